@@ -1,0 +1,186 @@
+"""numba kernels of the core. Private: call them through the public functions of
+``morphology``, ``rasterize`` and the filters, which validate and cast first."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, nogil=True)
+def _cell_min_kernel(x, y, z, x0, top, cell, nrows, ncols, out):
+    """out[row, col] = min z of the points in the cell (NaN where empty)."""
+    out[:, :] = np.nan
+    for k in range(x.shape[0]):
+        c = int(math.floor((x[k] - x0) / cell))
+        r = int(math.floor((top - y[k]) / cell))
+        if c < 0:
+            c = 0
+        elif c >= ncols:
+            c = ncols - 1
+        if r < 0:
+            r = 0
+        elif r >= nrows:
+            r = nrows - 1
+        v = out[r, c]
+        if not (z[k] >= v):  # also true when v is NaN
+            out[r, c] = z[k]
+
+
+@njit(cache=True, nogil=True)
+def _cell_mean_kernel(x, y, z, x0, top, cell, nrows, ncols, total, count):
+    for k in range(x.shape[0]):
+        c = int(math.floor((x[k] - x0) / cell))
+        r = int(math.floor((top - y[k]) / cell))
+        if c < 0:
+            c = 0
+        elif c >= ncols:
+            c = ncols - 1
+        if r < 0:
+            r = 0
+        elif r >= nrows:
+            r = nrows - 1
+        total[r, c] += z[k]
+        count[r, c] += 1
+
+
+@njit(cache=True, nogil=True)
+def _disk_extreme_kernel(src, radius, take_max, out):
+    """Grey erosion (min) or dilation (max) of ``src`` by the disk x²+y² <= radius².
+
+    The disk is the union of horizontal chords of half width ``w(dy)``. For every
+    source row the running extremes over widths 0..radius are built once
+    (``2 * radius`` comparisons a cell), and each chord of each output row is then
+    one lookup: O(radius) a cell instead of O(radius²). Cells outside the grid
+    are ignored (not padded), as in scikit-image.
+    """
+    nrows, ncols = src.shape
+    r = radius
+    half = np.empty(2 * r + 1, dtype=np.int64)
+    for dy in range(-r, r + 1):
+        half[dy + r] = int(math.floor(math.sqrt(r * r - dy * dy) + 1e-9))
+    fill = -np.inf if take_max else np.inf
+    out[:, :] = fill
+    buf = np.empty((r + 1, ncols), dtype=src.dtype)
+    for s in range(nrows):
+        for x in range(ncols):
+            buf[0, x] = src[s, x]
+        for w in range(1, r + 1):
+            for x in range(ncols):
+                v = buf[w - 1, x]
+                if x - w >= 0:
+                    u = src[s, x - w]
+                    if (u > v) if take_max else (u < v):
+                        v = u
+                if x + w < ncols:
+                    u = src[s, x + w]
+                    if (u > v) if take_max else (u < v):
+                        v = u
+                buf[w, x] = v
+        for dy in range(-r, r + 1):
+            i = s - dy
+            if i < 0 or i >= nrows:
+                continue
+            w = half[dy + r]
+            if take_max:
+                for x in range(ncols):
+                    if buf[w, x] > out[i, x]:
+                        out[i, x] = buf[w, x]
+            else:
+                for x in range(ncols):
+                    if buf[w, x] < out[i, x]:
+                        out[i, x] = buf[w, x]
+
+
+@njit(cache=True, nogil=True)
+def _keys_weights(t, w):
+    """Cubic convolution weights (Keys 1981, a = -0.5) for offsets -1, 0, 1, 2."""
+    a = -0.5
+    for k in range(4):
+        d = abs(t - (k - 1))
+        if d <= 1.0:
+            w[k] = (a + 2.0) * d ** 3 - (a + 3.0) * d ** 2 + 1.0
+        elif d < 2.0:
+            w[k] = a * d ** 3 - 5.0 * a * d ** 2 + 8.0 * a * d - 4.0 * a
+        else:
+            w[k] = 0.0
+
+
+@njit(cache=True, nogil=True)
+def _cubic_one(grid, fc, fr, wx, wy):
+    """Cubic convolution value of ``grid`` at fractional (column, row) ``(fc, fr)``,
+    where integer positions are cell centres; indices beyond the edge are clamped."""
+    nrows, ncols = grid.shape
+    c0 = int(math.floor(fc))
+    r0 = int(math.floor(fr))
+    _keys_weights(fc - c0, wx)
+    _keys_weights(fr - r0, wy)
+    acc = 0.0
+    for a in range(4):
+        rr = min(max(r0 + a - 1, 0), nrows - 1)
+        row_acc = 0.0
+        for b in range(4):
+            cc = min(max(c0 + b - 1, 0), ncols - 1)
+            row_acc += wx[b] * grid[rr, cc]
+        acc += wy[a] * row_acc
+    return acc
+
+
+@njit(cache=True, nogil=True)
+def _cubic_at_points_kernel(grid, x, y, x0, top, cell, out):
+    """Bicubic (cubic convolution) value of ``grid`` at each (x, y)."""
+    wx = np.empty(4)
+    wy = np.empty(4)
+    for k in range(x.shape[0]):
+        out[k] = _cubic_one(grid, (x[k] - x0) / cell - 0.5, (top - y[k]) / cell - 0.5, wx, wy)
+
+
+@njit(cache=True, nogil=True)
+def _rasterize_tin_kernel(px, py, pz, simplices, x0, top, cell, out):
+    """Linear interpolation on a triangulation: each cell centre inside a triangle
+    gets the plane of that triangle. Cells covered by no triangle keep their value."""
+    nrows, ncols = out.shape
+    for t in range(simplices.shape[0]):
+        i0 = simplices[t, 0]
+        i1 = simplices[t, 1]
+        i2 = simplices[t, 2]
+        xa, ya, za = px[i0], py[i0], pz[i0]
+        xb, yb, zb = px[i1], py[i1], pz[i1]
+        xc, yc, zc = px[i2], py[i2], pz[i2]
+        det = (yb - yc) * (xa - xc) + (xc - xb) * (ya - yc)
+        if det == 0.0:
+            continue
+        xmin = min(xa, min(xb, xc))
+        xmax = max(xa, max(xb, xc))
+        ymin = min(ya, min(yb, yc))
+        ymax = max(ya, max(yb, yc))
+        c_lo = max(int(math.ceil((xmin - x0) / cell - 0.5)), 0)
+        c_hi = min(int(math.floor((xmax - x0) / cell - 0.5)), ncols - 1)
+        r_lo = max(int(math.ceil((top - ymax) / cell - 0.5)), 0)
+        r_hi = min(int(math.floor((top - ymin) / cell - 0.5)), nrows - 1)
+        eps = -1e-9
+        for r in range(r_lo, r_hi + 1):
+            yy = top - (r + 0.5) * cell
+            for c in range(c_lo, c_hi + 1):
+                xx = x0 + (c + 0.5) * cell
+                l1 = ((yb - yc) * (xx - xc) + (xc - xb) * (yy - yc)) / det
+                l2 = ((yc - ya) * (xx - xc) + (xa - xc) * (yy - yc)) / det
+                l3 = 1.0 - l1 - l2
+                if l1 >= eps and l2 >= eps and l3 >= eps:
+                    out[r, c] = l1 * za + l2 * zb + l3 * zc
+
+
+@njit(cache=True, nogil=True)
+def _classify_against_surface_kernel(x, y, z, surface, slope, x0, top, cell,
+                                     threshold, scalar, out_ground):
+    """SMRF's last step: ground where |z - surface(x, y)| <= threshold + scalar * slope(x, y),
+    both grids interpolated by cubic convolution at the point."""
+    wx = np.empty(4)
+    wy = np.empty(4)
+    for k in range(x.shape[0]):
+        fc = (x[k] - x0) / cell - 0.5
+        fr = (top - y[k]) / cell - 0.5
+        zs = _cubic_one(surface, fc, fr, wx, wy)
+        ss = _cubic_one(slope, fc, fr, wx, wy)
+        out_ground[k] = abs(z[k] - zs) <= threshold + scalar * ss

@@ -1,0 +1,139 @@
+"""The driver shared by every ground filter: from a file to a classified file and a DTM.
+
+A filter (e.g. :class:`~groundsieve.core.smrf.SMRF`) only maps the x, y, z of the
+points it is given to a ground mask. This module does the rest, the same for every
+filter: select the points to filter (drop noise, optionally keep only last returns),
+write ASPRS classes (2 ground, 1 other, or keep the other existing classes), write
+the classified cloud and the DTM, report progress, honour cancellation.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+import numpy as np
+
+from .errors import InvalidParameterError
+from .grid import GridSpec
+from .io import (CLASS_GROUND, CLASS_UNCLASSIFIED, NOISE_CLASSES, PointCloud, check_output_path,
+                 read_cloud, write_classified)
+from .progress import Steps
+
+
+@dataclass(frozen=True)
+class FilterOptions:
+    """What the driver does around the filter."""
+    last_returns_only: bool = False
+    ignore_noise: bool = True
+    keep_existing_classes: bool = False
+
+
+@dataclass(frozen=True)
+class DTMOptions:
+    cell_size_m: float = 1.0
+    fill_outside_hull: bool = False
+
+    def __post_init__(self):
+        if not (math.isfinite(self.cell_size_m) and self.cell_size_m > 0):
+            raise InvalidParameterError(f"DTM cell size must be > 0 m (got {self.cell_size_m})")
+
+
+@dataclass
+class FilterRun:
+    cloud: PointCloud
+    classification: np.ndarray
+    ground: np.ndarray          #: bool per point of the cloud
+    filtered: np.ndarray        #: bool per point: was given to the filter
+    dtm_grid: Optional[GridSpec] = None
+    dtm: Optional[np.ndarray] = None
+
+    @property
+    def ground_count(self) -> int:
+        return int(self.ground.sum())
+
+
+def select_points(cloud: PointCloud, options: FilterOptions) -> np.ndarray:
+    """Boolean mask of the points the filter sees."""
+    keep = np.ones(len(cloud), dtype=bool)
+    if options.ignore_noise:
+        keep &= ~np.isin(cloud.classification, NOISE_CLASSES)
+    if options.last_returns_only and cloud.has_return_info:
+        rn, nr = cloud.return_number, cloud.number_of_returns
+        # A return is last when its number equals the count; files that leave both 0 count as single.
+        keep &= (rn >= nr) | (nr == 0)
+    return keep
+
+
+def classify_cloud(cloud: PointCloud, algorithm, options: FilterOptions = FilterOptions(),
+                   steps: Optional[Steps] = None, log: Optional[Callable[[str], None]] = None):
+    """Run ``algorithm`` on the selected points; return (classification, ground, filtered)."""
+    steps = steps or Steps()
+    log = log or (lambda _msg: None)
+    filtered = select_points(cloud, options)
+    n_sel = int(filtered.sum())
+    if n_sel == 0:
+        raise InvalidParameterError(f"{cloud.path}: no point is left to filter "
+                                    "(all are noise, or none is a last return)")
+    if n_sel < len(cloud):
+        log(f"Filtering {n_sel:,} of {len(cloud):,} points (noise or non-last returns left out).")
+    idx = np.flatnonzero(filtered)
+    xyz = np.column_stack([cloud.x[idx], cloud.y[idx], cloud.z[idx]])
+    sub_ground = algorithm(xyz, steps=steps)
+    ground = np.zeros(len(cloud), dtype=bool)
+    ground[idx[sub_ground]] = True
+    # Every point but ignored noise gets a new class: non-last returns are not ground either.
+    cls = cloud.classification.copy()
+    touched = ~np.isin(cls, NOISE_CLASSES) if options.ignore_noise else np.ones(len(cloud), dtype=bool)
+    if options.keep_existing_classes:
+        touched &= cls == CLASS_GROUND  # only a former ground class is taken away
+    cls[touched] = CLASS_UNCLASSIFIED
+    cls[ground] = CLASS_GROUND
+    return cls.astype(np.uint8), ground, filtered
+
+
+def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions):
+    """DTM grid covering all the points, interpolated from the ground points."""
+    from .rasterize import tin_dtm
+    grid = GridSpec.covering(x, y, options.cell_size_m, what="DTM")
+    if not ground.any():
+        raise InvalidParameterError("the filter found no ground point: no DTM can be made")
+    dtm = tin_dtm(x[ground], y[ground], z[ground], grid, fill_outside=options.fill_outside_hull)
+    return grid, dtm
+
+
+def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
+                      options: FilterOptions = FilterOptions(),
+                      dtm_path: Optional[str] = None, dtm: DTMOptions = DTMOptions(),
+                      progress: Optional[Callable[[float], None]] = None,
+                      is_cancelled: Optional[Callable[[], bool]] = None,
+                      log: Optional[Callable[[str], None]] = None) -> FilterRun:
+    """Read ``input_path``, classify ground with ``algorithm``, write ``output_path`` (LAS/LAZ)
+    and optionally ``dtm_path`` (GeoTIFF). Nothing is written unless everything succeeds
+    up to that output; the input file is never modified."""
+    from .raster import check_raster_path, write_geotiff
+    steps = Steps(progress, is_cancelled)
+    log = log or (lambda _msg: None)
+    if output_path:
+        check_output_path(output_path, inputs=[input_path])
+    if dtm_path:
+        check_raster_path(dtm_path, inputs=[input_path, output_path])
+    steps.check()
+    cloud = read_cloud(input_path)
+    log(f"Read {len(cloud):,} points from {input_path}.")
+    steps.report(0.1)
+    cls, ground, filtered = classify_cloud(cloud, algorithm, options, steps.sub(0.1, 0.75), log)
+    log(f"Ground: {int(ground.sum()):,} of {int(filtered.sum()):,} filtered points.")
+    run = FilterRun(cloud, cls, ground, filtered)
+    if dtm_path:
+        run.dtm_grid, run.dtm = make_dtm(cloud.x, cloud.y, cloud.z, ground, dtm)
+        steps.report(0.85)
+    steps.check()
+    if output_path:
+        write_classified(cloud, cls, output_path)
+    steps.report(0.95)
+    if dtm_path:
+        steps.check()
+        write_geotiff(dtm_path, run.dtm, run.dtm_grid, crs_wkt=cloud.crs_wkt)
+    steps.report(1.0)
+    return run
