@@ -1,0 +1,162 @@
+"""What every ground-filter algorithm shares: the INPUT/OUTPUT/DTM/GROUND_POINTS
+parameters, the adaptation of QGIS feedback to the core's plain callables, and the
+translation of core errors into QgsProcessingException."""
+import os
+
+from qgis.core import (QgsCoordinateReferenceSystem, QgsFeature, QgsFeatureSink, QgsField, QgsFields,
+                       QgsGeometry, QgsPoint, QgsProcessing, QgsProcessingAlgorithm, QgsProcessingException,
+                       QgsProcessingParameterBoolean, QgsProcessingParameterFeatureSink,
+                       QgsProcessingParameterFile, QgsProcessingParameterFileDestination,
+                       QgsProcessingParameterNumber, QgsProcessingParameterRasterDestination, QgsWkbTypes)
+from qgis.PyQt.QtCore import QVariant
+from qgis.PyQt.QtGui import QIcon
+
+_ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
+
+COMMON_HELP = """
+<h3>Input and outputs</h3>
+<p><b>Input point cloud</b>: LAS 1.2-1.4 or LAZ (point formats 0-10), or an ISPRS filter-test text
+file <code>x y z label</code> (.txt). The file is only read, never changed.</p>
+<p><b>Classified point cloud</b>: LAS or LAZ (by extension) with every dimension, extra bytes, VLRs
+and the CRS of the input kept. Ground points get ASPRS class 2, the other filtered points class 1
+(or keep their class with <i>Keep existing non-ground classes</i>). Points already classified as
+noise (7, 18) are left out of the filter and keep their class unless you untick
+<i>Ignore noise</i>.</p>
+<p><b>DTM</b> (optional): a GeoTIFF of the ground points interpolated linearly on their Delaunay
+triangulation, cell size <i>DTM cell size</i>, the cloud's CRS, nodata -9999 outside the hull of
+the ground points unless <i>Fill cells outside the ground hull</i> is ticked (nearest value).</p>
+<p><b>Ground points</b> (optional, off by default): the ground points as a PointZ layer with return
+number and intensity; meant for small clouds.</p>
+<p>Outputs are written under a temporary name and renamed when complete: a failed or cancelled run
+leaves nothing half-written.</p>
+"""
+
+
+def core_modules():
+    """Import the core, turning a missing dependency into a clear Processing error."""
+    from ..dependencies import require_dependencies
+    try:
+        require_dependencies()
+        from ..core import errors, workflow
+    except ImportError as err:
+        raise QgsProcessingException(str(err)) from err
+    return errors, workflow
+
+
+class GroundFilterAlgorithm(QgsProcessingAlgorithm):
+    """Base class of the ground filters. Subclasses declare their own parameters in
+    ``initFilterParameters`` and build the core filter object in ``buildFilter``."""
+
+    INPUT = "INPUT"
+    OUTPUT = "OUTPUT"
+    LAST_RETURNS = "LAST_RETURNS"
+    IGNORE_NOISE = "IGNORE_NOISE"
+    KEEP_CLASSES = "KEEP_CLASSES"
+    DTM = "DTM"
+    DTM_CELL = "DTM_CELL"
+    DTM_FILL = "DTM_FILL"
+    GROUND_POINTS = "GROUND_POINTS"
+    GROUND_COUNT = "GROUND_COUNT"
+    POINT_COUNT = "POINT_COUNT"
+
+    # -- to override ---------------------------------------------------------------
+    def initFilterParameters(self):  # noqa: N802
+        raise NotImplementedError
+
+    def buildFilter(self, parameters, context):  # noqa: N802
+        raise NotImplementedError
+
+    def iconName(self):  # noqa: N802
+        return "groundsieve.svg"
+
+    # -- QgsProcessingAlgorithm --------------------------------------------------------
+    def group(self):
+        return "Ground filters"
+
+    def groupId(self):  # noqa: N802
+        return "groundfilters"
+
+    def icon(self):
+        return QIcon(os.path.join(_ICONS, self.iconName()))
+
+    def createInstance(self):  # noqa: N802
+        return type(self)()
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.addParameter(QgsProcessingParameterFile(
+            self.INPUT, "Input point cloud (LAS/LAZ, or ISPRS .txt)",
+            behavior=QgsProcessingParameterFile.Behavior.File,
+            fileFilter="Point clouds (*.las *.laz *.LAS *.LAZ);;ISPRS text (*.txt);;All files (*.*)"))
+        self.initFilterParameters()
+        self.addParameter(QgsProcessingParameterBoolean(
+            self.LAST_RETURNS, "Filter only last returns (others become non-ground)", defaultValue=False))
+        self.addParameter(QgsProcessingParameterBoolean(
+            self.IGNORE_NOISE, "Ignore points already classified as noise (7, 18)", defaultValue=True))
+        self.addParameter(QgsProcessingParameterBoolean(
+            self.KEEP_CLASSES, "Keep existing non-ground classes", defaultValue=False))
+        self.addParameter(QgsProcessingParameterFileDestination(
+            self.OUTPUT, "Classified point cloud", fileFilter="LAZ (*.laz);;LAS (*.las)"))
+        self.addParameter(QgsProcessingParameterRasterDestination(
+            self.DTM, "DTM (ground surface)", optional=True, createByDefault=False))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.DTM_CELL, "DTM cell size (m)", type=QgsProcessingParameterNumber.Type.Double,
+            defaultValue=1.0, minValue=0.0))
+        self.addParameter(QgsProcessingParameterBoolean(
+            self.DTM_FILL, "Fill DTM cells outside the ground hull (nearest value)", defaultValue=False))
+        self.addParameter(QgsProcessingParameterFeatureSink(
+            self.GROUND_POINTS, "Ground points", type=QgsProcessing.SourceType.TypeVectorPoint,
+            optional=True, createByDefault=False))
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        errors, workflow = core_modules()
+        input_path = self.parameterAsFile(parameters, self.INPUT, context)
+        output_path = self.parameterAsFileOutput(parameters, self.OUTPUT, context)
+        dtm_path = self.parameterAsOutputLayer(parameters, self.DTM, context) or None
+        try:
+            algorithm = self.buildFilter(parameters, context)
+            options = workflow.FilterOptions(
+                last_returns_only=self.parameterAsBoolean(parameters, self.LAST_RETURNS, context),
+                ignore_noise=self.parameterAsBoolean(parameters, self.IGNORE_NOISE, context),
+                keep_existing_classes=self.parameterAsBoolean(parameters, self.KEEP_CLASSES, context))
+            dtm = workflow.DTMOptions(
+                cell_size_m=self.parameterAsDouble(parameters, self.DTM_CELL, context),
+                fill_outside_hull=self.parameterAsBoolean(parameters, self.DTM_FILL, context))
+            run = workflow.run_ground_filter(
+                input_path, output_path, algorithm, options=options, dtm_path=dtm_path, dtm=dtm,
+                progress=lambda f: feedback.setProgress(100.0 * f), is_cancelled=feedback.isCanceled,
+                log=feedback.pushInfo)
+        except errors.GroundSieveError as err:
+            raise QgsProcessingException(str(err)) from err
+        if run.cloud.crs_wkt is None:
+            feedback.pushWarning(f"{input_path}: no CRS in the file; outputs have none either.")
+        results = {self.OUTPUT: output_path, self.GROUND_COUNT: run.ground_count,
+                   self.POINT_COUNT: len(run.cloud)}
+        if dtm_path:
+            results[self.DTM] = dtm_path
+        sink_id = self._write_ground_points(parameters, context, feedback, run)
+        if sink_id is not None:
+            results[self.GROUND_POINTS] = sink_id
+        return results
+
+    def _write_ground_points(self, parameters, context, feedback, run):
+        fields = QgsFields()
+        fields.append(QgsField("return_number", QVariant.Int))
+        fields.append(QgsField("intensity", QVariant.Int))
+        crs = QgsCoordinateReferenceSystem.fromWkt(run.cloud.crs_wkt) if run.cloud.crs_wkt else \
+            QgsCoordinateReferenceSystem()
+        sink, sink_id = self.parameterAsSink(parameters, self.GROUND_POINTS, context, fields,
+                                             QgsWkbTypes.Type.PointZ, crs)
+        if sink is None:
+            return None
+        cloud = run.cloud
+        idx = run.ground.nonzero()[0]
+        intensity = cloud.intensity if cloud.intensity is not None else None
+        for k, i in enumerate(idx):
+            if feedback.isCanceled():
+                break
+            feature = QgsFeature(fields)
+            feature.setGeometry(QgsGeometry(QgsPoint(float(cloud.x[i]), float(cloud.y[i]), float(cloud.z[i]))))
+            feature.setAttributes([int(cloud.return_number[i]),
+                                   int(intensity[i]) if intensity is not None else None])
+            sink.addFeature(feature, QgsFeatureSink.Flag.FastInsert)
+        return sink_id
