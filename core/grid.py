@@ -36,7 +36,9 @@ class GridSpec:
         xmin, xmax = float(np.min(x)), float(np.max(x))
         ymin, ymax = float(np.min(y)), float(np.max(y))
         x0 = math.floor(xmin / cell) * cell
-        top = (math.floor(ymax / cell) + 1) * cell
+        top = math.ceil(ymax / cell) * cell
+        if top < ymax:  # floating-point rounding of the product
+            top += cell
         ncols = int(math.floor((xmax - x0) / cell)) + 1
         nrows = int(math.floor((top - ymin) / cell)) + 1
         # Rounding at exact edges can leave the last point one cell out: grow by one if so.

@@ -162,6 +162,9 @@ def atomic_path(path: str):
     os.close(fd)
     try:
         yield tmp
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; the output follows the umask like any file
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):
@@ -195,17 +198,21 @@ def new_las(x, y, z, *, point_format: int = 1, version: str = "1.2", scale: floa
     return las
 
 
-def write_las(las, path: str) -> None:
-    """Write a laspy ``LasData`` atomically (LAZ when the name ends in .laz)."""
+def write_las(las, path: str, *, atomic: bool = True) -> None:
+    """Write a laspy ``LasData`` (LAZ when the name ends in .laz), atomically unless the caller
+    already writes to a temporary path of its own (``atomic=False``)."""
     path = check_output_path(path)
     try:
-        with atomic_path(path) as tmp:
-            las.write(tmp, do_compress=_ext(path) == ".laz")
+        if atomic:
+            with atomic_path(path) as tmp:
+                las.write(tmp, do_compress=_ext(path) == ".laz")
+        else:
+            las.write(path, do_compress=_ext(path) == ".laz")
     except OSError as err:
         raise OutputError(f"{path}: cannot be written ({err})") from err
 
 
-def write_classified(cloud: PointCloud, classification: np.ndarray, path: str) -> None:
+def write_classified(cloud: PointCloud, classification: np.ndarray, path: str, *, atomic: bool = True) -> None:
     """Write ``cloud`` with a new classification, keeping every other dimension, the
     extra bytes, the VLRs and the CRS of a LAS/LAZ input. An ISPRS text input becomes
     LAS 1.2 point format 0 with its label column kept as the extra dimension
@@ -220,11 +227,11 @@ def write_classified(cloud: PointCloud, classification: np.ndarray, path: str) -
         original = np.array(las.classification)
         las.classification = classification
         try:
-            write_las(las, path)
+            write_las(las, path, atomic=atomic)
         finally:
             las.classification = original  # the in-memory input stays as read
     else:
         extra = {"reference_label": cloud.reference_label} if cloud.reference_label is not None else None
         las = new_las(cloud.x, cloud.y, cloud.z, point_format=0, crs_wkt=cloud.crs_wkt, extra=extra,
                       classification=classification)
-        write_las(las, path)
+        write_las(las, path, atomic=atomic)

@@ -10,7 +10,8 @@ def _check(grid: np.ndarray, radius: int) -> np.ndarray:
     grid = np.ascontiguousarray(grid, dtype=np.float64)
     if grid.ndim != 2:
         raise InvalidParameterError(f"grid must be 2-D (got {grid.ndim}-D)")
-    if int(radius) != radius or radius < 0:
+    if not isinstance(radius, (int, np.integer)) and not (
+            isinstance(radius, float) and radius.is_integer()) or radius < 0:
         raise InvalidParameterError(f"radius must be a whole number of cells >= 0 (got {radius})")
     return grid
 

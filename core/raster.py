@@ -1,6 +1,7 @@
 """GeoTIFF writing: the one module of the core that uses GDAL."""
 from __future__ import annotations
 
+import contextlib
 import os
 from typing import Optional
 
@@ -20,8 +21,9 @@ def check_raster_path(path: str, *, inputs=()) -> str:
 
 
 def write_geotiff(path: str, values: np.ndarray, grid: GridSpec, *, crs_wkt: Optional[str] = None,
-                  nodata: float = NODATA, dtype: str = "float32") -> None:
-    """Write ``values`` (row 0 = north, NaN = no data) as a single-band GeoTIFF, atomically."""
+                  nodata: float = NODATA, dtype: str = "float32", atomic: bool = True) -> None:
+    """Write ``values`` (row 0 = north, NaN = no data) as a single-band GeoTIFF, atomically unless
+    the caller already writes to a temporary path of its own (``atomic=False``)."""
     from osgeo import gdal
     gdal.UseExceptions()
     path = check_raster_path(path)
@@ -31,7 +33,7 @@ def write_geotiff(path: str, values: np.ndarray, grid: GridSpec, *, crs_wkt: Opt
                  "uint8": gdal.GDT_Byte, "int16": gdal.GDT_Int16}[dtype]
     data = np.where(np.isnan(values), nodata, values).astype(dtype) if values.dtype.kind == "f" else values.astype(dtype)
     try:
-        with atomic_path(path) as tmp:
+        with (atomic_path(path) if atomic else contextlib.nullcontext(path)) as tmp:
             driver = gdal.GetDriverByName("GTiff")
             ds = driver.Create(tmp, grid.ncols, grid.nrows, 1, gdal_type,
                                options=["COMPRESS=DEFLATE", "TILED=YES", "BIGTIFF=IF_SAFER"])

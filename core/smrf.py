@@ -40,6 +40,13 @@ def _require(condition: bool, message: str) -> None:
         raise InvalidParameterError(message)
 
 
+def check_number(params, name: str) -> None:
+    """Refuse a parameter that is not a real number (None, text, ...) with the core's error."""
+    value = getattr(params, name)
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise InvalidParameterError(f"{name} must be a number (got {value!r})")
+
+
 def validate_xyz(xyz: np.ndarray, *, what: str = "point cloud") -> np.ndarray:
     """Return ``xyz`` as a contiguous float64 (n, 3) array; refuse empty or non-finite input."""
     xyz = np.asarray(xyz)
@@ -81,6 +88,9 @@ class SMRF:
     name = "smrf"
 
     def __post_init__(self):
+        for name in ("cell_size_m", "slope", "window_m", "elevation_threshold_m", "elevation_scalar",
+                     "low_outlier_slope"):
+            check_number(self, name)
         _require(math.isfinite(self.cell_size_m) and self.cell_size_m > 0,
                  f"cell_size_m must be > 0 (got {self.cell_size_m})")
         _require(math.isfinite(self.slope) and self.slope >= 0,

@@ -8,6 +8,7 @@ the classified cloud and the DTM, report progress, honour cancellation.
 """
 from __future__ import annotations
 
+import contextlib
 import math
 from dataclasses import dataclass
 from typing import Callable, Optional
@@ -16,8 +17,8 @@ import numpy as np
 
 from .errors import InvalidParameterError
 from .grid import GridSpec
-from .io import (CLASS_GROUND, CLASS_UNCLASSIFIED, NOISE_CLASSES, PointCloud, check_output_path,
-                 read_cloud, write_classified)
+from .io import (CLASS_GROUND, CLASS_UNCLASSIFIED, NOISE_CLASSES, PointCloud, atomic_path,
+                 check_output_path, read_cloud, write_classified)
 from .progress import Steps
 
 
@@ -126,14 +127,19 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     log(f"Ground: {int(ground.sum()):,} of {int(filtered.sum()):,} filtered points.")
     run = FilterRun(cloud, cls, ground, filtered)
     if dtm_path:
-        run.dtm_grid, run.dtm = make_dtm(cloud.x, cloud.y, cloud.z, ground, dtm)
+        # The DTM covers every point but ignored noise (which may lie far away).
+        area = ~np.isin(cloud.classification, NOISE_CLASSES) if options.ignore_noise else slice(None)
+        run.dtm_grid, run.dtm = make_dtm(cloud.x[area], cloud.y[area], cloud.z[area], ground[area], dtm)
         steps.report(0.85)
-    steps.check()
-    if output_path:
-        write_classified(cloud, cls, output_path)
-    steps.report(0.95)
-    if dtm_path:
+    # Every output goes to a temporary file first; all are renamed into place only once all are
+    # complete and no cancellation came, so a failed or cancelled run leaves none of them.
+    with contextlib.ExitStack() as stack:
+        if output_path:
+            write_classified(cloud, cls, stack.enter_context(atomic_path(output_path)), atomic=False)
+            steps.report(0.95)
+        if dtm_path:
+            write_geotiff(stack.enter_context(atomic_path(dtm_path)), run.dtm, run.dtm_grid,
+                          crs_wkt=cloud.crs_wkt, atomic=False)
         steps.check()
-        write_geotiff(dtm_path, run.dtm, run.dtm_grid, crs_wkt=cloud.crs_wkt)
     steps.report(1.0)
     return run

@@ -4,16 +4,21 @@ import pytest
 
 
 @pytest.fixture(scope="session")
-def groundsieve_provider(qgis_app, qgis_processing):
+def groundsieve_plugin(qgis_app, qgis_processing):
+    """The plugin as qgis_process loads it: classFactory(iface=None), then initProcessing()."""
     from qgis.core import QgsApplication
 
-    from groundsieve.provider.provider import GroundSieveProvider
-    registry = QgsApplication.processingRegistry()
-    provider = registry.providerById("groundsieve")
-    if provider is None:
-        provider = GroundSieveProvider()  # keep a Python reference, or the algorithms vanish
-        assert registry.addProvider(provider)
-    yield provider
+    import groundsieve
+    plugin = groundsieve.classFactory(None)
+    plugin.initProcessing()  # the plugin keeps the Python reference the registry needs
+    yield plugin
+    plugin.unload()
+    assert QgsApplication.processingRegistry().providerById("groundsieve") is None
+
+
+@pytest.fixture(scope="session")
+def groundsieve_provider(groundsieve_plugin):
+    return groundsieve_plugin.provider
 
 
 @pytest.fixture(scope="session")

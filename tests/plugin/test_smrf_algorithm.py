@@ -104,17 +104,10 @@ def test_missing_dependency_is_reported_clearly(groundsieve_provider, scene_laz,
         _run({"INPUT": str(src), "OUTPUT": str(tmp_path / "o.laz")})
 
 
-def test_plugin_class_factory_registers_provider_without_iface(qgis_app, qgis_processing):
+def test_plugin_registers_its_provider_without_iface(groundsieve_plugin):
     from qgis.core import QgsApplication
-    import groundsieve
-    plugin = groundsieve.classFactory(None)
     registry = QgsApplication.processingRegistry()
-    existing = registry.providerById("groundsieve")
-    if existing is not None:
-        pytest.skip("provider already registered by another test; covered by test_provider_lists_smrf")
-    plugin.initProcessing()
-    try:
-        assert registry.providerById("groundsieve") is not None
-    finally:
-        plugin.unload()
-    assert registry.providerById("groundsieve") is None
+    assert groundsieve_plugin.iface is None
+    assert registry.providerById("groundsieve") is groundsieve_plugin.provider
+    groundsieve_plugin.initProcessing()  # a second call must not register a second provider
+    assert [p.id() for p in registry.providers()].count("groundsieve") == 1

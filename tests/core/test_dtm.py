@@ -1,0 +1,172 @@
+"""TIN DTM rasterization (core.rasterize.tin_dtm) and the grid convention (core.grid)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import Delaunay
+
+from groundsieve.core.errors import InputError, InvalidParameterError
+from groundsieve.core.grid import GridSpec
+from groundsieve.core.rasterize import cell_mean, cell_min, tin_dtm
+
+X0, Y0 = 512000.0, 5403000.0
+A, B, C = 0.13, -0.07, 250.0
+
+
+def plane(x, y):
+    return A * (x - X0) + B * (y - Y0) + C
+
+
+def random_points(n=300, seed=0, w=50.0, h=40.0):
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(0, w, n) + X0
+    y = rng.uniform(0, h, n) + Y0
+    return x, y, plane(x, y)
+
+
+def centre_mesh(grid):
+    xs, ys = grid.centers()
+    return np.meshgrid(xs, ys)
+
+
+def inside_hull(x, y, grid):
+    X, Y = centre_mesh(grid)
+    tri = Delaunay(np.column_stack([x - X0, y - Y0]))
+    return tri.find_simplex(np.column_stack([X.ravel() - X0, Y.ravel() - Y0])).reshape(X.shape) >= 0
+
+
+@pytest.mark.parametrize("cell", [1.0, 0.5, 2.5])
+def test_plane_reproduced_inside_hull_nan_outside(cell):
+    x, y, z = random_points()
+    grid = GridSpec.covering(x, y, cell)
+    dtm = tin_dtm(x, y, z, grid)
+    assert dtm.shape == grid.shape
+    X, Y = centre_mesh(grid)
+    inside = inside_hull(x, y, grid)
+    assert inside.sum() > 0.7 * inside.size
+    np.testing.assert_allclose(dtm[inside], plane(X, Y)[inside], rtol=0, atol=1e-9)
+    assert np.isnan(dtm[~inside]).all()
+
+
+def test_row_zero_is_north():
+    x, y, z = random_points(seed=1)
+    grid = GridSpec.covering(x, y, 1.0)
+    dtm = tin_dtm(x, y, z, grid)
+    # B < 0: z falls northwards, so the mean of the first row is the lowest
+    rows = np.nanmean(dtm, axis=1)
+    assert rows[1] < rows[-2]
+    assert np.all(np.diff(rows[1:-1]) > 0)
+
+
+def test_fill_outside_hull():
+    x, y, z = random_points(seed=2)
+    grid = GridSpec.covering(x, y, 1.0)
+    dtm = tin_dtm(x, y, z, grid)
+    filled = tin_dtm(x, y, z, grid, fill_outside=True)
+    assert np.isfinite(filled).all()
+    inside = ~np.isnan(dtm)
+    np.testing.assert_array_equal(filled[inside], dtm[inside])
+    # Every filled cell takes the value of some interpolated cell (nearest neighbour).
+    assert np.isin(filled[~inside], dtm[inside]).all()
+
+
+def test_duplicated_xy_keeps_the_lowest():
+    x, y, z = random_points(seed=3)
+    xd = np.concatenate([x, x[:100], x[:50]])
+    yd = np.concatenate([y, y[:100], y[:50]])
+    zd = np.concatenate([z, z[:100] + 5.0, z[:50] + 0.5])  # higher duplicates: ignored
+    rng = np.random.default_rng(4)
+    perm = rng.permutation(xd.size)
+    grid = GridSpec.covering(x, y, 1.0)
+    dtm = tin_dtm(xd[perm], yd[perm], zd[perm], grid)
+    X, Y = centre_mesh(grid)
+    inside = inside_hull(x, y, grid)
+    np.testing.assert_allclose(dtm[inside], plane(X, Y)[inside], atol=1e-9)
+
+
+def test_exact_duplicates_ok():
+    x, y, z = random_points(seed=5)
+    grid = GridSpec.covering(x, y, 1.0)
+    dtm = tin_dtm(np.tile(x, 3), np.tile(y, 3), np.tile(z, 3), grid)
+    np.testing.assert_array_equal(dtm, tin_dtm(x, y, z, grid))
+
+
+def test_points_on_a_lattice_hit_cell_centres():
+    xs = X0 + 0.5 + np.arange(10.0)
+    ys = Y0 + 0.5 + np.arange(8.0)
+    X, Y = np.meshgrid(xs, ys)
+    x, y = X.ravel(), Y.ravel()
+    grid = GridSpec.covering(x, y, 1.0)
+    dtm = tin_dtm(x, y, plane(x, y), grid)
+    assert np.isfinite(dtm).all()  # every centre is a vertex or on an edge (eps)
+    Xc, Yc = centre_mesh(grid)
+    np.testing.assert_allclose(dtm, plane(Xc, Yc), atol=1e-9)
+
+
+@pytest.mark.parametrize("pts", [
+    [[X0 + 1.2, Y0 + 3.4, 5.0]],
+    [[X0 + 1.2, Y0 + 3.4, 5.0], [X0 + 7.5, Y0 + 2.5, 6.0]],
+    [[X0, Y0, 1.0], [X0 + 1, Y0 + 1, 2.0], [X0 + 2, Y0 + 2, 3.0]],
+    [[X0, Y0, 1.0], [X0 + 1, Y0 + 1, 2.0], [X0 + 2, Y0 + 2, 3.0], [X0 + 3, Y0 + 3, 4.0]],
+    [[X0 + t, Y0 + 5.0, t] for t in range(12)],
+    [[X0 + 2.0, Y0 + t, t] for t in range(12)],
+    [[X0 + 1.2, Y0 + 3.4, 5.0]] * 4,
+], ids=["one", "two", "collinear3", "collinear4", "row", "column", "same-xy"])
+@pytest.mark.parametrize("fill", [False, True], ids=["nofill", "fill"])
+def test_few_or_collinear_points_do_not_crash(pts, fill):
+    pts = np.asarray(pts, dtype=np.float64)
+    grid = GridSpec.covering(pts[:, 0], pts[:, 1], 1.0)
+    dtm = tin_dtm(pts[:, 0], pts[:, 1], pts[:, 2], grid, fill_outside=fill)
+    assert dtm.shape == grid.shape
+    # The cells holding the points carry (the lowest of) their values.
+    cells = dtm[grid.row_of(pts[:, 1]), grid.col_of(pts[:, 0])]
+    assert np.isfinite(cells).all()
+    if fill:
+        assert np.isfinite(dtm).all()
+        assert dtm.min() >= pts[:, 2].min() and dtm.max() <= pts[:, 2].max()
+
+
+def test_no_points_raises():
+    grid = GridSpec(0.0, 10.0, 1.0, 10, 10)
+    with pytest.raises(InputError, match="no ground points"):
+        tin_dtm(np.array([]), np.array([]), np.array([]), grid)
+
+
+# --- grid convention and per-cell statistics -----------------------------------------------
+
+def test_grid_covering_convention():
+    x = np.array([10.2, 14.9, 12.0])
+    y = np.array([20.1, 23.0, 25.0])  # ymax exactly on an edge: it lies in row 0, (24, 25]
+    g = GridSpec.covering(x, y, 1.0)
+    assert g.x0 == 10.0 and g.top == 25.0
+    assert g.geotransform == (10.0, 1.0, 0.0, 25.0, 0.0, -1.0)
+    assert g.shape == (5, 5)
+    np.testing.assert_array_equal(g.col_of(x), [0, 4, 2])
+    # Rows are closed at their north edge: y = 23.0 lies in row 2, which covers (22, 23].
+    np.testing.assert_array_equal(g.row_of(y), [4, 2, 0])
+    xs, ys = g.centers()
+    np.testing.assert_allclose(xs, 10.5 + np.arange(5))
+    np.testing.assert_allclose(ys, 24.5 - np.arange(5))
+
+
+@pytest.mark.parametrize("cell", [0.0, -1.0, float("nan"), float("inf")])
+def test_grid_cell_must_be_positive(cell):
+    with pytest.raises(InvalidParameterError, match="cell size"):
+        GridSpec.covering(np.array([0.0, 1.0]), np.array([0.0, 1.0]), cell)
+
+
+def test_grid_refuses_absurd_size():
+    with pytest.raises(InvalidParameterError, match="larger cell size"):
+        GridSpec.covering(np.array([0.0, 1e6]), np.array([0.0, 1e6]), 0.01)
+
+
+def test_cell_min_and_mean():
+    g = GridSpec(0.0, 2.0, 1.0, 2, 2)
+    x = np.array([0.2, 0.7, 1.5, 1.5])
+    y = np.array([1.5, 1.2, 0.5, 0.4])
+    z = np.array([3.0, 1.0, 7.0, 9.0])
+    mins = cell_min(x, y, z, g)
+    np.testing.assert_array_equal(mins, [[1.0, np.nan], [np.nan, 7.0]])
+    mean, count = cell_mean(x, y, z, g)
+    np.testing.assert_array_equal(mean, [[2.0, np.nan], [np.nan, 8.0]])
+    np.testing.assert_array_equal(count, [[2, 0], [0, 2]])

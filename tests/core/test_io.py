@@ -1,0 +1,438 @@
+"""Reading and writing point clouds (core.io): round trips, errors naming the file, output
+path checks, atomic writes, and the input left untouched."""
+from __future__ import annotations
+
+import hashlib
+import os
+import stat
+
+import laspy
+import numpy as np
+import pytest
+
+from groundsieve.core.errors import GroundSieveError, InputError, OutputError, UnsupportedFormatError
+from groundsieve.core.io import (atomic_path, check_output_path, new_las, read_cloud, write_classified,
+                                 write_las)
+
+
+def utm32_wkt() -> str:
+    import pyproj
+    return pyproj.CRS.from_epsg(32632).to_wkt()
+
+
+def epsg_of(wkt):
+    import pyproj
+    return pyproj.CRS.from_wkt(wkt).to_epsg() if wkt else None
+
+
+def sha256(path) -> str:
+    return hashlib.sha256(open(path, "rb").read()).hexdigest()
+
+
+def sample_las(n=2000, point_format=1, version="1.2", seed=0, crs=True, extra=True, big_classes=False):
+    """A LasData with every dimension filled with known values on the 0.01 m grid."""
+    rng = np.random.default_rng(seed)
+    x = np.round(rng.uniform(0, 100, n), 2) + 512000.0
+    y = np.round(rng.uniform(0, 100, n), 2) + 5403000.0
+    z = np.round(rng.uniform(280, 320, n), 2)
+    nr = rng.integers(1, 4, n).astype(np.uint8)
+    rn = np.minimum(rng.integers(1, 4, n), nr).astype(np.uint8)
+    top_class = 64 if big_classes else 19
+    dims = dict(classification=rng.integers(0, top_class, n).astype(np.uint8),
+                intensity=rng.integers(0, 65535, n).astype(np.uint16),
+                return_number=rn, number_of_returns=nr)
+    if point_format in (1, 3, 4, 5, 6, 7, 8, 9, 10):
+        dims["gps_time"] = np.cumsum(rng.uniform(0, 1e-3, n)) + 3.0e8
+    ext = {"tree_id": rng.integers(0, 10_000, n).astype(np.int32),
+           "amplitude": rng.normal(size=n).astype(np.float32)} if extra else None
+    las = new_las(x, y, z, point_format=point_format, version=version, crs_wkt=utm32_wkt() if crs else None,
+                  extra=ext, **dims)
+    return las
+
+
+def assert_same_points(a, b, *, skip=()):
+    """Every dimension (standard and extra) of two LasData is equal."""
+    assert a.point_format.id == b.point_format.id
+    assert len(a.points) == len(b.points)
+    for name in a.point_format.dimension_names:
+        if name in skip:
+            continue
+        np.testing.assert_array_equal(np.asarray(a[name]), np.asarray(b[name]), err_msg=name)
+    np.testing.assert_array_equal(a.x, b.x)
+    np.testing.assert_array_equal(a.y, b.y)
+    np.testing.assert_array_equal(a.z, b.z)
+
+
+# --- round trips ----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("ext", [".las", ".laz"])
+@pytest.mark.parametrize("point_format, version", [(1, "1.2"), (6, "1.4"), (0, "1.2"), (3, "1.2")])
+def test_las_round_trip(tmp_path, ext, point_format, version):
+    las = sample_las(point_format=point_format, version=version, big_classes=point_format >= 6)
+    path = tmp_path / f"cloud{ext}"
+    write_las(las, str(path))
+    cloud = read_cloud(str(path))
+    assert cloud.path == str(path)
+    assert len(cloud) == len(las.points)
+    np.testing.assert_allclose(cloud.x, las.x, atol=1e-9)
+    np.testing.assert_allclose(cloud.y, las.y, atol=1e-9)
+    np.testing.assert_allclose(cloud.z, las.z, atol=1e-9)
+    np.testing.assert_array_equal(cloud.classification, np.asarray(las.classification))
+    np.testing.assert_array_equal(cloud.return_number, np.asarray(las.return_number))
+    np.testing.assert_array_equal(cloud.number_of_returns, np.asarray(las.number_of_returns))
+    np.testing.assert_array_equal(cloud.intensity, np.asarray(las.intensity))
+    assert cloud.has_return_info is True
+    assert cloud.reference_label is None
+    assert epsg_of(cloud.crs_wkt) == 32632
+    np.testing.assert_array_equal(cloud.las["tree_id"], las["tree_id"])
+    np.testing.assert_array_equal(cloud.las["amplitude"], las["amplitude"])
+    if "gps_time" in las.point_format.dimension_names:
+        np.testing.assert_array_equal(cloud.las.gps_time, las.gps_time)
+    assert_same_points(cloud.las, las)
+    assert cloud.las.header.version == laspy.header.Version.from_str(version)
+    np.testing.assert_array_equal(cloud.xyz, np.column_stack([cloud.x, cloud.y, cloud.z]))
+
+
+def test_las_without_crs(tmp_path):
+    path = tmp_path / "nocrs.las"
+    write_las(sample_las(crs=False, extra=False), str(path))
+    assert read_cloud(str(path)).crs_wkt is None
+
+
+@pytest.mark.parametrize("src_ext, dst_ext", [(".las", ".laz"), (".laz", ".las"), (".laz", ".laz")])
+@pytest.mark.parametrize("point_format, version", [(1, "1.2"), (6, "1.4")])
+def test_write_classified_keeps_everything_else(tmp_path, src_ext, dst_ext, point_format, version):
+    las = sample_las(point_format=point_format, version=version, big_classes=point_format >= 6)
+    src = tmp_path / f"in{src_ext}"
+    dst = tmp_path / f"out{dst_ext}"
+    write_las(las, str(src))
+    digest = sha256(src)
+    cloud = read_cloud(str(src))
+    original_cls = np.asarray(cloud.las.classification).copy()
+    new_cls = np.where(np.arange(len(cloud)) % 3 == 0, 2, 1).astype(np.uint8)
+    write_classified(cloud, new_cls, str(dst))
+    assert sha256(src) == digest, "the input file changed"
+    np.testing.assert_array_equal(cloud.las.classification, original_cls)  # in-memory input as read
+    np.testing.assert_array_equal(cloud.classification, original_cls)
+    out = read_cloud(str(dst))
+    np.testing.assert_array_equal(out.classification, new_cls)
+    assert_same_points(out.las, cloud.las, skip=("classification",))
+    assert epsg_of(out.crs_wkt) == 32632
+    np.testing.assert_array_equal(out.las["tree_id"], las["tree_id"])
+    assert out.las.header.version == cloud.las.header.version
+    assert sorted(os.listdir(tmp_path)) == sorted([src.name, dst.name])  # no temporary file left
+
+
+def test_write_classified_keeps_classification_flags(tmp_path):
+    las = sample_las(point_format=1, extra=False)
+    las.withheld = (np.arange(len(las.points)) % 2).astype(bool)
+    las.synthetic = (np.arange(len(las.points)) % 5 == 0)
+    src, dst = tmp_path / "in.las", tmp_path / "out.las"
+    write_las(las, str(src))
+    cloud = read_cloud(str(src))
+    write_classified(cloud, np.full(len(cloud), 2, np.uint8), str(dst))
+    out = laspy.read(str(dst))
+    np.testing.assert_array_equal(out.withheld, las.withheld)
+    np.testing.assert_array_equal(out.synthetic, las.synthetic)
+    assert (np.asarray(out.classification) == 2).all()
+
+
+def test_write_classified_refuses_classes_above_31_on_old_formats(tmp_path):
+    src = tmp_path / "in.las"
+    write_las(sample_las(point_format=1, extra=False), str(src))
+    cloud = read_cloud(str(src))
+    with pytest.raises(OutputError, match="0-31"):
+        write_classified(cloud, np.full(len(cloud), 40, np.uint8), str(tmp_path / "out.las"))
+    assert not (tmp_path / "out.las").exists()
+
+
+def test_write_classified_wrong_length(tmp_path):
+    src = tmp_path / "in.las"
+    write_las(sample_las(n=50, extra=False), str(src))
+    cloud = read_cloud(str(src))
+    with pytest.raises(OutputError, match="out.las"):
+        write_classified(cloud, np.ones(49, np.uint8), str(tmp_path / "out.las"))
+
+
+# --- ISPRS text ---------------------------------------------------------------------------
+
+def write_text(path, rows, fmt="%.2f\t%.2f\t%.2f\t%d"):
+    np.savetxt(str(path), rows, fmt=fmt)
+
+
+def test_isprs_text_reading(tmp_path):
+    rows = np.array([[512743.63, 5403547.33, 308.68, 0], [512743.62, 5403547.33, 308.70, 1],
+                     [512744.00, 5403548.10, 309.12, 0]])
+    path = tmp_path / "samp99.txt"
+    write_text(path, rows)
+    cloud = read_cloud(str(path))
+    assert len(cloud) == 3
+    np.testing.assert_array_equal(cloud.x, rows[:, 0])
+    np.testing.assert_array_equal(cloud.z, rows[:, 2])
+    np.testing.assert_array_equal(cloud.reference_label, [0, 1, 0])
+    assert cloud.has_return_info is False
+    assert cloud.crs_wkt is None and cloud.las is None
+    np.testing.assert_array_equal(cloud.return_number, 1)
+    np.testing.assert_array_equal(cloud.number_of_returns, 1)
+    np.testing.assert_array_equal(cloud.classification, 0)
+
+
+def test_isprs_text_crlf_spaces_and_three_columns(tmp_path):
+    path = tmp_path / "pts.txt"
+    path.write_bytes(b"1.0 2.0 3.0\r\n4.0   5.0 6.5\r\n")
+    cloud = read_cloud(str(path))
+    assert len(cloud) == 2 and cloud.reference_label is None
+    np.testing.assert_array_equal(cloud.z, [3.0, 6.5])
+    one = tmp_path / "one.txt"
+    one.write_text("1 2 3 1\n")
+    assert len(read_cloud(str(one))) == 1
+
+
+def test_isprs_text_to_las_keeps_label(tmp_path):
+    rows = np.array([[10.0, 20.0, 1.0, 0], [11.0, 20.5, 1.2, 1], [12.0, 21.0, 0.9, 0]])
+    src = tmp_path / "s.txt"
+    write_text(src, rows)
+    digest = sha256(src)
+    cloud = read_cloud(str(src))
+    write_classified(cloud, np.array([2, 1, 2], np.uint8), str(tmp_path / "s.laz"))
+    assert sha256(src) == digest
+    out = read_cloud(str(tmp_path / "s.laz"))
+    assert out.las.point_format.id == 0
+    np.testing.assert_array_equal(out.classification, [2, 1, 2])
+    np.testing.assert_array_equal(out.las["reference_label"], [0, 1, 0])
+    np.testing.assert_allclose(out.x, rows[:, 0], atol=1e-9)
+
+
+# --- read errors: each names the file --------------------------------------------------------
+
+def assert_names_file(err, path):
+    assert str(path) in str(err.value), f"message does not name {path}: {err.value}"
+    assert isinstance(err.value, GroundSieveError)
+
+
+def test_missing_file(tmp_path):
+    path = tmp_path / "nothere.laz"
+    with pytest.raises(InputError, match="no such file") as err:
+        read_cloud(str(path))
+    assert_names_file(err, path)
+
+
+def test_folder(tmp_path):
+    folder = tmp_path / "dir.las"
+    folder.mkdir()
+    with pytest.raises(InputError, match="folder") as err:
+        read_cloud(str(folder))
+    assert_names_file(err, folder)
+
+
+def test_text_named_las(tmp_path):
+    path = tmp_path / "fake.las"
+    path.write_text("this is not a LAS file\n1 2 3\n")
+    with pytest.raises(UnsupportedFormatError, match="not a LAS/LAZ") as err:
+        read_cloud(str(path))
+    assert_names_file(err, path)
+
+
+@pytest.mark.parametrize("ext", [".laz", ".las"])
+def test_truncated_file(tmp_path, ext):
+    full = tmp_path / f"full{ext}"
+    write_las(sample_las(n=20000, extra=False), str(full))
+    data = full.read_bytes()
+    cut = tmp_path / f"cut{ext}"
+    cut.write_bytes(data[:len(data) // 2])
+    with pytest.raises(InputError) as err:
+        read_cloud(str(cut))
+    assert_names_file(err, cut)
+    assert "truncated" in str(err.value) or "damaged" in str(err.value)
+
+
+def test_empty_las(tmp_path):
+    path = tmp_path / "empty.las"
+    write_las(new_las(np.array([]), np.array([]), np.array([])), str(path))
+    with pytest.raises(InputError, match="no points") as err:
+        read_cloud(str(path))
+    assert_names_file(err, path)
+
+
+def test_zero_byte_files(tmp_path):
+    for name in ("zero.las", "zero.laz", "zero.txt"):
+        path = tmp_path / name
+        path.write_bytes(b"")
+        with pytest.raises(InputError) as err:
+            read_cloud(str(path))
+        assert_names_file(err, path)
+
+
+@pytest.mark.parametrize("name", ["cloud.xyz", "cloud.csv", "cloud", "cloud.las.bak"])
+def test_unsupported_extension(tmp_path, name):
+    path = tmp_path / name
+    path.write_text("1 2 3\n")
+    with pytest.raises(UnsupportedFormatError, match="unsupported") as err:
+        read_cloud(str(path))
+    assert_names_file(err, path)
+
+
+def test_text_with_nan_coordinates(tmp_path):
+    path = tmp_path / "nan.txt"
+    path.write_text("1 2 3 0\n4 nan 6 1\n7 8 9 0\n")
+    with pytest.raises(InputError, match="NaN") as err:
+        read_cloud(str(path))
+    assert_names_file(err, path)
+
+
+def test_text_with_huge_coordinates(tmp_path):
+    path = tmp_path / "huge.txt"
+    path.write_text("1 2 3 0\n2.5e9 2 3 1\n")
+    with pytest.raises(InputError, match="1e9") as err:
+        read_cloud(str(path))
+    assert_names_file(err, path)
+
+
+def test_las_with_huge_coordinates(tmp_path):
+    path = tmp_path / "huge.las"
+    x = np.array([5.0e9, 5.0e9 + 1.0, 5.0e9 + 2.0])
+    write_las(new_las(x, np.array([0.0, 1.0, 2.0]), np.zeros(3)), str(path))
+    with pytest.raises(InputError, match="1e9") as err:
+        read_cloud(str(path))
+    assert_names_file(err, path)
+
+
+@pytest.mark.parametrize("content, match", [("a b c\n", "ISPRS"), ("1 2\n3 4\n", "3 columns"),
+                                            ("1 2 3\n4 5\n", "ISPRS")])
+def test_text_not_numbers(tmp_path, content, match):
+    path = tmp_path / "bad.txt"
+    path.write_text(content)
+    with pytest.raises(UnsupportedFormatError, match=match) as err:
+        read_cloud(str(path))
+    assert_names_file(err, path)
+
+
+def test_empty_text(tmp_path):
+    path = tmp_path / "empty.txt"
+    path.write_text("")
+    with pytest.raises(InputError, match="no points") as err:
+        read_cloud(str(path))
+    assert_names_file(err, path)
+
+
+# --- output paths ---------------------------------------------------------------------------
+
+def test_check_output_path_accepts_a_good_path(tmp_path):
+    for name in ("out.las", "out.laz", "OUT.LAZ"):
+        assert check_output_path(str(tmp_path / name), inputs=[str(tmp_path / "in.las")]) == str(tmp_path / name)
+
+
+def test_check_output_path_refuses_the_input(tmp_path, monkeypatch):
+    src = tmp_path / "in.laz"
+    write_las(sample_las(n=10, extra=False), str(src))
+    with pytest.raises(OutputError, match="must not be the input") as err:
+        check_output_path(str(src), inputs=[str(src)])
+    assert str(src) in str(err.value)
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(OutputError):
+        check_output_path("in.laz", inputs=[str(src)])  # relative vs absolute
+    with pytest.raises(OutputError):
+        check_output_path(str(tmp_path / "sub" / ".." / "in.laz"), inputs=[str(src)])
+
+
+def test_check_output_path_refuses_the_input_through_a_symlink(tmp_path):
+    src = tmp_path / "in.laz"
+    write_las(sample_las(n=10, extra=False), str(src))
+    link = tmp_path / "link.laz"
+    link.symlink_to(src)
+    with pytest.raises(OutputError, match="must not be the input"):
+        check_output_path(str(link), inputs=[str(src)])
+    with pytest.raises(OutputError, match="must not be the input"):
+        check_output_path(str(src), inputs=[str(link)])
+    linked_dir = tmp_path / "alias"
+    linked_dir.symlink_to(tmp_path, target_is_directory=True)
+    with pytest.raises(OutputError, match="must not be the input"):
+        check_output_path(str(linked_dir / "in.laz"), inputs=[str(src)])
+
+
+@pytest.mark.parametrize("name", ["out.txt", "out.tif", "out", "out.las.tmp"])
+def test_check_output_path_refuses_wrong_extension(tmp_path, name):
+    with pytest.raises(OutputError, match=r"\.las or \.laz"):
+        check_output_path(str(tmp_path / name))
+
+
+def test_check_output_path_refuses_missing_folder(tmp_path):
+    path = tmp_path / "no" / "such" / "dir" / "out.laz"
+    with pytest.raises(OutputError, match="does not exist") as err:
+        check_output_path(str(path))
+    assert str(path) in str(err.value)
+
+
+def test_write_las_checks_the_path(tmp_path):
+    with pytest.raises(OutputError):
+        write_las(sample_las(n=10, extra=False), str(tmp_path / "out.txt"))
+    with pytest.raises(OutputError):
+        write_las(sample_las(n=10, extra=False), str(tmp_path / "missing" / "out.las"))
+    assert os.listdir(tmp_path) == []
+
+
+# --- atomic writes --------------------------------------------------------------------------
+
+def test_atomic_write_success_leaves_only_the_target(tmp_path):
+    path = tmp_path / "out.laz"
+    write_las(sample_las(n=100, extra=False), str(path))
+    assert os.listdir(tmp_path) == ["out.laz"]
+    assert len(read_cloud(str(path))) == 100
+
+
+def test_atomic_path_failure_leaves_nothing(tmp_path):
+    path = tmp_path / "out.las"
+    with pytest.raises(RuntimeError, match="boom"):
+        with atomic_path(str(path)) as tmp:
+            assert os.path.dirname(tmp) == str(tmp_path) and tmp.endswith(".las")
+            with open(tmp, "wb") as fh:
+                fh.write(b"half a file")
+            raise RuntimeError("boom")
+    assert os.listdir(tmp_path) == []
+
+
+def test_atomic_path_failure_keeps_the_previous_file(tmp_path):
+    path = tmp_path / "out.las"
+    path.write_bytes(b"previous result")
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_path(str(path)) as tmp:
+            with open(tmp, "wb") as fh:
+                fh.write(b"partial")
+            raise KeyboardInterrupt
+    assert path.read_bytes() == b"previous result"
+    assert os.listdir(tmp_path) == ["out.las"]
+
+
+def test_write_las_failure_midway_leaves_nothing(tmp_path, monkeypatch):
+    las = sample_las(n=100, extra=False)
+
+    def failing_write(self, destination, do_compress=None, **kwargs):
+        with open(destination, "wb") as fh:
+            fh.write(b"LASF partial")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(type(las), "write", failing_write)
+    path = tmp_path / "out.laz"
+    with pytest.raises(OutputError, match="No space left") as err:
+        write_las(las, str(path))
+    assert str(path) in str(err.value)
+    assert os.listdir(tmp_path) == []
+
+
+def test_write_replaces_an_existing_output(tmp_path):
+    path = tmp_path / "out.las"
+    path.write_bytes(b"old")
+    write_las(sample_las(n=30, extra=False), str(path))
+    assert len(read_cloud(str(path))) == 30
+    assert os.listdir(tmp_path) == ["out.las"]
+
+
+
+def test_written_file_follows_the_umask(tmp_path):
+    old = os.umask(0o022)
+    try:
+        path = tmp_path / "out.las"
+        write_las(sample_las(n=10, extra=False), str(path))
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE(os.stat(path).st_mode) == 0o644
