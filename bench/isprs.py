@@ -45,28 +45,10 @@ import numpy as np  # noqa: E402
 from groundsieve.core.io import CLASS_GROUND, read_cloud  # noqa: E402
 from groundsieve.core.metrics import GroundAccuracy, ground_accuracy  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from filters import FILTERS  # noqa: E402
+
 ParamsRow = Optional[Dict[str, str]]
-
-
-# ---------------------------------------------------------------------------------------------
-# Filter registry: name -> function(params row or None) -> filter object
-# ---------------------------------------------------------------------------------------------
-
-def make_smrf(row: ParamsRow):
-    """SMRF with Pingel's per-sample parameters (cell 1 m, as in his runs), or the defaults."""
-    from groundsieve.core.smrf import SMRF
-    if row is None:
-        return SMRF()
-    return SMRF(cell_size_m=1.0,
-                slope=float(row["slope_threshold"]),
-                window_m=float(row["windows"]),
-                elevation_threshold_m=float(row["elevation_threshold"]),
-                elevation_scalar=float(row["elevation_scaler"]))
-
-
-FILTERS: Dict[str, Callable[[ParamsRow], Callable]] = {
-    "smrf": make_smrf,
-}
 
 
 # ---------------------------------------------------------------------------------------------

@@ -34,10 +34,14 @@ class FilterOptions:
 class DTMOptions:
     cell_size_m: float = 1.0
     fill_outside_hull: bool = False
+    #: ground points triangulated per DTM cell at most (0 = all; see rasterize.tin_dtm)
+    points_per_cell: int = 4
 
     def __post_init__(self):
         if not (math.isfinite(self.cell_size_m) and self.cell_size_m > 0):
             raise InvalidParameterError(f"DTM cell size must be > 0 m (got {self.cell_size_m})")
+        if int(self.points_per_cell) != self.points_per_cell or self.points_per_cell < 0:
+            raise InvalidParameterError(f"points_per_cell must be a whole number >= 0 (got {self.points_per_cell})")
 
 
 @dataclass
@@ -99,7 +103,8 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions):
     grid = GridSpec.covering(x, y, options.cell_size_m, what="DTM")
     if not ground.any():
         raise InvalidParameterError("the filter found no ground point: no DTM can be made")
-    dtm = tin_dtm(x[ground], y[ground], z[ground], grid, fill_outside=options.fill_outside_hull)
+    dtm = tin_dtm(x[ground], y[ground], z[ground], grid, fill_outside=options.fill_outside_hull,
+                  points_per_cell=options.points_per_cell)
     return grid, dtm
 
 
