@@ -7,7 +7,8 @@ from qgis.core import (QgsCoordinateReferenceSystem, QgsFeature, QgsFeatureSink,
                        QgsGeometry, QgsPoint, QgsProcessing, QgsProcessingAlgorithm, QgsProcessingException,
                        QgsProcessingParameterBoolean, QgsProcessingParameterFeatureSink,
                        QgsProcessingParameterFile, QgsProcessingParameterFileDestination,
-                       QgsProcessingParameterNumber, QgsProcessingParameterRasterDestination, QgsWkbTypes)
+                       QgsProcessingParameterNumber, QgsProcessingParameterRasterDestination, QgsUnitTypes,
+                       QgsWkbTypes)
 from qgis.PyQt.QtCore import QVariant
 from qgis.PyQt.QtGui import QIcon
 
@@ -16,7 +17,8 @@ _ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
 COMMON_HELP = """
 <h3>Input and outputs</h3>
 <p><b>Input point cloud</b>: LAS 1.2-1.4 or LAZ (point formats 0-10), or an ISPRS filter-test text
-file <code>x y z label</code> (.txt). The file is only read, never changed.</p>
+file <code>x y z label</code> (.txt). The file is only read, never changed. Lengths given in metres
+are read in the unit of the cloud's CRS (a warning says so when that unit is not the metre).</p>
 <p><b>Classified point cloud</b>: LAS or LAZ (by extension) with every dimension, extra bytes, VLRs
 and the CRS of the input kept. Ground points get ASPRS class 2, the other filtered points class 1
 (or keep their class with <i>Keep existing non-ground classes</i>). Points already classified as
@@ -129,6 +131,12 @@ class GroundFilterAlgorithm(QgsProcessingAlgorithm):
             raise QgsProcessingException(str(err)) from err
         if run.cloud.crs_wkt is None:
             feedback.pushWarning(f"{input_path}: no CRS in the file; outputs have none either.")
+        else:
+            units = QgsCoordinateReferenceSystem.fromWkt(run.cloud.crs_wkt).mapUnits()
+            if units != QgsUnitTypes.DistanceUnit.DistanceMeters:
+                feedback.pushWarning(
+                    f"{input_path}: the CRS's unit is {QgsUnitTypes.toString(units)}, not metres: every "
+                    "length parameter (cell sizes, windows, thresholds) was read in that unit.")
         results = {self.OUTPUT: output_path, self.GROUND_COUNT: run.ground_count,
                    self.POINT_COUNT: len(run.cloud)}
         if dtm_path:

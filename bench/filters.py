@@ -5,20 +5,22 @@ from typing import Callable, Dict, Optional
 ParamsRow = Optional[Dict[str, str]]
 
 
-def make_smrf(row: ParamsRow):
+def make_smrf(row: ParamsRow, **fixed):
     """SMRF with Pingel's per-sample parameters (cell 1 m, as in his runs), or the defaults."""
     from groundsieve.core.smrf import SMRF
     if row is None:
-        return SMRF()
+        return SMRF(**fixed)
     return SMRF(cell_size_m=1.0,
                 slope=float(row["slope_threshold"]),
                 window_m=float(row["windows"]),
                 elevation_threshold_m=float(row["elevation_threshold"]),
-                elevation_scalar=float(row["elevation_scaler"]))
+                elevation_scalar=float(row["elevation_scaler"]), **fixed)
 
 
 FILTERS: Dict[str, Callable[[ParamsRow], Callable]] = {
     "smrf": make_smrf,
+    # As Pingel's Python code runs by default: low-outlier cells are not refilled before the opening.
+    "smrf-nofill": lambda row: make_smrf(row, low_outlier_fill=False),
 }
 
 
