@@ -68,6 +68,10 @@ class GroundFilterAlgorithm(QgsProcessingAlgorithm):
     def buildFilter(self, parameters, context):  # noqa: N802
         raise NotImplementedError
 
+    def rasterOutputs(self, parameters, context):  # noqa: N802
+        """More GeoTIFF outputs: {output name: (path, f(run) -> (values, grid))}; none by default."""
+        return {}
+
     def iconName(self):  # noqa: N802
         return "groundsieve.svg"
 
@@ -116,6 +120,8 @@ class GroundFilterAlgorithm(QgsProcessingAlgorithm):
         dtm_path = self.parameterAsOutputLayer(parameters, self.DTM, context) or None
         try:
             algorithm = self.buildFilter(parameters, context)
+            rasters = {name: (path, make) for name, (path, make) in self.rasterOutputs(parameters, context).items()
+                       if path}
             options = workflow.FilterOptions(
                 last_returns_only=self.parameterAsBoolean(parameters, self.LAST_RETURNS, context),
                 ignore_noise=self.parameterAsBoolean(parameters, self.IGNORE_NOISE, context),
@@ -125,6 +131,7 @@ class GroundFilterAlgorithm(QgsProcessingAlgorithm):
                 fill_outside_hull=self.parameterAsBoolean(parameters, self.DTM_FILL, context))
             run = workflow.run_ground_filter(
                 input_path, output_path, algorithm, options=options, dtm_path=dtm_path, dtm=dtm,
+                rasters={path: make for path, make in rasters.values()},
                 progress=lambda f: feedback.setProgress(100.0 * f), is_cancelled=feedback.isCanceled,
                 log=feedback.pushInfo)
         except errors.GroundSieveError as err:
@@ -141,6 +148,8 @@ class GroundFilterAlgorithm(QgsProcessingAlgorithm):
                    self.POINT_COUNT: len(run.cloud)}
         if dtm_path:
             results[self.DTM] = dtm_path
+        for name, (path, _make) in rasters.items():
+            results[name] = path
         sink_id = self._write_ground_points(parameters, context, feedback, run)
         if sink_id is not None:
             results[self.GROUND_POINTS] = sink_id

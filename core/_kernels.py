@@ -184,3 +184,81 @@ def _classify_against_surface_kernel(x, y, z, surface, slope, x0, top, cell,
         zs = _cubic_one(surface, fc, fr, wx, wy)
         ss = _cubic_one(slope, fc, fr, wx, wy)
         out_ground[k] = abs(z[k] - zs) <= threshold + scalar * ss
+
+
+@njit(cache=True, nogil=True)
+def _kernel_index(x, y, x0, y0, size, nx):
+    return int(math.floor((y - y0) / size)) * nx + int(math.floor((x - x0) / size))
+
+
+@njit(cache=True, nogil=True)
+def _echo_grid_stats_kernel(x, y, z, rn, nr, x0, y0, size, nx, ny, zmin, zmax, only_first, only_single):
+    """Per square kernel: lowest and highest z, whether every return number is 1 (the paper's
+    bypass test) and whether every point is a single return (1 of 1)."""
+    zmin[:] = np.inf
+    zmax[:] = -np.inf
+    only_first[:] = True
+    only_single[:] = True
+    for k in range(x.shape[0]):
+        c = _kernel_index(x[k], y[k], x0, y0, size, nx)
+        if z[k] < zmin[c]:
+            zmin[c] = z[k]
+        if z[k] > zmax[c]:
+            zmax[c] = z[k]
+        if rn[k] != 1:
+            only_first[c] = False
+        if nr[k] > 1:
+            only_single[c] = False
+
+
+@njit(cache=True, nogil=True)
+def _echo_grid_classify_kernel(x, y, z, x0, y0, size, nx, reference, bypass, dz, out_ground):
+    """Ground where the kernel is bypassed, or z <= reference z of the kernel + dz."""
+    for k in range(x.shape[0]):
+        c = _kernel_index(x[k], y[k], x0, y0, size, nx)
+        out_ground[k] = bypass[c] or z[k] <= reference[c] + dz
+
+
+@njit(cache=True, nogil=True)
+def _focal_cv_kernel(values, radius, max_radius, min_cells, out_mean, out_std):
+    """Mean and (population) standard deviation of the non-NaN ``values`` in the square window
+    of ``radius`` cells around each non-NaN cell. Where fewer than ``min_cells`` cells of the
+    window hold a value, the window grows one cell at a time up to ``max_radius``. Cells left
+    with fewer than 2 values, and NaN cells, get NaN."""
+    nrows, ncols = values.shape
+    for r in range(nrows):
+        for c in range(ncols):
+            out_mean[r, c] = np.nan
+            out_std[r, c] = np.nan
+            if np.isnan(values[r, c]):
+                continue
+            rad = radius
+            while True:
+                count = 0
+                total = 0.0
+                total2 = 0.0
+                for rr in range(max(r - rad, 0), min(r + rad + 1, nrows)):
+                    for cc in range(max(c - rad, 0), min(c + rad + 1, ncols)):
+                        v = values[rr, cc]
+                        if not np.isnan(v):
+                            count += 1
+                            total += v
+                            total2 += v * v
+                if count >= min_cells or rad >= max_radius:
+                    break
+                rad += 1
+            if count >= 2:
+                mean = total / count
+                var = total2 / count - mean * mean
+                out_mean[r, c] = mean
+                out_std[r, c] = math.sqrt(var) if var > 0.0 else 0.0
+
+
+@njit(cache=True, nogil=True)
+def _cell_lookup_kernel(x, y, grid, x0, top, cell, out):
+    """out[k] = grid value of the cell holding point k."""
+    nrows, ncols = grid.shape
+    for k in range(x.shape[0]):
+        c = min(max(int(math.floor((x[k] - x0) / cell)), 0), ncols - 1)
+        r = min(max(int(math.floor((top - y[k]) / cell)), 0), nrows - 1)
+        out[k] = grid[r, c]

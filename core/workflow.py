@@ -52,6 +52,7 @@ class FilterRun:
     filtered: np.ndarray        #: bool per point: was given to the filter
     dtm_grid: Optional[GridSpec] = None
     dtm: Optional[np.ndarray] = None
+    detail: object = None       #: what the filter's ``run`` returned (see call_filter)
 
     @property
     def ground_count(self) -> int:
@@ -70,9 +71,38 @@ def select_points(cloud: PointCloud, options: FilterOptions) -> np.ndarray:
     return keep
 
 
+@dataclass
+class Classified:
+    classification: np.ndarray  #: uint8 ASPRS classes of every point
+    ground: np.ndarray          #: bool per point
+    filtered: np.ndarray        #: bool per point: given to the filter
+    detail: object = None       #: what the filter's ``run`` returned (grids, ...), if it has one
+
+
+def call_filter(algorithm, cloud: PointCloud, idx: np.ndarray, steps: Steps, log):
+    """Run one filter on the points ``idx`` of ``cloud``.
+
+    The protocol every filter follows: ``run(xyz, steps=..., **fields)`` returns an object with
+    a boolean ``ground`` (and whatever else the filter wants to show, e.g. grids); plain
+    callables ``f(xyz, steps=...) -> ground`` work too. A filter that needs per-point
+    attributes names them in ``point_fields`` (e.g. ``("return_number", "number_of_returns")``)
+    and gets them as keyword arrays; one that has something to tell the user sets
+    ``wants_log = True`` and gets ``log``.
+    """
+    xyz = np.column_stack([cloud.x[idx], cloud.y[idx], cloud.z[idx]])
+    extra = {name: np.ascontiguousarray(getattr(cloud, name)[idx])
+             for name in getattr(algorithm, "point_fields", ())}
+    if getattr(algorithm, "wants_log", False):
+        extra["log"] = log
+    if hasattr(algorithm, "run"):
+        detail = algorithm.run(xyz, steps=steps, **extra)
+        return np.asarray(detail.ground, dtype=bool), detail
+    return np.asarray(algorithm(xyz, steps=steps, **extra), dtype=bool), None
+
+
 def classify_cloud(cloud: PointCloud, algorithm, options: FilterOptions = FilterOptions(),
-                   steps: Optional[Steps] = None, log: Optional[Callable[[str], None]] = None):
-    """Run ``algorithm`` on the selected points; return (classification, ground, filtered)."""
+                   steps: Optional[Steps] = None, log: Optional[Callable[[str], None]] = None) -> Classified:
+    """Run ``algorithm`` on the selected points and give every point its ASPRS class."""
     steps = steps or Steps()
     log = log or (lambda _msg: None)
     filtered = select_points(cloud, options)
@@ -83,8 +113,7 @@ def classify_cloud(cloud: PointCloud, algorithm, options: FilterOptions = Filter
     if n_sel < len(cloud):
         log(f"Filtering {n_sel:,} of {len(cloud):,} points (noise or non-last returns left out).")
     idx = np.flatnonzero(filtered)
-    xyz = np.column_stack([cloud.x[idx], cloud.y[idx], cloud.z[idx]])
-    sub_ground = algorithm(xyz, steps=steps)
+    sub_ground, detail = call_filter(algorithm, cloud, idx, steps, log)
     ground = np.zeros(len(cloud), dtype=bool)
     ground[idx[sub_ground]] = True
     # Every point but ignored noise gets a new class: non-last returns are not ground either.
@@ -94,7 +123,7 @@ def classify_cloud(cloud: PointCloud, algorithm, options: FilterOptions = Filter
         touched &= cls == CLASS_GROUND  # only a former ground class is taken away
     cls[touched] = CLASS_UNCLASSIFIED
     cls[ground] = CLASS_GROUND
-    return cls.astype(np.uint8), ground, filtered
+    return Classified(cls.astype(np.uint8), ground, filtered, detail)
 
 
 def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions):
@@ -111,26 +140,31 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions):
 def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
                       options: FilterOptions = FilterOptions(),
                       dtm_path: Optional[str] = None, dtm: DTMOptions = DTMOptions(),
+                      rasters: Optional[dict] = None,
                       progress: Optional[Callable[[float], None]] = None,
                       is_cancelled: Optional[Callable[[], bool]] = None,
                       log: Optional[Callable[[str], None]] = None) -> FilterRun:
     """Read ``input_path``, classify ground with ``algorithm``, write ``output_path`` (LAS/LAZ)
-    and optionally ``dtm_path`` (GeoTIFF). Nothing is written unless everything succeeds
-    up to that output; the input file is never modified."""
+    and optionally ``dtm_path`` (GeoTIFF). ``rasters`` maps more GeoTIFF paths to functions
+    ``f(run) -> (values, grid)`` (e.g. the intermediate grids a filter keeps in ``run.detail``).
+    All outputs are written to temporary files and renamed together at the end: a failed or
+    cancelled run leaves none of them. The input file is never modified."""
     from .raster import check_raster_path, write_geotiff
     steps = Steps(progress, is_cancelled)
     log = log or (lambda _msg: None)
     if output_path:
         check_output_path(output_path, inputs=[input_path])
-    if dtm_path:
-        check_raster_path(dtm_path, inputs=[input_path, output_path])
+    rasters = {path: fn for path, fn in (rasters or {}).items() if path}
+    for path in ([dtm_path] if dtm_path else []) + list(rasters):
+        check_raster_path(path, inputs=[input_path, output_path])
     steps.check()
     cloud = read_cloud(input_path)
     log(f"Read {len(cloud):,} points from {input_path}.")
     steps.report(0.1)
-    cls, ground, filtered = classify_cloud(cloud, algorithm, options, steps.sub(0.1, 0.75), log)
-    log(f"Ground: {int(ground.sum()):,} of {int(filtered.sum()):,} filtered points.")
-    run = FilterRun(cloud, cls, ground, filtered)
+    done = classify_cloud(cloud, algorithm, options, steps.sub(0.1, 0.75), log)
+    cls, ground = done.classification, done.ground
+    log(f"Ground: {int(ground.sum()):,} of {int(done.filtered.sum()):,} filtered points.")
+    run = FilterRun(cloud, cls, ground, done.filtered, detail=done.detail)
     if dtm_path:
         # The DTM covers every point but ignored noise (which may lie far away).
         area = ~np.isin(cloud.classification, NOISE_CLASSES) if options.ignore_noise else slice(None)
@@ -145,6 +179,10 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
         if dtm_path:
             write_geotiff(stack.enter_context(atomic_path(dtm_path)), run.dtm, run.dtm_grid,
                           crs_wkt=cloud.crs_wkt, atomic=False)
+        for path, make in rasters.items():
+            values, grid = make(run)
+            write_geotiff(stack.enter_context(atomic_path(path)), values, grid, crs_wkt=cloud.crs_wkt,
+                          atomic=False)
         steps.check()
     steps.report(1.0)
     return run

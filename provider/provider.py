@@ -5,9 +5,11 @@ import os
 from qgis.core import QgsProcessingProvider
 from qgis.PyQt.QtGui import QIcon
 
+from ..algorithms.echogrid import EchoGridAlgorithm
+from ..algorithms.evc import EVCAlgorithm, EVCRastersAlgorithm
 from ..algorithms.smrf import SMRFAlgorithm
 
-ALGORITHMS = (SMRFAlgorithm,)
+ALGORITHMS = (SMRFAlgorithm, EchoGridAlgorithm, EVCAlgorithm, EVCRastersAlgorithm)
 
 _ROOT = os.path.dirname(os.path.dirname(__file__))
 

@@ -1,0 +1,52 @@
+"""groundsieve:echogrid — Ground filter (return-number grid), Matrone et al. 2024, Method 2."""
+from qgis.core import QgsProcessingParameterEnum, QgsProcessingParameterNumber
+
+from .base import COMMON_HELP, GroundFilterAlgorithm
+
+Double = QgsProcessingParameterNumber.Type.Double
+MODES = ("faithful", "evidence")
+
+
+class EchoGridAlgorithm(GroundFilterAlgorithm):
+    KERNEL = "KERNEL"
+    DZ = "DZ"
+    MODE = "MODE"
+
+    def name(self):
+        return "echogrid"
+
+    def displayName(self):  # noqa: N802
+        return "Ground filter (return-number grid)"
+
+    def iconName(self):  # noqa: N802
+        return "echogrid.svg"
+
+    def shortHelpString(self):  # noqa: N802
+        return """<p>The return-number ("echo") grid filter of Matrone et al. (2024, Method 2), made for
+UAV LiDAR: square kernels of <i>Kernel size</i> tile the cloud; in each, points higher than the lowest
+point + <i>Height above the kernel's lowest point</i> are non-ground; a kernel whose points all have
+return number 1 is taken as ground whole, without the height test (bare ground mostly gives single
+returns).</p>
+<p><b>No return information</b> (photogrammetry, ISPRS text, every point 1 of 1): the filter says so
+in the log and applies the height test everywhere.</p>
+<p><b>Mode</b>: <i>faithful</i> is the paper's rule. <i>evidence</i> uses the echoes as evidence
+rather than as a bypass, as the paper's conclusion asks: a return followed by others is never ground;
+a kernel of single returns is bypassed only when its height range is within the threshold and it is
+not raised above its neighbours (flat roofs are no longer ground); a raised kernel is tested against
+the lowest point of its 3 x 3 kernel neighbourhood. Both are measured in docs/BENCHMARKS.md.</p>
+""" + COMMON_HELP
+
+    def initFilterParameters(self):  # noqa: N802
+        self.addParameter(QgsProcessingParameterNumber(
+            self.KERNEL, "Kernel size (m)", type=Double, defaultValue=5.0, minValue=0.0))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.DZ, "Height above the kernel's lowest point (m)", type=Double, defaultValue=2.0, minValue=0.0))
+        self.addParameter(QgsProcessingParameterEnum(
+            self.MODE, "Mode", options=["faithful (paper: single-return kernels are ground)",
+                                        "evidence (echoes as evidence, not as a bypass)"], defaultValue=0))
+
+    def buildFilter(self, parameters, context):  # noqa: N802
+        from ..core.echogrid import EchoGrid
+        return EchoGrid(kernel_m=self.parameterAsDouble(parameters, self.KERNEL, context),
+                        dz_m=self.parameterAsDouble(parameters, self.DZ, context),
+                        mode=MODES[self.parameterAsEnum(parameters, self.MODE, context)])

@@ -1,0 +1,148 @@
+"""groundsieve:evc — Ground filter (multiscale EVC), Fan et al. 2023; and
+groundsieve:evcrasters — the same with its intermediate rasters."""
+from qgis.core import (QgsProcessingParameterBoolean, QgsProcessingParameterDefinition,
+                       QgsProcessingParameterEnum, QgsProcessingParameterNumber,
+                       QgsProcessingParameterRasterDestination)
+
+from .base import COMMON_HELP, GroundFilterAlgorithm
+
+Double = QgsProcessingParameterNumber.Type.Double
+Integer = QgsProcessingParameterNumber.Type.Integer
+DIFFERENCES = ("large_minus_small", "small_minus_large")
+
+EVC_HELP = """<p>The multiscale elevation-variation-coefficient filter of Fan et al. (2023), made for
+UAV photogrammetry over low vegetation: virtual grids of mean elevation at a small and a large scale;
+their difference on the small grid; in a square window of <i>Neighbourhood radius</i> cells,
+EVC = standard deviation / mean of the difference; then the paper's Table 2: ground where
+0 &lt; EVC &lt;= <i>Threshold</i>, vegetation where EVC &lt;= 0 (vegetation area) or EVC &gt; threshold
+(vegetation boundary). Points take the class of their small cell. <i>Natural breaks</i> picks the
+threshold automatically (Jenks, as the paper did).</p>
+<p><b>Empty small cells</b> (normal below about 25 points/m² at 0.2 m) are left out of every window;
+where a window holds fewer than <i>Minimum non-empty cells</i>, it grows up to <i>Maximum radius</i>.
+A cell still without an EVC is not ground.</p>
+<p><b>Difference</b>: the paper's vegetation values are negative, i.e. large minus small (default).
+<b>Ground offset</b> (0 = paper): added to the mean difference before the ratio, which is otherwise
+unstable on open ground far from vegetation (see docs/BENCHMARKS.md for what each measured).</p>
+"""
+
+
+class EVCAlgorithm(GroundFilterAlgorithm):
+    SMALL_SCALE = "SMALL_SCALE"
+    LARGE_SCALE = "LARGE_SCALE"
+    RADIUS = "RADIUS"
+    THRESHOLD = "THRESHOLD"
+    AUTO_THRESHOLD = "AUTO_THRESHOLD"
+    DIFFERENCE = "DIFFERENCE"
+    GROUND_OFFSET = "GROUND_OFFSET"
+    MIN_CELLS = "MIN_CELLS"
+    MAX_RADIUS = "MAX_RADIUS"
+
+    def name(self):
+        return "evc"
+
+    def displayName(self):  # noqa: N802
+        return "Ground filter (multiscale EVC)"
+
+    def iconName(self):  # noqa: N802
+        return "evc.svg"
+
+    def shortHelpString(self):  # noqa: N802
+        return EVC_HELP + COMMON_HELP
+
+    def initFilterParameters(self):  # noqa: N802
+        self.addParameter(QgsProcessingParameterNumber(
+            self.SMALL_SCALE, "Small-scale grid (m)", type=Double, defaultValue=0.2, minValue=0.0))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.LARGE_SCALE, "Large-scale grid (m)", type=Double, defaultValue=2.0, minValue=0.0))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.RADIUS, "Neighbourhood radius (cells)", type=Integer, defaultValue=1, minValue=0))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.THRESHOLD, "Threshold (EVC)", type=Double, defaultValue=1.5, minValue=0.0))
+        self.addParameter(QgsProcessingParameterBoolean(
+            self.AUTO_THRESHOLD, "Threshold by natural breaks (Jenks)", defaultValue=False))
+        advanced = [
+            QgsProcessingParameterEnum(self.DIFFERENCE, "Difference",
+                                       options=["large minus small (paper's sign)", "small minus large"],
+                                       defaultValue=0),
+            QgsProcessingParameterNumber(self.GROUND_OFFSET, "Ground offset added to the mean difference (m)",
+                                         type=Double, defaultValue=0.0, minValue=0.0),
+            QgsProcessingParameterNumber(self.MIN_CELLS, "Minimum non-empty cells in a window",
+                                         type=Integer, defaultValue=3, minValue=2),
+            QgsProcessingParameterNumber(self.MAX_RADIUS, "Maximum radius when growing a window (cells)",
+                                         type=Integer, defaultValue=5, minValue=1),
+        ]
+        for param in advanced:
+            param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
+            self.addParameter(param)
+
+    def buildFilter(self, parameters, context):  # noqa: N802
+        from ..core.evc import EVC
+        radius = self.parameterAsInt(parameters, self.RADIUS, context)
+        return EVC(small_scale_m=self.parameterAsDouble(parameters, self.SMALL_SCALE, context),
+                   large_scale_m=self.parameterAsDouble(parameters, self.LARGE_SCALE, context),
+                   radius=radius,
+                   threshold=self.parameterAsDouble(parameters, self.THRESHOLD, context),
+                   auto_threshold=self.parameterAsBoolean(parameters, self.AUTO_THRESHOLD, context),
+                   difference=DIFFERENCES[self.parameterAsEnum(parameters, self.DIFFERENCE, context)],
+                   ground_offset_m=self.parameterAsDouble(parameters, self.GROUND_OFFSET, context),
+                   min_cells=self.parameterAsInt(parameters, self.MIN_CELLS, context),
+                   max_radius=max(radius, self.parameterAsInt(parameters, self.MAX_RADIUS, context)))
+
+
+class EVCRastersAlgorithm(EVCAlgorithm):
+    SMALL_MEAN = "SMALL_MEAN"
+    LARGE_MEAN = "LARGE_MEAN"
+    DIFFERENCE_RASTER = "DIFFERENCE_RASTER"
+    EVC_RASTER = "EVC_RASTER"
+    CLASS_RASTER = "CLASS_RASTER"
+
+    #: output name -> (label, f(EVCResult) -> (values, grid))
+    RASTERS = {
+        SMALL_MEAN: ("Small-scale mean elevation", lambda d: (d.small_mean, d.small_grid)),
+        LARGE_MEAN: ("Large-scale mean elevation", lambda d: (d.large_mean, d.large_grid)),
+        DIFFERENCE_RASTER: ("Elevation difference", lambda d: (d.difference, d.small_grid)),
+        EVC_RASTER: ("Elevation variation coefficient (EVC)", lambda d: (d.evc, d.small_grid)),
+        CLASS_RASTER: ("EVC classes (1 ground, 2 vegetation area, 3 vegetation boundary)",
+                       lambda d: (_classes_or_nan(d), d.small_grid)),
+    }
+
+    def name(self):
+        return "evcrasters"
+
+    def displayName(self):  # noqa: N802
+        return "EVC raster workflow (multiscale EVC with its rasters)"
+
+    def group(self):
+        return "Raster workflows"
+
+    def groupId(self):  # noqa: N802
+        return "rasterworkflows"
+
+    def shortHelpString(self):  # noqa: N802
+        return EVC_HELP + """<p>This workflow also writes the filter's intermediate grids as GeoTIFF with
+the cloud's CRS: the small- and large-scale mean elevations, the elevation difference, the EVC and
+the class raster (1 ground, 2 vegetation area, 3 vegetation boundary, nodata where the small cell
+is empty), to inspect and to reuse in the modeler. From <code>qgis_process</code>, name the rasters
+you want (<code>--EVC_RASTER=evc.tif --CLASS_RASTER=classes.tif</code> ...); unnamed ones are not
+written there.</p>""" + COMMON_HELP
+
+    def initFilterParameters(self):  # noqa: N802
+        super().initFilterParameters()
+        for name, (label, _make) in self.RASTERS.items():
+            # Optional, created by default: the toolbox and the modeler make them (temporary files
+            # unless named); qgis_process 3.22 refuses unnamed mandatory outputs, so there the user
+            # names the rasters wanted (e.g. --EVC_RASTER=evc.tif).
+            self.addParameter(QgsProcessingParameterRasterDestination(
+                name, label, optional=True, createByDefault=True))
+
+    def rasterOutputs(self, parameters, context):  # noqa: N802
+        return {name: (self.parameterAsOutputLayer(parameters, name, context),
+                       lambda run, make=make: make(run.detail))
+                for name, (_label, make) in self.RASTERS.items()}
+
+
+def _classes_or_nan(detail):
+    """The class grid with empty cells as no data."""
+    values = detail.classes.astype("float32")
+    values[detail.classes == 0] = float("nan")
+    return values

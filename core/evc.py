@@ -1,0 +1,179 @@
+"""The multiscale elevation-variation-coefficient (EVC) filter of Fan et al. (2023).
+
+1. Virtual grids of mean elevation at a small scale (``small_scale_m``, 0.2 m) and a large
+   scale (``large_scale_m``, 2.0 m; 3.2 m was the paper's other optimum).
+2. The elevation difference between the two on the small grid (the "output standard"): each
+   small cell against the large cell holding its centre.
+3. In a square window of ``radius`` cells (1 = 3 x 3) around each small cell,
+   EVC = standard deviation / mean of that difference.
+4. Table 2 of the paper: ground where 0 < EVC <= ``threshold`` (1.5); vegetation area where
+   EVC <= 0; vegetation boundary where EVC > threshold. Points take their small cell's class.
+   ``auto_threshold`` picks the threshold by natural breaks (Jenks, two classes of the
+   positive EVC values), as the paper did.
+
+Sign of the difference. The paper says the values "in vegetation areas were mostly negative"
+and so were their EVCs, and Table 2 calls EVC <= 0 vegetation. Vegetation raises a small cell
+above the smoother large-scale surface, so that sign is ``large - small``, the default here
+(``difference="large_minus_small"``). ``"small_minus_large"`` is available; with it the same
+Table 2 calls the canopy ground (measured in docs/BENCHMARKS.md).
+
+Empty small cells (the normal case below ~25 points/m² at 0.2 m) hold no difference and are
+left out of every window: the statistics use the non-empty cells only, and where a window holds
+fewer than ``min_cells`` non-empty cells it grows one cell at a time up to ``max_radius``. A
+cell still left with fewer than two values gets no EVC and its points are called vegetation
+boundary (not ground). Large cells are never empty where a small cell has points, except at
+the rim when the scales are not multiples; those take the nearest large cell's mean.
+
+``ground_offset_m`` (default 0 = the paper) is our one departure, offered as an option: the
+coefficient of variation is unstable where the mean difference is near zero, which is the case
+on open ground far from vegetation (the difference is then only noise, of random sign, and
+about half of such ground falls into "vegetation area"). Adding a small offset (the ground's
+roughness, e.g. 0.1 m) to the mean difference before the ratio keeps open ground in (0, t].
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from .errors import InvalidParameterError
+from .grid import GridSpec
+from .progress import Steps
+from .rasterize import cell_mean
+from .smrf import check_number, validate_xyz
+
+DIFFERENCES = ("large_minus_small", "small_minus_large")
+#: class codes of the class raster
+EMPTY, GROUND, VEGETATION_AREA, VEGETATION_BOUNDARY = 0, 1, 2, 3
+
+
+@dataclass(frozen=True)
+class EVCResult:
+    ground: np.ndarray              #: bool per point
+    small_grid: GridSpec
+    large_grid: GridSpec
+    small_mean: np.ndarray          #: mean z per small cell (NaN = empty)
+    large_mean: np.ndarray          #: mean z per large cell (NaN = empty)
+    difference: np.ndarray          #: on the small grid (NaN = empty)
+    evc: np.ndarray                 #: on the small grid (NaN = empty or undefined)
+    classes: np.ndarray             #: uint8 on the small grid: 0 empty, 1 ground, 2 veg. area, 3 veg. boundary
+    threshold: float                #: the threshold used (given, or found by natural breaks)
+
+
+@dataclass(frozen=True)
+class EVC:
+    small_scale_m: float = 0.2
+    large_scale_m: float = 2.0
+    radius: int = 1
+    threshold: float = 1.5
+    auto_threshold: bool = False
+    difference: str = "large_minus_small"
+    min_cells: int = 3
+    max_radius: int = 5
+    ground_offset_m: float = 0.0
+
+    name = "evc"
+
+    def __post_init__(self):
+        for name in ("small_scale_m", "large_scale_m", "threshold", "ground_offset_m"):
+            check_number(self, name)
+        for name in ("radius", "min_cells", "max_radius"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                raise InvalidParameterError(f"{name} must be a whole number (got {value!r})")
+        if not (math.isfinite(self.small_scale_m) and self.small_scale_m > 0):
+            raise InvalidParameterError(f"small_scale_m must be > 0 (got {self.small_scale_m})")
+        if not (math.isfinite(self.large_scale_m) and self.large_scale_m > self.small_scale_m):
+            raise InvalidParameterError(
+                f"large_scale_m must be larger than small_scale_m {self.small_scale_m} m (got {self.large_scale_m})")
+        if self.radius < 1:
+            raise InvalidParameterError(f"radius must be at least 1 cell (got {self.radius})")
+        if self.max_radius < self.radius:
+            raise InvalidParameterError(f"max_radius must be >= radius {self.radius} (got {self.max_radius})")
+        if self.min_cells < 2:
+            raise InvalidParameterError(f"min_cells must be at least 2 (got {self.min_cells})")
+        if not (math.isfinite(self.threshold) and self.threshold > 0):
+            raise InvalidParameterError(f"threshold must be > 0 (got {self.threshold})")
+        if not (math.isfinite(self.ground_offset_m) and self.ground_offset_m >= 0):
+            raise InvalidParameterError(f"ground_offset_m must be >= 0 (got {self.ground_offset_m})")
+        if self.difference not in DIFFERENCES:
+            raise InvalidParameterError(
+                f"difference must be one of {', '.join(DIFFERENCES)} (got {self.difference!r})")
+
+    def __call__(self, xyz, steps=None, **_fields) -> np.ndarray:
+        return self.run(xyz, steps).ground
+
+    def run(self, xyz, steps: Optional[Steps] = None, **_fields) -> EVCResult:
+        from scipy.ndimage import distance_transform_edt
+
+        from ._kernels import _cell_lookup_kernel, _focal_cv_kernel
+        steps = steps or Steps()
+        xyz = validate_xyz(xyz)
+        x, y, z = (np.ascontiguousarray(xyz[:, i]) for i in range(3))
+        span = max(float(x.max() - x.min()), float(y.max() - y.min()))
+        if self.large_scale_m > span:
+            raise InvalidParameterError(
+                f"large_scale_m {self.large_scale_m:g} m is larger than the cloud itself "
+                f"({span:.2f} m across): the large-scale grid would be a single cell")
+        small = GridSpec.covering(x, y, self.small_scale_m, what="EVC small-scale grid")
+        large = GridSpec.covering(x, y, self.large_scale_m, what="EVC large-scale grid")
+        small_mean, _ = cell_mean(x, y, z, small)
+        large_mean, _ = cell_mean(x, y, z, large)
+        steps.report(0.3)
+        filled = large_mean
+        if np.isnan(large_mean).any():
+            idx = distance_transform_edt(np.isnan(large_mean), return_distances=False, return_indices=True)
+            filled = large_mean[tuple(idx)]
+        # The large cell holding each small cell's centre.
+        xs, ys = small.centers()
+        cols = large.col_of(xs)
+        rows = large.row_of(ys)
+        large_on_small = filled[rows[:, None], cols[None, :]]
+        if self.difference == "large_minus_small":
+            difference = large_on_small - small_mean
+        else:
+            difference = small_mean - large_on_small
+        del large_on_small
+        steps.report(0.5)
+        mean = np.empty_like(difference)
+        std = np.empty_like(difference)
+        _focal_cv_kernel(difference, int(self.radius), int(self.max_radius), int(self.min_cells), mean, std)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            evc = std / (mean + self.ground_offset_m)
+        steps.report(0.8)
+        threshold = natural_break(evc) if self.auto_threshold else float(self.threshold)
+        classes = np.full(evc.shape, VEGETATION_BOUNDARY, dtype=np.uint8)  # also: no EVC
+        classes[evc <= 0] = VEGETATION_AREA
+        classes[(evc > 0) & (evc <= threshold)] = GROUND
+        classes[np.isnan(small_mean)] = EMPTY
+        cls_at_point = np.empty(x.shape[0], dtype=np.uint8)
+        _cell_lookup_kernel(x, y, classes, small.x0, small.top, small.cell, cls_at_point)
+        steps.report(1.0)
+        return EVCResult(cls_at_point == GROUND, small, large, small_mean, large_mean, difference, evc,
+                         classes, threshold)
+
+
+def natural_break(evc: np.ndarray, max_values: int = 200_000, upper_percentile: float = 95.0) -> float:
+    """Two-class natural break (Jenks; for two classes the exact optimum of the within-class
+    sum of squares) of the positive finite EVC values: the largest value of the lower class.
+    The ratio explodes where the mean difference nears zero, so values above the
+    ``upper_percentile`` are left out first (they would otherwise be a class of their own)."""
+    values = evc[np.isfinite(evc) & (evc > 0)]
+    if values.size:
+        values = values[values <= np.percentile(values, upper_percentile)]
+    if values.size < 2:
+        raise InvalidParameterError("too few positive EVC values to find a natural break; set a threshold")
+    if values.size > max_values:  # an even subsample of the sorted values keeps the break
+        values = np.sort(values)[np.linspace(0, values.size - 1, max_values).astype(np.int64)]
+    else:
+        values = np.sort(values)
+    n = values.size
+    csum = np.cumsum(values)
+    csum2 = np.cumsum(values * values)
+    k = np.arange(1, n)  # lower class = values[:k]
+    left = csum2[k - 1] - csum[k - 1] ** 2 / k
+    right = (csum2[-1] - csum2[k - 1]) - (csum[-1] - csum[k - 1]) ** 2 / (n - k)
+    best = int(np.argmin(left + right))
+    return float(values[best])
