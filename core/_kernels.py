@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 
 @njit(cache=True, nogil=True)
@@ -46,24 +46,15 @@ def _cell_mean_kernel(x, y, z, x0, top, cell, nrows, ncols, total, count):
 
 
 @njit(cache=True, nogil=True)
-def _disk_extreme_kernel(src, radius, take_max, out):
-    """Grey erosion (min) or dilation (max) of ``src`` by the disk x²+y² <= radius².
-
-    The disk is the union of horizontal chords of half width ``w(dy)``. For every
-    source row the running extremes over widths 0..radius are built once
-    (``2 * radius`` comparisons a cell), and each chord of each output row is then
-    one lookup: O(radius) a cell instead of O(radius²). Cells outside the grid
-    are ignored (not padded), as in scikit-image.
-    """
+def _disk_extreme_rows(src, r, half, take_max, row_lo, row_hi, out):
+    """Rows ``row_lo:row_hi`` of the erosion/dilation (see ``_disk_extreme_kernel``)."""
     nrows, ncols = src.shape
-    r = radius
-    half = np.empty(2 * r + 1, dtype=np.int64)
-    for dy in range(-r, r + 1):
-        half[dy + r] = int(math.floor(math.sqrt(r * r - dy * dy) + 1e-9))
     fill = -np.inf if take_max else np.inf
-    out[:, :] = fill
+    for i in range(row_lo, row_hi):
+        for x in range(ncols):
+            out[i, x] = fill
     buf = np.empty((r + 1, ncols), dtype=src.dtype)
-    for s in range(nrows):
+    for s in range(max(row_lo - r, 0), min(row_hi + r, nrows)):
         for x in range(ncols):
             buf[0, x] = src[s, x]
         for w in range(1, r + 1):
@@ -80,7 +71,7 @@ def _disk_extreme_kernel(src, radius, take_max, out):
                 buf[w, x] = v
         for dy in range(-r, r + 1):
             i = s - dy
-            if i < 0 or i >= nrows:
+            if i < row_lo or i >= row_hi:
                 continue
             w = half[dy + r]
             if take_max:
@@ -91,6 +82,28 @@ def _disk_extreme_kernel(src, radius, take_max, out):
                 for x in range(ncols):
                     if buf[w, x] < out[i, x]:
                         out[i, x] = buf[w, x]
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _disk_extreme_kernel(src, radius, take_max, out):
+    """Grey erosion (min) or dilation (max) of ``src`` by the disk x²+y² <= radius².
+
+    The disk is the union of horizontal chords of half width ``w(dy)``. For every
+    source row the running extremes over widths 0..radius are built once
+    (``2 * radius`` comparisons a cell), and each chord of each output row is then
+    one lookup: O(radius) a cell instead of O(radius²). Cells outside the grid
+    are ignored (not padded), as in scikit-image. Blocks of output rows run in
+    parallel; each block reads the ``radius`` source rows around it.
+    """
+    nrows = src.shape[0]
+    r = radius
+    half = np.empty(2 * r + 1, dtype=np.int64)
+    for dy in range(-r, r + 1):
+        half[dy + r] = int(math.floor(math.sqrt(r * r - dy * dy) + 1e-9))
+    block = max(64, 4 * r)
+    nblocks = (nrows + block - 1) // block
+    for b in prange(nblocks):
+        _disk_extreme_rows(src, r, half, take_max, b * block, min((b + 1) * block, nrows), out)
 
 
 @njit(cache=True, nogil=True)
