@@ -275,3 +275,22 @@ def _cell_lookup_kernel(x, y, grid, x0, top, cell, out):
         c = min(max(int(math.floor((x[k] - x0) / cell)), 0), ncols - 1)
         r = min(max(int(math.floor((top - y[k]) / cell)), 0), nrows - 1)
         out[k] = grid[r, c]
+
+
+@njit(cache=True, nogil=True)
+def _lower_envelope_kernel(zmin, radius, step, slope, out):
+    """out[k] = min over kernels j within ``radius`` kernels of (zmin[j] + slope * distance(k, j)):
+    the lowest point around each kernel, raised by the slope the terrain may climb to reach it.
+    Empty kernels (inf) are ignored; a kernel with none around stays inf."""
+    ny, nx = zmin.shape
+    for r in range(ny):
+        for c in range(nx):
+            best = np.inf
+            for rr in range(max(r - radius, 0), min(r + radius + 1, ny)):
+                for cc in range(max(c - radius, 0), min(c + radius + 1, nx)):
+                    v = zmin[rr, cc]
+                    if v < np.inf:
+                        v += slope * step * math.sqrt((rr - r) ** 2 + (cc - c) ** 2)
+                        if v < best:
+                            best = v
+            out[r, c] = best

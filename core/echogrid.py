@@ -15,9 +15,12 @@ evidence rather than as a bypass:
 
 - a non-last return (return number < number of returns) is never ground: the pulse went on
   below it;
-- a kernel whose lowest point is more than ``dz_m`` above the lowest point of its 3 x 3
-  kernel neighbourhood holds no ground (a roof or a canopy no pulse went through): its points
-  are tested against the neighbourhood's lowest z;
+- a kernel whose lowest point is more than ``dz_m`` above the terrain reachable from the
+  kernels within ``neighbourhood_m`` (their lowest points, each raised by ``slope`` times its
+  distance) holds no ground (a roof, or a canopy no pulse went through): its points are tested
+  against that reachable height instead of its own lowest point. The neighbourhood must be
+  about half the width of the largest building (20 m), as SMRF's window; ``slope`` is the
+  steepest terrain expected between kernel minima (0.15, SMRF's default);
 - a kernel of single returns is bypassed only when its z range is within ``dz_m`` and it is
   not raised above its neighbours, so flat roofs and walls are not taken as ground.
 """
@@ -49,14 +52,20 @@ class EchoGrid:
     kernel_m: float = 5.0
     dz_m: float = 2.0
     mode: str = "faithful"
+    neighbourhood_m: float = 20.0   #: evidence mode only
+    slope: float = 0.15             #: evidence mode only (rise/run)
 
     name = "echogrid"
     point_fields = ("return_number", "number_of_returns")
     wants_log = True
 
     def __post_init__(self):
-        check_number(self, "kernel_m")
-        check_number(self, "dz_m")
+        for name in ("kernel_m", "dz_m", "neighbourhood_m", "slope"):
+            check_number(self, name)
+        if not (math.isfinite(self.neighbourhood_m) and self.neighbourhood_m >= 0):
+            raise InvalidParameterError(f"neighbourhood_m must be >= 0 (got {self.neighbourhood_m})")
+        if not (math.isfinite(self.slope) and self.slope >= 0):
+            raise InvalidParameterError(f"slope (rise/run) must be >= 0 (got {self.slope})")
         if not (math.isfinite(self.kernel_m) and self.kernel_m > 0):
             raise InvalidParameterError(f"kernel_m must be > 0 (got {self.kernel_m})")
         if not (math.isfinite(self.dz_m) and self.dz_m >= 0):
@@ -69,7 +78,8 @@ class EchoGrid:
 
     def run(self, xyz, steps: Steps | None = None, *, return_number=None, number_of_returns=None,
             log=None) -> EchoGridResult:
-        from ._kernels import _echo_grid_classify_kernel, _echo_grid_stats_kernel
+        from ._kernels import (_echo_grid_classify_kernel, _echo_grid_stats_kernel,
+                               _lower_envelope_kernel)
         steps = steps or Steps()
         log = log or (lambda _msg: None)
         xyz = validate_xyz(xyz)
@@ -101,9 +111,12 @@ class EchoGrid:
             reference = zmin
             bypass = only_first & occupied if has_returns else np.zeros_like(occupied)
         else:
-            neighbourhood = _min3x3(zmin.reshape(ny, nx)).ravel()
-            raised = zmin - neighbourhood > self.dz_m
-            reference = np.where(raised, neighbourhood, zmin)
+            reachable = np.empty((ny, nx))
+            _lower_envelope_kernel(zmin.reshape(ny, nx), int(math.ceil(self.neighbourhood_m / size)),
+                                   size, float(self.slope), reachable)
+            reachable = reachable.ravel()
+            raised = occupied & (zmin > reachable + self.dz_m)  # empty kernels: inf > inf is False
+            reference = np.where(raised, reachable, zmin)
             flat = (zmax - zmin) <= self.dz_m
             bypass = (only_single & flat & ~raised & occupied) if has_returns else np.zeros_like(occupied)
         ground = np.empty(n, dtype=np.bool_)
@@ -114,13 +127,3 @@ class EchoGrid:
         steps.report(1.0)
         return EchoGridResult(ground, has_returns, int(occupied.sum()), int(bypass.sum()))
 
-
-def _min3x3(grid: np.ndarray) -> np.ndarray:
-    """Minimum over each cell's 3 x 3 neighbourhood (cells outside the grid ignored; inf = empty)."""
-    padded = np.pad(grid, 1, constant_values=np.inf)
-    out = grid.copy()
-    rows, cols = grid.shape
-    for dr in (0, 1, 2):
-        for dc in (0, 1, 2):
-            np.minimum(out, padded[dr:dr + rows, dc:dc + cols], out=out)
-    return out

@@ -28,7 +28,9 @@ the rim when the scales are not multiples; those take the nearest large cell's m
 coefficient of variation is unstable where the mean difference is near zero, which is the case
 on open ground far from vegetation (the difference is then only noise, of random sign, and
 about half of such ground falls into "vegetation area"). Adding a small offset (the ground's
-roughness, e.g. 0.1 m) to the mean difference before the ratio keeps open ground in (0, t].
+roughness, e.g. 0.1 m) to the mean difference before the ratio keeps open ground in [0, t]:
+with an offset, a cell is ground when the shifted mean is positive and EVC <= t (so a perfectly
+smooth surface, EVC = 0, is ground; under the paper's rule 0/0 is no EVC at all).
 """
 from __future__ import annotations
 
@@ -145,8 +147,13 @@ class EVC:
         steps.report(0.8)
         threshold = natural_break(evc) if self.auto_threshold else float(self.threshold)
         classes = np.full(evc.shape, VEGETATION_BOUNDARY, dtype=np.uint8)  # also: no EVC
-        classes[evc <= 0] = VEGETATION_AREA
-        classes[(evc > 0) & (evc <= threshold)] = GROUND
+        if self.ground_offset_m > 0:
+            shifted = mean + self.ground_offset_m
+            classes[shifted <= 0] = VEGETATION_AREA
+            classes[(shifted > 0) & (evc <= threshold)] = GROUND
+        else:  # the paper's Table 2
+            classes[evc <= 0] = VEGETATION_AREA
+            classes[(evc > 0) & (evc <= threshold)] = GROUND
         classes[np.isnan(small_mean)] = EMPTY
         cls_at_point = np.empty(x.shape[0], dtype=np.uint8)
         _cell_lookup_kernel(x, y, classes, small.x0, small.top, small.cell, cls_at_point)
