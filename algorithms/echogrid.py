@@ -1,5 +1,6 @@
 """groundsieve:echogrid — Ground filter (return-number grid), Matrone et al. 2024, Method 2."""
-from qgis.core import QgsProcessingParameterEnum, QgsProcessingParameterNumber
+from qgis.core import (QgsProcessingParameterDefinition, QgsProcessingParameterEnum,
+                       QgsProcessingParameterNumber)
 
 from .base import COMMON_HELP, GroundFilterAlgorithm
 
@@ -11,6 +12,8 @@ class EchoGridAlgorithm(GroundFilterAlgorithm):
     KERNEL = "KERNEL"
     DZ = "DZ"
     MODE = "MODE"
+    NEIGHBOURHOOD = "NEIGHBOURHOOD"
+    SLOPE = "SLOPE"
 
     def name(self):
         return "echogrid"
@@ -32,8 +35,11 @@ in the log and applies the height test everywhere.</p>
 <p><b>Mode</b>: <i>faithful</i> is the paper's rule. <i>evidence</i> uses the echoes as evidence
 rather than as a bypass, as the paper's conclusion asks: a return followed by others is never ground;
 a kernel of single returns is bypassed only when its height range is within the threshold and it is
-not raised above its neighbours (flat roofs are no longer ground); a raised kernel is tested against
-the lowest point of its 3 x 3 kernel neighbourhood. Both are measured in docs/BENCHMARKS.md.</p>
+not raised above its neighbours (flat roofs are no longer ground); a raised kernel (its lowest point
+more than the threshold above the lowest points within <i>neighbourhood</i>, each raised by
+<i>slope</i> x distance) is tested against that height. A neighbourhood of half the largest
+building's width also finds the middle of wide roofs, at a cost on steep terrain. Both modes are
+measured in docs/BENCHMARKS.md.</p>
 """ + COMMON_HELP
 
     def initFilterParameters(self):  # noqa: N802
@@ -44,9 +50,18 @@ the lowest point of its 3 x 3 kernel neighbourhood. Both are measured in docs/BE
         self.addParameter(QgsProcessingParameterEnum(
             self.MODE, "Mode", options=["faithful (paper: single-return kernels are ground)",
                                         "evidence (echoes as evidence, not as a bypass)"], defaultValue=0))
+        for param in (
+                QgsProcessingParameterNumber(self.NEIGHBOURHOOD, "Evidence mode: neighbourhood for raised kernels (m)",
+                                             type=Double, defaultValue=5.0, minValue=0.0),
+                QgsProcessingParameterNumber(self.SLOPE, "Evidence mode: terrain slope between kernels (rise/run)",
+                                             type=Double, defaultValue=0.15, minValue=0.0)):
+            param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
+            self.addParameter(param)
 
     def buildFilter(self, parameters, context):  # noqa: N802
         from ..core.echogrid import EchoGrid
         return EchoGrid(kernel_m=self.parameterAsDouble(parameters, self.KERNEL, context),
                         dz_m=self.parameterAsDouble(parameters, self.DZ, context),
-                        mode=MODES[self.parameterAsEnum(parameters, self.MODE, context)])
+                        mode=MODES[self.parameterAsEnum(parameters, self.MODE, context)],
+                        neighbourhood_m=self.parameterAsDouble(parameters, self.NEIGHBOURHOOD, context),
+                        slope=self.parameterAsDouble(parameters, self.SLOPE, context))

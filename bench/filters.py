@@ -17,10 +17,28 @@ def make_smrf(row: ParamsRow, **fixed):
                 elevation_scalar=float(row["elevation_scaler"]), **fixed)
 
 
+def make_echogrid(row: ParamsRow, **fixed):
+    """The echo grid filter (matrone2024 Method 2), paper defaults (5 m kernels, dz 2 m); the
+    per-sample rows hold SMRF parameters, so ``row`` is ignored."""
+    from groundsieve.core.echogrid import EchoGrid
+    return EchoGrid(**fixed)
+
+
+def make_evc(row: ParamsRow, **fixed):
+    """The multiscale EVC filter (fan2023), paper defaults unless fixed; ``row`` is ignored."""
+    from groundsieve.core.evc import EVC
+    return EVC(**fixed)
+
+
 FILTERS: Dict[str, Callable[[ParamsRow], Callable]] = {
     "smrf": make_smrf,
     # As Pingel's Python code runs by default: low-outlier cells are not refilled before the opening.
     "smrf-nofill": lambda row: make_smrf(row, low_outlier_fill=False),
+    "echogrid": make_echogrid,
+    "echogrid-evidence": lambda row: make_echogrid(row, mode="evidence"),
+    "evc": make_evc,
+    "evc-3.2": lambda row: make_evc(row, large_scale_m=3.2),
+    "evc-offset": lambda row: make_evc(row, ground_offset_m=0.1),
 }
 
 

@@ -41,22 +41,26 @@ def child(filter_name, n_points, density, seed):
     algorithm = make_filter(filter_name, None)
     scene = make_scene(SceneSpec.for_points(n_points, density_per_m2=density, seed=seed))
     xyz = np.column_stack([scene.x, scene.y, scene.z])
+    rn, nr = scene.return_number, scene.number_of_returns
     del scene
+    # Filters that use return numbers (point_fields) get the scene's.
+    fields = {name: {"return_number": rn, "number_of_returns": nr}[name]
+              for name in getattr(algorithm, "point_fields", ())}
     from groundsieve.core.io import PointCloud
     from groundsieve.core.workflow import DTMOptions, FilterOptions, classify_cloud, make_dtm
-    algorithm(xyz[:20000])  # compile the numba kernels (cached on disk after the first run)
+    # Compile the numba kernels (cached on disk after the first run).
+    algorithm(xyz[:20000], **{name: values[:20000] for name, values in fields.items()})
     with open("/proc/self/clear_refs", "w") as refs:
         refs.write("5")  # reset the peak resident set (VmHWM)
     before = _rss_kib("VmRSS")
     t0 = time.perf_counter()
-    ground = algorithm(xyz)
+    ground = algorithm(xyz, **fields)
     seconds = time.perf_counter() - t0
     peak = _rss_kib("VmHWM")
     n = len(xyz)
     del ground
-    ones = np.ones(n, dtype=np.uint8)
     cloud = PointCloud("generated", np.ascontiguousarray(xyz[:, 0]), np.ascontiguousarray(xyz[:, 1]),
-                       np.ascontiguousarray(xyz[:, 2]), np.zeros(n, dtype=np.uint8), ones, ones,
+                       np.ascontiguousarray(xyz[:, 2]), np.zeros(n, dtype=np.uint8), rn, nr,
                        has_return_info=True)
     del xyz
     t0 = time.perf_counter()

@@ -47,7 +47,7 @@ def oracle_faithful(xyz, rn, nr, kernel, dz):
     return ground, int((counts > 0).sum()), int(bypass.sum())
 
 
-def oracle_evidence(xyz, rn, nr, kernel, dz, neighbourhood=20.0, slope=0.15):
+def oracle_evidence(xyz, rn, nr, kernel, dz, neighbourhood=5.0, slope=0.15):
     """The evidence rule as documented in core/echogrid.py."""
     z = xyz[:, 2]
     col, row, k, nx, ny = _kernels(xyz, kernel)
@@ -247,21 +247,20 @@ def test_building_roof_kernel_is_not_ground_in_evidence_mode():
     assert not res.ground[crown].any()
 
 
-def test_evidence_mode_finds_the_centre_of_a_wide_roof():
+def test_evidence_mode_and_the_centre_of_a_wide_roof():
     """A roof three kernels wide (15 x 15 m on the kernel edges) has a central kernel whose 3 x 3
-    neighbours are all roof; the 20 m neighbourhood still reaches the ground around it."""
+    neighbours are all roof: with the default 5 m neighbourhood it is taken as ground (the rim
+    kernels are found); a 20 m neighbourhood reaches the ground around it."""
     box = (10.0, 25.0, 10.0, 25.0)
     xyz, rn, nr, roof, crown = building_scene(box=box)
-    res = EchoGrid(mode="evidence").run(xyz, return_number=rn, number_of_returns=nr)
     x, y = xyz[:, 0] - X0, xyz[:, 1] - Y0
     centre = (x > 15.0) & (x < 20.0) & (y > 15.0) & (y < 20.0)
     assert centre.sum() > 50
-    assert not res.ground[roof].any()
-    # With a 3 x 3 neighbourhood only (5 m), the centre kernel is taken as ground: the limit the
-    # wider neighbourhood removes.
-    narrow = EchoGrid(mode="evidence", neighbourhood_m=5.0).run(xyz, return_number=rn, number_of_returns=nr)
+    narrow = EchoGrid(mode="evidence").run(xyz, return_number=rn, number_of_returns=nr)
     assert narrow.ground[centre].all()
     assert not narrow.ground[roof & ~centre].any()
+    wide = EchoGrid(mode="evidence", neighbourhood_m=20.0).run(xyz, return_number=rn, number_of_returns=nr)
+    assert not wide.ground[roof].any()
 
 
 @pytest.mark.parametrize("mode", MODES)
