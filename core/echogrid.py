@@ -99,6 +99,10 @@ class EchoGrid:
                 "height test.")
         x0, y0 = float(x.min()), float(y.min())
         size = float(self.kernel_m)
+        span = max(float(x.max()) - x0, float(y.max()) - y0)
+        if size > span:
+            log(f"Echo grid: the kernel ({size:g} m) is larger than the cloud ({span:.2f} m across): one "
+                "kernel holds every point, so the test is against the cloud's single lowest point.")
         nx = int(math.floor((float(x.max()) - x0) / size)) + 1
         ny = int(math.floor((float(y.max()) - y0) / size)) + 1
         if nx * ny > 400_000_000:

@@ -575,3 +575,13 @@ def test_run_ground_filter_on_an_isprs_text_file(tmp_path):
     np.testing.assert_array_equal(run.ground, ~high)
     written = laspy.read(str(tmp_path / "out.las"))
     np.testing.assert_array_equal(np.asarray(written.classification), np.where(high, 1, 2))
+
+
+def test_kernel_larger_than_the_cloud_is_reported():
+    xyz = np.array([[0.0, 0.0, 10.0], [1.0, 1.0, 10.5], [2.0, 0.5, 14.0]]) + [X0, Y0, 0.0]
+    messages = []
+    res = EchoGrid(kernel_m=50.0).run(xyz, return_number=[1, 1, 1], number_of_returns=[1, 1, 1],
+                                      log=messages.append)
+    assert any("larger than the cloud" in m for m in messages), messages
+    assert res.kernels == 1
+    np.testing.assert_array_equal(res.ground, [True, True, False])
