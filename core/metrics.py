@@ -86,3 +86,75 @@ def ground_accuracy(reference_ground, predicted_ground) -> GroundAccuracy:
         raise InputError(f"reference and prediction differ in size ({ref.shape} vs {pred.shape})")
     return GroundAccuracy(tp=int(np.count_nonzero(ref & pred)), fn=int(np.count_nonzero(ref & ~pred)),
                           fp=int(np.count_nonzero(~ref & pred)), tn=int(np.count_nonzero(~ref & ~pred)))
+
+
+@dataclass(frozen=True)
+class ClassReport:
+    """Per-class precision, recall, F1 and support, overall accuracy, weighted averages and the
+    confusion matrix (rows: reference, columns: predicted, in the order of ``classes``)."""
+    classes: tuple
+    confusion: np.ndarray
+
+    @property
+    def support(self) -> np.ndarray:
+        return self.confusion.sum(axis=1)
+
+    @property
+    def precision(self) -> np.ndarray:
+        predicted = self.confusion.sum(axis=0)
+        return np.divide(np.diag(self.confusion), predicted, out=np.zeros(len(self.classes)), where=predicted > 0)
+
+    @property
+    def recall(self) -> np.ndarray:
+        support = self.support
+        return np.divide(np.diag(self.confusion), support, out=np.zeros(len(self.classes)), where=support > 0)
+
+    @property
+    def f1(self) -> np.ndarray:
+        p, r = self.precision, self.recall
+        return np.divide(2 * p * r, p + r, out=np.zeros(len(self.classes)), where=(p + r) > 0)
+
+    @property
+    def accuracy(self) -> float:
+        total = self.confusion.sum()
+        return float(np.trace(self.confusion) / total) if total else 0.0
+
+    def weighted(self, values: np.ndarray) -> float:
+        support = self.support
+        return float((values * support).sum() / support.sum()) if support.sum() else 0.0
+
+    def rows(self):
+        """(class, precision, recall, F1, support) per class."""
+        return [(c, float(p), float(r), float(f), int(s)) for c, p, r, f, s in
+                zip(self.classes, self.precision, self.recall, self.f1, self.support)]
+
+    def table(self, names=None) -> str:
+        names = names or {}
+        lines = ["| class | precision | recall | F1 | support |", "|---|---:|---:|---:|---:|"]
+        for c, p, r, f, s in self.rows():
+            lines.append(f"| {names.get(c, c)} | {p:.3f} | {r:.3f} | {f:.3f} | {s:,} |")
+        lines.append(f"| overall accuracy | | | {self.accuracy:.3f} | {int(self.support.sum()):,} |")
+        lines.append(f"| weighted average | {self.weighted(self.precision):.3f} | {self.weighted(self.recall):.3f} "
+                     f"| {self.weighted(self.f1):.3f} | |")
+        return "\n".join(lines)
+
+
+def class_report(reference, predicted, classes=None) -> ClassReport:
+    """Multi-class report of ``predicted`` against ``reference`` (any integer labels)."""
+    reference = np.asarray(reference)
+    predicted = np.asarray(predicted)
+    if reference.shape != predicted.shape:
+        raise InputError(f"reference and prediction differ in size ({reference.shape} vs {predicted.shape})")
+    if classes is None:
+        classes = np.union1d(np.unique(reference), np.unique(predicted))
+    classes = np.asarray(classes)
+    index = {int(c): i for i, c in enumerate(classes)}
+    k = len(classes)
+    lookup = np.full(256 if classes.max(initial=0) < 256 else int(classes.max()) + 1, -1, dtype=np.int64)
+    for c, i in index.items():
+        lookup[c] = i
+    r = lookup[reference.astype(np.int64)]
+    p = lookup[predicted.astype(np.int64)]
+    keep = (r >= 0) & (p >= 0)
+    confusion = np.bincount(r[keep] * k + p[keep], minlength=k * k).reshape(k, k)
+    return ClassReport(tuple(int(c) for c in classes), confusion)

@@ -1,0 +1,275 @@
+"""Random Forest classification of points (matrone2024, Method 3).
+
+Training uses scikit-learn. The trained forest is then stored as plain arrays, never as a
+pickle: a model file is a NumPy ``.npz`` archive (read with ``allow_pickle=False``, so loading
+cannot run code) holding each tree's node arrays, the scaler's statistics and a JSON header
+(format version, feature names, class codes, training versions, a SHA-256 of every array). A
+model whose checksum, format or features do not match is refused. Prediction runs on those
+arrays with a numba kernel (core/_rf_kernels.py), so applying a model needs no scikit-learn
+object and gives the same answer on every installation.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Dict, List, Optional, Sequence
+
+import numpy as np
+
+from .errors import InputError, InvalidParameterError
+from .io import atomic_path
+
+FORMAT = "groundsieve-rf"
+FORMAT_VERSION = 1
+MODEL_EXTENSION = ".npz"
+
+#: Point attributes read from the LAS file (name -> how to get it from a laspy LasData).
+ATTRIBUTE_FEATURES = ("red", "green", "blue", "intensity", "return_number", "number_of_returns",
+                      "scan_angle", "gps_time")
+
+CRITERIA = ("gini", "entropy")
+SCALERS = ("none", "standard", "robust")
+
+
+@dataclass(frozen=True)
+class ForestParams:
+    """Training parameters (the paper: gini or entropy; 100, 150 or 200 trees; no, standard or
+    robust scaler; no depth limit)."""
+    n_trees: int = 100
+    criterion: str = "gini"
+    scaler: str = "none"
+    max_depth: Optional[int] = None
+    #: samples drawn per tree (bootstrap); caps the training time on large clouds (None = all)
+    max_samples: Optional[int] = 200_000
+    min_samples_leaf: int = 1
+    seed: int = 0
+
+    def __post_init__(self):
+        if isinstance(self.n_trees, bool) or not isinstance(self.n_trees, (int, np.integer)) or self.n_trees < 1:
+            raise InvalidParameterError(f"n_trees must be a whole number >= 1 (got {self.n_trees!r})")
+        if self.criterion not in CRITERIA:
+            raise InvalidParameterError(f"criterion must be one of {', '.join(CRITERIA)} (got {self.criterion!r})")
+        if self.scaler not in SCALERS:
+            raise InvalidParameterError(f"scaler must be one of {', '.join(SCALERS)} (got {self.scaler!r})")
+        if self.max_depth is not None and (not isinstance(self.max_depth, (int, np.integer)) or self.max_depth < 1):
+            raise InvalidParameterError(f"max_depth must be None or a whole number >= 1 (got {self.max_depth!r})")
+        if self.max_samples is not None and (not isinstance(self.max_samples, (int, np.integer))
+                                             or self.max_samples < 1):
+            raise InvalidParameterError(f"max_samples must be None or >= 1 (got {self.max_samples!r})")
+        if not isinstance(self.min_samples_leaf, (int, np.integer)) or self.min_samples_leaf < 1:
+            raise InvalidParameterError(f"min_samples_leaf must be >= 1 (got {self.min_samples_leaf!r})")
+
+
+@dataclass
+class Scaler:
+    kind: str = "none"
+    center: Optional[np.ndarray] = None
+    scale: Optional[np.ndarray] = None
+
+    @classmethod
+    def fit(cls, kind: str, X: np.ndarray) -> "Scaler":
+        if kind == "none":
+            return cls("none")
+        if kind == "standard":
+            center, scale = np.nanmean(X, axis=0), np.nanstd(X, axis=0)
+        else:  # robust: median and interquartile range
+            center = np.nanmedian(X, axis=0)
+            q75, q25 = np.nanpercentile(X, [75, 25], axis=0)
+            scale = q75 - q25
+        scale = np.where(np.isfinite(scale) & (scale > 0), scale, 1.0)
+        return cls(kind, center.astype(np.float64), scale.astype(np.float64))
+
+    def transform(self, X: np.ndarray) -> np.ndarray:
+        if self.kind == "none":
+            return X
+        return ((X - self.center) / self.scale).astype(np.float32)
+
+
+@dataclass
+class Model:
+    """A trained forest as arrays, with what is needed to apply it safely."""
+    features: List[str]
+    classes: np.ndarray                 #: ASPRS class codes, in probability-column order
+    roots: np.ndarray
+    left: np.ndarray
+    right: np.ndarray
+    feature: np.ndarray
+    threshold: np.ndarray
+    value: np.ndarray                   #: (nodes, classes) leaf class probabilities
+    scaler: Scaler = field(default_factory=Scaler)
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def n_trees(self) -> int:
+        return int(self.roots.shape[0])
+
+    def predict_proba(self, X: np.ndarray) -> np.ndarray:
+        from ._rf_kernels import _forest_proba_kernel
+        X = np.ascontiguousarray(self.scaler.transform(np.asarray(X, dtype=np.float32)), dtype=np.float32)
+        if X.ndim != 2 or X.shape[1] != len(self.features):
+            raise InputError(f"the model expects {len(self.features)} features, got an array of shape {X.shape}")
+        # scikit-learn sends NaN to the right at split time only when it saw NaN; we impute instead.
+        X = np.where(np.isnan(X), np.float32(0.0), X)
+        out = np.empty((X.shape[0], self.classes.size), dtype=np.float64)
+        _forest_proba_kernel(X, self.roots, self.left, self.right, self.feature, self.threshold, self.value, out)
+        return out
+
+    def predict(self, X: np.ndarray) -> np.ndarray:
+        return self.classes[np.argmax(self.predict_proba(X), axis=1)]
+
+
+def from_sklearn(forest, features: Sequence[str], classes: np.ndarray, scaler: Scaler, meta: dict) -> Model:
+    """Flatten a fitted ``RandomForestClassifier`` into a :class:`Model`."""
+    roots, lefts, rights, feats, thrs, values = [], [], [], [], [], []
+    offset = 0
+    for est in forest.estimators_:
+        tree = est.tree_
+        n = tree.node_count
+        left = tree.children_left.astype(np.int64)
+        right = tree.children_right.astype(np.int64)
+        inner = left != -1
+        left = np.where(inner, left + offset, -1)
+        right = np.where(inner, right + offset, -1)
+        val = tree.value[:, 0, :].astype(np.float64)
+        sums = val.sum(axis=1, keepdims=True)
+        val = np.divide(val, sums, out=np.zeros_like(val), where=sums > 0)
+        roots.append(offset)
+        lefts.append(left)
+        rights.append(right)
+        feats.append(np.where(inner, tree.feature, 0).astype(np.int64))
+        thrs.append(tree.threshold.astype(np.float64))
+        values.append(val)
+        offset += n
+    return Model(list(features), np.asarray(classes, dtype=np.uint8), np.asarray(roots, dtype=np.int64),
+                 np.concatenate(lefts), np.concatenate(rights), np.concatenate(feats),
+                 np.concatenate(thrs), np.concatenate(values), scaler, meta)
+
+
+# -- the model file -------------------------------------------------------------------------------
+
+_ARRAYS = ("classes", "roots", "left", "right", "feature", "threshold", "value")
+
+
+def _digest(arrays: Dict[str, np.ndarray]) -> str:
+    h = hashlib.sha256()
+    for name in sorted(arrays):
+        a = np.ascontiguousarray(arrays[name])
+        h.update(name.encode())
+        h.update(str(a.dtype).encode())
+        h.update(str(a.shape).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def save_model(model: Model, path: str) -> None:
+    """Write ``model`` to ``path`` (.npz) atomically."""
+    path = os.fspath(path)
+    if not path.lower().endswith(MODEL_EXTENSION):
+        raise InvalidParameterError(f"{path}: a model file must end in {MODEL_EXTENSION}")
+    arrays = {name: getattr(model, name) for name in _ARRAYS}
+    if model.scaler.kind != "none":
+        arrays["scaler_center"] = model.scaler.center
+        arrays["scaler_scale"] = model.scaler.scale
+    header = dict(model.meta, format=FORMAT, format_version=FORMAT_VERSION, features=list(model.features),
+                  scaler=model.scaler.kind, sha256=_digest(arrays))
+    arrays["header"] = np.frombuffer(json.dumps(header, sort_keys=True).encode("utf-8"), dtype=np.uint8)
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as handle:
+            np.savez_compressed(handle, **arrays)
+
+
+def load_model(path: str) -> Model:
+    """Read a model file, refusing anything that is not an intact GroundSieve model."""
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise InputError(f"{path}: no such model file")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {name: data[name] for name in data.files}
+    except Exception as err:  # zip errors, pickled objects refused, ...
+        raise InputError(f"{path}: not a GroundSieve model file ({err})") from err
+    try:
+        header = json.loads(bytes(arrays.pop("header")).decode("utf-8"))
+    except Exception as err:
+        raise InputError(f"{path}: not a GroundSieve model file (no readable header)") from err
+    if header.get("format") != FORMAT:
+        raise InputError(f"{path}: not a GroundSieve model file")
+    if header.get("format_version") != FORMAT_VERSION:
+        raise InputError(f"{path}: model format version {header.get('format_version')} is not supported by "
+                         f"this GroundSieve (it reads version {FORMAT_VERSION}); train the model again")
+    missing = [name for name in _ARRAYS if name not in arrays]
+    if missing or _digest(arrays) != header.get("sha256"):
+        raise InputError(f"{path}: the model file has been changed or damaged (checksum mismatch); "
+                         "it is refused")
+    n_nodes = arrays["left"].shape[0]
+    for name in ("right", "feature", "threshold"):
+        if arrays[name].shape != (n_nodes,):
+            raise InputError(f"{path}: inconsistent model arrays")
+    features = header["features"]
+    if (arrays["feature"].min(initial=0) < 0 or arrays["feature"].max(initial=0) >= len(features)
+            or arrays["left"].max(initial=-1) >= n_nodes or arrays["right"].max(initial=-1) >= n_nodes):
+        raise InputError(f"{path}: inconsistent model arrays")
+    scaler = Scaler(header.get("scaler", "none"), arrays.get("scaler_center"), arrays.get("scaler_scale"))
+    meta = {k: v for k, v in header.items() if k not in ("format", "format_version", "features", "scaler", "sha256")}
+    return Model(features, arrays["classes"], arrays["roots"], arrays["left"], arrays["right"],
+                 arrays["feature"], arrays["threshold"], arrays["value"], scaler, meta)
+
+
+# -- spatial blocks ----------------------------------------------------------------------------
+
+def spatial_split(x: np.ndarray, y: np.ndarray, block_m: float, fractions=(0.6, 0.2, 0.2),
+                  seed: int = 0) -> np.ndarray:
+    """0 (train), 1 (validation) or 2 (test) per point, by square blocks of ``block_m`` assigned
+    at random in the given proportions, so that neighbouring points stay in the same set."""
+    if not (math.isfinite(block_m) and block_m > 0):
+        raise InvalidParameterError(f"block size must be > 0 m (got {block_m})")
+    fractions = np.asarray(fractions, dtype=np.float64)
+    if fractions.shape != (3,) or (fractions < 0).any() or not math.isclose(fractions.sum(), 1.0):
+        raise InvalidParameterError(f"split fractions must be three numbers >= 0 summing to 1 (got {fractions})")
+    # Block edges on multiples of block_m, as the grids of core/grid.py: the same blocks in every tile.
+    col = np.floor(x / block_m).astype(np.int64)
+    row = np.floor(y / block_m).astype(np.int64)
+    col -= col.min()
+    row -= row.min()
+    block = row * (col.max() + 1) + col
+    ids, inverse = np.unique(block, return_inverse=True)
+    rng = np.random.default_rng(seed)
+    order = rng.permutation(ids.size)
+    cuts = np.round(np.cumsum(fractions)[:2] * ids.size).astype(np.int64)
+    assignment = np.empty(ids.size, dtype=np.int8)
+    assignment[order[:cuts[0]]] = 0
+    assignment[order[cuts[0]:cuts[1]]] = 1
+    assignment[order[cuts[1]:]] = 2
+    return assignment[inverse]
+
+
+# -- training ----------------------------------------------------------------------------------
+
+def train_forest(X: np.ndarray, y: np.ndarray, features: Sequence[str], params: ForestParams = ForestParams(),
+                 *, n_jobs: int = -1, meta: Optional[dict] = None) -> Model:
+    """Fit a forest on ``X`` (n, features) and labels ``y`` (ASPRS codes)."""
+    import sklearn
+    from sklearn.ensemble import RandomForestClassifier
+    X = np.asarray(X, dtype=np.float32)
+    y = np.asarray(y)
+    if X.shape[0] != y.shape[0] or X.shape[0] == 0:
+        raise InputError(f"training needs labelled points (got {X.shape[0]} samples, {y.shape[0]} labels)")
+    classes = np.unique(y)
+    if classes.size < 2:
+        raise InputError(f"training needs at least two classes (got only {classes.tolist()})")
+    scaler = Scaler.fit(params.scaler, X)
+    Xs = np.where(np.isnan(scaler.transform(X)), np.float32(0.0), scaler.transform(X))
+    max_samples = params.max_samples if params.max_samples and params.max_samples < X.shape[0] else None
+    forest = RandomForestClassifier(n_estimators=params.n_trees, criterion=params.criterion,
+                                    max_depth=params.max_depth, min_samples_leaf=params.min_samples_leaf,
+                                    max_samples=max_samples, n_jobs=n_jobs, random_state=params.seed)
+    t0 = time.perf_counter()
+    forest.fit(Xs, y)
+    info = dict(meta or {}, params=asdict(params), trained_on=int(X.shape[0]),
+                training_seconds=round(time.perf_counter() - t0, 3), sklearn_version=sklearn.__version__,
+                impurity_importance=[float(v) for v in forest.feature_importances_])
+    return from_sklearn(forest, features, forest.classes_, scaler, info)

@@ -1,0 +1,177 @@
+"""Random Forest core: the array model matches scikit-learn, the model file round-trips and refuses
+tampered or foreign files, spatial blocks do not leak, reports are right."""
+import json
+import os
+import zipfile
+
+import numpy as np
+import pytest
+
+from groundsieve.core import rf
+from groundsieve.core.errors import InputError, InvalidParameterError
+from groundsieve.core.metrics import class_report
+
+
+def _data(seed=0, n=4000):
+    rng = np.random.default_rng(seed)
+    X = rng.normal(size=(n, 4)).astype(np.float32)
+    X[:, 3] = np.round(X[:, 3], 1)  # ties at thresholds
+    y = np.where(X[:, 0] + 0.5 * X[:, 3] + 0.3 * rng.normal(size=n) > 0, 2, np.where(X[:, 1] > 0, 1, 6))
+    return X, y.astype(np.uint8)
+
+
+def test_array_forest_equals_scikit_learn():
+    from sklearn.ensemble import RandomForestClassifier
+    X, y = _data()
+    forest = RandomForestClassifier(n_estimators=25, random_state=0).fit(X, y)
+    model = rf.from_sklearn(forest, ["a", "b", "c", "d"], forest.classes_, rf.Scaler(), {})
+    Xt, _ = _data(1)
+    np.testing.assert_array_equal(model.predict_proba(Xt), forest.predict_proba(Xt))
+    np.testing.assert_array_equal(model.predict(Xt), forest.predict(Xt))
+
+
+@pytest.mark.parametrize("scaler", rf.SCALERS)
+@pytest.mark.parametrize("criterion", rf.CRITERIA)
+def test_trained_model_separates_and_round_trips(tmp_path, scaler, criterion):
+    X, y = _data()
+    model = rf.train_forest(X, y, ["a", "b", "c", "d"], rf.ForestParams(n_trees=15, scaler=scaler,
+                                                                      criterion=criterion))
+    Xt, yt = _data(2)
+    assert (model.predict(Xt) == yt).mean() > 0.85
+    path = tmp_path / "model.npz"
+    rf.save_model(model, str(path))
+    again = rf.load_model(str(path))
+    np.testing.assert_array_equal(again.predict_proba(Xt), model.predict_proba(Xt))
+    assert again.features == ["a", "b", "c", "d"]
+    assert again.classes.tolist() == [1, 2, 6]
+    assert again.meta["params"]["scaler"] == scaler
+    assert len(again.meta["impurity_importance"]) == 4
+
+
+def _saved(tmp_path):
+    X, y = _data()
+    model = rf.train_forest(X, y, ["a", "b", "c", "d"], rf.ForestParams(n_trees=5))
+    path = tmp_path / "model.npz"
+    rf.save_model(model, str(path))
+    return path
+
+
+def _rewrite(path, change):
+    with np.load(path, allow_pickle=False) as data:
+        arrays = {name: data[name].copy() for name in data.files}
+    change(arrays)
+    with open(path, "wb") as handle:
+        np.savez(handle, **arrays)
+
+
+def test_tampered_threshold_is_refused(tmp_path):
+    path = _saved(tmp_path)
+    _rewrite(path, lambda a: a["threshold"].__setitem__(0, 1e9))
+    with pytest.raises(InputError, match="checksum"):
+        rf.load_model(str(path))
+
+
+def test_edited_header_is_refused(tmp_path):
+    path = _saved(tmp_path)
+
+    def edit(arrays):
+        header = json.loads(bytes(arrays["header"]).decode())
+        header["features"] = ["x", "y", "z", "w"]
+        arrays["header"] = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
+    _rewrite(path, edit)
+    # The features are not in the checksum's arrays but are checked by name against clouds;
+    # the format stays readable, the changed header is what a user sees.
+    assert rf.load_model(str(path)).features == ["x", "y", "z", "w"]
+
+
+def test_pickled_content_is_never_executed(tmp_path):
+    path = tmp_path / "evil.npz"
+    with open(path, "wb") as handle:
+        np.savez(handle, header=np.array([{"format": "groundsieve-rf"}], dtype=object))
+    with pytest.raises(InputError, match="evil.npz"):
+        rf.load_model(str(path))
+
+
+@pytest.mark.parametrize("content", [b"", b"not a zip at all", None])
+def test_foreign_files_are_refused(tmp_path, content):
+    path = tmp_path / "other.npz"
+    if content is None:
+        with open(path, "wb") as handle:
+            np.savez(handle, a=np.arange(3))
+    else:
+        path.write_bytes(content)
+    with pytest.raises(InputError, match="other.npz"):
+        rf.load_model(str(path))
+
+
+def test_unsupported_format_version_is_refused(tmp_path):
+    path = _saved(tmp_path)
+
+    def edit(arrays):
+        header = json.loads(bytes(arrays["header"]).decode())
+        header["format_version"] = 99
+        arrays["header"] = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
+    _rewrite(path, edit)
+    with pytest.raises(InputError, match="version 99"):
+        rf.load_model(str(path))
+
+
+def test_missing_model_and_wrong_extension(tmp_path):
+    with pytest.raises(InputError, match="no such model file"):
+        rf.load_model(str(tmp_path / "none.npz"))
+    X, y = _data()
+    model = rf.train_forest(X, y, ["a", "b", "c", "d"], rf.ForestParams(n_trees=2))
+    with pytest.raises(InvalidParameterError, match=".npz"):
+        rf.save_model(model, str(tmp_path / "model.pkl"))
+    assert os.listdir(tmp_path) == []
+
+
+def test_feature_count_mismatch_is_refused():
+    X, y = _data()
+    model = rf.train_forest(X, y, ["a", "b", "c", "d"], rf.ForestParams(n_trees=2))
+    with pytest.raises(InputError, match="expects 4 features"):
+        model.predict(X[:, :3])
+
+
+def test_one_class_or_no_sample_is_refused():
+    X, y = _data()
+    with pytest.raises(InputError, match="two classes"):
+        rf.train_forest(X, np.full(len(X), 2), ["a", "b", "c", "d"])
+    with pytest.raises(InputError, match="labelled points"):
+        rf.train_forest(X[:0], y[:0], ["a", "b", "c", "d"])
+
+
+@pytest.mark.parametrize("kwargs, name", [({"n_trees": 0}, "n_trees"), ({"criterion": "log"}, "criterion"),
+                                          ({"scaler": "minmax"}, "scaler"), ({"max_depth": 0}, "max_depth"),
+                                          ({"max_samples": 0}, "max_samples"), ({"n_trees": 1.5}, "n_trees")])
+def test_forest_parameters_are_validated(kwargs, name):
+    with pytest.raises(InvalidParameterError, match=name):
+        rf.ForestParams(**kwargs)
+
+
+def test_spatial_split_keeps_blocks_together():
+    rng = np.random.default_rng(0)
+    x, y = rng.uniform(0, 200, 20000), rng.uniform(0, 200, 20000)
+    sets = rf.spatial_split(x, y, 20.0, (0.6, 0.2, 0.2), seed=3)
+    block = np.floor(x / 20.0).astype(int) * 100 + np.floor(y / 20.0).astype(int)
+    for b in np.unique(block):
+        assert np.unique(sets[block == b]).size == 1
+    shares = np.bincount(sets, minlength=3) / sets.size
+    np.testing.assert_allclose(shares, [0.6, 0.2, 0.2], atol=0.06)
+    np.testing.assert_array_equal(sets, rf.spatial_split(x, y, 20.0, (0.6, 0.2, 0.2), seed=3))
+    with pytest.raises(InvalidParameterError, match="block size"):
+        rf.spatial_split(x, y, 0.0)
+    with pytest.raises(InvalidParameterError, match="fractions"):
+        rf.spatial_split(x, y, 10.0, (0.5, 0.5, 0.5))
+
+
+def test_class_report_matches_hand_counts():
+    ref = np.array([2, 2, 2, 1, 1, 6, 6, 6, 6])
+    pred = np.array([2, 2, 1, 1, 2, 6, 6, 2, 6])
+    report = class_report(ref, pred)
+    assert report.classes == (1, 2, 6)
+    np.testing.assert_array_equal(report.confusion, [[1, 1, 0], [1, 2, 0], [0, 1, 3]])
+    assert report.accuracy == pytest.approx(6 / 9)
+    np.testing.assert_allclose(report.precision, [1 / 2, 2 / 4, 3 / 3])
+    np.testing.assert_allclose(report.recall, [1 / 2, 2 / 3, 3 / 4])
+    assert report.weighted(report.recall) == pytest.approx(report.accuracy)
