@@ -154,8 +154,10 @@ def from_sklearn(forest, features: Sequence[str], classes: np.ndarray, scaler: S
 _ARRAYS = ("classes", "roots", "left", "right", "feature", "threshold", "value")
 
 
-def _digest(arrays: Dict[str, np.ndarray]) -> str:
+def _digest(arrays: Dict[str, np.ndarray], header: dict) -> str:
+    """SHA-256 over every array and the header (less its own checksum)."""
     h = hashlib.sha256()
+    h.update(json.dumps({k: v for k, v in header.items() if k != "sha256"}, sort_keys=True).encode("utf-8"))
     for name in sorted(arrays):
         a = np.ascontiguousarray(arrays[name])
         h.update(name.encode())
@@ -175,7 +177,8 @@ def save_model(model: Model, path: str) -> None:
         arrays["scaler_center"] = model.scaler.center
         arrays["scaler_scale"] = model.scaler.scale
     header = dict(model.meta, format=FORMAT, format_version=FORMAT_VERSION, features=list(model.features),
-                  scaler=model.scaler.kind, sha256=_digest(arrays))
+                  scaler=model.scaler.kind)
+    header["sha256"] = _digest(arrays, header)
     arrays["header"] = np.frombuffer(json.dumps(header, sort_keys=True).encode("utf-8"), dtype=np.uint8)
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as handle:
@@ -202,7 +205,7 @@ def load_model(path: str) -> Model:
         raise InputError(f"{path}: model format version {header.get('format_version')} is not supported by "
                          f"this GroundSieve (it reads version {FORMAT_VERSION}); train the model again")
     missing = [name for name in _ARRAYS if name not in arrays]
-    if missing or _digest(arrays) != header.get("sha256"):
+    if missing or _digest(arrays, header) != header.get("sha256"):
         raise InputError(f"{path}: the model file has been changed or damaged (checksum mismatch); "
                          "it is refused")
     n_nodes = arrays["left"].shape[0]
