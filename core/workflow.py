@@ -137,6 +137,33 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions):
     return grid, dtm
 
 
+def check_outputs(input_path: str, output_path: Optional[str], raster_paths=()) -> None:
+    """Refuse bad output paths before any work: wrong extension, missing folder, the input itself."""
+    from .raster import check_raster_path
+    if output_path:
+        check_output_path(output_path, inputs=[input_path])
+    for path in raster_paths:
+        if path:
+            check_raster_path(path, inputs=[input_path, output_path])
+
+
+def write_outputs(cloud: PointCloud, classification: np.ndarray, output_path: Optional[str],
+                  rasters=(), steps: Optional[Steps] = None) -> None:
+    """Write the classified cloud and the rasters ``[(path, values, grid), ...]`` (GeoTIFF, the
+    cloud's CRS). Every output goes to a temporary file first; all are renamed into place only
+    once all are complete and no cancellation came, so a failed or cancelled run leaves none."""
+    from .raster import write_geotiff
+    steps = steps or Steps()
+    with contextlib.ExitStack() as stack:
+        if output_path:
+            write_classified(cloud, classification, stack.enter_context(atomic_path(output_path)), atomic=False)
+            steps.report(0.95)
+        for path, values, grid in rasters:
+            write_geotiff(stack.enter_context(atomic_path(path)), values, grid, crs_wkt=cloud.crs_wkt,
+                          atomic=False)
+        steps.check()
+
+
 def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
                       options: FilterOptions = FilterOptions(),
                       dtm_path: Optional[str] = None, dtm: DTMOptions = DTMOptions(),
@@ -149,14 +176,10 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     ``f(run) -> (values, grid)`` (e.g. the intermediate grids a filter keeps in ``run.detail``).
     All outputs are written to temporary files and renamed together at the end: a failed or
     cancelled run leaves none of them. The input file is never modified."""
-    from .raster import check_raster_path, write_geotiff
     steps = Steps(progress, is_cancelled)
     log = log or (lambda _msg: None)
-    if output_path:
-        check_output_path(output_path, inputs=[input_path])
     rasters = {path: fn for path, fn in (rasters or {}).items() if path}
-    for path in ([dtm_path] if dtm_path else []) + list(rasters):
-        check_raster_path(path, inputs=[input_path, output_path])
+    check_outputs(input_path, output_path, [dtm_path, *rasters])
     steps.check()
     cloud = read_cloud(input_path)
     log(f"Read {len(cloud):,} points from {input_path}.")
@@ -170,19 +193,9 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
         area = ~np.isin(cloud.classification, NOISE_CLASSES) if options.ignore_noise else slice(None)
         run.dtm_grid, run.dtm = make_dtm(cloud.x[area], cloud.y[area], cloud.z[area], ground[area], dtm)
         steps.report(0.85)
-    # Every output goes to a temporary file first; all are renamed into place only once all are
-    # complete and no cancellation came, so a failed or cancelled run leaves none of them.
-    with contextlib.ExitStack() as stack:
-        if output_path:
-            write_classified(cloud, cls, stack.enter_context(atomic_path(output_path)), atomic=False)
-            steps.report(0.95)
-        if dtm_path:
-            write_geotiff(stack.enter_context(atomic_path(dtm_path)), run.dtm, run.dtm_grid,
-                          crs_wkt=cloud.crs_wkt, atomic=False)
-        for path, make in rasters.items():
-            values, grid = make(run)
-            write_geotiff(stack.enter_context(atomic_path(path)), values, grid, crs_wkt=cloud.crs_wkt,
-                          atomic=False)
-        steps.check()
+    extra = [(path, *make(run)) for path, make in rasters.items()]
+    if dtm_path:
+        extra.insert(0, (dtm_path, run.dtm, run.dtm_grid))
+    write_outputs(cloud, cls, output_path, extra, steps)
     steps.report(1.0)
     return run
