@@ -4,12 +4,12 @@ from numba import njit, prange
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def _forest_proba_kernel(X, roots, left, right, feature, threshold, value, out):
+def _forest_proba_kernel(X, roots, left, right, feature, threshold, missing_left, value, out):
     """Mean class probabilities of a forest stored as flat node arrays.
 
     Tree t starts at node ``roots[t]``; a node is a leaf when ``left`` is -1; an inner node
-    sends a sample left when ``X[i, feature] <= threshold`` (scikit-learn's rule). ``value``
-    holds each leaf's class probabilities."""
+    sends a sample left when ``X[i, feature] <= threshold`` (scikit-learn's rule), and a missing
+    value (NaN) left when ``missing_left`` is set. ``value`` holds each leaf's class probabilities."""
     n = X.shape[0]
     n_trees = roots.shape[0]
     n_classes = value.shape[1]
@@ -19,7 +19,10 @@ def _forest_proba_kernel(X, roots, left, right, feature, threshold, value, out):
         for t in range(n_trees):
             node = roots[t]
             while left[node] != -1:
-                if X[i, feature[node]] <= threshold[node]:
+                v = X[i, feature[node]]
+                if np.isnan(v):
+                    node = left[node] if missing_left[node] else right[node]
+                elif v <= threshold[node]:
                     node = left[node]
                 else:
                     node = right[node]

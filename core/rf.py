@@ -99,6 +99,7 @@ class Model:
     right: np.ndarray
     feature: np.ndarray
     threshold: np.ndarray
+    missing_left: np.ndarray            #: 1 where a missing value (NaN) goes to the left child
     value: np.ndarray                   #: (nodes, classes) leaf class probabilities
     scaler: Scaler = field(default_factory=Scaler)
     meta: dict = field(default_factory=dict)
@@ -112,10 +113,9 @@ class Model:
         X = np.ascontiguousarray(self.scaler.transform(np.asarray(X, dtype=np.float32)), dtype=np.float32)
         if X.ndim != 2 or X.shape[1] != len(self.features):
             raise InputError(f"the model expects {len(self.features)} features, got an array of shape {X.shape}")
-        # scikit-learn sends NaN to the right at split time only when it saw NaN; we impute instead.
-        X = np.where(np.isnan(X), np.float32(0.0), X)
         out = np.empty((X.shape[0], self.classes.size), dtype=np.float64)
-        _forest_proba_kernel(X, self.roots, self.left, self.right, self.feature, self.threshold, self.value, out)
+        _forest_proba_kernel(X, self.roots, self.left, self.right, self.feature, self.threshold,
+                             self.missing_left, self.value, out)
         return out
 
     def predict(self, X: np.ndarray) -> np.ndarray:
@@ -124,7 +124,7 @@ class Model:
 
 def from_sklearn(forest, features: Sequence[str], classes: np.ndarray, scaler: Scaler, meta: dict) -> Model:
     """Flatten a fitted ``RandomForestClassifier`` into a :class:`Model`."""
-    roots, lefts, rights, feats, thrs, values = [], [], [], [], [], []
+    roots, lefts, rights, feats, thrs, missing, values = [], [], [], [], [], [], []
     offset = 0
     for est in forest.estimators_:
         tree = est.tree_
@@ -142,16 +142,17 @@ def from_sklearn(forest, features: Sequence[str], classes: np.ndarray, scaler: S
         rights.append(right)
         feats.append(np.where(inner, tree.feature, 0).astype(np.int64))
         thrs.append(tree.threshold.astype(np.float64))
+        missing.append(np.asarray(tree.missing_go_to_left, dtype=np.uint8))
         values.append(val)
         offset += n
     return Model(list(features), np.asarray(classes, dtype=np.uint8), np.asarray(roots, dtype=np.int64),
                  np.concatenate(lefts), np.concatenate(rights), np.concatenate(feats),
-                 np.concatenate(thrs), np.concatenate(values), scaler, meta)
+                 np.concatenate(thrs), np.concatenate(missing), np.concatenate(values), scaler, meta)
 
 
 # -- the model file -------------------------------------------------------------------------------
 
-_ARRAYS = ("classes", "roots", "left", "right", "feature", "threshold", "value")
+_ARRAYS = ("classes", "roots", "left", "right", "feature", "threshold", "missing_left", "value")
 
 
 def _digest(arrays: Dict[str, np.ndarray], header: dict) -> str:
@@ -209,7 +210,7 @@ def load_model(path: str) -> Model:
         raise InputError(f"{path}: the model file has been changed or damaged (checksum mismatch); "
                          "it is refused")
     n_nodes = arrays["left"].shape[0]
-    for name in ("right", "feature", "threshold"):
+    for name in ("right", "feature", "threshold", "missing_left"):
         if arrays[name].shape != (n_nodes,):
             raise InputError(f"{path}: inconsistent model arrays")
     features = header["features"]
@@ -219,7 +220,7 @@ def load_model(path: str) -> Model:
     scaler = Scaler(header.get("scaler", "none"), arrays.get("scaler_center"), arrays.get("scaler_scale"))
     meta = {k: v for k, v in header.items() if k not in ("format", "format_version", "features", "scaler", "sha256")}
     return Model(features, arrays["classes"], arrays["roots"], arrays["left"], arrays["right"],
-                 arrays["feature"], arrays["threshold"], arrays["value"], scaler, meta)
+                 arrays["feature"], arrays["threshold"], arrays["missing_left"], arrays["value"], scaler, meta)
 
 
 # -- spatial blocks ----------------------------------------------------------------------------
@@ -265,7 +266,8 @@ def train_forest(X: np.ndarray, y: np.ndarray, features: Sequence[str], params: 
     if classes.size < 2:
         raise InputError(f"training needs at least two classes (got only {classes.tolist()})")
     scaler = Scaler.fit(params.scaler, X)
-    Xs = np.where(np.isnan(scaler.transform(X)), np.float32(0.0), scaler.transform(X))
+    Xs = scaler.transform(X)  # NaN (e.g. a feature undefined for too few neighbours) stays NaN:
+    # scikit-learn's trees learn where missing values go, and the predictor follows them.
     max_samples = params.max_samples if params.max_samples and params.max_samples < X.shape[0] else None
     forest = RandomForestClassifier(n_estimators=params.n_trees, criterion=params.criterion,
                                     max_depth=params.max_depth, min_samples_leaf=params.min_samples_leaf,
@@ -276,3 +278,86 @@ def train_forest(X: np.ndarray, y: np.ndarray, features: Sequence[str], params: 
                 training_seconds=round(time.perf_counter() - t0, 3), sklearn_version=sklearn.__version__,
                 impurity_importance=[float(v) for v in forest.feature_importances_])
     return from_sklearn(forest, features, forest.classes_, scaler, info)
+
+
+# -- features of a cloud -----------------------------------------------------------------------
+
+#: f4-f7 of the paper: verticality 0.6 m, planarity 0.6 m, eigenentropy 0.4 m, surface variation 0.6 m.
+GEOMETRIC = ("verticality_r0p6", "planarity_r0p6", "eigenentropy_r0p4", "surface_variation_r0p6")
+#: ``radiometry`` stands for red, green, blue, or intensity when the cloud has no colour.
+RADIOMETRY = "radiometry"
+#: The paper's feature configurations (its Table 7).
+PRESETS = {
+    "C1": (RADIOMETRY,),
+    "C2": (RADIOMETRY, "return_number"),
+    "C3": (RADIOMETRY, "return_number", "scan_angle", "gps_time"),
+    "C4": (RADIOMETRY, "return_number", "scan_angle", "gps_time") + GEOMETRIC,
+    "C5": (RADIOMETRY, "return_number") + GEOMETRIC,
+}
+DEFAULT_PRESET = "C5"
+
+
+def _has_colour(cloud) -> bool:
+    las = cloud.las
+    if las is None or "red" not in las.point_format.dimension_names:
+        return False
+    return bool(np.any(las.red) or np.any(las.green) or np.any(las.blue))
+
+
+def resolve_features(names: Sequence[str], cloud, log=None) -> List[str]:
+    """Expand ``radiometry`` for this cloud (RGB when it has colour, else intensity)."""
+    out: List[str] = []
+    for name in names:
+        if name == RADIOMETRY:
+            if _has_colour(cloud):
+                out += ["red", "green", "blue"]
+            else:
+                if log:
+                    log(f"{cloud.path}: no colour (RGB) in the file; the radiometric feature is the intensity.")
+                out.append("intensity")
+        elif name not in out:
+            out.append(name)
+    return out
+
+
+def _attribute(cloud, name: str) -> np.ndarray:
+    las = cloud.las
+    if name in ("return_number", "number_of_returns"):
+        return getattr(cloud, name).astype(np.float32)
+    if las is None:
+        raise InputError(f"{cloud.path}: the feature '{name}' needs a LAS/LAZ file (this is ISPRS text)")
+    dims = set(las.point_format.dimension_names)
+    if name == "scan_angle":
+        if "scan_angle" in dims:  # formats 6-10: 0.006 degree units
+            return (np.asarray(las.scan_angle, dtype=np.float32) * np.float32(0.006))
+        if "scan_angle_rank" in dims:
+            return np.asarray(las.scan_angle_rank, dtype=np.float32)
+    if name in dims:
+        return np.asarray(las[name], dtype=np.float32)
+    raise InputError(f"{cloud.path}: the feature '{name}' is not in this file (dimensions: "
+                     f"{', '.join(sorted(dims))})")
+
+
+def feature_matrix(cloud, names: Sequence[str], steps=None) -> np.ndarray:
+    """(n, len(names)) float32 matrix of the named features of ``cloud``. Attributes are read from
+    the file; geometric features (``<feature>_r<radius>``) are taken from the file's extra bytes when
+    present (e.g. written by groundsieve:features) and computed otherwise."""
+    from .features import FeatureSpec, compute_features, parse_feature_name
+    from .progress import Steps
+    steps = steps or Steps()
+    columns: Dict[str, np.ndarray] = {}
+    dims = set(cloud.las.point_format.dimension_names) if cloud.las is not None else set()
+    to_compute = []
+    for name in names:
+        if name in ATTRIBUTE_FEATURES or name in ("scan_angle",):
+            columns[name] = _attribute(cloud, name)
+        elif name in dims:
+            columns[name] = np.asarray(cloud.las[name], dtype=np.float32)
+        else:
+            parse_feature_name(name)  # a clear error for an unknown name
+            to_compute.append(name)
+    if to_compute:
+        computed = compute_features(cloud.xyz, FeatureSpec.from_names(to_compute), steps=steps)
+        columns.update(computed)
+    steps.report(1.0)
+    return np.column_stack([columns[name] for name in names]).astype(np.float32)

@@ -20,12 +20,17 @@ def _data(seed=0, n=4000):
     return X, y.astype(np.uint8)
 
 
-def test_array_forest_equals_scikit_learn():
+@pytest.mark.parametrize("with_nan", [False, True])
+def test_array_forest_equals_scikit_learn(with_nan):
     from sklearn.ensemble import RandomForestClassifier
     X, y = _data()
+    if with_nan:  # missing values (features undefined for too few neighbours) in training and test
+        X[np.random.default_rng(5).random(X.shape) < 0.1] = np.nan
     forest = RandomForestClassifier(n_estimators=25, random_state=0).fit(X, y)
     model = rf.from_sklearn(forest, ["a", "b", "c", "d"], forest.classes_, rf.Scaler(), {})
     Xt, _ = _data(1)
+    if with_nan:
+        Xt[np.random.default_rng(6).random(Xt.shape) < 0.1] = np.nan
     np.testing.assert_array_equal(model.predict_proba(Xt), forest.predict_proba(Xt))
     np.testing.assert_array_equal(model.predict(Xt), forest.predict(Xt))
 
