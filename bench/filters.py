@@ -30,6 +30,12 @@ def make_evc(row: ParamsRow, **fixed):
     return EVC(**fixed)
 
 
+def make_pmf(row: ParamsRow, **fixed):
+    """PMF (Zhang et al. 2003) with PDAL's defaults unless fixed; ``row`` (SMRF parameters) is ignored."""
+    from groundsieve.core.pmf import PMF
+    return PMF(**fixed)
+
+
 FILTERS: Dict[str, Callable[[ParamsRow], Callable]] = {
     "smrf": make_smrf,
     # As Pingel's Python code runs by default: low-outlier cells are not refilled before the opening.
@@ -39,6 +45,8 @@ FILTERS: Dict[str, Callable[[ParamsRow], Callable]] = {
     "evc": make_evc,
     "evc-3.2": lambda row: make_evc(row, large_scale_m=3.2),
     "evc-offset": lambda row: make_evc(row, ground_offset_m=0.1),
+    "pmf": make_pmf,
+    "pmf-linear": lambda row: make_pmf(row, exponential=False),
 }
 
 

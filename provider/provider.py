@@ -7,9 +7,10 @@ from qgis.PyQt.QtGui import QIcon
 
 from ..algorithms.echogrid import EchoGridAlgorithm
 from ..algorithms.evc import EVCAlgorithm, EVCRastersAlgorithm
+from ..algorithms.pmf import PMFAlgorithm
 from ..algorithms.smrf import SMRFAlgorithm
 
-ALGORITHMS = (SMRFAlgorithm, EchoGridAlgorithm, EVCAlgorithm, EVCRastersAlgorithm)
+ALGORITHMS = (SMRFAlgorithm, EchoGridAlgorithm, EVCAlgorithm, EVCRastersAlgorithm, PMFAlgorithm)
 
 _ROOT = os.path.dirname(os.path.dirname(__file__))
 

@@ -24,7 +24,7 @@ def _run(alg, params):
     return processing.run(f"groundsieve:{alg}", params)
 
 
-@pytest.mark.parametrize("alg", ["echogrid", "evc", "evcrasters"])
+@pytest.mark.parametrize("alg", ["smrf", "echogrid", "evc", "evcrasters", "pmf"])
 def test_registered_with_the_shared_interface(groundsieve_provider, alg):
     from qgis.core import QgsApplication
     algorithm = QgsApplication.processingRegistry().algorithmById(f"groundsieve:{alg}")
@@ -136,3 +136,15 @@ def test_evcrasters_and_echogrid_from_the_command_line(scene_laz, tmp_path):
                            f"--OUTPUT={tmp_path / 'e.laz'}"], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert (classes_of(tmp_path / "e.laz") == 2).any()
+
+
+@pytest.mark.parametrize("alg", ["smrf", "echogrid", "evc", "pmf"])
+def test_every_filter_runs_with_input_and_output_only(alg, scene_laz, tmp_path):
+    """The shared interface: `scripts/qgis-process run groundsieve:<id> --INPUT=a.laz --OUTPUT=b.laz`."""
+    src, scene = scene_laz
+    out = tmp_path / f"{alg}.laz"
+    proc = subprocess.run([str(REPO / "scripts" / "qgis-process"), "run", f"groundsieve:{alg}", f"--INPUT={src}",
+                           f"--OUTPUT={out}"], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    cls = classes_of(out)
+    assert len(cls) == len(scene.x) and set(np.unique(cls)) <= {1, 2} and (cls == 2).any()
