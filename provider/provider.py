@@ -7,10 +7,13 @@ from qgis.PyQt.QtGui import QIcon
 
 from ..algorithms.echogrid import EchoGridAlgorithm
 from ..algorithms.evc import EVCAlgorithm, EVCRastersAlgorithm
+from ..algorithms.features import FeaturesAlgorithm
 from ..algorithms.pmf import PMFAlgorithm
+from ..algorithms.rf import RFClassifyAlgorithm, RFTrainAlgorithm
 from ..algorithms.smrf import SMRFAlgorithm
 
-ALGORITHMS = (SMRFAlgorithm, EchoGridAlgorithm, EVCAlgorithm, EVCRastersAlgorithm, PMFAlgorithm)
+ALGORITHMS = (SMRFAlgorithm, EchoGridAlgorithm, EVCAlgorithm, EVCRastersAlgorithm, PMFAlgorithm,
+              FeaturesAlgorithm, RFTrainAlgorithm, RFClassifyAlgorithm)
 
 _ROOT = os.path.dirname(os.path.dirname(__file__))
 

@@ -1,0 +1,232 @@
+"""groundsieve:rftrain — Train Random Forest classifier; groundsieve:rfclassify — Classify with
+Random Forest model (Matrone et al. 2024, Method 3)."""
+import os
+
+from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException, QgsProcessingOutputNumber,
+                       QgsProcessingParameterBoolean, QgsProcessingParameterDefinition,
+                       QgsProcessingParameterEnum, QgsProcessingParameterFile,
+                       QgsProcessingParameterFileDestination, QgsProcessingParameterNumber,
+                       QgsProcessingParameterRasterDestination, QgsProcessingParameterString)
+from qgis.PyQt.QtGui import QIcon
+
+from .base import core_modules
+
+_ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
+Double = QgsProcessingParameterNumber.Type.Double
+Integer = QgsProcessingParameterNumber.Type.Integer
+PRESET_NAMES = ("C5H", "C1", "C2", "C3", "C4", "C5", "custom")
+CRITERIA = ("gini", "entropy")
+SCALERS = ("none", "standard", "robust")
+CLOUD_FILTER = "Point clouds (*.las *.laz *.LAS *.LAZ)"
+
+
+def _rf():
+    errors, _workflow = core_modules()
+    from ..core import rf
+    return errors, rf
+
+
+class _RFBase(QgsProcessingAlgorithm):
+    def group(self):
+        return "Classification"
+
+    def groupId(self):  # noqa: N802
+        return "classification"
+
+    def icon(self):
+        return QIcon(os.path.join(_ICONS, "rf.svg"))
+
+    def createInstance(self):  # noqa: N802
+        return type(self)()
+
+
+class RFTrainAlgorithm(_RFBase):
+    INPUT = "INPUT"
+    CLASSES = "CLASSES"
+    PRESET = "PRESET"
+    CUSTOM_FEATURES = "CUSTOM_FEATURES"
+    CRITERION = "CRITERION"
+    TREES = "TREES"
+    SCALER = "SCALER"
+    MAX_DEPTH = "MAX_DEPTH"
+    SAMPLES_PER_TREE = "SAMPLES_PER_TREE"
+    BLOCK = "BLOCK"
+    VALIDATION = "VALIDATION"
+    TEST = "TEST"
+    GRID = "GRID"
+    MODEL = "MODEL"
+    REPORT = "REPORT"
+    TEST_ACCURACY = "TEST_ACCURACY"
+
+    def name(self):
+        return "rftrain"
+
+    def displayName(self):  # noqa: N802
+        return "Train Random Forest classifier"
+
+    def shortHelpString(self):  # noqa: N802
+        return """<p>Trains a Random Forest on a labelled point cloud (its classification field is the
+label), as Matrone et al. (2024, Method 3) did to test whether the return number helps.</p>
+<p><b>Classes</b>: ASPRS codes to learn, e.g. <code>2,1</code> or <code>2,11,5,6,14</code>
+(ground, road, vegetation, building, power line); empty = every class present except 0, 7 and 18.</p>
+<p><b>Features</b>: the paper's configurations: C1 RGB; C2 RGB + return number; C3 + scan angle and
+GPS time; C4 + verticality (0.6 m), planarity (0.6 m), eigenentropy (0.4 m), surface variation
+(0.6 m); C5 = C4 without scan angle and GPS time (the paper's best). Clouds without colour use the
+intensity in place of RGB. <b>C5H</b> (default, ours) adds the height above the lowest point within
+2.5 m and the local point density, which carry the ground contrast on sparse airborne clouds where the
+paper's small spheres hold few points. <i>custom</i>: a comma-separated list such as
+<code>intensity,return_number,number_of_returns,planarity_r0p6,height_above_min_r2p5</code>. Geometric
+features already in the file (from <i>Compute point features</i>) are used as they are.</p>
+<p><b>Split</b>: training / validation / test sets are square blocks of <i>Block size</i> drawn at
+random (60/20/20 %), so neighbouring points do not leak between sets; or give validation and test
+files. <b>Parameter grid</b> runs the paper's 18 combinations (gini/entropy x 100/150/200 trees x
+no/standard/robust scaler) and keeps the best on the validation set (weighted F1); it takes 18 times
+as long. <b>Samples per tree</b> caps each tree's bootstrap sample (0 = all points), which bounds the
+training time on large clouds.</p>
+<p><b>Outputs</b>: the model file (.npz: plain arrays with a checksum, never a pickle, so loading it
+cannot run code; a changed or foreign file is refused) and an HTML report (per-class precision,
+recall, F1, overall accuracy, weighted averages, confusion matrices, impurity and permutation feature
+importances, timings) with the same figures in a CSV beside it.</p>"""
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.addParameter(QgsProcessingParameterFile(
+            self.INPUT, "Labelled point cloud (LAS/LAZ)", behavior=QgsProcessingParameterFile.Behavior.File,
+            fileFilter=CLOUD_FILTER))
+        self.addParameter(QgsProcessingParameterString(
+            self.CLASSES, "Classes to learn (ASPRS codes, comma-separated; empty = all present)",
+            defaultValue="", optional=True))
+        self.addParameter(QgsProcessingParameterEnum(
+            self.PRESET, "Features", options=[
+                "C5H: C5 + height above ground minimum and density (default)", "C1: RGB",
+                "C2: RGB + return number", "C3: RGB + return number, scan angle, GPS time",
+                "C4: C3 + verticality, planarity, eigenentropy, surface variation",
+                "C5: RGB + return number + the four geometric features (paper's best)",
+                "custom list"], defaultValue=0))
+        self.addParameter(QgsProcessingParameterString(
+            self.CUSTOM_FEATURES, "Custom feature list (with 'custom list')", defaultValue="", optional=True))
+        self.addParameter(QgsProcessingParameterEnum(self.CRITERION, "Splitting criterion", options=list(CRITERIA),
+                                                     defaultValue=0))
+        self.addParameter(QgsProcessingParameterNumber(self.TREES, "Number of trees", type=Integer,
+                                                       defaultValue=100, minValue=1))
+        self.addParameter(QgsProcessingParameterEnum(self.SCALER, "Feature scaler", options=list(SCALERS),
+                                                     defaultValue=0))
+        self.addParameter(QgsProcessingParameterBoolean(
+            self.GRID, "Run the paper's parameter grid and keep the best on validation", defaultValue=False))
+        advanced = [
+            QgsProcessingParameterNumber(self.MAX_DEPTH, "Maximum tree depth (0 = none)", type=Integer,
+                                         defaultValue=0, minValue=0),
+            QgsProcessingParameterNumber(self.SAMPLES_PER_TREE, "Samples per tree (0 = all)", type=Integer,
+                                         defaultValue=100000, minValue=0),
+            QgsProcessingParameterNumber(self.BLOCK, "Block size of the spatial split (m)", type=Double,
+                                         defaultValue=25.0, minValue=0.0),
+            QgsProcessingParameterFile(self.VALIDATION, "Validation cloud (instead of blocks)", optional=True,
+                                       behavior=QgsProcessingParameterFile.Behavior.File, fileFilter=CLOUD_FILTER),
+            QgsProcessingParameterFile(self.TEST, "Test cloud (instead of blocks)", optional=True,
+                                       behavior=QgsProcessingParameterFile.Behavior.File, fileFilter=CLOUD_FILTER),
+        ]
+        for param in advanced:
+            param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
+            self.addParameter(param)
+        self.addParameter(QgsProcessingParameterFileDestination(self.MODEL, "Model file",
+                                                                fileFilter="GroundSieve model (*.npz)"))
+        self.addParameter(QgsProcessingParameterFileDestination(self.REPORT, "Report",
+                                                                fileFilter="HTML (*.html)"))
+        self.addOutput(QgsProcessingOutputNumber(self.TEST_ACCURACY, "Overall accuracy on the test set"))
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        errors, rf = _rf()
+        try:
+            preset = PRESET_NAMES[self.parameterAsEnum(parameters, self.PRESET, context)]
+            if preset == "custom":
+                text = self.parameterAsString(parameters, self.CUSTOM_FEATURES, context)
+                features = tuple(n.strip() for n in text.split(",") if n.strip())
+                if not features:
+                    raise errors.InvalidParameterError("'custom list' needs a feature list")
+            else:
+                features = rf.PRESETS[preset]
+            text = self.parameterAsString(parameters, self.CLASSES, context).strip()
+            try:
+                classes = tuple(int(c) for c in text.replace(";", ",").split(",") if c.strip()) or None
+            except ValueError:
+                raise errors.InvalidParameterError(f"classes must be ASPRS codes separated by commas (got {text!r})")
+            depth = self.parameterAsInt(parameters, self.MAX_DEPTH, context)
+            samples = self.parameterAsInt(parameters, self.SAMPLES_PER_TREE, context)
+            params = rf.ForestParams(
+                n_trees=self.parameterAsInt(parameters, self.TREES, context),
+                criterion=CRITERIA[self.parameterAsEnum(parameters, self.CRITERION, context)],
+                scaler=SCALERS[self.parameterAsEnum(parameters, self.SCALER, context)],
+                max_depth=depth or None, max_samples=samples or None)
+            options = rf.TrainOptions(features=features, classes=classes, params=params,
+                                      block_m=self.parameterAsDouble(parameters, self.BLOCK, context),
+                                      grid=self.parameterAsBoolean(parameters, self.GRID, context))
+            model_path = self.parameterAsFileOutput(parameters, self.MODEL, context)
+            report_path = self.parameterAsFileOutput(parameters, self.REPORT, context)
+            run = rf.train_file(
+                self.parameterAsFile(parameters, self.INPUT, context), model_path, report_path, options,
+                validation_path=self.parameterAsFile(parameters, self.VALIDATION, context) or None,
+                test_path=self.parameterAsFile(parameters, self.TEST, context) or None,
+                progress=lambda f: feedback.setProgress(100.0 * f), is_cancelled=feedback.isCanceled,
+                log=feedback.pushInfo)
+        except errors.GroundSieveError as err:
+            raise QgsProcessingException(str(err)) from err
+        test = run.evaluations["test set"]
+        feedback.pushInfo("Test set:\n" + test.table())
+        return {self.MODEL: model_path, self.REPORT: report_path, self.TEST_ACCURACY: test.accuracy}
+
+
+class RFClassifyAlgorithm(_RFBase):
+    INPUT = "INPUT"
+    MODEL = "MODEL"
+    OUTPUT = "OUTPUT"
+    DTM = "DTM"
+    DTM_CELL = "DTM_CELL"
+    DTM_FILL = "DTM_FILL"
+
+    def name(self):
+        return "rfclassify"
+
+    def displayName(self):  # noqa: N802
+        return "Classify with Random Forest model"
+
+    def shortHelpString(self):  # noqa: N802
+        return """<p>Applies a model trained with <i>Train Random Forest classifier</i> to another cloud and
+writes it with the predicted ASPRS classes (every other dimension kept); optionally a DTM GeoTIFF
+from the points predicted as ground (class 2), as the ground filters make it.</p>
+<p>The model is refused with a clear message when the file was changed or is not a GroundSieve
+model, or when the cloud cannot give the model's features (e.g. colour in one and not the other).
+Loading a model never runs code from the file (plain arrays, no pickle).</p>"""
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.addParameter(QgsProcessingParameterFile(
+            self.INPUT, "Point cloud (LAS/LAZ)", behavior=QgsProcessingParameterFile.Behavior.File,
+            fileFilter=CLOUD_FILTER))
+        self.addParameter(QgsProcessingParameterFile(
+            self.MODEL, "Model file", behavior=QgsProcessingParameterFile.Behavior.File,
+            fileFilter="GroundSieve model (*.npz)"))
+        self.addParameter(QgsProcessingParameterFileDestination(
+            self.OUTPUT, "Classified point cloud", fileFilter="LAZ (*.laz);;LAS (*.las)"))
+        self.addParameter(QgsProcessingParameterRasterDestination(
+            self.DTM, "DTM (ground surface)", optional=True, createByDefault=False))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.DTM_CELL, "DTM cell size (m)", type=Double, defaultValue=1.0, minValue=0.0))
+        self.addParameter(QgsProcessingParameterBoolean(
+            self.DTM_FILL, "Fill DTM cells outside the ground hull (nearest value)", defaultValue=False))
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        errors, rf = _rf()
+        from ..core.workflow import DTMOptions
+        output = self.parameterAsFileOutput(parameters, self.OUTPUT, context)
+        dtm_path = self.parameterAsOutputLayer(parameters, self.DTM, context) or None
+        try:
+            dtm = DTMOptions(cell_size_m=self.parameterAsDouble(parameters, self.DTM_CELL, context),
+                             fill_outside_hull=self.parameterAsBoolean(parameters, self.DTM_FILL, context))
+            rf.classify_file(self.parameterAsFile(parameters, self.INPUT, context), output,
+                             self.parameterAsFile(parameters, self.MODEL, context), dtm_path=dtm_path, dtm=dtm,
+                             progress=lambda f: feedback.setProgress(100.0 * f), is_cancelled=feedback.isCanceled,
+                             log=feedback.pushInfo)
+        except errors.GroundSieveError as err:
+            raise QgsProcessingException(str(err)) from err
+        results = {self.OUTPUT: output}
+        if dtm_path:
+            results[self.DTM] = dtm_path
+        return results

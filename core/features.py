@@ -1,0 +1,397 @@
+"""Per-point geometric features of the local neighbourhood, for classification
+(Matrone et al. 2024, Method 3: verticality 0.6 m, planarity 0.6 m, eigenentropy 0.4 m and
+surface variation 0.6 m, after Weinmann et al. 2015).
+
+Neighbourhoods
+--------------
+*Sphere features* use the points within the 3D distance ``radius`` of the point, **the point
+itself included** (``k`` points); *column features* the points within the horizontal distance
+``radius`` (a vertical cylinder of unbounded height), the point included.
+
+Eigen features
+--------------
+``C`` is the covariance of the ``k`` points of the sphere (divided by ``k``, about their own
+centroid), ``λ1 >= λ2 >= λ3 >= 0`` its eigenvalues and ``e_i = λ_i / (λ1 + λ2 + λ3)`` the
+normalised eigenvalues, as in Weinmann et al. (2015):
+
+=====================  =======================================  ==================
+feature                value                                    range
+=====================  =======================================  ==================
+``linearity``          (e1 - e2) / e1                           [0, 1]
+``planarity``          (e2 - e3) / e1                           [0, 1]
+``sphericity``         e3 / e1                                  [0, 1]
+``anisotropy``         (e1 - e3) / e1                           [0, 1]
+``omnivariance``       (e1 e2 e3)^(1/3)                         [0, 1/3]
+``eigenentropy``       -(e1 ln e1 + e2 ln e2 + e3 ln e3)        [0, ln 3]; 0 ln 0 = 0
+``surface_variation``  e3 / (e1 + e2 + e3) = e3                 [0, 1/3]
+``verticality``        1 - |n_z|, n the unit eigenvector of λ3  [0, 1]
+``eigenvalue_sum``     λ1 + λ2 + λ3 (m², not normalised)        >= 0
+=====================  =======================================  ==================
+
+The ratios (linearity, planarity, sphericity, anisotropy, surface variation) and verticality are
+also those of CloudCompare (CCCoreLib ``Neighbourhood::computeFeature``, covariance divided by
+``k``, NaN below 3 points) and of jakteristics (covariance divided by ``k - 1``). Both of these
+compute omnivariance and eigenentropy from the raw eigenvalues λ (m²) instead of ``e``: those two
+features (only) differ in value from theirs; ours do not depend on the unit or on the radius.
+
+Other features: ``density`` = k / (4/3 π r³), points per m³ in the sphere (the point
+included, so never 0); ``height_above_min`` = z minus the lowest z in the vertical column
+of radius ``r`` around the point (>= 0).
+
+Points whose sphere holds fewer than :data:`MIN_POINTS` = 3 points (the point included, as
+CloudCompare) get NaN for every eigen feature, and so do points whose sphere holds only
+coincident points (no shape, no normal; ``eigenvalue_sum`` is then 0). For a perfectly
+collinear sphere the normal (hence verticality) is one arbitrary perpendicular of the line.
+
+Names
+-----
+A feature at a radius is named ``<feature>_r<radius>``, the radius in metres (the unit of the
+cloud's CRS) with ``p`` as the decimal mark and no trailing zeros, e.g. ``verticality_r0p6``,
+``eigenentropy_r0p4``, ``height_above_min_r2p5``, ``density_r1``. The dot is avoided because
+PDAL (which QGIS uses to index LAS/LAZ) and its expressions accept only letters, digits and
+underscores in dimension names; every name fits the 32 characters of a LAS extra-bytes name.
+:func:`parse_feature_name` reads a name back.
+
+Speed: one pass over the points per distinct radius (all features at that radius share the
+covariance sums), in numba kernels run in parallel (see ``_features_kernels``).
+"""
+from __future__ import annotations
+
+import copy
+import math
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Callable, Dict, Optional, Tuple
+
+import numpy as np
+
+from .errors import InvalidParameterError, OutputError
+from .io import PointCloud, check_output_path, new_las, read_cloud, write_las
+from .progress import Steps
+from .smrf import validate_xyz
+
+#: Features of the eigenvalues of the covariance in a sphere.
+EIGEN_FEATURES = ("linearity", "planarity", "sphericity", "omnivariance", "anisotropy", "eigenentropy",
+                  "surface_variation", "verticality", "eigenvalue_sum")
+#: Features of a sphere of ``radius``.
+SPHERE_FEATURES = EIGEN_FEATURES + ("density",)
+#: Features of a vertical column of ``radius``.
+COLUMN_FEATURES = ("height_above_min",)
+FEATURES = SPHERE_FEATURES + COLUMN_FEATURES
+
+#: The features of Matrone et al. (2024) at their radii (m).
+PAPER_FEATURES = (("verticality", 0.6), ("planarity", 0.6), ("eigenentropy", 0.4), ("surface_variation", 0.6))
+
+#: Fewest points (the point included) a sphere needs for the eigen features; fewer give NaN.
+MIN_POINTS = 3
+#: Smallest radius accepted (m): names carry the radius to 1e-6 m, and a smaller sphere is below
+#: the usual coordinate resolution of LAS files (0.01-0.001 m).
+MIN_RADIUS_M = 0.001
+#: Longest name of a LAS extra-bytes dimension.
+MAX_NAME_LENGTH = 32
+
+_NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
+_FEATURE_NAME_RE = re.compile(r"^(?P<feature>[a-z_]+)_r(?P<int>[0-9]+)(?:p(?P<frac>[0-9]+))?$")
+
+
+def radius_text(radius: float) -> str:
+    """The radius as it appears in feature names: 0.6 -> ``0p6``, 2.5 -> ``2p5``, 1.0 -> ``1``."""
+    text = f"{float(radius):.6f}".rstrip("0").rstrip(".")
+    return text.replace(".", "p")
+
+
+def feature_name(feature: str, radius: float) -> str:
+    """``<feature>_r<radius>``, e.g. ``feature_name("planarity", 0.6) == "planarity_r0p6"``."""
+    return f"{feature}_r{radius_text(radius)}"
+
+
+def parse_feature_name(name: str) -> Tuple[str, float]:
+    """(feature, radius) of a name made by :func:`feature_name`; InvalidParameterError otherwise."""
+    match = _FEATURE_NAME_RE.match(str(name))
+    if not match or match.group("feature") not in FEATURES:
+        raise InvalidParameterError(
+            f"'{name}' is not a feature name: expected <feature>_r<radius> (e.g. planarity_r0p6) with "
+            f"<feature> one of {', '.join(FEATURES)}")
+    radius = float(match.group("int") + "." + (match.group("frac") or "0"))
+    return match.group("feature"), radius
+
+
+@dataclass(frozen=True)
+class FeatureSpec:
+    """Which features, each at which radius (m): ``features`` is a tuple of
+    ``(feature, radius)`` pairs (a mapping ``{feature: radius}`` is accepted too); the same
+    feature may come at several radii. Defaults: the paper's four features and radii."""
+    features: Tuple[Tuple[str, float], ...] = PAPER_FEATURES
+
+    def __post_init__(self):
+        items = self.features
+        if isinstance(items, Mapping):
+            items = tuple(items.items())
+        if isinstance(items, (str, bytes)) or not hasattr(items, "__iter__"):
+            raise InvalidParameterError(f"features must be (feature, radius) pairs (got {items!r})")
+        pairs = []
+        for item in items:
+            if isinstance(item, (str, bytes)) or not hasattr(item, "__len__") or len(item) != 2:
+                raise InvalidParameterError(
+                    f"features must be (feature, radius) pairs (got {item!r}); e.g. ('planarity', 0.6)")
+            feature, radius = item
+            if feature not in FEATURES:
+                raise InvalidParameterError(f"unknown feature {feature!r}; expected one of {', '.join(FEATURES)}")
+            if isinstance(radius, bool) or not isinstance(radius, (int, float, np.integer, np.floating)):
+                raise InvalidParameterError(f"{feature} radius must be a number in m (got {radius!r})")
+            radius = float(radius)
+            if not (math.isfinite(radius) and radius >= MIN_RADIUS_M):
+                raise InvalidParameterError(f"{feature} radius must be at least {MIN_RADIUS_M} m (got {radius:g})")
+            pairs.append((feature, radius))
+        if not pairs:
+            raise InvalidParameterError("no feature asked: give at least one (feature, radius)")
+        seen = {}
+        for feature, radius in pairs:
+            name = feature_name(feature, radius)
+            if len(name) > MAX_NAME_LENGTH:
+                raise InvalidParameterError(f"{feature} radius {radius:g} m makes the name {name} longer than "
+                                            f"the {MAX_NAME_LENGTH} characters of a LAS dimension")
+            if name in seen:
+                raise InvalidParameterError(
+                    f"{name} asked twice ({feature} at {seen[name]:g} m and {radius:g} m); radii must differ "
+                    "by at least 1e-6 m")
+            seen[name] = radius
+        object.__setattr__(self, "features", tuple(pairs))
+
+    @classmethod
+    def from_names(cls, names) -> "FeatureSpec":
+        """The spec computing the features named ``names`` (e.g. a trained model's list)."""
+        if isinstance(names, str):
+            names = [n for n in (s.strip() for s in names.split(",")) if n]
+        return cls(tuple(parse_feature_name(n) for n in names))
+
+    @property
+    def names(self) -> Tuple[str, ...]:
+        """The output names, in the order of ``features``."""
+        return tuple(feature_name(f, r) for f, r in self.features)
+
+    def sphere_passes(self) -> Dict[float, list]:
+        """{radius: [(feature, name), ...]} of the sphere features: one pass each."""
+        passes: Dict[float, list] = {}
+        for feature, radius in self.features:
+            if feature in SPHERE_FEATURES:
+                passes.setdefault(radius, []).append((feature, feature_name(feature, radius)))
+        return passes
+
+    def column_passes(self) -> Dict[float, list]:
+        passes: Dict[float, list] = {}
+        for feature, radius in self.features:
+            if feature in COLUMN_FEATURES:
+                passes.setdefault(radius, []).append((feature, feature_name(feature, radius)))
+        return passes
+
+
+# --------------------------------------------------------------------------- computation
+
+def _columns(xr: np.ndarray, yr: np.ndarray, z: np.ndarray, cell: float):
+    """Sort the points by (column of ``cell``, z). ``xr``, ``yr`` are >= 0 (relative to the
+    minimum). Returns order, sorted x, y, z, the start of each occupied column's run (plus n),
+    the sorted keys of the occupied columns, a dense key -> column lookup when the grid is small
+    (else an empty array) and the grid's numbers of columns and rows ``nx``, ``ny``."""
+    ix = np.floor(xr / cell).astype(np.int64)
+    iy = np.floor(yr / cell).astype(np.int64)
+    nx, ny = int(ix.max()) + 1, int(iy.max()) + 1
+    if nx * ny >= 2 ** 62:
+        raise InvalidParameterError(
+            f"a radius of {cell:g} m is too small for a cloud {xr.max():.3g} x {yr.max():.3g} m wide")
+    key = ix * ny + iy
+    del ix, iy
+    order = np.lexsort((z, key))
+    skey = key[order]
+    del key
+    breaks = np.flatnonzero(skey[1:] != skey[:-1]) + 1
+    starts = np.concatenate([[0], breaks, [skey.shape[0]]]).astype(np.int64)
+    ukeys = np.ascontiguousarray(skey[starts[:-1]])
+    if nx * ny <= max(4 * xr.shape[0], 1 << 20):
+        lookup = np.full(nx * ny, -1, dtype=np.int64)  # dense: one lookup per neighbour column
+        lookup[ukeys] = np.arange(ukeys.shape[0], dtype=np.int64)
+    else:
+        lookup = np.empty(0, dtype=np.int64)  # sparse: binary search in ukeys
+    return (order.astype(np.int64), np.ascontiguousarray(xr[order]), np.ascontiguousarray(yr[order]),
+            np.ascontiguousarray(z[order]), starts, ukeys, lookup, nx, ny)
+
+
+def _threads() -> int:
+    import numba
+    return int(numba.get_num_threads())
+
+
+def _run_in_chunks(kernel, args: tuple, out: np.ndarray, n_columns: int, steps: Steps) -> None:
+    """Call ``kernel(*args, c0, c1, ntasks, out)`` on slices ``c0:c1`` of the columns,
+    reporting progress and honouring cancellation between slices."""
+    ntasks = 8 * _threads()
+    nchunks = max(1, min(n_columns // 4096, 32))
+    bounds = np.linspace(0, n_columns, nchunks + 1).astype(np.int64)
+    for i in range(nchunks):
+        kernel(*args, int(bounds[i]), int(bounds[i + 1]), ntasks, out)
+        steps.report((i + 1) / nchunks)
+
+
+#: Cells per radius in the neighbour search (1: 3 x 3 columns of the radius; 2: 5 x 5 of half).
+_SPHERE_SPLIT = 1
+_COLUMN_SPLIT = 2
+
+
+def compute_features(xyz: np.ndarray, spec: FeatureSpec = FeatureSpec(), *,
+                     steps: Optional[Steps] = None) -> Dict[str, np.ndarray]:
+    """The features of ``spec`` for every point of ``xyz`` (n, 3): ``{name: float32 (n,)}``
+    in the order of ``spec.names`` (see the module's documentation for the definitions)."""
+    from . import _features_kernels as K
+    if not isinstance(spec, FeatureSpec):
+        raise InvalidParameterError(f"spec must be a FeatureSpec (got {type(spec).__name__})")
+    steps = steps or Steps()
+    xyz = validate_xyz(xyz)
+    n = xyz.shape[0]
+    xr = xyz[:, 0] - xyz[:, 0].min()
+    yr = xyz[:, 1] - xyz[:, 1].min()
+    z = np.ascontiguousarray(xyz[:, 2])
+    del xyz
+    sphere, column = spec.sphere_passes(), spec.column_passes()
+    npasses = len(sphere) + len(column)
+    results: Dict[str, np.ndarray] = {}
+    done = 0
+    for radius, wanted in sphere.items():
+        sub = steps.sub(done / npasses, (done + 1) / npasses)
+        cell = radius / _SPHERE_SPLIT
+        order, xs, ys, zs, starts, ukeys, lookup, nx, ny = _columns(xr, yr, z, cell)
+        sub.report(0.1)
+        rows = np.full(K.N_SPHERE, -1, dtype=np.int64)
+        for i, (feature, _name) in enumerate(wanted):
+            rows[SPHERE_FEATURES.index(feature)] = i
+        out = np.empty((len(wanted), n), dtype=np.float32)
+        _run_in_chunks(K._sphere_features_kernel,
+                       (xs, ys, zs, order, starts, ukeys, lookup, nx, ny, cell, _SPHERE_SPLIT, radius, rows),
+                       out, ukeys.shape[0], sub.sub(0.1, 1.0))
+        for i, (_feature, name) in enumerate(wanted):
+            results[name] = out[i]
+        done += 1
+    for radius, wanted in column.items():
+        sub = steps.sub(done / npasses, (done + 1) / npasses)
+        cell = radius / _COLUMN_SPLIT
+        order, xs, ys, zs, starts, ukeys, lookup, nx, ny = _columns(xr, yr, z, cell)
+        sub.report(0.1)
+        height = np.empty(n, dtype=np.float32)
+        _run_in_chunks(K._column_min_kernel,
+                       (xs, ys, zs, order, starts, ukeys, lookup, nx, ny, cell, _COLUMN_SPLIT, radius),
+                       height, ukeys.shape[0], sub.sub(0.1, 1.0))
+        for _feature, name in wanted:
+            results[name] = height
+        done += 1
+    steps.report(1.0)
+    return {name: results[name] for name in spec.names}
+
+
+# --------------------------------------------------------------------------- files
+
+def _description(name: str) -> str:
+    """The extra-bytes description of a feature (at most 32 characters)."""
+    try:
+        feature, radius = parse_feature_name(name)
+    except InvalidParameterError:
+        return ""
+    shape = "column" if feature in COLUMN_FEATURES else "sphere"
+    return f"{feature} {shape} r={radius:g}"[:32]
+
+
+def _check_feature_arrays(features: Mapping, n: int, path: str) -> Dict[str, np.ndarray]:
+    arrays: Dict[str, np.ndarray] = {}
+    lowered = {}
+    for name, values in features.items():
+        if not isinstance(name, str) or not _NAME_RE.match(name) or len(name) > MAX_NAME_LENGTH:
+            raise OutputError(f"{path}: {name!r} cannot name a LAS extra dimension: use at most "
+                              f"{MAX_NAME_LENGTH} letters, digits or underscores, starting with a letter")
+        if name.lower() in lowered:
+            raise OutputError(f"{path}: feature names {lowered[name.lower()]!r} and {name!r} differ only by case")
+        lowered[name.lower()] = name
+        values = np.asarray(values)
+        if values.shape != (n,):
+            raise OutputError(f"{path}: feature {name} has {values.shape} values for {n} points")
+        arrays[name] = values.astype(np.float32, copy=False)
+    if not arrays:
+        raise OutputError(f"{path}: no feature to write")
+    return arrays
+
+
+def check_names_free(cloud: PointCloud, names, path: str) -> None:
+    """Refuse (OutputError) feature names already taken by a dimension of ``cloud`` (case ignored,
+    as PDAL does), e.g. when the input is the output of an earlier run."""
+    if cloud.las is not None:
+        taken = list(cloud.las.point_format.dimension_names)
+    else:
+        taken = ["X", "Y", "Z", "classification"] + (["reference_label"] if cloud.reference_label is not None else [])
+    existing = {d.lower(): d for d in taken}
+    for name in names:
+        if name.lower() in existing:
+            raise OutputError(
+                f"{path}: the input {cloud.path} already has a dimension named '{existing[name.lower()]}' "
+                f"(from an earlier run?); the feature {name} cannot be added beside it. Compute the "
+                "features on the original cloud, or at other radii.")
+
+
+def write_features(cloud: PointCloud, features: Mapping, path: str, *, atomic: bool = True) -> None:
+    """Write ``cloud`` (LAS/LAZ by the extension of ``path``) with every dimension, extra bytes,
+    VLR and the CRS of a LAS/LAZ input kept, plus one float32 extra-bytes dimension per entry of
+    ``features`` ({name: array}); NaN marks points without a value. An ISPRS text input becomes
+    LAS 1.2 point format 0 (its label column kept as ``reference_label``, as
+    :func:`~groundsieve.core.io.write_classified` does). A name already used by a dimension of
+    the input (case ignored, as PDAL does) is refused with an :class:`OutputError`."""
+    import laspy
+    path = check_output_path(path, inputs=[cloud.path])
+    arrays = _check_feature_arrays(features, len(cloud), path)
+    check_names_free(cloud, arrays, path)
+    if cloud.las is not None:
+        # A copy: the cloud in memory stays as read.
+        las = laspy.LasData(copy.deepcopy(cloud.las.header), points=cloud.las.points.copy())
+    else:
+        extra = {"reference_label": cloud.reference_label} if cloud.reference_label is not None else None
+        las = new_las(cloud.x, cloud.y, cloud.z, point_format=0, crs_wkt=cloud.crs_wkt, extra=extra,
+                      classification=cloud.classification)
+    las.add_extra_dims([laspy.ExtraBytesParams(name=name, type=np.float32, description=_description(name))
+                        for name in arrays])
+    for name, values in arrays.items():
+        las[name] = values
+    write_las(las, path, atomic=atomic)
+
+
+@dataclass
+class FeaturesRun:
+    cloud: PointCloud
+    features: Dict[str, np.ndarray]   #: {name: float32 per point}
+
+    @property
+    def names(self) -> Tuple[str, ...]:
+        return tuple(self.features)
+
+
+def run_features(input_path: str, output_path: str, spec: FeatureSpec = FeatureSpec(), *,
+                 progress: Optional[Callable[[float], None]] = None,
+                 is_cancelled: Optional[Callable[[], bool]] = None,
+                 log: Optional[Callable[[str], None]] = None) -> FeaturesRun:
+    """Read ``input_path``, compute the features of ``spec`` for every point and write
+    ``output_path`` (LAS/LAZ) with them as extra bytes. The output is written under a temporary
+    name and renamed when complete; the input is never modified."""
+    steps = Steps(progress, is_cancelled)
+    log = log or (lambda _msg: None)
+    check_output_path(output_path, inputs=[input_path])
+    steps.check()
+    cloud = read_cloud(input_path)
+    log(f"Read {len(cloud):,} points from {input_path}.")
+    check_names_free(cloud, spec.names, output_path)
+    steps.report(0.05)
+    features = compute_features(cloud.xyz, spec, steps=steps.sub(0.05, 0.85))
+    for radius, wanted in spec.sphere_passes().items():
+        eigen = [name for feature, name in wanted if feature in EIGEN_FEATURES]
+        missing = int(np.isnan(features[eigen[0]]).sum()) if eigen else 0
+        if missing:
+            log(f"{missing:,} point(s) ({100.0 * missing / len(cloud):.1f} %) have fewer than {MIN_POINTS} points "
+                f"(or only coincident ones) within {radius:g} m: no value (NaN) for {', '.join(eigen)}.")
+    steps.check()
+    write_features(cloud, features, output_path)
+    steps.report(1.0)
+    return FeaturesRun(cloud, features)

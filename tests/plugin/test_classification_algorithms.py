@@ -1,0 +1,98 @@
+"""groundsieve:features, groundsieve:rftrain and groundsieve:rfclassify through processing.run."""
+import numpy as np
+import pytest
+
+from .conftest import classes_of
+
+
+@pytest.fixture(scope="module")
+def labelled_pair(tmp_path_factory):
+    """Two generated clouds of the same kind labelled with ASPRS 1 and 2 only."""
+    from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+    folder = tmp_path_factory.mktemp("rf")
+    paths = []
+    for seed in (21, 22):
+        scene = make_scene(SceneSpec(size_m=90.0, density_per_m2=8.0, seed=seed))
+        scene.classification[:] = np.where(scene.classification == 2, 2, 1)
+        path = folder / f"scene{seed}.laz"
+        write_scene(scene, str(path))
+        paths.append(path)
+    return paths
+
+
+def _run(alg, params):
+    import processing
+    return processing.run(f"groundsieve:{alg}", params)
+
+
+def test_train_with_defaults_then_classify_another_cloud(groundsieve_provider, labelled_pair, tmp_path):
+    from osgeo import gdal
+    from groundsieve.core.metrics import ground_accuracy
+    train, test = labelled_pair
+    model, report = tmp_path / "model.npz", tmp_path / "report.html"
+    result = _run("rftrain", {"INPUT": str(train), "MODEL": str(model), "REPORT": str(report)})
+    assert result["TEST_ACCURACY"] > 0.9
+    html = report.read_text()
+    assert "<svg" in html and "Permutation" in html and "test set" in html
+    assert (tmp_path / "report.csv").read_text().startswith("set,class,precision")
+    out, dtm = tmp_path / "classified.laz", tmp_path / "dtm.tif"
+    _run("rfclassify", {"INPUT": str(test), "MODEL": str(model), "OUTPUT": str(out), "DTM": str(dtm)})
+    truth = classes_of(test) == 2
+    predicted = classes_of(out)
+    assert set(np.unique(predicted)) <= {1, 2}
+    acc = ground_accuracy(truth, predicted == 2)
+    assert acc.total < 0.05, acc.summary()
+    ds = gdal.Open(str(dtm))
+    assert ds.RasterXSize > 40 and ds.GetRasterBand(1).GetNoDataValue() == -9999.0
+
+
+def test_tampered_model_is_refused(groundsieve_provider, labelled_pair, tmp_path):
+    from qgis.core import QgsProcessingException
+    train, test = labelled_pair
+    model = tmp_path / "model.npz"
+    _run("rftrain", {"INPUT": str(train), "MODEL": str(model), "REPORT": str(tmp_path / "r.html"),
+                     "TREES": 5, "PRESET": 2})
+    with np.load(model, allow_pickle=False) as data:
+        arrays = {name: data[name].copy() for name in data.files}
+    arrays["threshold"][:] = 0.0
+    with open(model, "wb") as handle:
+        np.savez(handle, **arrays)
+    out = tmp_path / "o.laz"
+    with pytest.raises(QgsProcessingException, match="checksum"):
+        _run("rfclassify", {"INPUT": str(test), "MODEL": str(model), "OUTPUT": str(out)})
+    assert not out.exists()
+
+
+def test_features_are_written_as_extra_bytes(groundsieve_provider, labelled_pair, tmp_path):
+    import laspy
+    train, _ = labelled_pair
+    out = tmp_path / "features.laz"
+    result = _run("features", {"INPUT": str(train), "OUTPUT": str(out)})
+    names = result["FEATURES"].split(",")
+    assert {"verticality_r0p6", "planarity_r0p6", "eigenentropy_r0p4", "surface_variation_r0p6"} <= set(names)
+    las = laspy.read(str(out))
+    for name in names:
+        values = np.asarray(las[name])
+        assert values.dtype == np.float32 and np.isfinite(values).mean() > 0.5
+    np.testing.assert_array_equal(las.classification, laspy.read(str(train)).classification)
+
+
+def test_training_reuses_features_already_in_the_file(groundsieve_provider, labelled_pair, tmp_path):
+    """A cloud from groundsieve:features trains on its stored features (same names)."""
+    train, _ = labelled_pair
+    with_features = tmp_path / "features.laz"
+    _run("features", {"INPUT": str(train), "OUTPUT": str(with_features)})
+    result = _run("rftrain", {"INPUT": str(with_features), "MODEL": str(tmp_path / "m.npz"),
+                              "REPORT": str(tmp_path / "r.html"), "PRESET": 5, "TREES": 20})
+    assert result["TEST_ACCURACY"] > 0.8
+
+
+def test_bad_classes_and_missing_feature(groundsieve_provider, labelled_pair, tmp_path):
+    from qgis.core import QgsProcessingException
+    train, _ = labelled_pair
+    common = {"INPUT": str(train), "MODEL": str(tmp_path / "m.npz"), "REPORT": str(tmp_path / "r.html")}
+    with pytest.raises(QgsProcessingException, match="class 9"):
+        _run("rftrain", dict(common, CLASSES="2,9"))
+    with pytest.raises(QgsProcessingException, match="red"):
+        _run("rftrain", dict(common, PRESET=6, CUSTOM_FEATURES="red,return_number"))
+    assert not (tmp_path / "m.npz").exists()
