@@ -9,20 +9,19 @@ from numba import njit, prange
 
 
 @njit(cache=True, nogil=True)
+def _cell_of(x, y, x0, top, cell, nrows, ncols):
+    """(row, col) of the grid cell holding (x, y), clamped to the grid (see core/grid.py)."""
+    c = min(max(int(math.floor((x - x0) / cell)), 0), ncols - 1)
+    r = min(max(int(math.floor((top - y) / cell)), 0), nrows - 1)
+    return r, c
+
+
+@njit(cache=True, nogil=True)
 def _cell_min_kernel(x, y, z, x0, top, cell, nrows, ncols, out):
     """out[row, col] = min z of the points in the cell (NaN where empty)."""
     out[:, :] = np.nan
     for k in range(x.shape[0]):
-        c = int(math.floor((x[k] - x0) / cell))
-        r = int(math.floor((top - y[k]) / cell))
-        if c < 0:
-            c = 0
-        elif c >= ncols:
-            c = ncols - 1
-        if r < 0:
-            r = 0
-        elif r >= nrows:
-            r = nrows - 1
+        r, c = _cell_of(x[k], y[k], x0, top, cell, nrows, ncols)
         v = out[r, c]
         if not (z[k] >= v):  # also true when v is NaN
             out[r, c] = z[k]
@@ -31,16 +30,7 @@ def _cell_min_kernel(x, y, z, x0, top, cell, nrows, ncols, out):
 @njit(cache=True, nogil=True)
 def _cell_mean_kernel(x, y, z, x0, top, cell, nrows, ncols, total, count):
     for k in range(x.shape[0]):
-        c = int(math.floor((x[k] - x0) / cell))
-        r = int(math.floor((top - y[k]) / cell))
-        if c < 0:
-            c = 0
-        elif c >= ncols:
-            c = ncols - 1
-        if r < 0:
-            r = 0
-        elif r >= nrows:
-            r = nrows - 1
+        r, c = _cell_of(x[k], y[k], x0, top, cell, nrows, ncols)
         total[r, c] += z[k]
         count[r, c] += 1
 
@@ -272,8 +262,7 @@ def _cell_lookup_kernel(x, y, grid, x0, top, cell, out):
     """out[k] = grid value of the cell holding point k."""
     nrows, ncols = grid.shape
     for k in range(x.shape[0]):
-        c = min(max(int(math.floor((x[k] - x0) / cell)), 0), ncols - 1)
-        r = min(max(int(math.floor((top - y[k]) / cell)), 0), nrows - 1)
+        r, c = _cell_of(x[k], y[k], x0, top, cell, nrows, ncols)
         out[k] = grid[r, c]
 
 
