@@ -179,3 +179,59 @@ def test_class_report_matches_hand_counts():
     np.testing.assert_allclose(report.precision, [1 / 2, 2 / 4, 3 / 3])
     np.testing.assert_allclose(report.recall, [1 / 2, 2 / 3, 3 / 4])
     assert report.weighted(report.recall) == pytest.approx(report.accuracy)
+
+
+# -- file to file ------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def labelled_files(tmp_path_factory):
+    from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+    folder = tmp_path_factory.mktemp("rf_files")
+    paths = []
+    for seed in (31, 32, 33):
+        scene = make_scene(SceneSpec(size_m=60.0, density_per_m2=6.0, seed=seed))
+        scene.classification[:] = np.where(scene.classification == 2, 2, 1)
+        path = folder / f"s{seed}.laz"
+        write_scene(scene, str(path))
+        paths.append(path)
+    return paths
+
+
+def test_train_file_with_separate_validation_and_test_files(labelled_files, tmp_path):
+    train, validation, test = labelled_files
+    run = rf.train_file(str(train), str(tmp_path / "m.npz"), str(tmp_path / "r.html"),
+                        rf.TrainOptions(params=rf.ForestParams(n_trees=10)),
+                        validation_path=str(validation), test_path=str(test))
+    from groundsieve.core.io import read_cloud
+    n_test = len(read_cloud(str(test)))
+    assert int(run.evaluations["test set"].support.sum()) == n_test
+    assert run.evaluations["test set"].accuracy > 0.9
+    assert "separate files" in (tmp_path / "r.html").read_text()
+
+
+def test_train_file_runs_the_paper_grid_and_keeps_the_best(labelled_files, tmp_path):
+    train = labelled_files[0]
+    run = rf.train_file(str(train), str(tmp_path / "m.npz"), None,
+                        rf.TrainOptions(features=rf.PRESETS["C2"], grid=True, block_m=10.0,
+                                        params=rf.ForestParams(max_samples=2000)))
+    assert len(run.grid) == 18
+    assert {(g["criterion"], g["n_trees"], g["scaler"]) for g in run.grid} == set(rf.PAPER_GRID)
+    best = max(run.grid, key=lambda g: g["f1"])
+    kept = run.model.meta["params"]
+    assert (kept["criterion"], kept["n_trees"], kept["scaler"]) == (best["criterion"], best["n_trees"],
+                                                                   best["scaler"])
+
+
+def test_classify_file_refuses_a_cloud_without_the_model_features(labelled_files, tmp_path):
+    from groundsieve.core.io import new_las, write_las
+    train = labelled_files[0]
+    rf.train_file(str(train), str(tmp_path / "m.npz"), None,
+                  rf.TrainOptions(features=("intensity", "return_number", "gps_time"),
+                                  params=rf.ForestParams(n_trees=3)))
+    rng = np.random.default_rng(0)
+    xyz = rng.uniform(0, 50, (500, 3))
+    bare = tmp_path / "format0.las"  # point format 0: no GPS time
+    write_las(new_las(xyz[:, 0], xyz[:, 1], xyz[:, 2], point_format=0), str(bare))
+    with pytest.raises(InputError, match="gps_time"):
+        rf.classify_file(str(bare), str(tmp_path / "o.laz"), str(tmp_path / "m.npz"))
+    assert not (tmp_path / "o.laz").exists()

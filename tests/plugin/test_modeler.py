@@ -36,6 +36,11 @@ def _model():
     child("groundsieve:echogrid", "echo", {"INPUT": Source.fromChildOutput("smrf", "OUTPUT"),
                                            "MODE": Source.fromStaticValue(1)}, {"reclassified": "OUTPUT"})
     child("native:rasterlayerstatistics", "stats", {"INPUT": Source.fromChildOutput("smrf", "DTM")}, {})
+    child("groundsieve:evcrasters", "evc", {"INPUT": Source.fromModelParameter("cloud"),
+                                            "SMALL_SCALE": Source.fromStaticValue(0.5),
+                                            "LARGE_SCALE": Source.fromStaticValue(4.0)},
+          {"evc": "EVC_RASTER", "evc_classified": "OUTPUT"})
+    child("native:rasterlayerstatistics", "evcstats", {"INPUT": Source.fromChildOutput("evc", "EVC_RASTER")}, {})
     return model
 
 
@@ -48,9 +53,12 @@ def test_model_chains_groundsieve_outputs(groundsieve_provider, scene_laz, tmp_p
     first, second, dtm = tmp_path / "smrf.laz", tmp_path / "echo.laz", tmp_path / "dtm.tif"
     context, feedback = QgsProcessingContext(), QgsProcessingFeedback()
     results, ok = model.run({"cloud": str(src), "smrf:classified": str(first), "smrf:dtm": str(dtm),
-                             "echo:reclassified": str(second)}, context, feedback)
+                             "echo:reclassified": str(second), "evc:evc": str(tmp_path / "evc.tif"),
+                             "evc:evc_classified": str(tmp_path / "evc.laz")}, context, feedback)
     assert ok
     assert first.exists() and second.exists() and dtm.exists()
     assert (classes_of(second) == 2).sum() > 0.3 * len(scene.x)
     stats = results["CHILD_RESULTS"]["stats"]
     assert scene.z.min() - 1 < stats["MIN"] < stats["MAX"] < scene.z.max() + 1
+    assert (tmp_path / "evc.tif").exists() and (tmp_path / "evc.laz").exists()
+    assert results["CHILD_RESULTS"]["evcstats"]["MAX"] > 0  # the EVC raster fed a QGIS algorithm
