@@ -36,6 +36,39 @@ def make_pmf(row: ParamsRow, **fixed):
     return PMF(**fixed)
 
 
+#: Zhang et al. (2016) Table 2: rigidness and slope smoothing of each ISPRS sample's group
+#: (cloth 0.5 m, time step 0.65, class threshold 0.5 m for all).
+CSF_PAPER_GROUPS = {**{s: (3, False) for s in ("samp21", "samp31", "samp42", "samp51", "samp54")},
+                    **{s: (2, True) for s in ("samp11", "samp12", "samp22", "samp23", "samp24", "samp41")},
+                    **{s: (1, True) for s in ("samp52", "samp53", "samp61", "samp71")}}
+
+
+def make_csf(row: ParamsRow, **fixed):
+    """CSF with the reference implementation's defaults; ``row`` (SMRF parameters) is ignored."""
+    from groundsieve.core.csf import CSF
+    return CSF(**fixed)
+
+
+def make_csf_paper(row: ParamsRow, **fixed):
+    """CSF with Zhang et al.'s ISPRS settings: a 0.5 m cloth and the rigidness and slope smoothing
+    of the sample's group, found from the row's file name (run bench/isprs.py with --params);
+    without a row, the 0.5 m cloth with the other defaults."""
+    from groundsieve.core.csf import CSF
+    kw = {"cloth_resolution_m": 0.5}
+    if row is not None:
+        name = row["filename"].strip().split(".")[0].split("-")[0].lower()
+        if name in CSF_PAPER_GROUPS:
+            kw["rigidness"], kw["slope_smooth"] = CSF_PAPER_GROUPS[name]
+    kw.update(fixed)
+    return CSF(**kw)
+
+
+def make_ptd(row: ParamsRow, **fixed):
+    """Progressive TIN densification (Axelsson 2000) with its defaults unless fixed; ``row`` is ignored."""
+    from groundsieve.core.ptd import PTD
+    return PTD(**fixed)
+
+
 FILTERS: Dict[str, Callable[[ParamsRow], Callable]] = {
     "smrf": make_smrf,
     # As Pingel's Python code runs by default: low-outlier cells are not refilled before the opening.
@@ -47,6 +80,15 @@ FILTERS: Dict[str, Callable[[ParamsRow], Callable]] = {
     "evc-offset": lambda row: make_evc(row, ground_offset_m=0.1),
     "pmf": make_pmf,
     "pmf-linear": lambda row: make_pmf(row, exponential=False),
+    "csf": make_csf,
+    # The authors' library's behaviour: cell heights with scan-line fill, no low-outlier step.
+    "csf-ref": lambda row: make_csf(row, intersection_height="cell", low_outlier_m=0.0),
+    "csf-paper": make_csf_paper,
+    "csf-paper-ref": lambda row: make_csf_paper(row, intersection_height="cell", low_outlier_m=0.0),
+    "ptd": make_ptd,
+    "ptd-mirror": lambda row: make_ptd(row, mirror=True),
+    "ptd-nooffset": lambda row: make_ptd(row, offset_m=0.0),
+    "ptd-terrascan": lambda row: make_ptd(row, seed_cell_m=60.0, max_angle_deg=6.0),
 }
 
 

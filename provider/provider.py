@@ -5,15 +5,17 @@ import os
 from qgis.core import QgsProcessingProvider
 from qgis.PyQt.QtGui import QIcon
 
+from ..algorithms.csf import CSFAlgorithm
 from ..algorithms.echogrid import EchoGridAlgorithm
 from ..algorithms.evc import EVCAlgorithm, EVCRastersAlgorithm
 from ..algorithms.features import FeaturesAlgorithm
 from ..algorithms.pmf import PMFAlgorithm
+from ..algorithms.ptd import PTDAlgorithm
 from ..algorithms.rf import RFClassifyAlgorithm, RFTrainAlgorithm
 from ..algorithms.smrf import SMRFAlgorithm
 
-ALGORITHMS = (SMRFAlgorithm, EchoGridAlgorithm, EVCAlgorithm, EVCRastersAlgorithm, PMFAlgorithm,
-              FeaturesAlgorithm, RFTrainAlgorithm, RFClassifyAlgorithm)
+ALGORITHMS = (SMRFAlgorithm, EchoGridAlgorithm, EVCAlgorithm, EVCRastersAlgorithm, PMFAlgorithm, CSFAlgorithm,
+              PTDAlgorithm, FeaturesAlgorithm, RFTrainAlgorithm, RFClassifyAlgorithm)
 
 _ROOT = os.path.dirname(os.path.dirname(__file__))
 

@@ -24,7 +24,7 @@ def _run(alg, params):
     return processing.run(f"groundsieve:{alg}", params)
 
 
-@pytest.mark.parametrize("alg", ["smrf", "echogrid", "evc", "evcrasters", "pmf"])
+@pytest.mark.parametrize("alg", ["smrf", "echogrid", "evc", "evcrasters", "pmf", "csf", "ptd"])
 def test_registered_with_the_shared_interface(groundsieve_provider, alg):
     from qgis.core import QgsApplication
     algorithm = QgsApplication.processingRegistry().algorithmById(f"groundsieve:{alg}")
@@ -138,7 +138,7 @@ def test_evcrasters_and_echogrid_from_the_command_line(scene_laz, tmp_path):
     assert (classes_of(tmp_path / "e.laz") == 2).any()
 
 
-@pytest.mark.parametrize("alg", ["smrf", "echogrid", "evc", "pmf"])
+@pytest.mark.parametrize("alg", ["smrf", "echogrid", "evc", "pmf", "csf", "ptd"])
 def test_every_filter_runs_with_input_and_output_only(alg, scene_laz, tmp_path):
     """The shared interface: `scripts/qgis-process run groundsieve:<id> --INPUT=a.laz --OUTPUT=b.laz`."""
     src, scene = scene_laz

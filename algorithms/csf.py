@@ -1,0 +1,93 @@
+"""groundsieve:csf — Ground filter (CSF, cloth simulation, Zhang et al. 2016)."""
+from qgis.core import (QgsProcessingParameterBoolean, QgsProcessingParameterDefinition,
+                       QgsProcessingParameterEnum, QgsProcessingParameterNumber)
+
+from .base import COMMON_HELP, GroundFilterAlgorithm
+
+Double = QgsProcessingParameterNumber.Type.Double
+Integer = QgsProcessingParameterNumber.Type.Integer
+
+#: Rigidness options as the reference implementation's tools present them: option i is rigidness i + 1.
+RIGIDNESS_OPTIONS = ["1: steep slope", "2: relief", "3: flat"]
+HEIGHT_OPTIONS = ["nearest point (paper)", "points of the particle's cell, scan-line fill (reference library)"]
+HEIGHT_VALUES = ["nearest", "cell"]
+
+
+class CSFAlgorithm(GroundFilterAlgorithm):
+    RESOLUTION = "RESOLUTION"
+    RIGIDNESS = "RIGIDNESS"
+    TIME_STEP = "TIME_STEP"
+    CLASS_THRESHOLD = "CLASS_THRESHOLD"
+    ITERATIONS = "ITERATIONS"
+    SLOPE_SMOOTH = "SLOPE_SMOOTH"
+    LOW_OUTLIER = "LOW_OUTLIER"
+    INTERSECTION_HEIGHT = "INTERSECTION_HEIGHT"
+
+    def name(self):
+        return "csf"
+
+    def displayName(self):  # noqa: N802
+        return "Ground filter (CSF)"
+
+    def iconName(self):  # noqa: N802
+        return "csf.svg"
+
+    def shortHelpString(self):  # noqa: N802
+        return """<p>Separates ground from non-ground points with the Cloth Simulation Filter (Zhang, Qi,
+Wan, Wang, Xie, Wang &amp; Yan 2016, Remote Sensing 8(6):501), after the authors' reference
+implementation: the cloud is turned upside down and a grid of cloth particles falls on it under
+gravity; particles that reach the (inverted) surface are pinned there, the others are held by their
+neighbours, so the cloth bridges buildings and trees; a point is ground when it lies within the class
+threshold of the cloth (bilinear interpolation between the four particles around it).</p>
+<h3>Parameters</h3>
+<p><b>Cloth resolution (m)</b>: distance between particles (1 m by default; 0.5 m in the paper's
+ISPRS tests). <b>Rigidness</b>: how stiff the cloth is, by scene: 1 for steep slopes, 2 for relief,
+3 for flat terrain (the default). <b>Time step</b>: of the simulation (0.65); the gravity step is
+0.2 x time step<sup>4</sup> per iteration, as in the reference library. <b>Class threshold (m)</b>:
+largest distance from the cloth of a ground point (0.5 m). <b>Maximum iterations</b> (500): the
+simulation stops earlier once no particle moves more than 5 mm in an iteration.
+<b>Slope post-processing</b>: pins groups of cloth left hanging over steep slopes onto the
+surface from their edges inwards while neighbouring heights differ by less than 0.3 m (on by
+default; the paper turns it off for flat scenes).</p>
+<p>Advanced: <b>Low-outlier threshold (m)</b>: a point more than this below its surroundings (the
+lowest points of the eight 5 m cells around it) is left out of the cloth and is not ground; 0 turns
+this off. A single low outlier otherwise pins a tent of cloth tens of metres below the ground. Not in
+the reference. <b>Particle heights from</b>: the height each particle cannot fall below is that of the
+nearest point (the paper's definition, the default) or, as the reference library does, of the points
+that fall in the particle's cell, empty cells taking the first value to the east along their row;
+the library's way is much worse where points are sparser than the cloth (see docs/BENCHMARKS.md).</p>
+<p>The run time grows with the area / resolution<sup>2</sup> more than with the number of points.</p>
+""" + COMMON_HELP
+
+    def initFilterParameters(self):  # noqa: N802
+        self.addParameter(QgsProcessingParameterNumber(
+            self.RESOLUTION, "Cloth resolution (m)", type=Double, defaultValue=1.0, minValue=0.0))
+        self.addParameter(QgsProcessingParameterEnum(
+            self.RIGIDNESS, "Rigidness (scene)", options=RIGIDNESS_OPTIONS, defaultValue=2))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.TIME_STEP, "Time step", type=Double, defaultValue=0.65, minValue=0.0))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.CLASS_THRESHOLD, "Class threshold (m)", type=Double, defaultValue=0.5, minValue=0.0))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.ITERATIONS, "Maximum iterations", type=Integer, defaultValue=500, minValue=1))
+        self.addParameter(QgsProcessingParameterBoolean(
+            self.SLOPE_SMOOTH, "Slope post-processing (for steep slopes)", defaultValue=True))
+        for param in (
+                QgsProcessingParameterNumber(self.LOW_OUTLIER, "Low-outlier threshold (m, 0 = off)",
+                                             type=Double, defaultValue=5.0, minValue=0.0),
+                QgsProcessingParameterEnum(self.INTERSECTION_HEIGHT, "Particle heights from",
+                                           options=HEIGHT_OPTIONS, defaultValue=0)):
+            param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
+            self.addParameter(param)
+
+    def buildFilter(self, parameters, context):  # noqa: N802
+        from ..core.csf import CSF
+        return CSF(cloth_resolution_m=self.parameterAsDouble(parameters, self.RESOLUTION, context),
+                   rigidness=self.parameterAsEnum(parameters, self.RIGIDNESS, context) + 1,
+                   time_step=self.parameterAsDouble(parameters, self.TIME_STEP, context),
+                   class_threshold_m=self.parameterAsDouble(parameters, self.CLASS_THRESHOLD, context),
+                   iterations=self.parameterAsInt(parameters, self.ITERATIONS, context),
+                   slope_smooth=self.parameterAsBoolean(parameters, self.SLOPE_SMOOTH, context),
+                   low_outlier_m=self.parameterAsDouble(parameters, self.LOW_OUTLIER, context),
+                   intersection_height=HEIGHT_VALUES[
+                       self.parameterAsEnum(parameters, self.INTERSECTION_HEIGHT, context)])

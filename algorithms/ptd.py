@@ -1,0 +1,98 @@
+"""groundsieve:ptd — Ground filter (progressive TIN densification, Axelsson 2000)."""
+from qgis.core import (QgsProcessingParameterBoolean, QgsProcessingParameterDefinition,
+                       QgsProcessingParameterNumber)
+
+from .base import COMMON_HELP, GroundFilterAlgorithm
+
+Double = QgsProcessingParameterNumber.Type.Double
+
+
+class PTDAlgorithm(GroundFilterAlgorithm):
+    SEED_CELL = "SEED_CELL"
+    MAX_ANGLE = "MAX_ANGLE"
+    MAX_DISTANCE = "MAX_DISTANCE"
+    MAX_EDGE = "MAX_EDGE"
+    MIN_EDGE = "MIN_EDGE"
+    TERRAIN_ANGLE = "TERRAIN_ANGLE"
+    OFFSET = "OFFSET"
+    MIRROR = "MIRROR"
+    LOW_OUTLIERS = "LOW_OUTLIERS"
+
+    def name(self):
+        return "ptd"
+
+    def displayName(self):  # noqa: N802
+        return "Ground filter (progressive TIN densification)"
+
+    def iconName(self):  # noqa: N802
+        return "ptd.svg"
+
+    def shortHelpString(self):  # noqa: N802
+        return """<p>Separates ground from non-ground points by progressive TIN densification (Axelsson
+2000, "DEM generation from laser scanner data using adaptive TIN models", IAPRS 33(B4)), the method
+of TerraScan's ground routine and LAStools' lasground: the lowest point of each cell of a grid as
+large as the largest building seeds a triangulated surface (TIN) of the ground; then, round after
+round, every triangle adds the point nearest its plane among those that pass Axelsson's two tests:
+the point is at most the <i>iteration distance</i> from the triangle's plane, and the lines from
+it to the triangle's three corners make at most the <i>iteration angle</i> with the plane. A point
+below the triangle only has to pass the distance test. The TIN grows up from the ground and stops
+where objects begin; when no point passes, the TIN's points are ground, and so are the points
+within the <i>offset</i> of it.</p>
+<p>Low outliers: a cell's lowest point that lies far below most of the area around it (an isolated
+echo, or a group of multipath echoes) is not ground and does not seed the TIN. In clouds denser
+than 2 points/m², only the lowest point of each 1 m square enters the TIN; the others are judged
+against the final TIN.</p>
+<h3>Parameters</h3>
+<p><b>Seed cell size (m)</b>: about the size of the largest building: a building larger than it
+has a whole cell on its roof and is taken as ground (30 m; TerraScan suggests 60 m, lasR 50 m).
+<b>Iteration angle (degrees)</b>: 30° (lasR's default; smaller keeps more low objects out but
+leaves steep or rough ground out too). <b>Iteration distance (m)</b>: 1.4 m.
+<b>Maximum edge length (m)</b>: a triangle with a longer edge accepts no point, so the TIN does
+not bridge large gaps (water, missing data); 0 = off.</p>
+<p>Advanced: <b>Minimum edge length (m)</b>: triangles whose edges are all shorter are not
+densified further (their passing points are still ground); 0 = off.
+<b>Maximum terrain angle (degrees)</b>: a triangle steeper than this (one stood up along a wall)
+accepts no point (75°). <b>Offset (m)</b>: the points this close to the final TIN (above or
+below) are ground too (0.2 m; 0 = off). <b>Mirror points</b>: Axelsson's mirroring: a point that
+fails is tested again as its mirror image through the nearest corner, which lets the TIN climb
+steep slopes but also lets it climb onto objects joined to sloping ground (off).
+<b>Reject low outliers</b>: on.</p>
+<p>The defaults and what each choice does on the ISPRS filter-test samples are in
+docs/BENCHMARKS.md.</p>
+""" + COMMON_HELP
+
+    def initFilterParameters(self):  # noqa: N802
+        self.addParameter(QgsProcessingParameterNumber(
+            self.SEED_CELL, "Seed cell size: largest building size (m)", type=Double, defaultValue=30.0,
+            minValue=0.0))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.MAX_ANGLE, "Iteration angle (degrees)", type=Double, defaultValue=30.0, minValue=0.0,
+            maxValue=90.0))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.MAX_DISTANCE, "Iteration distance (m)", type=Double, defaultValue=1.4, minValue=0.0))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.MAX_EDGE, "Maximum edge length of an accepting triangle (m, 0 = off)", type=Double,
+            defaultValue=0.0, minValue=0.0))
+        for param in (
+                QgsProcessingParameterNumber(self.MIN_EDGE, "Minimum edge length: stop densifying below (m, 0 = off)",
+                                             type=Double, defaultValue=0.0, minValue=0.0),
+                QgsProcessingParameterNumber(self.TERRAIN_ANGLE, "Maximum terrain angle (degrees)", type=Double,
+                                             defaultValue=75.0, minValue=0.0, maxValue=90.0),
+                QgsProcessingParameterNumber(self.OFFSET, "Offset: points this close to the final TIN are ground "
+                                             "(m, 0 = off)", type=Double, defaultValue=0.2, minValue=0.0),
+                QgsProcessingParameterBoolean(self.MIRROR, "Mirror points (Axelsson)", defaultValue=False),
+                QgsProcessingParameterBoolean(self.LOW_OUTLIERS, "Reject low outliers as seeds", defaultValue=True)):
+            param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
+            self.addParameter(param)
+
+    def buildFilter(self, parameters, context):  # noqa: N802
+        from ..core.ptd import PTD
+        return PTD(seed_cell_m=self.parameterAsDouble(parameters, self.SEED_CELL, context),
+                   max_angle_deg=self.parameterAsDouble(parameters, self.MAX_ANGLE, context),
+                   max_distance_m=self.parameterAsDouble(parameters, self.MAX_DISTANCE, context),
+                   max_edge_m=self.parameterAsDouble(parameters, self.MAX_EDGE, context),
+                   min_edge_m=self.parameterAsDouble(parameters, self.MIN_EDGE, context),
+                   max_terrain_angle_deg=self.parameterAsDouble(parameters, self.TERRAIN_ANGLE, context),
+                   offset_m=self.parameterAsDouble(parameters, self.OFFSET, context),
+                   mirror=self.parameterAsBoolean(parameters, self.MIRROR, context),
+                   low_outlier_check=self.parameterAsBoolean(parameters, self.LOW_OUTLIERS, context))

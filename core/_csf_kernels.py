@@ -1,0 +1,514 @@
+"""numba kernels of the cloth simulation filter (core.csf). Private: call them through
+:class:`groundsieve.core.csf.CSF`, which validates and casts first.
+
+The cloth lives in the reference implementation's *inverted* frame: a particle's height
+``h`` is ``-z``, the cloth starts above every inverted point and falls (``h`` decreases).
+Particles are stored row-major, ``p = row * W + col``, with column ``col`` at
+``x = ox + col * res`` and row ``row`` at ``y = oy + row * res`` (row 0 south, as the
+reference's ``j`` index; the public result flips it to the core's north-up convention).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+#: Neighbour offsets (d_col, d_row) of a particle's constraint list, in the order the
+#: reference's Cloth constructor appends them (immediate ring first, then distance 2).
+NEIGHBOURS = np.array([(-1, -1), (-1, 0), (-1, 1), (0, -1), (1, -1), (1, 0), (0, 1), (1, 1),
+                       (-2, -2), (-2, 0), (-2, 2), (0, -2), (2, -2), (2, 0), (0, 2), (2, 2)],
+                      dtype=np.int64)
+
+
+# --------------------------------------------------------------------------------------------
+# Low outliers (an addition of GroundSieve, see core/csf.py)
+# --------------------------------------------------------------------------------------------
+
+@njit(cache=True, nogil=True)
+def _low_outliers_kernel(x, y, z, x0, y0, cell, ncols, nrows, threshold, out):
+    """out[k] = point k lies more than ``threshold`` below the third lowest of the minima of
+    the (up to 8) non-empty cells around its own cell. Cells with fewer than three non-empty
+    neighbours flag nothing. The third lowest, not the lowest, so that a cluster of outliers
+    spread over two neighbouring cells is still found."""
+    n = x.shape[0]
+    zmin = np.full((nrows, ncols), np.inf)
+    for k in range(n):
+        c = min(max(int((x[k] - x0) / cell), 0), ncols - 1)
+        r = min(max(int((y[k] - y0) / cell), 0), nrows - 1)
+        if z[k] < zmin[r, c]:
+            zmin[r, c] = z[k]
+    ref = np.full((nrows, ncols), -np.inf)
+    buf = np.empty(8)
+    for r in range(nrows):
+        for c in range(ncols):
+            if zmin[r, c] == np.inf:
+                continue
+            m = 0
+            for dr in range(-1, 2):
+                for dc in range(-1, 2):
+                    if dr == 0 and dc == 0:
+                        continue
+                    rr = r + dr
+                    cc = c + dc
+                    if 0 <= rr < nrows and 0 <= cc < ncols and zmin[rr, cc] < np.inf:
+                        # insertion into the sorted prefix buf[:m]
+                        v = zmin[rr, cc]
+                        i = m
+                        while i > 0 and buf[i - 1] > v:
+                            buf[i] = buf[i - 1]
+                            i -= 1
+                        buf[i] = v
+                        m += 1
+            if m >= 3:
+                ref[r, c] = buf[2]
+    count = 0
+    for k in range(n):
+        c = min(max(int((x[k] - x0) / cell), 0), ncols - 1)
+        r = min(max(int((y[k] - y0) / cell), 0), nrows - 1)
+        flag = z[k] < ref[r, c] - threshold
+        out[k] = flag
+        if flag:
+            count += 1
+    return count
+
+
+# --------------------------------------------------------------------------------------------
+# Intersection height values (IHV): the inverted height each particle cannot fall below
+# --------------------------------------------------------------------------------------------
+
+@njit(cache=True, nogil=True)
+def _cell_heights_kernel(x, y, z, use, ox, oy, res, W, H, hv, has):
+    """The reference's Rasterization::RasterTerrian: each point goes to the particle at
+    ``round((x - ox) / res), round((y - oy) / res)``; a particle takes the inverted height of
+    the nearest of its points (the first one on a tie). ``has`` marks particles with a point."""
+    best = np.full(W * H, np.inf)
+    for k in range(x.shape[0]):
+        if not use[k]:
+            continue
+        dx = x[k] - ox
+        dy = y[k] - oy
+        c = int(dx / res + 0.5)
+        r = int(dy / res + 0.5)
+        if c < 0 or r < 0 or c >= W or r >= H:
+            continue
+        p = r * W + c
+        ex = dx - c * res
+        ey = dy - r * res
+        d = ex * ex + ey * ey
+        if d < best[p]:
+            best[p] = d
+            hv[p] = -z[k]
+            has[p] = True
+
+
+@njit(cache=True, nogil=True)
+def _bfs_height(p, hv, has, W, H, visited, queue, touched):
+    """The reference's findHeightValByNeighbor: breadth-first over the constraint graph from
+    particle ``p`` until a particle with a point is met; its height, or -inf if none."""
+    qh = 0
+    qt = 0
+    nt = 0
+    r0 = p // W
+    c0 = p % W
+    result = -np.inf
+    for k in range(NEIGHBOURS.shape[0]):
+        cc = c0 + NEIGHBOURS[k, 0]
+        rr = r0 + NEIGHBOURS[k, 1]
+        if 0 <= cc < W and 0 <= rr < H:
+            q = rr * W + cc
+            queue[qt] = q
+            qt += 1
+            if not visited[q]:
+                visited[q] = True
+                touched[nt] = q
+                nt += 1
+    if not visited[p]:
+        visited[p] = True
+        touched[nt] = p
+        nt += 1
+    while qh < qt:
+        q = queue[qh]
+        qh += 1
+        if has[q]:
+            result = hv[q]
+            break
+        r = q // W
+        c = q % W
+        for k in range(NEIGHBOURS.shape[0]):
+            cc = c + NEIGHBOURS[k, 0]
+            rr = r + NEIGHBOURS[k, 1]
+            if 0 <= cc < W and 0 <= rr < H:
+                s = rr * W + cc
+                if not visited[s]:
+                    visited[s] = True
+                    touched[nt] = s
+                    nt += 1
+                    queue[qt] = s
+                    qt += 1
+    for i in range(nt):
+        visited[touched[i]] = False
+    return result
+
+
+@njit(cache=True, nogil=True)
+def _scanline_fill_kernel(hv, has, W, H):
+    """The reference's findHeightValByScanline for every particle without a point: the first
+    particle with a point to the east on its row, else to the west, else to the south on its
+    column, else to the north; else breadth-first over the constraint graph. O(W * H): the
+    nearest particle with a point in each direction is precomputed by one sweep per direction."""
+    n = W * H
+    east = np.full(n, -1, dtype=np.int64)
+    west = np.full(n, -1, dtype=np.int64)
+    south = np.full(n, -1, dtype=np.int64)
+    north = np.full(n, -1, dtype=np.int64)
+    for r in range(H):
+        last = -1
+        for c in range(W - 1, -1, -1):
+            east[r * W + c] = last
+            if has[r * W + c]:
+                last = r * W + c
+        last = -1
+        for c in range(W):
+            west[r * W + c] = last
+            if has[r * W + c]:
+                last = r * W + c
+    for c in range(W):
+        last = -1
+        for r in range(H):
+            south[r * W + c] = last
+            if has[r * W + c]:
+                last = r * W + c
+        last = -1
+        for r in range(H - 1, -1, -1):
+            north[r * W + c] = last
+            if has[r * W + c]:
+                last = r * W + c
+    out = hv.copy()
+    visited = np.zeros(0, dtype=np.bool_)
+    queue = np.zeros(0, dtype=np.int64)
+    touched = np.zeros(0, dtype=np.int64)
+    for p in range(n):
+        if has[p]:
+            continue
+        if east[p] >= 0:
+            out[p] = hv[east[p]]
+        elif west[p] >= 0:
+            out[p] = hv[west[p]]
+        elif south[p] >= 0:
+            out[p] = hv[south[p]]
+        elif north[p] >= 0:
+            out[p] = hv[north[p]]
+        else:
+            if visited.shape[0] == 0:
+                visited = np.zeros(n, dtype=np.bool_)
+                queue = np.empty(n + 16, dtype=np.int64)
+                touched = np.empty(n, dtype=np.int64)
+            out[p] = _bfs_height(p, hv, has, W, H, visited, queue, touched)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _nearest_heights_kernel(x, y, z, use, ox, oy, res, W, H, max_ring, hv, found):
+    """The paper's IHV: each particle takes the inverted height of the nearest point in the
+    horizontal plane (the lowest point index on a tie). Points are bucketed by the particle
+    they round to; a particle searches square rings of buckets outwards until the next ring
+    cannot hold a nearer point, or up to ``max_ring`` rings (``found`` stays False beyond:
+    the caller completes those far-from-any-point particles)."""
+    n = x.shape[0]
+    ncell = W * H
+    start = np.zeros(ncell + 1, dtype=np.int64)
+    for k in range(n):
+        if not use[k]:
+            continue
+        c = int((x[k] - ox) / res + 0.5)
+        r = int((y[k] - oy) / res + 0.5)
+        start[r * W + c + 1] += 1
+    for p in range(ncell):
+        start[p + 1] += start[p]
+    fill = start[:-1].copy()
+    order = np.empty(start[ncell], dtype=np.int64)
+    for k in range(n):
+        if not use[k]:
+            continue
+        c = int((x[k] - ox) / res + 0.5)
+        r = int((y[k] - oy) / res + 0.5)
+        p = r * W + c
+        order[fill[p]] = k
+        fill[p] += 1
+    for r0 in range(H):
+        py = r0 * res
+        for c0 in range(W):
+            px = c0 * res
+            best = np.inf
+            best_k = -1
+            ring = 0
+            while ring <= max_ring:
+                # Every point of ring ``ring`` is at least (ring - 0.5) * res away.
+                if best_k >= 0:
+                    lim = (ring - 0.5) * res
+                    if lim > 0 and lim * lim > best:
+                        break
+                r_lo = r0 - ring
+                r_hi = r0 + ring
+                for rr in range(max(r_lo, 0), min(r_hi, H - 1) + 1):
+                    edge_row = rr == r_lo or rr == r_hi
+                    step = 1 if edge_row else 2 * ring
+                    cc = c0 - ring
+                    while cc <= c0 + ring:
+                        if 0 <= cc < W:
+                            q = rr * W + cc
+                            for i in range(start[q], start[q + 1]):
+                                k = order[i]
+                                ex = x[k] - ox - px
+                                ey = y[k] - oy - py
+                                d = ex * ex + ey * ey
+                                if d < best or (d == best and k < best_k):
+                                    best = d
+                                    best_k = k
+                        if step == 0:
+                            break
+                        cc += step
+                ring += 1
+            p = r0 * W + c0
+            if best_k >= 0:
+                hv[p] = -z[best_k]
+                found[p] = True
+
+
+# --------------------------------------------------------------------------------------------
+# The cloth
+# --------------------------------------------------------------------------------------------
+
+@njit(cache=True, nogil=True)
+def _time_step_kernel(pos, old, movable, quiet, hv, W, H, acceleration, single_move, double_move):
+    """One iteration of the reference (Cloth::timeStep then Cloth::terrCollision).
+
+    1. Verlet step of every movable particle: ``pos += (pos - old) * 0.99 + acceleration``.
+    2. Internal forces, particle by particle in index order, each over its 16 neighbours in
+       the reference's list order (so each pair is met twice per iteration, once from each
+       end, as in Particle::satisfyConstraintSelf): the height difference ``d`` closes by
+       ``double_move * d`` at each end when both move, by ``single_move * d`` when one does.
+    3. ``max_diff``: the largest |pos - old| of the movable particles.
+    4. Collision: a particle below its intersection height is put on it and pinned.
+
+    ``quiet`` marks pinned particles whose 16 neighbours are pinned too: nothing can move
+    them or be moved by them any more, so they are skipped (set here, once for good).
+
+    Returns (max_diff, number of particles pinned in this iteration)."""
+    n = W * H
+    for p in range(n):
+        if movable[p]:
+            t = pos[p]
+            pos[p] = t + (t - old[p]) * 0.99 + acceleration
+            old[p] = t
+    offsets = np.empty(16, dtype=np.int64)
+    for k in range(16):
+        offsets[k] = NEIGHBOURS[k, 1] * W + NEIGHBOURS[k, 0]
+    for r in range(H):
+        interior_row = 2 <= r < H - 2
+        for c in range(W):
+            p = r * W + c
+            if quiet[p]:
+                continue
+            mp = movable[p]
+            if interior_row and 2 <= c < W - 2:
+                # Fast path: all 16 neighbours exist.
+                if mp:
+                    hp = pos[p]
+                    for k in range(16):
+                        q = p + offsets[k]
+                        d = pos[q] - hp
+                        if movable[q]:
+                            hp += d * double_move
+                            pos[q] -= d * double_move
+                        else:
+                            hp += d * single_move
+                    pos[p] = hp
+                else:
+                    hp = pos[p]
+                    still = True
+                    for k in range(16):
+                        q = p + offsets[k]
+                        if movable[q]:
+                            pos[q] -= (pos[q] - hp) * single_move
+                            still = False
+                    quiet[p] = still
+                continue
+            still = not mp
+            for k in range(16):
+                cc = c + NEIGHBOURS[k, 0]
+                rr = r + NEIGHBOURS[k, 1]
+                if cc < 0 or cc >= W or rr < 0 or rr >= H:
+                    continue
+                q = rr * W + cc
+                mq = movable[q]
+                if mq:
+                    still = False
+                if mp:
+                    d = pos[q] - pos[p]
+                    if mq:
+                        pos[p] += d * double_move
+                        pos[q] -= d * double_move
+                    else:
+                        pos[p] += d * single_move
+                elif mq:
+                    pos[q] -= (pos[q] - pos[p]) * single_move
+            quiet[p] = still
+    max_diff = 0.0
+    pinned = 0
+    for p in range(n):
+        if movable[p]:
+            d = abs(old[p] - pos[p])
+            if d > max_diff:
+                max_diff = d
+            if pos[p] < hv[p]:
+                pos[p] = hv[p]
+                movable[p] = False
+                pinned += 1
+    return max_diff, pinned
+
+
+@njit(cache=True, nogil=True)
+def _free_fall_kernel(pos, old, hv, acceleration, iterations, stop_diff):
+    """Iterations while no particle has touched yet. All particles are movable and at one
+    height, so every internal force is exactly zero and the cloth moves as one particle:
+    the same floating-point result as :func:`_time_step_kernel`, at the cost of one particle.
+    Advances until the iteration in which the first particle would touch (left to
+    :func:`_time_step_kernel`), or ``iterations``, or the reference's early stop (a step
+    shorter than ``stop_diff``). Returns (iterations done, stopped early)."""
+    top = -np.inf
+    for p in range(hv.shape[0]):
+        if hv[p] > top:
+            top = hv[p]
+    h = pos[0]
+    o = old[0]
+    done = 0
+    stopped = False
+    while done < iterations:
+        t = h + (h - o) * 0.99 + acceleration
+        if t < top:
+            break
+        o = h
+        h = t
+        done += 1
+        d = abs(o - h)
+        if d != 0.0 and d < stop_diff:
+            stopped = True
+            break
+    for p in range(pos.shape[0]):
+        pos[p] = h
+        old[p] = o
+    return done, stopped
+
+
+@njit(cache=True, nogil=True)
+def _slope_smooth_kernel(pos, movable, hv, W, H, height_diff, min_size):
+    """The reference's post-processing (Cloth::movableFilter): each 4-connected group of
+    still-movable particles larger than ``min_size`` is pulled onto its intersection heights
+    from its edges inwards: a movable particle 4-adjacent to a pinned one whose intersection
+    height differs by less than ``height_diff`` is put on its own intersection height and
+    pinned, and so on through the group while neighbouring intersection heights differ by
+    less than ``height_diff``. The reference does this with an edge pass then a
+    breadth-first pass; both reach the particles connected to a pinned particle by such
+    steps, which is what this flood fill does. Returns the number of particles pinned."""
+    n = W * H
+    visited = np.zeros(n, dtype=np.bool_)
+    member = np.zeros(n, dtype=np.bool_)
+    comp = np.empty(n, dtype=np.int64)
+    queue = np.empty(n, dtype=np.int64)
+    queued = np.zeros(n, dtype=np.bool_)
+    dcs = (-1, 1, 0, 0)
+    drs = (0, 0, -1, 1)
+    total = 0
+    for c0 in range(W):
+        for r0 in range(H):
+            p0 = r0 * W + c0
+            if not movable[p0] or visited[p0]:
+                continue
+            size = 1
+            comp[0] = p0
+            visited[p0] = True
+            head = 0
+            while head < size:
+                p = comp[head]
+                head += 1
+                r = p // W
+                c = p - r * W
+                for k in range(4):
+                    rr = r + drs[k]
+                    cc = c + dcs[k]
+                    if rr < 0 or rr >= H or cc < 0 or cc >= W:
+                        continue
+                    q = rr * W + cc
+                    if movable[q] and not visited[q]:
+                        visited[q] = True
+                        comp[size] = q
+                        size += 1
+            if size <= min_size:
+                continue
+            for i in range(size):
+                member[comp[i]] = True
+            qt = 0
+            for i in range(size):
+                p = comp[i]
+                r = p // W
+                c = p - r * W
+                for k in range(4):
+                    rr = r + drs[k]
+                    cc = c + dcs[k]
+                    if rr < 0 or rr >= H or cc < 0 or cc >= W:
+                        continue
+                    q = rr * W + cc
+                    if not movable[q] and abs(hv[p] - hv[q]) < height_diff:
+                        pos[p] = hv[p]
+                        movable[p] = False
+                        total += 1
+                        queue[qt] = p
+                        qt += 1
+                        queued[p] = True
+                        break
+            head = 0
+            while head < qt:
+                p = queue[head]
+                head += 1
+                r = p // W
+                c = p - r * W
+                for k in range(4):
+                    rr = r + drs[k]
+                    cc = c + dcs[k]
+                    if rr < 0 or rr >= H or cc < 0 or cc >= W:
+                        continue
+                    q = rr * W + cc
+                    if member[q] and not queued[q] and abs(hv[p] - hv[q]) < height_diff:
+                        if movable[q]:
+                            pos[q] = hv[q]
+                            movable[q] = False
+                            total += 1
+                        queued[q] = True
+                        queue[qt] = q
+                        qt += 1
+            for i in range(size):
+                member[comp[i]] = False
+    return total
+
+
+@njit(cache=True, nogil=True)
+def _classify_kernel(x, y, z, use, ox, oy, res, W, H, pos, threshold, out):
+    """The reference's c2cdist: the cloth's height at each point by bilinear interpolation
+    between the four particles around it; ground when |z - cloth| < threshold (strictly).
+    Points with ``use`` False (low outliers) are not ground."""
+    for k in range(x.shape[0]):
+        if not use[k]:
+            out[k] = False
+            continue
+        dx = x[k] - ox
+        dy = y[k] - oy
+        c0 = min(max(int(dx / res), 0), W - 2)
+        r0 = min(max(int(dy / res), 0), H - 2)
+        tx = (dx - c0 * res) / res
+        ty = (dy - r0 * res) / res
+        p = r0 * W + c0
+        f = (pos[p] * (1.0 - tx) * (1.0 - ty) + pos[p + W] * (1.0 - tx) * ty
+             + pos[p + W + 1] * tx * ty + pos[p + 1] * tx * (1.0 - ty))
+        out[k] = abs(f + z[k]) < threshold

@@ -1,0 +1,428 @@
+"""CSF (core.csf) on generated scenes with known truth, its validation, progress and
+cancellation, and the behaviour of its kernels against the reference implementation."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from groundsieve.core.csf import CSF, CSFResult
+from groundsieve.core.errors import Cancelled, InputError, InvalidParameterError
+from groundsieve.core.progress import Steps
+
+X0, Y0 = 512000.0, 5403000.0  # UTM-sized coordinates, as real data
+
+
+def plane_scene(seed=0, size=60.0, density=2.0, tilt=(0.0, 0.0), box=None, box_height=10.0):
+    """Uniform points on z = 100 + tilt·(x, y); ``box`` = (xmin, xmax, ymin, ymax) lifted by
+    ``box_height`` (a building without wall points). Returns xyz and the true ground mask."""
+    rng = np.random.default_rng(seed)
+    n = int(size * size * density)
+    x = rng.uniform(0.0, size, n)
+    y = rng.uniform(0.0, size, n)
+    z = 100.0 + tilt[0] * x + tilt[1] * y
+    on_box = np.zeros(n, dtype=bool)
+    if box is not None:
+        on_box = (x > box[0]) & (x < box[1]) & (y > box[2]) & (y < box[3])
+        z = z + box_height * on_box
+    return np.column_stack([x + X0, y + Y0, z]), ~on_box
+
+
+BOX = (20.0, 35.0, 22.0, 37.0)  # 15 x 15 m
+
+
+def hill_scene(height=10.0, radius=40.0, size=200.0, spacing=2.4, seed=0):
+    """A bare, smooth, convex hill (z = 100 + height * cos²(pi r / 2 radius) within ``radius``)
+    on a flat plain, sampled uniformly at random with a mean spacing of ``spacing`` metres
+    (2.4 m: the ISPRS rural samples). Every point is ground; returns xyz and 'on the hill'."""
+    rng = np.random.default_rng(seed)
+    n = int(size * size / spacing ** 2)
+    x = rng.uniform(0.0, size, n)
+    y = rng.uniform(0.0, size, n)
+    r = np.hypot(x - size / 2, y - size / 2)
+    z = 100.0 + np.where(r < radius, height * np.cos(np.pi * r / (2 * radius)) ** 2, 0.0)
+    return np.column_stack([x + X0, y + Y0, z]), r < radius
+
+
+@pytest.mark.parametrize("tilt", [(0.0, 0.0), (0.1, 0.05), (-0.08, 0.06)], ids=["flat", "tilted", "tilted2"])
+def test_plane_is_all_ground(tilt):
+    xyz, _ = plane_scene(tilt=tilt)
+    ground = CSF()(xyz)
+    assert ground.dtype == bool and ground.shape == (xyz.shape[0],)
+    assert ground.all()
+
+
+@pytest.mark.parametrize("rigidness", [1, 2, 3])
+@pytest.mark.parametrize("tilt", [(0.0, 0.0), (0.05, 0.02)], ids=["flat", "tilted"])
+def test_box_on_plane_is_object_and_plane_is_ground(tilt, rigidness):
+    xyz, truth = plane_scene(tilt=tilt, box=BOX)
+    ground = CSF(rigidness=rigidness)(xyz)
+    np.testing.assert_array_equal(ground, truth)
+
+
+def test_box_at_the_papers_isprs_settings():
+    xyz, truth = plane_scene(seed=1, tilt=(0.03, -0.02), box=BOX)
+    ground = CSF(cloth_resolution_m=0.5, rigidness=2)(xyz)
+    np.testing.assert_array_equal(ground, truth)
+
+
+def test_trees_are_never_ground():
+    """Scattered 'tree' points several metres above a plane are never ground."""
+    xyz, truth = plane_scene(seed=3, tilt=(0.05, -0.03), box=BOX)
+    rng = np.random.default_rng(4)
+    crowns = rng.uniform(0, 60, size=(40, 2))
+    tree = np.column_stack([crowns[:, 0] + X0, crowns[:, 1] + Y0,
+                            100.0 + 0.05 * crowns[:, 0] - 0.03 * crowns[:, 1] + rng.uniform(4, 15, 40)])
+    xyz = np.vstack([xyz, tree])
+    truth = np.concatenate([truth, np.zeros(40, dtype=bool)])
+    ground = CSF()(xyz)
+    assert not (ground & ~truth).any(), "an object point was called ground"
+    assert ground[truth].mean() > 0.99
+
+
+# --- the convex hill at sparse spacing ---------------------------------------------------------
+#
+# Issue 4: at ISPRS rural spacing (about 2.4 m) the authors' CSF leaves the cloth hanging below
+# convex hilltops and loses 28-56 % of the ground points of a bare smooth hill at every rigidness.
+# On this 10 m high, 80 m wide hill, measured here (the library: cloth-simulation-filter 1.1.7):
+#
+#   points of the hill called object, %   library 1.1.7   ours, "cell"   ours, default ("nearest")
+#   0.5 m, rigidness 1, smoothing on / off    58 / 64          58 / 64          8 / 29
+#   0.5 m, rigidness 2, smoothing on / off    59 / 65          59 / 65         34 / 42
+#   0.5 m, rigidness 3, smoothing on / off    60 / 66          59 / 65         34 / 44
+#   1 m (default), any rigidness              61-70            61-70           54-66
+#
+# The cloth is stiff by design (it must bridge buildings): it hangs over any (inverted) basin more
+# curved than gravity / stiffness allows, and a convex hill is such a basin. What rescues the
+# hill is the slope post-processing, which pins the hanging cloth onto the surface while
+# neighbouring particle heights differ by less than 0.3 m. With the library's particle heights
+# (the points rounding to a particle, empty particles filled from the east) the heights of the
+# sparse cloud are steps of a whole point spacing and the smoothing stops at the first one. With
+# the paper's nearest-point heights they are steps too (where the nearest point changes: slope x
+# about 2.4 m, up to 0.9 m on the flanks, which are 39 % steep at mid-height), but the softest cloth
+# (rigidness 1) sags by itself past the steep mid-flank, and from there the smoothing goes up to
+# the top: 8 % lost instead of 58 %. The stiffer cloths hang from lower on the flanks, where the
+# steps stop the smoothing; at 1 m the cloth is stiffer still (the same per-particle stiffness over
+# twice the distance). So the weakness is beaten only with the paper's ISPRS resolution and
+# steep-slope settings; elsewhere ours loses less than the library but still a third or more.
+
+
+def test_sparse_convex_hill_steep_slope_settings_keep_the_hill():
+    xyz, on_hill = hill_scene()
+    ground = CSF(cloth_resolution_m=0.5, rigidness=1, slope_smooth=True)(xyz)
+    lost = 1.0 - ground[on_hill].mean()
+    assert lost < 0.12, f"{100 * lost:.1f} % of the hill's ground points lost"
+    assert ground[~on_hill].mean() > 0.99
+
+
+def test_sparse_convex_hill_reference_heights_lose_the_hilltop():
+    """The reference library's behaviour, reproduced by intersection_height='cell'."""
+    xyz, on_hill = hill_scene()
+    ground = CSF(cloth_resolution_m=0.5, rigidness=1, slope_smooth=True, intersection_height="cell")(xyz)
+    lost = 1.0 - ground[on_hill].mean()
+    assert lost > 0.5, f"only {100 * lost:.1f} % lost: the reference-compatible mode changed"
+
+
+def test_sparse_convex_hill_flat_settings_hang_below_the_top():
+    """Rigidness 3 without smoothing (the paper's flat-scene settings) still loses the hilltop:
+    the cloth's stiffness, not a bug; 44 % here (library: 66 %; 28-56 % in the issue)."""
+    xyz, on_hill = hill_scene()
+    res = CSF(cloth_resolution_m=0.5, rigidness=3, slope_smooth=False).run(xyz)
+    lost = 1.0 - res.ground[on_hill].mean()
+    assert 0.2 < lost < 0.6
+    top = np.abs(xyz[:, 0] - X0 - 100.0) + np.abs(xyz[:, 1] - Y0 - 100.0) < 5.0
+    assert not res.ground[top].any(), "the cloth reached the hilltop"
+
+
+# --- low outliers ------------------------------------------------------------------------------
+
+def test_low_outliers_are_not_ground_and_do_not_pin_the_cloth():
+    xyz, _ = plane_scene(seed=5)
+    low = np.array([10, 500, 2000, 4000, 6000])
+    xyz[low, 2] -= np.array([20.0, 30.0, 45.0, 25.0, 60.0])
+    res = CSF().run(xyz)
+    assert res.low_outliers[low].all() and res.low_outliers.sum() == len(low)
+    assert not res.ground[low].any()
+    rest = np.ones(len(xyz), dtype=bool)
+    rest[low] = False
+    assert res.ground[rest].all()
+
+
+def test_without_the_outlier_step_a_low_outlier_pins_a_tent():
+    """The reference's behaviour (low_outlier_m=0): the outlier pins the cloth far below the
+    ground and the ground points around it are lost."""
+    xyz, _ = plane_scene(seed=5)
+    xyz[500, 2] -= 30.0
+    res = CSF(low_outlier_m=0.0).run(xyz)
+    assert not res.low_outliers.any()
+    near = np.hypot(xyz[:, 0] - xyz[500, 0], xyz[:, 1] - xyz[500, 1]) < 2.0
+    assert not res.ground[near].all()
+
+
+def test_a_pit_is_not_an_outlier():
+    """A 3 m deep, 10 m wide pit is terrain, not a low outlier (the test needs 5 m)."""
+    xyz, _ = plane_scene(seed=6)
+    pit = np.hypot(xyz[:, 0] - X0 - 30.0, xyz[:, 1] - Y0 - 30.0) < 5.0
+    xyz[pit, 2] -= 3.0
+    res = CSF(rigidness=1).run(xyz)
+    assert not res.low_outliers.any()
+
+
+# --- the result ----------------------------------------------------------------------------------
+
+def test_result_fields():
+    xyz, truth = plane_scene(box=BOX)
+    res = CSF().run(xyz)
+    assert isinstance(res, CSFResult)
+    np.testing.assert_array_equal(res.ground, CSF()(xyz))
+    assert res.cloth.shape == res.grid.shape == res.pinned.shape
+    assert res.grid.cell == 1.0
+    # Cell centres on the particles: two particles beyond the points on the west and south.
+    xs, ys = res.grid.centers()
+    assert xs[0] == pytest.approx(xyz[:, 0].min() - 2.0)
+    assert ys[-1] == pytest.approx(xyz[:, 1].min() - 2.0)
+    assert xs[-1] >= xyz[:, 0].max() and ys[0] >= xyz[:, 1].max()
+    # The cloth lies on the plane and bridges the box; it is pinned off the box.
+    np.testing.assert_allclose(res.cloth, 100.0, atol=0.1)
+    assert res.pinned.mean() > 0.8
+    assert 1 <= res.iterations < 500
+
+
+def test_cloth_follows_a_tilted_plane():
+    xyz, _ = plane_scene(seed=2, tilt=(0.1, 0.05))
+    res = CSF().run(xyz)
+    xs, ys = res.grid.centers()
+    expected = 100.0 + 0.1 * (xs[None, :] - X0) + 0.05 * (ys[:, None] - Y0)
+    inside = ((xs[None, :] > X0 + 2) & (xs[None, :] < X0 + 58) & (ys[:, None] > Y0 + 2) & (ys[:, None] < Y0 + 58))
+    assert np.abs(res.cloth - expected)[inside].max() < 0.2
+
+
+def test_point_order_does_not_matter():
+    xyz, _ = plane_scene(seed=8, tilt=(0.05, 0.02), box=BOX)
+    xyz[::37, 2] += 3.0
+    perm = np.random.default_rng(9).permutation(len(xyz))
+    for mode in ("nearest", "cell"):
+        a = CSF(intersection_height=mode)(xyz)
+        b = CSF(intersection_height=mode)(xyz[perm])
+        np.testing.assert_array_equal(a[perm], b)
+
+
+def test_tiny_time_step_stops_after_one_iteration_as_the_reference():
+    """The reference stops as soon as no particle moved more than 5 mm in an iteration: with
+    time_step 0.35 the gravity step (0.2 * 0.35**4 = 3 mm) is below that from the start."""
+    xyz, _ = plane_scene(size=20.0)
+    xyz[:, 2] += np.random.default_rng(0).uniform(0, 2, len(xyz))
+    assert CSF(time_step=0.35).run(xyz).iterations == 1
+    assert CSF().run(xyz).iterations > 1
+
+
+# --- kernels against the reference's semantics --------------------------------------------------
+
+def test_free_fall_shortcut_is_exactly_the_simulation():
+    from groundsieve.core import _csf_kernels as k
+    rng = np.random.default_rng(1)
+    W, H = 30, 20
+    hv = -(100.0 + rng.uniform(0, 8, W * H))
+    acc = -0.2 * 0.65 ** 4
+    start = float(hv.max()) + 40.0  # the cloth starts well above: a long free fall
+    results = []
+    for shortcut in (True, False):
+        pos = np.full(W * H, start)
+        old = pos.copy()
+        movable = np.ones(W * H, dtype=bool)
+        quiet = np.zeros(W * H, dtype=bool)
+        done = 0
+        if shortcut:
+            done, stopped = k._free_fall_kernel(pos, old, hv, acc, 300, 0.005)
+            assert done > 10 and not stopped and movable.all()
+        while done < 300:
+            md, _ = k._time_step_kernel(pos, old, movable, quiet, hv, W, H, acc, 0.3, 0.3)
+            done += 1
+            if md != 0 and md < 0.005:
+                break
+        results.append((pos.copy(), movable.copy(), done))
+    np.testing.assert_array_equal(results[0][0], results[1][0])
+    np.testing.assert_array_equal(results[0][1], results[1][1])
+    assert results[0][2] == results[1][2]
+
+
+def test_scanline_fill_follows_the_reference_order():
+    from groundsieve.core import _csf_kernels as k
+    W, H = 6, 5
+    has = np.zeros(W * H, dtype=bool)
+    hv = np.full(W * H, -np.inf)
+    for (c, r, v) in [(4, 2, 1.0), (1, 2, 2.0), (0, 4, 3.0), (5, 0, 4.0)]:
+        has[r * W + c] = True
+        hv[r * W + c] = v
+    out = k._scanline_fill_kernel(hv, has, W, H)
+    grid = out.reshape(H, W)
+    assert grid[2, 0] == 2.0 and grid[2, 2] == 1.0 and grid[2, 5] == 1.0  # east first, then west
+    assert grid[4, 1] == 3.0 and grid[4, 5] == 3.0    # west when nothing to the east
+    assert grid[1, 4] == 1.0                            # then south along the column ...
+    assert grid[3, 5] == 4.0                            # ... and north when nothing south
+    assert grid[0, 0] == 4.0
+    assert np.isfinite(out).all()
+
+
+def test_nearest_heights_are_the_nearest_point():
+    from scipy.spatial import cKDTree
+
+    from groundsieve.core import _csf_kernels as k
+    rng = np.random.default_rng(3)
+    x, y = rng.uniform(0, 30, 200), rng.uniform(0, 20, 200)
+    z = rng.uniform(0, 5, 200)
+    res, W, H = 0.5, 64, 44
+    ox, oy = -1.0, -1.0
+    hv = np.full(W * H, -np.inf)
+    found = np.zeros(W * H, dtype=bool)
+    k._nearest_heights_kernel(x, y, z, np.ones(200, dtype=bool), ox, oy, res, W, H, 100, hv, found)
+    assert found.all()
+    gx, gy = np.meshgrid(ox + np.arange(W) * res, oy + np.arange(H) * res)
+    _, idx = cKDTree(np.column_stack([x, y])).query(np.column_stack([gx.ravel(), gy.ravel()]))
+    np.testing.assert_array_equal(hv, -z[idx])
+
+
+def test_matches_the_reference_library_when_installed():
+    """intersection_height='cell' without the outlier step is the library 1.1.7 (bench only)."""
+    lib = pytest.importorskip("CSF")
+    xyz, _ = plane_scene(seed=11, density=1.0, tilt=(0.05, -0.02), box=BOX)
+    xyz[::13, 2] += np.random.default_rng(2).uniform(0.5, 8.0, len(xyz[::13]))
+    c = lib.CSF()
+    c.params.cloth_resolution = 0.5
+    c.params.rigidness = 2
+    c.setPointCloud(np.ascontiguousarray(xyz))
+    ground_idx, other_idx = lib.VecInt(), lib.VecInt()
+    c.do_filtering(ground_idx, other_idx, False)
+    theirs = np.zeros(len(xyz), dtype=bool)
+    theirs[np.array(ground_idx, dtype=np.int64)] = True
+    ours = CSF(cloth_resolution_m=0.5, rigidness=2, intersection_height="cell", low_outlier_m=0.0)(xyz)
+    assert (ours == theirs).mean() > 0.995
+
+
+# --- degenerate inputs ----------------------------------------------------------------------
+
+def test_one_point():
+    g = CSF()(np.array([[X0, Y0, 250.0]]))
+    assert g.shape == (1,) and g.dtype == bool and g[0]
+
+
+def test_all_points_identical():
+    assert CSF()(np.tile([[X0, Y0, 3.0]], (10, 1))).all()
+
+
+@pytest.mark.parametrize("layout", ["row", "column", "diagonal", "two"])
+def test_degenerate_layouts_do_not_crash(layout):
+    t = np.arange(40, dtype=np.float64)
+    xyz = {"row": np.column_stack([t + X0, np.full(40, Y0), np.zeros(40)]),
+           "column": np.column_stack([np.full(40, X0), t + Y0, np.zeros(40)]),
+           "diagonal": np.column_stack([t + X0, t + Y0, np.zeros(40)]),
+           "two": np.array([[X0, Y0, 1.0], [X0 + 25.0, Y0 + 3.0, 1.0]])}[layout]
+    g = CSF()(xyz)
+    assert g.shape == (len(xyz),) and g.all()
+
+
+@pytest.mark.parametrize("xyz", [np.empty((0, 3)), np.zeros((5, 2)), np.array([[0.0, np.nan, 1.0]])],
+                         ids=["empty", "2cols", "nan"])
+def test_bad_arrays_raise_input_error(xyz):
+    with pytest.raises(InputError):
+        CSF()(xyz)
+
+
+def test_too_fine_a_cloth_is_refused():
+    xyz = np.array([[X0, Y0, 0.0], [X0 + 20000.0, Y0 + 20000.0, 0.0]])
+    with pytest.raises(InvalidParameterError, match="cloth_resolution_m"):
+        CSF(cloth_resolution_m=0.5)(xyz)
+
+
+# --- parameters ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize("kwargs, name", [
+    ({"cloth_resolution_m": 0}, "cloth_resolution_m"),
+    ({"cloth_resolution_m": -1.0}, "cloth_resolution_m"),
+    ({"cloth_resolution_m": math.nan}, "cloth_resolution_m"),
+    ({"cloth_resolution_m": math.inf}, "cloth_resolution_m"),
+    ({"cloth_resolution_m": "1"}, "cloth_resolution_m"),
+    ({"rigidness": 0}, "rigidness"),
+    ({"rigidness": 4}, "rigidness"),
+    ({"rigidness": 2.5}, "rigidness"),
+    ({"rigidness": None}, "rigidness"),
+    ({"time_step": 0.0}, "time_step"),
+    ({"time_step": -0.65}, "time_step"),
+    ({"time_step": math.nan}, "time_step"),
+    ({"class_threshold_m": 0.0}, "class_threshold_m"),
+    ({"class_threshold_m": -0.5}, "class_threshold_m"),
+    ({"class_threshold_m": math.inf}, "class_threshold_m"),
+    ({"iterations": 0}, "iterations"),
+    ({"iterations": 10.5}, "iterations"),
+    ({"iterations": math.inf}, "iterations"),
+    ({"slope_smooth": "yes"}, "slope_smooth"),
+    ({"slope_smooth_height_m": 0.0}, "slope_smooth_height_m"),
+    ({"low_outlier_m": -1.0}, "low_outlier_m"),
+    ({"low_outlier_m": math.nan}, "low_outlier_m"),
+    ({"intersection_height": "kdtree"}, "intersection_height"),
+])
+def test_invalid_parameters_name_the_parameter(kwargs, name):
+    with pytest.raises(InvalidParameterError) as info:
+        CSF(**kwargs)
+    assert name in str(info.value)
+
+
+def test_defaults_are_the_reference_implementations():
+    c = CSF()
+    assert (c.cloth_resolution_m, c.rigidness, c.time_step, c.class_threshold_m, c.iterations, c.slope_smooth) == \
+        (1.0, 3, 0.65, 0.5, 500, True)
+    assert c.slope_smooth_height_m == 0.3
+    assert c.gravity_step_m == pytest.approx(0.2 * 0.65 ** 4)
+    assert CSF.name == "csf"
+
+
+def test_valid_edge_parameters():
+    CSF(rigidness=1, iterations=1, low_outlier_m=0.0, class_threshold_m=0.01, slope_smooth=False)
+    CSF(rigidness=np.int64(2), cloth_resolution_m=np.float32(0.5), iterations=np.int32(10))
+
+
+# --- progress and cancellation ---------------------------------------------------------------
+
+def test_progress_is_monotonic_and_complete():
+    seen = []
+    xyz, _ = plane_scene(box=BOX)
+    res = CSF().run(xyz, Steps(progress=seen.append))
+    assert all(0.0 <= f <= 1.0 for f in seen)
+    assert all(b >= a for a, b in zip(seen, seen[1:])), seen
+    assert seen[-1] == pytest.approx(1.0)
+    assert len(seen) >= res.iterations // 2  # about one report per iteration
+
+
+def test_progress_within_a_sub_range():
+    seen = []
+    xyz, _ = plane_scene(size=20.0)
+    CSF().run(xyz, Steps(progress=seen.append).sub(0.2, 0.6))
+    assert min(seen) >= 0.2 - 1e-12 and max(seen) <= 0.6 + 1e-12
+    assert seen[-1] == pytest.approx(0.6)
+
+
+def test_cancelled_from_the_start():
+    xyz, _ = plane_scene(size=20.0)
+    with pytest.raises(Cancelled):
+        CSF().run(xyz, Steps(is_cancelled=lambda: True))
+
+
+@pytest.mark.parametrize("after", [3, 10, 40])
+def test_cancellation_stops_within_one_iteration(after, monkeypatch):
+    """Cancel once ``after`` iterations have run: no further iteration starts."""
+    from groundsieve.core import _csf_kernels as k
+    calls = {"n": 0}
+    real = k._time_step_kernel
+
+    def counting(*args):
+        calls["n"] += 1
+        return real(*args)
+
+    monkeypatch.setattr(k, "_time_step_kernel", counting)
+    xyz, _ = plane_scene(seed=4, tilt=(0.2, 0.1), size=80.0)  # a long fall: many iterations
+    assert CSF().run(xyz).iterations > 45
+    calls["n"] = 0
+    with pytest.raises(Cancelled):
+        CSF().run(xyz, Steps(is_cancelled=lambda: calls["n"] >= after))
+    assert calls["n"] == after
