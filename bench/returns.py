@@ -158,6 +158,7 @@ class DataSet:
     metres_per_unit: float = 1.0
     group: str = ""
     note: str = ""
+    intensity: Optional[np.ndarray] = None  #: per input point, where the file has it
 
     @property
     def fields(self) -> Dict[str, np.ndarray]:
@@ -301,7 +302,8 @@ def load_isprs(name: str, data: str, encodings: Tuple[str, ...], sites: SiteCach
             stats.input_echoes = int(sel.size)
         label = name if encoding == "file" else f"{name} [echoes]"
         out.append(DataSet(label, xyz, np.ascontiguousarray(rn[sel]), np.ascontiguousarray(nr[sel]),
-                           scored, ref_ground, group=f"isprs-{encoding}", note=site_name))
+                           scored, ref_ground, group=f"isprs-{encoding}", note=site_name,
+                           intensity=np.asarray(site.intensity)[sel]))
     return out, stats
 
 
