@@ -18,7 +18,8 @@ class GroundSievePlugin:
         self.initProcessing()
         if self.iface is not None:
             from .dependencies import missing_dependencies
-            missing = missing_dependencies()
+            from .dependencies import TRAINING
+            missing = missing_dependencies(TRAINING)
             if missing:
                 from qgis.core import Qgis
                 self.iface.messageBar().pushMessage(

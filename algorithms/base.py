@@ -34,11 +34,11 @@ leaves nothing half-written.</p>
 """
 
 
-def core_modules():
+def core_modules(extra=None):
     """Import the core, turning a missing dependency into a clear Processing error."""
     from ..dependencies import require_dependencies
     try:
-        require_dependencies()
+        require_dependencies(extra)
         from ..core import errors, workflow
     except ImportError as err:
         raise QgsProcessingException(str(err)) from err

@@ -20,8 +20,8 @@ SCALERS = ("none", "standard", "robust")
 CLOUD_FILTER = "Point clouds (*.las *.laz *.LAS *.LAZ)"
 
 
-def _rf():
-    errors, _workflow = core_modules()
+def _rf(extra=None):
+    errors, _workflow = core_modules(extra)
     from ..core import rf
     return errors, rf
 
@@ -134,7 +134,8 @@ importances, timings) with the same figures in a CSV beside it.</p>"""
         self.addOutput(QgsProcessingOutputNumber(self.TEST_ACCURACY, "Overall accuracy on the test set"))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        errors, rf = _rf()
+        from ..dependencies import TRAINING
+        errors, rf = _rf(TRAINING)
         try:
             preset = PRESET_NAMES[self.parameterAsEnum(parameters, self.PRESET, context)]
             if preset == "custom":

@@ -96,3 +96,14 @@ def test_bad_classes_and_missing_feature(groundsieve_provider, labelled_pair, tm
     with pytest.raises(QgsProcessingException, match="red"):
         _run("rftrain", dict(common, PRESET=6, CUSTOM_FEATURES="red,return_number"))
     assert not (tmp_path / "m.npz").exists()
+
+
+def test_training_without_scikit_learn_says_so(groundsieve_provider, labelled_pair, tmp_path, monkeypatch):
+    from qgis.core import QgsProcessingException
+    import groundsieve.dependencies as deps
+    real = deps.missing_dependencies
+    monkeypatch.setattr(deps, "missing_dependencies",
+                        lambda extra=None: real(extra) + (["scikit-learn"] if extra else []))
+    train, _ = labelled_pair
+    with pytest.raises(QgsProcessingException, match="scikit-learn"):
+        _run("rftrain", {"INPUT": str(train), "MODEL": str(tmp_path / "m.npz"), "REPORT": str(tmp_path / "r.html")})

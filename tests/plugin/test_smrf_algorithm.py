@@ -98,7 +98,7 @@ def test_bad_input_is_a_processing_error(groundsieve_provider, scene_laz, tmp_pa
 def test_missing_dependency_is_reported_clearly(groundsieve_provider, scene_laz, tmp_path, monkeypatch):
     from qgis.core import QgsProcessingException
     import groundsieve.dependencies as deps
-    monkeypatch.setattr(deps, "missing_dependencies", lambda: ["numba"])
+    monkeypatch.setattr(deps, "missing_dependencies", lambda extra=None: ["numba"])
     src, _scene = scene_laz
     with pytest.raises(QgsProcessingException, match="numba.*pip install"):
         _run({"INPUT": str(src), "OUTPUT": str(tmp_path / "o.laz")})
