@@ -17,14 +17,14 @@ class GroundSievePlugin:
     def initGui(self):  # noqa: N802 (QGIS API name)
         self.initProcessing()
         if self.iface is not None:
-            from .dependencies import missing_dependencies
-            from .dependencies import TRAINING
+            from .dependencies import TRAINING, missing_dependencies
             missing = missing_dependencies(TRAINING)
             if missing:
                 from qgis.core import Qgis
                 self.iface.messageBar().pushMessage(
                     "GroundSieve", f"Python packages missing: {', '.join(missing)}. "
-                    "The algorithms will not run until they are installed (see the plugin's README).",
+                    "The algorithms that need them stop with a message until they are installed "
+                    "(see the plugin's README).",
                     level=Qgis.Warning, duration=15)
 
     def unload(self):
