@@ -394,20 +394,6 @@ def test_progress_is_monotonic_and_complete():
     assert len(seen) >= res.iterations // 2  # about one report per iteration
 
 
-def test_progress_within_a_sub_range():
-    seen = []
-    xyz, _ = plane_scene(size=20.0)
-    CSF().run(xyz, Steps(progress=seen.append).sub(0.2, 0.6))
-    assert min(seen) >= 0.2 - 1e-12 and max(seen) <= 0.6 + 1e-12
-    assert seen[-1] == pytest.approx(0.6)
-
-
-def test_cancelled_from_the_start():
-    xyz, _ = plane_scene(size=20.0)
-    with pytest.raises(Cancelled):
-        CSF().run(xyz, Steps(is_cancelled=lambda: True))
-
-
 @pytest.mark.parametrize("after", [3, 10, 40])
 def test_cancellation_stops_within_one_iteration(after, monkeypatch):
     """Cancel once ``after`` iterations have run: no further iteration starts."""

@@ -215,21 +215,6 @@ def test_progress_is_monotonic_and_complete():
     assert len(seen) >= len(SMRF().radii)  # one report per window at least
 
 
-def test_progress_within_a_sub_range():
-    seen = []
-    xyz, _ = plane_scene(size=20.0)
-    SMRF().run(xyz, Steps(progress=seen.append).sub(0.2, 0.6))
-    assert min(seen) >= 0.2 - 1e-12 and max(seen) <= 0.6 + 1e-12
-    assert seen[-1] == pytest.approx(0.6)
-    assert all(b >= a for a, b in zip(seen, seen[1:]))
-
-
-def test_cancelled_from_the_start():
-    xyz, _ = plane_scene(size=20.0)
-    with pytest.raises(Cancelled):
-        SMRF().run(xyz, Steps(is_cancelled=lambda: True))
-
-
 @pytest.mark.parametrize("after", [1, 3, 10])
 def test_cancelled_midway(after):
     calls = {"n": 0}
