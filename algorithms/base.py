@@ -45,6 +45,23 @@ def core_modules(extra=None):
     return errors, workflow
 
 
+def feedback_callables(feedback):
+    """The core's plain callables for a Processing feedback: progress, is_cancelled, log."""
+    return dict(progress=lambda f: feedback.setProgress(100.0 * f), is_cancelled=feedback.isCanceled,
+                log=feedback.pushInfo)
+
+
+def warn_about_crs(feedback, input_path, crs_wkt, lengths="every length parameter"):
+    """Warn when the cloud has no CRS, or one whose unit is not the metre (lengths are read in it)."""
+    if crs_wkt is None:
+        feedback.pushWarning(f"{input_path}: no CRS in the file; outputs have none either.")
+        return
+    units = QgsCoordinateReferenceSystem.fromWkt(crs_wkt).mapUnits()
+    if units != QgsUnitTypes.DistanceUnit.DistanceMeters:
+        feedback.pushWarning(f"{input_path}: the CRS's unit is {QgsUnitTypes.toString(units)}, not metres: "
+                             f"{lengths} was read in that unit.")
+
+
 class GroundFilterAlgorithm(QgsProcessingAlgorithm):
     """Base class of the ground filters. Subclasses declare their own parameters in
     ``initFilterParameters`` and build the core filter object in ``buildFilter``."""
@@ -131,19 +148,11 @@ class GroundFilterAlgorithm(QgsProcessingAlgorithm):
                 fill_outside_hull=self.parameterAsBoolean(parameters, self.DTM_FILL, context))
             run = workflow.run_ground_filter(
                 input_path, output_path, algorithm, options=options, dtm_path=dtm_path, dtm=dtm,
-                rasters={path: make for path, make in rasters.values()},
-                progress=lambda f: feedback.setProgress(100.0 * f), is_cancelled=feedback.isCanceled,
-                log=feedback.pushInfo)
+                rasters={path: make for path, make in rasters.values()}, **feedback_callables(feedback))
         except errors.GroundSieveError as err:
             raise QgsProcessingException(str(err)) from err
-        if run.cloud.crs_wkt is None:
-            feedback.pushWarning(f"{input_path}: no CRS in the file; outputs have none either.")
-        else:
-            units = QgsCoordinateReferenceSystem.fromWkt(run.cloud.crs_wkt).mapUnits()
-            if units != QgsUnitTypes.DistanceUnit.DistanceMeters:
-                feedback.pushWarning(
-                    f"{input_path}: the CRS's unit is {QgsUnitTypes.toString(units)}, not metres: every "
-                    "length parameter (cell sizes, windows, thresholds) was read in that unit.")
+        warn_about_crs(feedback, input_path, run.cloud.crs_wkt,
+                       "every length parameter (cell sizes, windows, thresholds)")
         results = {self.OUTPUT: output_path, self.GROUND_COUNT: run.ground_count,
                    self.POINT_COUNT: len(run.cloud)}
         if dtm_path:

@@ -2,13 +2,13 @@
 features of the local neighbourhood, written as LAS extra bytes)."""
 import os
 
-from qgis.core import (QgsCoordinateReferenceSystem, QgsProcessingAlgorithm, QgsProcessingException,
+from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException,
                        QgsProcessingOutputString, QgsProcessingParameterEnum,
                        QgsProcessingParameterFile, QgsProcessingParameterFileDestination,
-                       QgsProcessingParameterNumber, QgsUnitTypes)
+                       QgsProcessingParameterNumber)
 from qgis.PyQt.QtGui import QIcon
 
-from .base import core_modules
+from .base import core_modules, feedback_callables, warn_about_crs
 
 _ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
 Double = QgsProcessingParameterNumber.Type.Double
@@ -139,18 +139,8 @@ the cloud's CRS. The output is written under a temporary name and renamed when c
         try:
             spec = features.FeatureSpec(tuple(pairs))
             feedback.pushInfo("Features: " + ", ".join(spec.names))
-            run = features.run_features(
-                input_path, output_path, spec,
-                progress=lambda f: feedback.setProgress(100.0 * f), is_cancelled=feedback.isCanceled,
-                log=feedback.pushInfo)
+            run = features.run_features(input_path, output_path, spec, **feedback_callables(feedback))
         except errors.GroundSieveError as err:
             raise QgsProcessingException(str(err)) from err
-        if run.cloud.crs_wkt is None:
-            feedback.pushWarning(f"{input_path}: no CRS in the file; the output has none either.")
-        else:
-            units = QgsCoordinateReferenceSystem.fromWkt(run.cloud.crs_wkt).mapUnits()
-            if units != QgsUnitTypes.DistanceUnit.DistanceMeters:
-                feedback.pushWarning(
-                    f"{input_path}: the CRS's unit is {QgsUnitTypes.toString(units)}, not metres: every "
-                    "radius was read in that unit.")
+        warn_about_crs(feedback, input_path, run.cloud.crs_wkt, "every radius")
         return {self.OUTPUT: output_path, self.FEATURES: ",".join(run.names)}

@@ -9,7 +9,7 @@ from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException, QgsProces
                        QgsProcessingParameterRasterDestination, QgsProcessingParameterString)
 from qgis.PyQt.QtGui import QIcon
 
-from .base import core_modules
+from .base import core_modules, feedback_callables
 
 _ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
 Double = QgsProcessingParameterNumber.Type.Double
@@ -166,8 +166,7 @@ importances, timings) with the same figures in a CSV beside it.</p>"""
                 self.parameterAsFile(parameters, self.INPUT, context), model_path, report_path, options,
                 validation_path=self.parameterAsFile(parameters, self.VALIDATION, context) or None,
                 test_path=self.parameterAsFile(parameters, self.TEST, context) or None,
-                progress=lambda f: feedback.setProgress(100.0 * f), is_cancelled=feedback.isCanceled,
-                log=feedback.pushInfo)
+                **feedback_callables(feedback))
         except errors.GroundSieveError as err:
             raise QgsProcessingException(str(err)) from err
         test = run.evaluations["test set"]
@@ -223,8 +222,7 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>"""
                              fill_outside_hull=self.parameterAsBoolean(parameters, self.DTM_FILL, context))
             rf.classify_file(self.parameterAsFile(parameters, self.INPUT, context), output,
                              self.parameterAsFile(parameters, self.MODEL, context), dtm_path=dtm_path, dtm=dtm,
-                             progress=lambda f: feedback.setProgress(100.0 * f), is_cancelled=feedback.isCanceled,
-                             log=feedback.pushInfo)
+                             **feedback_callables(feedback))
         except errors.GroundSieveError as err:
             raise QgsProcessingException(str(err)) from err
         results = {self.OUTPUT: output}
