@@ -481,7 +481,6 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
     log(", ".join(f"{label}: {len(v[0]):,} points" for label, v in sets.items()))
     steps.report(0.35)
     meta = dict(groundsieve_trained_from=os.path.basename(input_path), preset_features=list(options.features))
-    grid_rows = None
     candidates = [options.params]
     if options.grid:
         candidates = [ForestParams(n_trees=t, criterion=c, scaler=s, max_depth=options.params.max_depth,
