@@ -370,6 +370,83 @@ def _time_step_kernel(pos, old, movable, quiet, hv, W, H, acceleration, single_m
 
 
 @njit(cache=True, nogil=True)
+def _time_step_2016_kernel(pos, old, movable, hv, W, H, acceleration, passes):
+    """One iteration of the authors' 2016 code (CSFDLL, the repository's first version):
+
+    1. the same Verlet step as :func:`_time_step_kernel`;
+    2. ``passes`` (= rigidness) passes over the cloth's constraints, each pair once per pass
+       with the factor 0.3, in the order the 2016 Cloth constructor made them: for each
+       column ``x``, for each row ``y``, the pairs to (x+1, y), (x, y+1), (x+1, y+1) and
+       (x+1, y)-(x, y+1); then, in a second sweep, the same four at distance two. The first
+       particle of each pair is the one that must be movable: it closes 0.3 of the height
+       difference towards the second, and only then is the second (when movable) moved the same
+       amount the other way, so a pinned particle pulls only the neighbours that list it second
+       (Constraint::satisfyConstraint of that code);
+    3. ``max_diff`` and the collision, as :func:`_time_step_kernel`.
+
+    The arrays are **column-major** here (``p = x * H + y``, the caller transposes them once
+    per run), so that this order walks memory forwards.
+
+    Returns (max_diff, number of particles pinned in this iteration)."""
+    n = W * H
+    for p in range(n):
+        if movable[p]:
+            t = pos[p]
+            pos[p] = t + (t - old[p]) * 0.99 + acceleration
+            old[p] = t
+    for _ in range(passes):
+        for dist in range(1, 3):
+            east = dist * H
+            for x in range(W):
+                right = x < W - dist
+                for y in range(H):
+                    p = x * H + y
+                    up = y < H - dist
+                    # The pair's first particle carries it: a pinned p moves nothing in its
+                    # first three pairs, a pinned p + east nothing in the fourth.
+                    if movable[p]:
+                        hp = pos[p]
+                        if right:
+                            q = p + east
+                            d = (pos[q] - hp) * 0.3
+                            hp += d
+                            if movable[q]:
+                                pos[q] -= d
+                        if up:
+                            q = p + dist
+                            d = (pos[q] - hp) * 0.3
+                            hp += d
+                            if movable[q]:
+                                pos[q] -= d
+                            if right:
+                                q = p + east + dist
+                                d = (pos[q] - hp) * 0.3
+                                hp += d
+                                if movable[q]:
+                                    pos[q] -= d
+                        pos[p] = hp
+                    if right and up and movable[p + east]:
+                        a = p + east
+                        q = p + dist
+                        d = (pos[q] - pos[a]) * 0.3
+                        pos[a] += d
+                        if movable[q]:
+                            pos[q] -= d
+    max_diff = 0.0
+    pinned = 0
+    for p in range(n):
+        if movable[p]:
+            d = abs(old[p] - pos[p])
+            if d > max_diff:
+                max_diff = d
+            if pos[p] < hv[p]:
+                pos[p] = hv[p]
+                movable[p] = False
+                pinned += 1
+    return max_diff, pinned
+
+
+@njit(cache=True, nogil=True)
 def _free_fall_kernel(pos, old, hv, acceleration, iterations, stop_diff):
     """Iterations while no particle has touched yet. All particles are movable and at one
     height, so every internal force is exactly zero and the cloth moves as one particle:

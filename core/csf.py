@@ -91,12 +91,18 @@ LOW_OUTLIER_CELL_M = 5.0
 NEAREST_MAX_RING = 8
 
 INTERSECTION_HEIGHTS = ("nearest", "cell")
+CONSTRAINT_SCHEMES = ("library", "2016")
 RIGIDNESS_SCENES = {1: "steep slope", 2: "relief", 3: "flat"}
 
 
 def _require(condition: bool, message: str) -> None:
     if not condition:
         raise InvalidParameterError(message)
+
+
+def _transpose(a: np.ndarray, rows: int, cols: int) -> np.ndarray:
+    """The flat row-major (rows, cols) array ``a`` as a flat row-major (cols, rows) array."""
+    return np.ascontiguousarray(a.reshape(rows, cols).T).ravel()
 
 
 @dataclass(frozen=True)
@@ -123,6 +129,7 @@ class CSF:
     slope_smooth_height_m: float = 0.3
     intersection_height: str = "nearest"
     low_outlier_m: float = 5.0
+    constraint_scheme: str = "library"
 
     name = "csf"
 
@@ -150,6 +157,9 @@ class CSF:
         _require(self.intersection_height in INTERSECTION_HEIGHTS,
                  f"intersection_height must be one of {', '.join(INTERSECTION_HEIGHTS)} "
                  f"(got {self.intersection_height!r})")
+        _require(self.constraint_scheme in CONSTRAINT_SCHEMES,
+                 f"constraint_scheme must be one of {', '.join(CONSTRAINT_SCHEMES)} "
+                 f"(got {self.constraint_scheme!r})")
 
     @property
     def gravity_step_m(self) -> float:
@@ -215,11 +225,22 @@ class CSF:
         total = int(self.iterations)
         done, stopped = k._free_fall_kernel(pos, old, hv, acceleration, total, STOP_DIFF_M)
         sim = steps.sub(0.1, 0.9)
+        scheme_2016 = self.constraint_scheme == "2016"
+        if scheme_2016:  # that kernel runs on column-major arrays
+            pos, old, movable, hv_sim = (_transpose(a, H, W) for a in (pos, old, movable, hv))
         while done < total and not stopped:
             sim.report(done / total)  # also raises Cancelled: a long run stops within an iteration
-            max_diff, _pinned = k._time_step_kernel(pos, old, movable, quiet, hv, W, H, acceleration, single, double)
+            if scheme_2016:
+                max_diff, _pinned = k._time_step_2016_kernel(pos, old, movable, hv_sim, W, H, acceleration,
+                                                             int(self.rigidness))
+            else:
+                max_diff, _pinned = k._time_step_kernel(pos, old, movable, quiet, hv, W, H, acceleration,
+                                                        single, double)
             done += 1
             stopped = max_diff != 0.0 and max_diff < STOP_DIFF_M
+        if scheme_2016:
+            pos, movable = _transpose(pos, W, H), _transpose(movable, W, H)
+            del hv_sim
         del old, quiet
         sim.report(1.0)
         if self.slope_smooth:

@@ -148,3 +148,15 @@ def test_every_filter_runs_with_input_and_output_only(alg, scene_laz, tmp_path):
     assert proc.returncode == 0, proc.stdout + proc.stderr
     cls = classes_of(out)
     assert len(cls) == len(scene.x) and set(np.unique(cls)) <= {1, 2} and (cls == 2).any()
+
+
+@pytest.mark.parametrize("index, scheme", [(0, "library"), (1, "2016")])
+def test_csf_form_maps_to_the_core_filter(groundsieve_provider, index, scheme):
+    """The CSF form's enums reach the core parameters (rigidness option i is rigidness i + 1)."""
+    from qgis.core import QgsApplication, QgsProcessingContext
+    algorithm = QgsApplication.processingRegistry().createAlgorithmById("groundsieve:csf")
+    f = algorithm.buildFilter({"CONSTRAINT_SCHEME": index, "RIGIDNESS": 0, "RESOLUTION": 0.5,
+                               "INTERSECTION_HEIGHT": 1}, QgsProcessingContext())
+    assert (f.constraint_scheme, f.rigidness, f.cloth_resolution_m, f.intersection_height) == \
+        (scheme, 1, 0.5, "cell")
+    assert (f.time_step, f.class_threshold_m, f.iterations, f.low_outlier_m) == (0.65, 0.5, 500, 5.0)
