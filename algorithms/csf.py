@@ -64,8 +64,8 @@ the library's way is much worse where points are sparser than the cloth (see doc
 rigidness passes over the pairs, and a pinned particle there pulls only its neighbours to the west
 and south: softer cloth, the scheme with which the paper's ISPRS figures are reproduced (mean total
 error 4.8 % on the 8 samples here against 4.6 % published; library scheme 6.1 %), but its result
-depends on the cloud's orientation (rotated by 90, 180 or 270 degrees the same samples give
-7.1-7.7 %).</p>
+depends on the cloud's orientation (turned by 90, 180 or 270 degrees the same samples give
+7.0-7.6 %, the library scheme 6.6-7.8 %).</p>
 <p>The run time grows with the area / resolution<sup>2</sup> more than with the number of points.</p>
 """ + COMMON_HELP
 

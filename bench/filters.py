@@ -85,6 +85,7 @@ FILTERS: Dict[str, Callable[[ParamsRow], Callable]] = {
     "csf-ref": lambda row: make_csf(row, intersection_height="cell", low_outlier_m=0.0),
     "csf-paper": make_csf_paper,
     "csf-paper-ref": lambda row: make_csf_paper(row, intersection_height="cell", low_outlier_m=0.0),
+    "csf-2016": lambda row: make_csf(row, constraint_scheme="2016"),
     # The authors' 2016 code's constraints (the scheme that reproduces the paper's ISPRS table).
     "csf-paper-2016": lambda row: make_csf_paper(row, constraint_scheme="2016"),
     "ptd": make_ptd,
