@@ -281,6 +281,36 @@ def _nearest_heights_kernel(x, y, z, use, ox, oy, res, W, H, max_ring, hv, found
 # --------------------------------------------------------------------------------------------
 
 @njit(cache=True, nogil=True)
+def _verlet_step(pos, old, movable, acceleration):
+    """The reference's Particle::timeStep for every movable particle:
+    ``pos += (pos - old) * 0.99 + acceleration``."""
+    for p in range(pos.shape[0]):
+        if movable[p]:
+            t = pos[p]
+            pos[p] = t + (t - old[p]) * 0.99 + acceleration
+            old[p] = t
+
+
+@njit(cache=True, nogil=True)
+def _collide(pos, old, movable, hv):
+    """``max_diff`` (the largest |pos - old| of the movable particles, for the early stop) and
+    the reference's Cloth::terrCollision: a particle below its intersection height is put on it
+    and pinned. Returns (max_diff, number of particles pinned)."""
+    max_diff = 0.0
+    pinned = 0
+    for p in range(pos.shape[0]):
+        if movable[p]:
+            d = abs(old[p] - pos[p])
+            if d > max_diff:
+                max_diff = d
+            if pos[p] < hv[p]:
+                pos[p] = hv[p]
+                movable[p] = False
+                pinned += 1
+    return max_diff, pinned
+
+
+@njit(cache=True, nogil=True)
 def _time_step_kernel(pos, old, movable, quiet, hv, W, H, acceleration, single_move, double_move):
     """One iteration of the reference (Cloth::timeStep then Cloth::terrCollision).
 
@@ -296,12 +326,7 @@ def _time_step_kernel(pos, old, movable, quiet, hv, W, H, acceleration, single_m
     them or be moved by them any more, so they are skipped (set here, once for good).
 
     Returns (max_diff, number of particles pinned in this iteration)."""
-    n = W * H
-    for p in range(n):
-        if movable[p]:
-            t = pos[p]
-            pos[p] = t + (t - old[p]) * 0.99 + acceleration
-            old[p] = t
+    _verlet_step(pos, old, movable, acceleration)
     offsets = np.empty(16, dtype=np.int64)
     for k in range(16):
         offsets[k] = NEIGHBOURS[k, 1] * W + NEIGHBOURS[k, 0]
@@ -355,18 +380,7 @@ def _time_step_kernel(pos, old, movable, quiet, hv, W, H, acceleration, single_m
                 elif mq:
                     pos[q] -= (pos[q] - pos[p]) * single_move
             quiet[p] = still
-    max_diff = 0.0
-    pinned = 0
-    for p in range(n):
-        if movable[p]:
-            d = abs(old[p] - pos[p])
-            if d > max_diff:
-                max_diff = d
-            if pos[p] < hv[p]:
-                pos[p] = hv[p]
-                movable[p] = False
-                pinned += 1
-    return max_diff, pinned
+    return _collide(pos, old, movable, hv)
 
 
 @njit(cache=True, nogil=True)
@@ -388,12 +402,7 @@ def _time_step_2016_kernel(pos, old, movable, hv, W, H, acceleration, passes):
     per run), so that this order walks memory forwards.
 
     Returns (max_diff, number of particles pinned in this iteration)."""
-    n = W * H
-    for p in range(n):
-        if movable[p]:
-            t = pos[p]
-            pos[p] = t + (t - old[p]) * 0.99 + acceleration
-            old[p] = t
+    _verlet_step(pos, old, movable, acceleration)
     for _ in range(passes):
         for dist in range(1, 3):
             east = dist * H
@@ -432,18 +441,7 @@ def _time_step_2016_kernel(pos, old, movable, hv, W, H, acceleration, passes):
                         pos[a] += d
                         if movable[q]:
                             pos[q] -= d
-    max_diff = 0.0
-    pinned = 0
-    for p in range(n):
-        if movable[p]:
-            d = abs(old[p] - pos[p])
-            if d > max_diff:
-                max_diff = d
-            if pos[p] < hv[p]:
-                pos[p] = hv[p]
-                movable[p] = False
-                pinned += 1
-    return max_diff, pinned
+    return _collide(pos, old, movable, hv)
 
 
 @njit(cache=True, nogil=True)
