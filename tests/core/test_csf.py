@@ -10,26 +10,7 @@ import pytest
 from groundsieve.core.csf import CSF, CSFResult
 from groundsieve.core.errors import Cancelled, InputError, InvalidParameterError
 from groundsieve.core.progress import Steps
-
-X0, Y0 = 512000.0, 5403000.0  # UTM-sized coordinates, as real data
-
-
-def plane_scene(seed=0, size=60.0, density=2.0, tilt=(0.0, 0.0), box=None, box_height=10.0):
-    """Uniform points on z = 100 + tilt·(x, y); ``box`` = (xmin, xmax, ymin, ymax) lifted by
-    ``box_height`` (a building without wall points). Returns xyz and the true ground mask."""
-    rng = np.random.default_rng(seed)
-    n = int(size * size * density)
-    x = rng.uniform(0.0, size, n)
-    y = rng.uniform(0.0, size, n)
-    z = 100.0 + tilt[0] * x + tilt[1] * y
-    on_box = np.zeros(n, dtype=bool)
-    if box is not None:
-        on_box = (x > box[0]) & (x < box[1]) & (y > box[2]) & (y < box[3])
-        z = z + box_height * on_box
-    return np.column_stack([x + X0, y + Y0, z]), ~on_box
-
-
-BOX = (20.0, 35.0, 22.0, 37.0)  # 15 x 15 m
+from groundsieve.tests.core.scenes import BOX, X0, Y0, add_trees, plane_scene
 
 
 def hill_scene(height=10.0, radius=40.0, size=200.0, spacing=2.4, seed=0):
@@ -70,12 +51,7 @@ def test_box_at_the_papers_isprs_settings():
 def test_trees_are_never_ground():
     """Scattered 'tree' points several metres above a plane are never ground."""
     xyz, truth = plane_scene(seed=3, tilt=(0.05, -0.03), box=BOX)
-    rng = np.random.default_rng(4)
-    crowns = rng.uniform(0, 60, size=(40, 2))
-    tree = np.column_stack([crowns[:, 0] + X0, crowns[:, 1] + Y0,
-                            100.0 + 0.05 * crowns[:, 0] - 0.03 * crowns[:, 1] + rng.uniform(4, 15, 40)])
-    xyz = np.vstack([xyz, tree])
-    truth = np.concatenate([truth, np.zeros(40, dtype=bool)])
+    xyz, truth = add_trees(xyz, truth, n=40, seed=4, tilt=(0.05, -0.03))
     ground = CSF()(xyz)
     assert not (ground & ~truth).any(), "an object point was called ground"
     assert ground[truth].mean() > 0.99

@@ -17,8 +17,7 @@ from groundsieve.core.pmf import (PMF, PMFResult, fill_nearest, square_dilate, s
                                   square_opening)
 from groundsieve.core.progress import Steps
 from groundsieve.core.workflow import FilterOptions, run_ground_filter
-
-X0, Y0 = 512000.0, 5403000.0  # UTM-sized coordinates, as real data
+from groundsieve.tests.core.scenes import BOX, X0, Y0, plane_scene
 
 
 # --- the square-window kernels -----------------------------------------------------------------
@@ -123,23 +122,7 @@ def test_fill_nearest():
 
 # --- generated scenes with known answers --------------------------------------------------------
 
-def plane_scene(seed=0, size=60.0, density=2.0, tilt=(0.0, 0.0), boxes=(), box_height=10.0):
-    """Uniform points on z = 100 + tilt·(x, y); each box (xmin, xmax, ymin, ymax) lifted by
-    ``box_height`` (a building without wall points). Returns xyz and the true ground mask."""
-    rng = np.random.default_rng(seed)
-    n = int(size * size * density)
-    x = rng.uniform(0.0, size, n)
-    y = rng.uniform(0.0, size, n)
-    z = 100.0 + tilt[0] * x + tilt[1] * y
-    on_box = np.zeros(n, dtype=bool)
-    for box in boxes:
-        inside = (x > box[0]) & (x < box[1]) & (y > box[2]) & (y < box[3])
-        on_box |= inside
-        z = z + box_height * inside
-    return np.column_stack([x + X0, y + Y0, z]), ~on_box
-
-
-BOX = (20.0, 35.0, 22.0, 37.0)           # 15 x 15 m, cell edges on the box edges
+# scenes.BOX: 15 x 15 m, cell edges on the box edges
 BOX_OFF_GRID = (20.3, 35.6, 22.2, 37.7)  # 15.3 x 15.5 m, cells straddle the edges
 
 

@@ -4,6 +4,7 @@ and its accuracy on the ISPRS reference samples of the shared data."""
 from __future__ import annotations
 
 import math
+from functools import partial
 
 import numpy as np
 import pytest
@@ -12,26 +13,10 @@ from groundsieve.core import _ptd_kernels as K
 from groundsieve.core.errors import Cancelled, InputError, InvalidParameterError
 from groundsieve.core.progress import Steps
 from groundsieve.core.ptd import PTD, PTDResult, triangulate
+from groundsieve.tests.core import scenes
+from groundsieve.tests.core.scenes import X0, Y0, add_trees
 
-X0, Y0 = 512000.0, 5403000.0  # UTM-sized coordinates, as real data
-
-
-def plane_scene(seed=0, size=80.0, density=2.0, tilt=(0.0, 0.0), box=None, box_height=10.0, noise=0.0):
-    """Uniform points on z = 100 + tilt·(x, y) (+ Gaussian noise); ``box`` = (xmin, xmax, ymin,
-    ymax) lifted by ``box_height`` (a building without wall points). Returns xyz and the true
-    ground mask."""
-    rng = np.random.default_rng(seed)
-    n = int(size * size * density)
-    x = rng.uniform(0.0, size, n)
-    y = rng.uniform(0.0, size, n)
-    z = 100.0 + tilt[0] * x + tilt[1] * y + (rng.normal(0.0, noise, n) if noise else 0.0)
-    on_box = np.zeros(n, dtype=bool)
-    if box is not None:
-        on_box = (x > box[0]) & (x < box[1]) & (y > box[2]) & (y < box[3])
-        z = z + box_height * on_box
-    return np.column_stack([x + X0, y + Y0, z]), ~on_box
-
-
+plane_scene = partial(scenes.plane_scene, size=80.0)  # here 80 m wide by default
 BOX = (30.0, 50.0, 25.0, 45.0)  # 20 x 20 m, smaller than the 30 m default seed cell
 
 
@@ -97,12 +82,7 @@ def test_smooth_hill_is_kept_at_sparse_spacing():
 
 def test_trees_are_never_ground():
     xyz, truth = plane_scene(seed=6, tilt=(0.05, -0.03), box=BOX)
-    rng = np.random.default_rng(7)
-    crowns = rng.uniform(0, 80, size=(60, 2))
-    tree = np.column_stack([crowns[:, 0] + X0, crowns[:, 1] + Y0,
-                            100.0 + 0.05 * crowns[:, 0] - 0.03 * crowns[:, 1] + rng.uniform(4, 15, 60)])
-    xyz = np.vstack([xyz, tree])
-    truth = np.concatenate([truth, np.zeros(60, dtype=bool)])
+    xyz, truth = add_trees(xyz, truth, n=60, seed=7, size=80.0, tilt=(0.05, -0.03))
     ground = PTD()(xyz)
     assert not (ground & ~truth).any(), "an object point was called ground"
     assert ground[truth].all()

@@ -1,0 +1,59 @@
+"""Generated scenes with known truth for the ground-filter tests (SMRF, CSF, PMF, PTD): a plane
+of uniform random points, lifted boxes (buildings without wall points) and scattered trees.
+
+Import it as ``from groundsieve.tests.core.scenes import X0, Y0, BOX, add_trees, plane_scene``
+(``.build/plugins`` on the path makes the checkout the ``groundsieve`` package, see
+``tests/conftest.py``). Each scene draws from its own ``np.random.default_rng(seed)``: the same
+arguments give the same points, bit for bit.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+X0, Y0 = 512000.0, 5403000.0  # UTM-sized coordinates, as real data
+
+#: A 15 x 15 m building on the default 60 m plane, its edges on the 1 m cell edges.
+BOX = (20.0, 35.0, 22.0, 37.0)
+
+
+def plane_scene(seed=0, size=60.0, density=2.0, tilt=(0.0, 0.0), box=None, boxes=(), box_height=10.0,
+                noise=0.0):
+    """Uniform points on z = 100 + tilt·(x, y) (+ Gaussian noise of standard deviation ``noise``
+    metres when not zero), ``density`` points per m² over a ``size`` x ``size`` m square whose
+    south-west corner is (X0, Y0).
+
+    ``box`` and each of ``boxes`` = (xmin, xmax, ymin, ymax), in metres from that corner, is lifted
+    by ``box_height`` (a building without wall points; where boxes overlap, their heights add).
+    Returns xyz (n, 3) and the true ground mask (False on the boxes).
+
+    The random draws are, in this order: x, y, then the noise if any.
+    """
+    rng = np.random.default_rng(seed)
+    n = int(size * size * density)
+    x = rng.uniform(0.0, size, n)
+    y = rng.uniform(0.0, size, n)
+    z = 100.0 + tilt[0] * x + tilt[1] * y
+    if noise:
+        z = z + rng.normal(0.0, noise, n)
+    on_box = np.zeros(n, dtype=bool)
+    for b in ([box] if box is not None else []) + list(boxes):
+        inside = (x > b[0]) & (x < b[1]) & (y > b[2]) & (y < b[3])
+        on_box |= inside
+        z = z + box_height * inside
+    return np.column_stack([x + X0, y + Y0, z]), ~on_box
+
+
+def add_trees(xyz, truth, n, seed, size=60.0, tilt=(0.0, 0.0), heights=(4.0, 15.0)):
+    """The scene ``xyz``, ``truth`` with ``n`` 'tree' points appended, which are not ground.
+
+    The crowns are uniform over the ``size`` x ``size`` m square at (X0, Y0), each between
+    ``heights`` (low, high) metres above the plane z = 100 + tilt·(x, y) (the ground of
+    :func:`plane_scene` with the same ``tilt``), drawn from ``np.random.default_rng(seed)``:
+    the crowns' (x, y) first, then their heights. Returns the new xyz and truth.
+    """
+    rng = np.random.default_rng(seed)
+    crowns = rng.uniform(0, size, size=(n, 2))
+    tree = np.column_stack([crowns[:, 0] + X0, crowns[:, 1] + Y0,
+                            100.0 + tilt[0] * crowns[:, 0] + tilt[1] * crowns[:, 1]
+                            + rng.uniform(heights[0], heights[1], n)])
+    return np.vstack([xyz, tree]), np.concatenate([truth, np.zeros(n, dtype=bool)])
