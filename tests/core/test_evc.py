@@ -16,7 +16,7 @@ from groundsieve.core.io import PointCloud
 from groundsieve.core.progress import Steps
 from groundsieve.core.workflow import classify_cloud
 
-X0, Y0 = 512000.0, 5403000.0  # UTM-sized coordinates, as real data
+from groundsieve.tests.core.scenes import X0, Y0, plane_scene
 
 
 # --- numpy oracle -------------------------------------------------------------------------------
@@ -236,14 +236,7 @@ def test_every_point_gets_its_small_cells_class():
 # --- planes, shrubs, sparse clouds ----------------------------------------------------------------
 
 def plane(density, size=30.0, noise=0.0, seed=0, tilt=(0.0, 0.0)):
-    rng = np.random.default_rng(seed)
-    n = int(size * size * density)
-    x = rng.uniform(0.0, size, n)
-    y = rng.uniform(0.0, size, n)
-    z = 100.0 + tilt[0] * x + tilt[1] * y
-    if noise:
-        z = z + rng.normal(0.0, noise, n)
-    return np.column_stack([x + X0, y + Y0, z])
+    return plane_scene(seed=seed, size=size, density=density, tilt=tilt, noise=noise)[0]
 
 
 def point_classes(res, xyz):
