@@ -238,7 +238,7 @@ def part_isprs(samples, lib):
         ri, smooth = GROUPS[name]
         g, sec, _ = run_ours(ours(ri, smooth), xyz)
         acc = ground_accuracy(ref, g)
-        gr, _, _ = run_ours(ours(ri, smooth, intersection_height="cell", low_outlier_m=0.0), xyz)
+        gr, _, _ = run_ours(ours(ri, smooth, intersection_height="cell", low_outlier_m=0.0, sweep_order="fixed"), xyz)
         pub = PUBLISHED[name][2]
         row = {"type1": 100 * acc.type1, "type2": 100 * acc.type2, "total": 100 * acc.total,
                "kappa": 100 * acc.kappa, "s": sec, "pub": pub, "ref": total(ref, gr),
@@ -295,7 +295,7 @@ def part_diagnose(samples, lib):
         else:
             for c in cols[:6]:
                 row[c] = math.nan
-        row["ours-ref"] = total(ref, ours(ri, smooth, intersection_height="cell", low_outlier_m=0.0)(xyz))
+        row["ours-ref"] = total(ref, ours(ri, smooth, intersection_height="cell", low_outlier_m=0.0, sweep_order="fixed")(xyz))
         row["ours nearest"] = total(ref, ours(ri, smooth, low_outlier_m=0.0)(xyz))
         row["ours nearest + outliers (default)"] = total(ref, ours(ri, smooth)(xyz))
         row["empty particles %"] = 100.0 * empty_particle_share(xyz, RESOLUTION_M)
@@ -348,36 +348,42 @@ def part_scheme2016(samples):
     pub = np.array([PUBLISHED[n][2] for n in names])
     print("## The 2016 code's constraint scheme against the published figures\n")
     print("| Sample | 2016 Type I / II % | 2016 total % | published Type I / II % | published total % "
-          "| 2016 - published | 2016 without the outlier step | library scheme (default) total % |")
-    print("|---|---|---:|---|---:|---:|---:|---:|")
+          "| 2016 - published | 2016 without the outlier step | library scheme, fixed sweep total % "
+          "| library scheme, rotating sweep (default) total % |")
+    print("|---|---|---:|---|---:|---:|---:|---:|---:|")
     rows = []
     for name in names:
         xyz, ref = samples[name]
         ri, smooth = GROUPS[name]
         acc = ground_accuracy(ref, ours(ri, smooth, constraint_scheme="2016")(xyz))
         raw = total(ref, ours(ri, smooth, constraint_scheme="2016", low_outlier_m=0.0)(xyz))
+        fixed = total(ref, ours(ri, smooth, sweep_order="fixed")(xyz))
         lib_scheme = total(ref, ours(ri, smooth)(xyz))
         t1, t2, pt = PUBLISHED[name]
-        rows.append((100 * acc.total, raw, lib_scheme))
+        rows.append((100 * acc.total, raw, fixed, lib_scheme))
         print(f"| {name} | {100 * acc.type1:.2f} / {100 * acc.type2:.2f} | {100 * acc.total:.2f} | {t1:.2f} / {t2:.2f} "
-              f"| {pt:.2f} | {100 * acc.total - pt:+.2f} | {raw:.2f} | {lib_scheme:.2f} |", flush=True)
+              f"| {pt:.2f} | {100 * acc.total - pt:+.2f} | {raw:.2f} | {fixed:.2f} | {lib_scheme:.2f} |", flush=True)
     m = np.array(rows).mean(axis=0)
     within = sum(abs(r[0] - p) <= 1.5 for r, p in zip(rows, pub))
-    print(f"| **mean** | | {m[0]:.2f} | | {pub.mean():.2f} | {m[0] - pub.mean():+.2f} | {m[1]:.2f} | {m[2]:.2f} |\n")
+    print(f"| **mean** | | {m[0]:.2f} | | {pub.mean():.2f} | {m[0] - pub.mean():+.2f} | {m[1]:.2f} | {m[2]:.2f} "
+          f"| {m[3]:.2f} |\n")
     print(f"2016 scheme: {within} of {len(names)} samples within 1.5 points of the published total.\n")
     print("### The same, the samples turned about their centre: mean total error %\n")
-    print("| scheme | 0° | 90° | 180° | 270° | mean of the four | worst sample change |")
-    print("|---|---:|---:|---:|---:|---:|---:|")
-    for scheme in ("2016", "library"):
+    print("| scheme | 0° | 90° | 180° | 270° | mean of the four | mean per-sample range | widest sample range |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|")
+    variants = (("2016", {"constraint_scheme": "2016"}),
+                ("library, fixed sweep (the reference's order)", {"sweep_order": "fixed"}),
+                ("library, rotating sweep (default)", {}))
+    for label, kw in variants:
         per_turn = []
         for turns in range(4):
-            per_turn.append([total(samples[n][1], ours(*GROUPS[n], constraint_scheme=scheme)(rotated(samples[n][0], turns)))
+            per_turn.append([total(samples[n][1], ours(*GROUPS[n], **kw)(rotated(samples[n][0], turns)))
                              for n in names])
         a = np.array(per_turn)
         spread = (a.max(axis=0) - a.min(axis=0))
-        worst = names[int(spread.argmax())]
-        print(f"| {scheme} | " + " | ".join(f"{v:.2f}" for v in a.mean(axis=1)) +
-              f" | {a.mean():.2f} | {worst} {a[:, int(spread.argmax())].min():.2f}-{a[:, int(spread.argmax())].max():.2f} |",
+        worst = int(spread.argmax())
+        print(f"| {label} | " + " | ".join(f"{v:.2f}" for v in a.mean(axis=1)) +
+              f" | {a.mean():.2f} | {spread.mean():.2f} | {names[worst]} {a[:, worst].min():.2f}-{a[:, worst].max():.2f} |",
               flush=True)
     print()
 
@@ -409,8 +415,9 @@ def part_agreement(lib, n_points, density):
         print(f"| library 1.1.7 | {lsec:.2f} | {len(xyz) / lsec:,.0f} | {100 * (gl != truth).mean():.2f} | 100 | 1 |",
               flush=True)
     for label, algorithm in (("ours (defaults)", CSF()),
+                             ("ours, fixed sweep", CSF(sweep_order="fixed")),
                              ("ours-ref (cell heights, no outlier step)",
-                              CSF(intersection_height="cell", low_outlier_m=0.0))):
+                              CSF(intersection_height="cell", low_outlier_m=0.0, sweep_order="fixed"))):
         g, sec, res = run_ours(algorithm, xyz)
         same = fmt(100 * (g == gl).mean(), 3) if gl is not None else "n/a"
         ratio = fmt(lsec / sec) if lsec is not None else "n/a"

@@ -81,10 +81,13 @@ FILTERS: Dict[str, Callable[[ParamsRow], Callable]] = {
     "pmf": make_pmf,
     "pmf-linear": lambda row: make_pmf(row, exponential=False),
     "csf": make_csf,
-    # The authors' library's behaviour: cell heights with scan-line fill, no low-outlier step.
-    "csf-ref": lambda row: make_csf(row, intersection_height="cell", low_outlier_m=0.0),
+    # The authors' library's behaviour: cell heights with scan-line fill, no low-outlier step, its sweep order.
+    "csf-ref": lambda row: make_csf(row, intersection_height="cell", low_outlier_m=0.0, sweep_order="fixed"),
     "csf-paper": make_csf_paper,
-    "csf-paper-ref": lambda row: make_csf_paper(row, intersection_height="cell", low_outlier_m=0.0),
+    "csf-paper-ref": lambda row: make_csf_paper(row, intersection_height="cell", low_outlier_m=0.0, sweep_order="fixed"),
+    # The reference's fixed sweep order (the default cycles through 8 orders).
+    "csf-fixed": lambda row: make_csf(row, sweep_order="fixed"),
+    "csf-paper-fixed": lambda row: make_csf_paper(row, sweep_order="fixed"),
     "csf-2016": lambda row: make_csf(row, constraint_scheme="2016"),
     # The authors' 2016 code's constraints (the scheme that reproduces the paper's ISPRS table).
     "csf-paper-2016": lambda row: make_csf_paper(row, constraint_scheme="2016"),

@@ -311,7 +311,20 @@ def _collide(pos, old, movable, hv):
 
 
 @njit(cache=True, nogil=True)
-def _time_step_kernel(pos, old, movable, quiet, hv, W, H, acceleration, single_move, double_move):
+def _max_change(pos, before, movable):
+    """The largest |pos - before| of the movable particles (0 when none is)."""
+    m = 0.0
+    for p in range(pos.shape[0]):
+        if movable[p]:
+            d = abs(pos[p] - before[p])
+            if d > m:
+                m = d
+    return m
+
+
+@njit(cache=True, nogil=True)
+def _time_step_kernel(pos, old, movable, quiet, hv, W, H, acceleration, single_move, double_move,
+                      neighbours=NEIGHBOURS, transpose=False, rev_outer=False, rev_inner=False):
     """One iteration of the reference (Cloth::timeStep then Cloth::terrCollision).
 
     1. Verlet step of every movable particle: ``pos += (pos - old) * 0.99 + acceleration``.
@@ -322,6 +335,11 @@ def _time_step_kernel(pos, old, movable, quiet, hv, W, H, acceleration, single_m
     3. ``max_diff``: the largest |pos - old| of the movable particles.
     4. Collision: a particle below its intersection height is put on it and pinned.
 
+    The defaults are the reference's order. ``neighbours`` (16 (d_col, d_row)) and the three
+    flags give the order of the same sweep run on the cloth turned or mirrored (see
+    ``core.csf.sweeps()``): the particles column by column when ``transpose``, the outer loop
+    (rows, or columns) backwards when ``rev_outer``, the inner one backwards when ``rev_inner``.
+
     ``quiet`` marks pinned particles whose 16 neighbours are pinned too: nothing can move
     them or be moved by them any more, so they are skipped (set here, once for good).
 
@@ -329,15 +347,24 @@ def _time_step_kernel(pos, old, movable, quiet, hv, W, H, acceleration, single_m
     _verlet_step(pos, old, movable, acceleration)
     offsets = np.empty(16, dtype=np.int64)
     for k in range(16):
-        offsets[k] = NEIGHBOURS[k, 1] * W + NEIGHBOURS[k, 0]
-    for r in range(H):
-        interior_row = 2 <= r < H - 2
-        for c in range(W):
+        offsets[k] = neighbours[k, 1] * W + neighbours[k, 0]
+    n_outer = W if transpose else H
+    n_inner = H if transpose else W
+    for io in range(n_outer):
+        a = n_outer - 1 - io if rev_outer else io
+        for ii in range(n_inner):
+            b = n_inner - 1 - ii if rev_inner else ii
+            if transpose:
+                r = b
+                c = a
+            else:
+                r = a
+                c = b
             p = r * W + c
             if quiet[p]:
                 continue
             mp = movable[p]
-            if interior_row and 2 <= c < W - 2:
+            if 2 <= r < H - 2 and 2 <= c < W - 2:
                 # Fast path: all 16 neighbours exist.
                 if mp:
                     hp = pos[p]
@@ -362,8 +389,8 @@ def _time_step_kernel(pos, old, movable, quiet, hv, W, H, acceleration, single_m
                 continue
             still = not mp
             for k in range(16):
-                cc = c + NEIGHBOURS[k, 0]
-                rr = r + NEIGHBOURS[k, 1]
+                cc = c + neighbours[k, 0]
+                rr = r + neighbours[k, 1]
                 if cc < 0 or cc >= W or rr < 0 or rr >= H:
                     continue
                 q = rr * W + cc

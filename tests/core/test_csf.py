@@ -209,6 +209,61 @@ def test_tiny_time_step_stops_after_one_iteration_as_the_reference():
 
 # --- kernels against the reference's semantics --------------------------------------------------
 
+@pytest.mark.parametrize("shape", [(9, 13), (12, 12)], ids=["9x13", "12x12"])
+def test_each_rotating_sweep_is_the_reference_sweep_on_the_turned_cloth(shape):
+    """sweep_order='rotating' cycles through 8 sweeps; sweep g over the cloth must be, bit for
+    bit, the reference sweep over the cloth transformed by g (mirrored and/or turned), so that
+    turning the cloud only changes which of the 8 comes first."""
+    from groundsieve.core import _csf_kernels as k
+    from groundsieve.core.csf import sweeps
+    H, W = shape
+    rng = np.random.default_rng(8)
+    hv = -(100.0 + rng.uniform(0, 3, (H, W)))
+    start = float(hv.max()) + 0.3
+    acc = -0.2 * 0.65 ** 4
+    index = np.arange(W * H).reshape(H, W)
+
+    def simulate(hv2d, neighbours=None, flags=()):
+        h, w = hv2d.shape
+        pos = np.full(h * w, start)
+        old = pos.copy()
+        movable = np.ones(h * w, dtype=bool)
+        quiet = np.zeros(h * w, dtype=bool)
+        extra = () if neighbours is None else (neighbours, *flags)
+        for _ in range(40):
+            k._time_step_kernel(pos, old, movable, quiet, hv2d.ravel().copy(), w, h, acc, 0.51, 0.42, *extra)
+        return pos, movable
+
+    orders = sweeps()
+    assert len(orders) == 8
+    seen = set()
+    for g, (neighbours, flags) in enumerate(orders):
+        mirror, turns = divmod(g, 4)
+        transform = lambda a: np.rot90(a[:, ::-1] if mirror else a, turns)  # noqa: E731
+        ours_pos, ours_mov = simulate(hv, neighbours, flags)
+        ref_pos, ref_mov = simulate(np.ascontiguousarray(transform(hv)))
+        back = transform(index).ravel()  # G index of each particle of the turned cloth
+        expect_pos = np.empty(W * H)
+        expect_pos[back] = ref_pos
+        expect_mov = np.empty(W * H, dtype=bool)
+        expect_mov[back] = ref_mov
+        np.testing.assert_array_equal(ours_pos, expect_pos)
+        np.testing.assert_array_equal(ours_mov, expect_mov)
+        assert 0 < ours_mov.sum() < W * H  # some particles pinned, some not: a real test
+        seen.add(ours_pos.tobytes())
+    assert len(seen) == 8  # eight different results: the order matters, hence the cycle
+
+
+def test_rotating_sweep_stops_early_after_whole_cycles():
+    """The rotating sweep's early stop is tested once per cycle of the 8 orders."""
+    xyz, truth = plane_scene(tilt=(0.05, 0.02), box=BOX)
+    res = CSF().run(xyz)
+    assert res.iterations < 500 and res.iterations % 8 == 0, res.iterations
+    np.testing.assert_array_equal(res.ground, truth)
+    fixed = CSF(sweep_order="fixed").run(xyz)
+    np.testing.assert_array_equal(fixed.ground, truth)
+
+
 def test_free_fall_shortcut_is_exactly_the_simulation():
     from groundsieve.core import _csf_kernels as k
     rng = np.random.default_rng(1)
@@ -286,7 +341,7 @@ def test_matches_the_reference_library_when_installed():
     c.do_filtering(ground_idx, other_idx, False)
     theirs = np.zeros(len(xyz), dtype=bool)
     theirs[np.array(ground_idx, dtype=np.int64)] = True
-    ours = CSF(cloth_resolution_m=0.5, rigidness=2, intersection_height="cell", low_outlier_m=0.0)(xyz)
+    ours = CSF(cloth_resolution_m=0.5, rigidness=2, intersection_height="cell", low_outlier_m=0.0, sweep_order="fixed")(xyz)
     assert (ours == theirs).mean() > 0.995
 
 
@@ -433,6 +488,7 @@ def test_too_fine_a_cloth_is_refused():
     ({"low_outlier_m": math.nan}, "low_outlier_m"),
     ({"intersection_height": "kdtree"}, "intersection_height"),
     ({"constraint_scheme": "2017"}, "constraint_scheme"),
+    ({"sweep_order": "random"}, "sweep_order"),
 ])
 def test_invalid_parameters_name_the_parameter(kwargs, name):
     with pytest.raises(InvalidParameterError) as info:

@@ -156,7 +156,10 @@ def test_csf_form_maps_to_the_core_filter(groundsieve_provider, index, scheme):
     from qgis.core import QgsApplication, QgsProcessingContext
     algorithm = QgsApplication.processingRegistry().createAlgorithmById("groundsieve:csf")
     f = algorithm.buildFilter({"CONSTRAINT_SCHEME": index, "RIGIDNESS": 0, "RESOLUTION": 0.5,
-                               "INTERSECTION_HEIGHT": 1}, QgsProcessingContext())
-    assert (f.constraint_scheme, f.rigidness, f.cloth_resolution_m, f.intersection_height) == \
-        (scheme, 1, 0.5, "cell")
+                               "INTERSECTION_HEIGHT": 1, "SWEEP_ORDER": index}, QgsProcessingContext())
+    assert (f.constraint_scheme, f.rigidness, f.cloth_resolution_m, f.intersection_height, f.sweep_order) == \
+        (scheme, 1, 0.5, "cell", ("rotating", "fixed")[index])
     assert (f.time_step, f.class_threshold_m, f.iterations, f.low_outlier_m) == (0.65, 0.5, 500, 5.0)
+    f = algorithm.buildFilter({}, QgsProcessingContext())  # the form's defaults are the core's
+    from groundsieve.core.csf import CSF
+    assert f == CSF(rigidness=3)
