@@ -53,8 +53,8 @@ Findings (measured 2026-11 on the 8 samples here, 2 cores; library 1.1.7):
    dynamics with nearest-point heights: mean 7.79 % (samp52 38.27 -> 5.80, samp54 26.92 -> 4.98).
 4. **Low outliers** (about 1.7 points): inverted, a low outlier is a spike that pins a tent of
    cloth far below the ground. samp31 has 18 labelled ones: the library without them 13.27 ->
-   1.98 %; ours with the automatic 5 m outlier step 1.96 % (13.91 without). With both changes, our
-   default: mean 6.07 %.
+   1.98 %; ours with the automatic 5 m outlier step 1.96 % (13.91 without). With both changes, in
+   the library's fixed sweep order: mean 6.07 %.
 5. The rest (+1.42 points with the library's scheme): on every sample our Type I is higher and our
    Type II lower than published: the paper's cloth followed the terrain more closely. The time step
    only enters the gravity step, so ``--part timestep`` sweeps the weight: dT 0.70-0.74 brings 6-8
@@ -69,18 +69,22 @@ Findings (measured 2026-11 on the 8 samples here, 2 cores; library 1.1.7):
    (without it 7.40 %: samp31 10.0 %, samp23 14.3 %), which the 2016 code did not have: the
    outliers were probably removed before the paper's runs. The asymmetry makes the result depend
    on the cloud's orientation: the samples turned by 90 / 180 / 270 degrees give 6.97 / 7.60 /
-   7.32 % with the 2016 scheme and 6.59 / 7.81 / 7.41 % with the library's (samp51 alone moves
-   between 3 % and 15 %). The published table is therefore one orientation of an
-   orientation-dependent filter; over the four, the schemes are equal within noise (6.68 % and
-   6.97 %), so the default stays the library's scheme and the 2016 one is an option.
+   7.32 %; the library's fixed sweep order too: 6.59 / 7.81 / 7.41 % (samp51 alone 2.2-12.6 %).
+   The published table is therefore one orientation of an orientation-dependent filter.
+6. **Orientation** (``--part scheme2016``, last table): the library's dependence on it comes from
+   its sequential (Gauss-Seidel) sweep order. Our default ``sweep_order="rotating"`` runs the
+   library's sweep on the cloth turned / mirrored by each of the 8 symmetries of the square in
+   turn: 5.59 / 5.44 / 5.45 / 5.81 % at 0 / 90 / 180 / 270 degrees (fixed order 6.07 / 6.59 /
+   7.81 / 7.41 %), per-sample spread four times narrower.
 
 Targets (issue 4): with the paper's parameters and ``constraint_scheme="2016"``: 8 of 8 samples
-within 1.5 points of the published total, mean +0.18 (target 0.5): met (with the library's scheme:
-4 of 8, +1.42; the library itself: 0 of 8, +13.95). Agreement: the reference-compatible mode 99.94 %
-of the points on average (>= 99.76 % on every sample); the default mode 83.7 % (it is a different,
-better, cloth at sparse density), 99.998 % on the 5 million generated points (10 pulses/m², denser
-than the cloth). Speed: see ``--part agreement`` (ours about twice as fast as the library, which
-runs on both cores).
+within 1.5 points of the published total, mean +0.18 (target 0.5): met (our default: 7 of 8,
++0.95; the library's scheme in its fixed order: 4 of 8, +1.42; the library itself: 0 of 8,
++13.95). Agreement: the reference-compatible mode 99.94 % of the points on average (>= 99.76 % on
+every sample); the default mode 83.5 % (a different, better, cloth at sparse density); on 5 million
+generated points (10 pulses/m², denser than the cloth) 99.998 % with the fixed sweep, 99.72 % with
+the default rotating one. Speed: see ``--part agreement`` (ours 1.4-2.2 times as fast as the
+library, which runs on both cores).
 """
 from __future__ import annotations
 
