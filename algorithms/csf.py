@@ -51,7 +51,8 @@ ISPRS tests). <b>Rigidness</b>: how stiff the cloth is, by scene: 1 for steep sl
 3 for flat terrain (the default). <b>Time step</b>: of the simulation (0.65); the gravity step is
 0.2 x time step<sup>4</sup> per iteration, as in the reference library. <b>Class threshold (m)</b>:
 largest distance from the cloth of a ground point (0.5 m). <b>Maximum iterations</b> (500): the
-simulation stops earlier once no particle moves more than 5 mm in an iteration.
+simulation stops earlier once the cloth has settled (no particle moved more than 5 mm in an
+iteration; with the rotating sweep, 40 mm over a cycle of 8 iterations).
 <b>Slope post-processing</b>: pins groups of cloth left hanging over steep slopes onto the
 surface from their edges inwards while neighbouring heights differ by less than 0.3 m (on by
 default; the paper turns it off for flat scenes).</p>
@@ -62,19 +63,19 @@ the reference. <b>Particle heights from</b>: the height each particle cannot fal
 nearest point (the paper's definition, the default) or, as the reference library does, of the points
 that fall in the particle's cell, empty cells taking the first value to the east along their row;
 the library's way is much worse where points are sparser than the cloth (see docs/BENCHMARKS.md).
-<b>Sweep order</b>: the library updates the particles one after another, row by row from
-the south-west corner, each with the new heights of those before it; the order makes the result
-depend on how the cloud is oriented (the ISPRS samples turned by 90-270 degrees: mean total error
-6.1-7.8 %). <i>Rotating</i> (the default) cycles through the 8 orders of the turned and mirrored
-cloth, one per iteration: 5.4-5.8 % at every orientation, about 1.3 times the run time;
-<i>fixed</i> is the library's order. <b>Cloth constraints</b>: how neighbouring particles hold each other. The reference library 1.1.7
+<b>Sweep order</b>: the library updates the particles one after another, row by row from the
+south-west corner, each with the new heights of those before it, so the result depends on how the
+cloud is oriented (the 8 ISPRS samples turned by 0, 90, 180, 270 degrees: mean total error 6.1 to
+7.8 %). <i>Rotating</i> (the default) cycles through the 8 orders of the turned and mirrored cloth,
+one per iteration: 5.4 to 5.8 % at every orientation, about 1.3 times the run time. <i>Fixed</i> is
+the library's order.
+<b>Cloth constraints</b>: how neighbouring particles hold each other. The reference library 1.1.7
 (default) relaxes every neighbour pair from both ends each iteration. The authors' 2016 code (which
-always runs in its own order) makes
-rigidness passes over the pairs, and a pinned particle there pulls only its neighbours to the west
-and south: softer cloth, the scheme with which the paper's ISPRS figures are reproduced (mean total
-error 4.8 % on the 8 samples here against 4.6 % published; library scheme 6.1 %), but its result
-depends on the cloud's orientation (turned by 90, 180 or 270 degrees the same samples give
-7.0-7.6 %).</p>
+always runs in its own order) makes rigidness passes over the pairs, and a pinned particle there
+pulls only its neighbours to the west and south: a softer cloth, the scheme with which the paper's
+ISPRS figures are reproduced (mean total error 4.8 % on the 8 samples here against 4.6 % published;
+library scheme 5.6 %, 6.1 % in its fixed order), but turned by 90, 180 or 270 degrees the same
+samples give 7.0 to 7.6 %.</p>
 <p>The run time grows with the area / resolution<sup>2</sup> more than with the number of points.</p>
 """ + COMMON_HELP
 
