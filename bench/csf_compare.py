@@ -63,7 +63,7 @@ Findings (measured 2026-11 on the 8 samples here, 2 cores; library 1.1.7):
    authors' first published code** (jianboqi/CSF, folder ``CSFDLL``, read, not copied): rigidness =
    number of passes over the list of neighbour pairs, 0.3 of the difference per pair, and a pair
    moves only when its first particle (west / south) is movable, so pinned particles pull only
-   their west and south neighbours. ``constraint_scheme="2016"`` (``--part scheme2016``): all 8
+   their west, south-west, south and south-east neighbours. ``constraint_scheme="2016"`` (``--part scheme2016``): all 8
    samples within 1.5 points, mean 4.83 % against 4.64 % (+0.18); samp21, 31, 52, 54 within 0.12
    points and their Type I / II close to the published ones. It needs the low-outlier step too
    (without it 7.40 %: samp31 10.0 %, samp23 14.3 %), which the 2016 code did not have: the
