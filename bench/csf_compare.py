@@ -74,16 +74,16 @@ Findings (measured 2026-11 on the 8 samples here, 2 cores; library 1.1.7):
 6. **Orientation** (``--part scheme2016``, last table): the library's dependence on it comes from
    its sequential (Gauss-Seidel) sweep order. Our default ``sweep_order="rotating"`` runs the
    library's sweep on the cloth turned / mirrored by each of the 8 symmetries of the square in
-   turn: 5.59 / 5.44 / 5.45 / 5.81 % at 0 / 90 / 180 / 270 degrees (fixed order 6.07 / 6.59 /
+   turn: 5.58 / 5.42 / 5.44 / 5.75 % at 0 / 90 / 180 / 270 degrees (fixed order 6.07 / 6.59 /
    7.81 / 7.41 %), per-sample spread four times narrower.
 
 Targets (issue 4): with the paper's parameters and ``constraint_scheme="2016"``: 8 of 8 samples
 within 1.5 points of the published total, mean +0.18 (target 0.5): met (our default: 7 of 8,
-+0.95; the library's scheme in its fixed order: 4 of 8, +1.42; the library itself: 0 of 8,
++0.94; the library's scheme in its fixed order: 4 of 8, +1.42; the library itself: 0 of 8,
 +13.95). Agreement: the reference-compatible mode 99.94 % of the points on average (>= 99.76 % on
 every sample); the default mode 83.5 % (a different, better, cloth at sparse density); on 5 million
-generated points (10 pulses/m², denser than the cloth) 99.998 % with the fixed sweep, 99.72 % with
-the default rotating one. Speed: see ``--part agreement`` (ours 1.4-2.2 times as fast as the
+generated points (10 pulses/m², denser than the cloth) 99.998 % with the fixed sweep, 99.73 % with
+the default rotating one. Speed: see ``--part agreement`` (ours 1.4-2.0 times as fast as the
 library, which runs on both cores).
 """
 from __future__ import annotations

@@ -44,8 +44,9 @@ What GroundSieve does differently, each measured on the ISPRS samples in
   take the height of a point metres to the east, the cloth is pinned too low on slopes: over
   the 8 ISPRS samples here, with the paper's parameters, the mean total error is 18.6 % the
   library's way and 7.8 % with nearest-point heights (6.1 % with the outlier step below,
-  5.6 % with the rotating sweep too; published: 4.6 %). ``"cell"`` reproduces the library (99.8-100 % of points classified the
-  same, on every sample).
+  5.6 % with the rotating sweep too; published: 4.6 %). ``"cell"`` (with ``low_outlier_m=0``
+  and ``sweep_order="fixed"``) reproduces the library: 99.8-100 % of points classified the
+  same, on every sample.
 * ``low_outlier_m`` (default 5 m; 0 = off): before the cloth is made, a point lying more
   than this below the third lowest of the lowest points of the eight 5 m cells around its
   own is a low outlier: it is not ground and the cloth does not see it. In the inverted
@@ -59,14 +60,14 @@ What GroundSieve does differently, each measured on the ISPRS samples in
   reference's order (samp51 alone 2.2-12.6 %). The rotating sweep runs iteration i in the
   order of the reference on the cloth turned or mirrored by the (i mod 8)-th symmetry of the
   square (:func:`sweeps`), and tests the early stop once per cycle of 8 (the cloth moved less
-  than 8 x 5 mm since the previous cycle): 5.59 / 5.44 / 5.45 / 5.81 %, per-sample ranges
+  than 8 x 5 mm since the previous cycle): 5.58 / 5.42 / 5.44 / 5.75 %, per-sample ranges
   4 times narrower; on 5 million generated points 1.00 % error against 1.09 %; about 1.3
   times the run time. ``"fixed"`` is the reference's order.
 * Speed, not results: the free fall before the first contact is computed for one particle
   (bit-for-bit the same); pinned particles whose 16 neighbours are pinned are skipped (nothing
   can move them or be moved by them); the scan-line fill is linear in the number of particles.
   The constraint pass stays sequential (Gauss-Seidel) and single-threaded: 10 million generated
-  points take about 4 s (3 s with the fixed sweep); 5 million 2.0 s against the library's 2.8 s
+  points take about 4 s (3 s with the fixed sweep); 5 million 1.9 s against the library's 2.6 s
   on two threads (bench/csf_compare.py --part agreement).
 
 ``constraint_scheme`` chooses how neighbouring particles hold each other:
@@ -87,7 +88,7 @@ What GroundSieve does differently, each measured on the ISPRS samples in
   without the early stop the ISPRS figures below are the same to 0.01 point. The cloth is softer and the result depends on the
   cloud's orientation. With it the paper's ISPRS table is reproduced: with the paper's
   parameters, every one of the 8 samples here within 1.5 points of the published total error,
-  mean 4.83 % against 4.64 % published (library scheme: 6.07 % in the fixed order, 5.59 %
+  mean 4.83 % against 4.64 % published (library scheme: 6.07 % in the fixed order, 5.58 %
   rotating); turned by 90, 180 or 270 degrees the same samples give 7.0-7.6 %
   (``bench/csf_compare.py --part scheme2016``). The published table is one orientation of an
   orientation-dependent filter.
