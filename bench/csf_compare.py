@@ -63,8 +63,8 @@ Findings (measured 2026-11 on the 8 samples here, 2 cores; library 1.1.7):
    authors' first published code** (jianboqi/CSF, folder ``CSFDLL``, read, not copied): rigidness =
    number of passes over the list of neighbour pairs, 0.3 of the difference per pair, and a pair
    moves only when its first particle (west / south) is movable, so pinned particles pull only
-   their west, south-west, south and south-east neighbours. ``constraint_scheme="2016"`` (``--part scheme2016``): all 8
-   samples within 1.5 points, mean 4.83 % against 4.64 % (+0.18); samp21, 31, 52, 54 within 0.12
+   their west, south-west, south and south-east neighbours. ``constraint_scheme="2016"``
+   (``--part scheme2016``): all 8 samples within 1.5 points, mean 4.83 % against 4.64 % (+0.18); samp21, 31, 52, 54 within 0.12
    points and their Type I / II close to the published ones. It needs the low-outlier step too
    (without it 7.40 %: samp31 10.0 %, samp23 14.3 %), which the 2016 code did not have: the
    outliers were probably removed before the paper's runs. The asymmetry makes the result depend
@@ -242,7 +242,8 @@ def part_isprs(samples, lib):
         ri, smooth = GROUPS[name]
         g, sec, _ = run_ours(ours(ri, smooth), xyz)
         acc = ground_accuracy(ref, g)
-        gr, _, _ = run_ours(ours(ri, smooth, intersection_height="cell", low_outlier_m=0.0, sweep_order="fixed"), xyz)
+        gr, _, _ = run_ours(ours(ri, smooth, intersection_height="cell", low_outlier_m=0.0, sweep_order="fixed"),
+                            xyz)
         pub = PUBLISHED[name][2]
         row = {"type1": 100 * acc.type1, "type2": 100 * acc.type2, "total": 100 * acc.total,
                "kappa": 100 * acc.kappa, "s": sec, "pub": pub, "ref": total(ref, gr),
@@ -299,7 +300,8 @@ def part_diagnose(samples, lib):
         else:
             for c in cols[:6]:
                 row[c] = math.nan
-        row["ours-ref"] = total(ref, ours(ri, smooth, intersection_height="cell", low_outlier_m=0.0, sweep_order="fixed")(xyz))
+        row["ours-ref"] = total(ref, ours(ri, smooth, intersection_height="cell", low_outlier_m=0.0,
+                                          sweep_order="fixed")(xyz))
         row["ours nearest"] = total(ref, ours(ri, smooth, low_outlier_m=0.0)(xyz))
         row["ours nearest + outliers (default)"] = total(ref, ours(ri, smooth)(xyz))
         row["empty particles %"] = 100.0 * empty_particle_share(xyz, RESOLUTION_M)

@@ -84,7 +84,8 @@ FILTERS: Dict[str, Callable[[ParamsRow], Callable]] = {
     # The authors' library's behaviour: cell heights with scan-line fill, no low-outlier step, its sweep order.
     "csf-ref": lambda row: make_csf(row, intersection_height="cell", low_outlier_m=0.0, sweep_order="fixed"),
     "csf-paper": make_csf_paper,
-    "csf-paper-ref": lambda row: make_csf_paper(row, intersection_height="cell", low_outlier_m=0.0, sweep_order="fixed"),
+    "csf-paper-ref": lambda row: make_csf_paper(row, intersection_height="cell", low_outlier_m=0.0,
+                                                sweep_order="fixed"),
     # The reference's fixed sweep order (the default cycles through 8 orders).
     "csf-fixed": lambda row: make_csf(row, sweep_order="fixed"),
     "csf-paper-fixed": lambda row: make_csf_paper(row, sweep_order="fixed"),

@@ -85,8 +85,8 @@ What GroundSieve does differently, each measured on the ISPRS samples in
   cloth buffer; its stored Particle.cpp never resets the acceleration while gravity is added
   every iteration, which taken literally makes the cloth ever heavier and gave 26 % on the
   ISPRS samples in a trial run, so it cannot be what produced the paper) are not reproduced;
-  without the early stop the ISPRS figures below are the same to 0.01 point. The cloth is softer and the result depends on the
-  cloud's orientation. With it the paper's ISPRS table is reproduced: with the paper's
+  without the early stop the ISPRS figures below are the same to 0.01 point. The cloth is
+  softer and the result depends on the cloud's orientation. With it the paper's ISPRS table is reproduced: with the paper's
   parameters, every one of the 8 samples here within 1.5 points of the published total error,
   mean 4.83 % against 4.64 % published (library scheme: 6.07 % in the fixed order, 5.58 %
   rotating); turned by 90, 180 or 270 degrees the same samples give 7.0-7.6 %
