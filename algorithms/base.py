@@ -2,6 +2,7 @@
 parameters, the adaptation of QGIS feedback to the core's plain callables, and the
 translation of core errors into QgsProcessingException."""
 import os
+import re
 
 from qgis.core import (QgsCoordinateReferenceSystem, QgsFeature, QgsFeatureSink, QgsField, QgsFields,
                        QgsGeometry, QgsPoint, QgsProcessing, QgsProcessingAlgorithm, QgsProcessingException,
@@ -32,6 +33,13 @@ number and intensity; meant for small clouds.</p>
 <p>Outputs are written under a temporary name and renamed when complete: a failed or cancelled run
 leaves nothing half-written.</p>
 """
+
+
+def dialog_help(html):
+    """``html`` as the algorithm dialog wants it: QGIS's dialog makes each line of
+    shortHelpString a paragraph of its own (QgsProcessingAlgorithmDialogBase::formatHelp), so
+    the source's wrapped lines are joined; the paragraphs come from the HTML tags."""
+    return re.sub(r"\s*\n\s*", " ", html).strip()
 
 
 def core_modules(extra=None):

@@ -2,7 +2,7 @@
 from qgis.core import (QgsProcessingParameterBoolean, QgsProcessingParameterDefinition,
                        QgsProcessingParameterEnum, QgsProcessingParameterNumber)
 
-from .base import COMMON_HELP, GroundFilterAlgorithm
+from .base import COMMON_HELP, GroundFilterAlgorithm, dialog_help
 
 Double = QgsProcessingParameterNumber.Type.Double
 Integer = QgsProcessingParameterNumber.Type.Integer
@@ -39,7 +39,7 @@ class CSFAlgorithm(GroundFilterAlgorithm):
         return "csf.svg"
 
     def shortHelpString(self):  # noqa: N802
-        return """<p>Separates ground from non-ground points with the Cloth Simulation Filter (Zhang, Qi,
+        return dialog_help("""<p>Separates ground from non-ground points with the Cloth Simulation Filter (Zhang, Qi,
 Wan, Wang, Xie, Wang &amp; Yan 2016, Remote Sensing 8(6):501), after the authors' reference
 implementation: the cloud is turned upside down and a grid of cloth particles falls on it under
 gravity; particles that reach the (inverted) surface are pinned there, the others are held by their
@@ -77,7 +77,7 @@ ISPRS figures are reproduced (mean total error 4.8 % on the 8 samples here again
 library scheme 5.6 %, 6.1 % in its fixed order), but turned by 90, 180 or 270 degrees the same
 samples give 7.0 to 7.6 %.</p>
 <p>The run time grows with the area / resolution<sup>2</sup> more than with the number of points.</p>
-""" + COMMON_HELP
+""" + COMMON_HELP)
 
     def initFilterParameters(self):  # noqa: N802
         self.addParameter(QgsProcessingParameterNumber(

@@ -2,7 +2,7 @@
 from qgis.core import (QgsProcessingParameterDefinition, QgsProcessingParameterEnum,
                        QgsProcessingParameterNumber)
 
-from .base import COMMON_HELP, GroundFilterAlgorithm
+from .base import COMMON_HELP, GroundFilterAlgorithm, dialog_help
 
 Double = QgsProcessingParameterNumber.Type.Double
 MODES = ("faithful", "evidence")
@@ -25,7 +25,7 @@ class EchoGridAlgorithm(GroundFilterAlgorithm):
         return "echogrid.svg"
 
     def shortHelpString(self):  # noqa: N802
-        return """<p>The return-number ("echo") grid filter of Matrone et al. (2024, Method 2), made for
+        return dialog_help("""<p>The return-number ("echo") grid filter of Matrone et al. (2024, Method 2), made for
 UAV LiDAR: square kernels of <i>Kernel size</i> tile the cloud; in each, points higher than the lowest
 point + <i>Height above the kernel's lowest point</i> are non-ground; a kernel whose points all have
 return number 1 is taken as ground whole, without the height test (bare ground mostly gives single
@@ -40,7 +40,7 @@ more than the threshold above the lowest points within <i>neighbourhood</i>, eac
 <i>slope</i> x distance) is tested against that height. A neighbourhood of half the largest
 building's width also finds the middle of wide roofs, at a cost on steep terrain. Both modes are
 measured in docs/BENCHMARKS.md.</p>
-""" + COMMON_HELP
+""" + COMMON_HELP)
 
     def initFilterParameters(self):  # noqa: N802
         self.addParameter(QgsProcessingParameterNumber(

@@ -4,7 +4,7 @@ from qgis.core import (QgsProcessingParameterBoolean, QgsProcessingParameterDefi
                        QgsProcessingParameterEnum, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterDestination)
 
-from .base import COMMON_HELP, GroundFilterAlgorithm
+from .base import COMMON_HELP, GroundFilterAlgorithm, dialog_help
 
 Double = QgsProcessingParameterNumber.Type.Double
 Integer = QgsProcessingParameterNumber.Type.Integer
@@ -47,7 +47,7 @@ class EVCAlgorithm(GroundFilterAlgorithm):
         return "evc.svg"
 
     def shortHelpString(self):  # noqa: N802
-        return EVC_HELP + COMMON_HELP
+        return dialog_help(EVC_HELP + COMMON_HELP)
 
     def initFilterParameters(self):  # noqa: N802
         self.addParameter(QgsProcessingParameterNumber(
@@ -119,12 +119,12 @@ class EVCRastersAlgorithm(EVCAlgorithm):
         return "rasterworkflows"
 
     def shortHelpString(self):  # noqa: N802
-        return EVC_HELP + """<p>This workflow also writes the filter's intermediate grids as GeoTIFF with
+        return dialog_help(EVC_HELP + """<p>This workflow also writes the filter's intermediate grids as GeoTIFF with
 the cloud's CRS: the small- and large-scale mean elevations, the elevation difference, the EVC and
 the class raster (1 ground, 2 vegetation area, 3 vegetation boundary, nodata where the small cell
 is empty), to inspect and to reuse in the modeler. From <code>qgis_process</code>, name the rasters
 you want (<code>--EVC_RASTER=evc.tif --CLASS_RASTER=classes.tif</code> ...); unnamed ones are not
-written there.</p>""" + COMMON_HELP
+written there.</p>""" + COMMON_HELP)
 
     def initFilterParameters(self):  # noqa: N802
         super().initFilterParameters()

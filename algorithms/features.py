@@ -8,7 +8,7 @@ from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException,
                        QgsProcessingParameterNumber)
 from qgis.PyQt.QtGui import QIcon
 
-from .base import core_modules, feedback_callables, warn_about_crs
+from .base import core_modules, dialog_help, feedback_callables, warn_about_crs
 
 _ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
 Double = QgsProcessingParameterNumber.Type.Double
@@ -64,7 +64,7 @@ class FeaturesAlgorithm(QgsProcessingAlgorithm):
         return type(self)()
 
     def shortHelpString(self):  # noqa: N802
-        return """<p>Computes geometric features of each point's neighbourhood and writes them into a copy
+        return dialog_help("""<p>Computes geometric features of each point's neighbourhood and writes them into a copy
 of the cloud as LAS extra bytes (one float32 dimension per feature), to inspect them or to train a
 classifier. The defaults are the features and radii of Matrone et al. (2024, Method 3): verticality
 0.6 m, planarity 0.6 m, eigenentropy 0.4 m, surface variation 0.6 m.</p>
@@ -91,7 +91,7 @@ features named <code>&lt;feature&gt;_r&lt;radius&gt;</code> with <code>p</code> 
 e.g. <code>verticality_r0p6</code>, <code>eigenentropy_r0p4</code>, <code>height_above_min_r2p5</code>.
 An input that already holds a dimension of the same name is refused. Lengths are read in the unit of
 the cloud's CRS. The output is written under a temporary name and renamed when complete.</p>
-"""
+""")
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.addParameter(QgsProcessingParameterFile(

@@ -1,7 +1,7 @@
 """groundsieve:pmf — Ground filter (PMF, Zhang et al. 2003)."""
 from qgis.core import QgsProcessingParameterBoolean, QgsProcessingParameterNumber
 
-from .base import COMMON_HELP, GroundFilterAlgorithm
+from .base import COMMON_HELP, GroundFilterAlgorithm, dialog_help
 
 Double = QgsProcessingParameterNumber.Type.Double
 
@@ -24,7 +24,7 @@ class PMFAlgorithm(GroundFilterAlgorithm):
         return "pmf.svg"
 
     def shortHelpString(self):  # noqa: N802
-        return """<p>Separates ground from non-ground points with the Progressive Morphological Filter
+        return dialog_help("""<p>Separates ground from non-ground points with the Progressive Morphological Filter
 (Zhang, Chen, Whitman, Shyu, Yan &amp; Zhang 2003, IEEE TGRS 41(4):872-882), as the paper describes it:
 a minimum-elevation grid, empty cells taking the value of the nearest cell; square windows growing
 linearly (5, 9, 13, ... cells) or exponentially (3, 5, 9, 17, 33, ... cells) up to the maximum
@@ -45,7 +45,7 @@ building. Low outliers are not detected: classify them as noise (7) beforehand.<
 which follows gradual terrain better at more cost. The defaults are those of PDAL's
 <code>filters.pmf</code>; unlike it, every point is filtered unless <i>Filter only last returns</i> is
 ticked.</p>
-""" + COMMON_HELP
+""" + COMMON_HELP)
 
     def initFilterParameters(self):  # noqa: N802
         self.addParameter(QgsProcessingParameterNumber(

@@ -2,7 +2,7 @@
 from qgis.core import (QgsProcessingParameterBoolean, QgsProcessingParameterDefinition,
                        QgsProcessingParameterNumber)
 
-from .base import COMMON_HELP, GroundFilterAlgorithm
+from .base import COMMON_HELP, GroundFilterAlgorithm, dialog_help
 
 Double = QgsProcessingParameterNumber.Type.Double
 
@@ -28,7 +28,7 @@ class PTDAlgorithm(GroundFilterAlgorithm):
         return "ptd.svg"
 
     def shortHelpString(self):  # noqa: N802
-        return """<p>Separates ground from non-ground points by progressive TIN densification (Axelsson
+        return dialog_help("""<p>Separates ground from non-ground points by progressive TIN densification (Axelsson
 2000, "DEM generation from laser scanner data using adaptive TIN models", IAPRS 33(B4)), the method
 of TerraScan's ground routine and LAStools' lasground: the lowest point of each cell of a grid as
 large as the largest building seeds a triangulated surface (TIN) of the ground; then, round after
@@ -59,7 +59,7 @@ steep slopes but also lets it climb onto objects joined to sloping ground (off).
 <b>Reject low outliers</b>: on.</p>
 <p>The defaults and what each choice does on the ISPRS filter-test samples are in
 docs/BENCHMARKS.md.</p>
-""" + COMMON_HELP
+""" + COMMON_HELP)
 
     def initFilterParameters(self):  # noqa: N802
         self.addParameter(QgsProcessingParameterNumber(

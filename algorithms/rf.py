@@ -9,7 +9,7 @@ from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException, QgsProces
                        QgsProcessingParameterRasterDestination, QgsProcessingParameterString)
 from qgis.PyQt.QtGui import QIcon
 
-from .base import core_modules, feedback_callables
+from .base import core_modules, dialog_help, feedback_callables
 
 _ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
 Double = QgsProcessingParameterNumber.Type.Double
@@ -65,7 +65,7 @@ class RFTrainAlgorithm(_RFBase):
         return "Train Random Forest classifier"
 
     def shortHelpString(self):  # noqa: N802
-        return """<p>Trains a Random Forest on a labelled point cloud (its classification field is the
+        return dialog_help("""<p>Trains a Random Forest on a labelled point cloud (its classification field is the
 label), as Matrone et al. (2024, Method 3) did to test whether the return number helps.</p>
 <p><b>Classes</b>: ASPRS codes to learn, e.g. <code>2,1</code> or <code>2,11,5,6,14</code>
 (ground, road, vegetation, building, power line); empty = every class present except 0, 7 and 18.</p>
@@ -86,7 +86,7 @@ training time on large clouds.</p>
 <p><b>Outputs</b>: the model file (.npz: plain arrays with a checksum, never a pickle, so loading it
 cannot run code; a changed or foreign file is refused) and an HTML report (per-class precision,
 recall, F1, overall accuracy, weighted averages, confusion matrices, impurity and permutation feature
-importances, timings) with the same figures in a CSV beside it.</p>"""
+importances, timings) with the same figures in a CSV beside it.</p>""")
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.addParameter(QgsProcessingParameterFile(
@@ -189,12 +189,12 @@ class RFClassifyAlgorithm(_RFBase):
         return "Classify with Random Forest model"
 
     def shortHelpString(self):  # noqa: N802
-        return """<p>Applies a model trained with <i>Train Random Forest classifier</i> to another cloud and
+        return dialog_help("""<p>Applies a model trained with <i>Train Random Forest classifier</i> to another cloud and
 writes it with the predicted ASPRS classes (every other dimension kept); optionally a DTM GeoTIFF
 from the points predicted as ground (class 2), as the ground filters make it.</p>
 <p>The model is refused with a clear message when the file was changed or is not a GroundSieve
 model, or when the cloud cannot give the model's features (e.g. colour in one and not the other).
-Loading a model never runs code from the file (plain arrays, no pickle).</p>"""
+Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.addParameter(QgsProcessingParameterFile(

@@ -1,7 +1,7 @@
 """groundsieve:smrf — Ground filter (SMRF, Pingel, Clarke & McBride 2013)."""
 from qgis.core import QgsProcessingParameterBoolean, QgsProcessingParameterNumber
 
-from .base import COMMON_HELP, GroundFilterAlgorithm
+from .base import COMMON_HELP, GroundFilterAlgorithm, dialog_help
 
 Double = QgsProcessingParameterNumber.Type.Double
 
@@ -24,7 +24,7 @@ class SMRFAlgorithm(GroundFilterAlgorithm):
         return "smrf.svg"
 
     def shortHelpString(self):  # noqa: N802
-        return """<p>Separates ground from non-ground points with the Simple Morphological Filter
+        return dialog_help("""<p>Separates ground from non-ground points with the Simple Morphological Filter
 (Pingel, Clarke &amp; McBride 2013, ISPRS J. Photogramm. 77:21-30), as the paper describes it:
 a minimum-elevation grid with empty cells filled by harmonic inpainting; low outliers found on the
 inverted surface; a progressive opening with disks growing one cell at a time up to the maximum
@@ -39,7 +39,7 @@ surface interpolated over the object cells; finally each point is ground when it
 <b>Remove low outliers before the opening</b>: low-outlier cells are refilled from their
 neighbours before the progressive opening (on by default; Pingel's Python code leaves it off;
 it lowers the mean ISPRS total error with the single parameter set, see docs/BENCHMARKS.md).</p>
-""" + COMMON_HELP
+""" + COMMON_HELP)
 
     def initFilterParameters(self):  # noqa: N802
         self.addParameter(QgsProcessingParameterNumber(

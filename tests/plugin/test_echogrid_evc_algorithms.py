@@ -163,3 +163,15 @@ def test_csf_form_maps_to_the_core_filter(groundsieve_provider, index, scheme):
     f = algorithm.buildFilter({}, QgsProcessingContext())  # the form's defaults are the core's
     from groundsieve.core.csf import CSF
     assert f == CSF(rigidness=3)
+
+
+def test_help_is_one_line_per_paragraph(groundsieve_provider):
+    """QGIS's algorithm dialog turns every line of shortHelpString into a paragraph, so the help
+    of every algorithm must have no line breaks (its paragraphs are HTML tags)."""
+    algorithms = groundsieve_provider.algorithms()
+    assert len(algorithms) >= 10
+    for algorithm in algorithms:
+        text = algorithm.shortHelpString()
+        assert text.startswith("<p>") and "</p>" in text, algorithm.id()
+        assert "\n" not in text, algorithm.id()
+        assert "  " not in text, algorithm.id()
