@@ -507,6 +507,25 @@ def _free_fall_kernel(pos, old, hv, acceleration, iterations, stop_diff):
 
 
 @njit(cache=True, nogil=True)
+def _neighbour4(p, k, W, H):
+    """The k-th 4-neighbour (0 west, 1 east, 2 south, 3 north) of particle ``p`` on the
+    row-major W x H cloth, or -1 beyond its edge."""
+    r = p // W
+    c = p - r * W
+    if k == 0:
+        c -= 1
+    elif k == 1:
+        c += 1
+    elif k == 2:
+        r -= 1
+    else:
+        r += 1
+    if r < 0 or r >= H or c < 0 or c >= W:
+        return -1
+    return r * W + c
+
+
+@njit(cache=True, nogil=True)
 def _slope_smooth_kernel(pos, movable, hv, W, H, height_diff, min_size):
     """The reference's post-processing (Cloth::movableFilter): each 4-connected group of
     still-movable particles larger than ``min_size`` is pulled onto its intersection heights
@@ -522,8 +541,6 @@ def _slope_smooth_kernel(pos, movable, hv, W, H, height_diff, min_size):
     comp = np.empty(n, dtype=np.int64)
     queue = np.empty(n, dtype=np.int64)
     queued = np.zeros(n, dtype=np.bool_)
-    dcs = (-1, 1, 0, 0)
-    drs = (0, 0, -1, 1)
     total = 0
     for c0 in range(W):
         for r0 in range(H):
@@ -537,14 +554,10 @@ def _slope_smooth_kernel(pos, movable, hv, W, H, height_diff, min_size):
             while head < size:
                 p = comp[head]
                 head += 1
-                r = p // W
-                c = p - r * W
                 for k in range(4):
-                    rr = r + drs[k]
-                    cc = c + dcs[k]
-                    if rr < 0 or rr >= H or cc < 0 or cc >= W:
+                    q = _neighbour4(p, k, W, H)
+                    if q < 0:
                         continue
-                    q = rr * W + cc
                     if movable[q] and not visited[q]:
                         visited[q] = True
                         comp[size] = q
@@ -556,14 +569,10 @@ def _slope_smooth_kernel(pos, movable, hv, W, H, height_diff, min_size):
             qt = 0
             for i in range(size):
                 p = comp[i]
-                r = p // W
-                c = p - r * W
                 for k in range(4):
-                    rr = r + drs[k]
-                    cc = c + dcs[k]
-                    if rr < 0 or rr >= H or cc < 0 or cc >= W:
+                    q = _neighbour4(p, k, W, H)
+                    if q < 0:
                         continue
-                    q = rr * W + cc
                     if not movable[q] and abs(hv[p] - hv[q]) < height_diff:
                         pos[p] = hv[p]
                         movable[p] = False
@@ -576,14 +585,10 @@ def _slope_smooth_kernel(pos, movable, hv, W, H, height_diff, min_size):
             while head < qt:
                 p = queue[head]
                 head += 1
-                r = p // W
-                c = p - r * W
                 for k in range(4):
-                    rr = r + drs[k]
-                    cc = c + dcs[k]
-                    if rr < 0 or rr >= H or cc < 0 or cc >= W:
+                    q = _neighbour4(p, k, W, H)
+                    if q < 0:
                         continue
-                    q = rr * W + cc
                     if member[q] and not queued[q] and abs(hv[p] - hv[q]) < height_diff:
                         if movable[q]:
                             pos[q] = hv[q]
