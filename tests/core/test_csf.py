@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from groundsieve.core.csf import CSF, CSFResult
-from groundsieve.core.errors import Cancelled, InputError, InvalidParameterError
+from groundsieve.core.errors import Cancelled, InvalidParameterError
 from groundsieve.core.progress import Steps
 from groundsieve.tests.core.scenes import BOX, X0, Y0, add_trees, plane_scene
 
@@ -511,33 +511,6 @@ def test_2016_scheme_reproduces_the_published_isprs_figures():
 
 
 # --- degenerate inputs ----------------------------------------------------------------------
-
-def test_one_point():
-    g = CSF()(np.array([[X0, Y0, 250.0]]))
-    assert g.shape == (1,) and g.dtype == bool and g[0]
-
-
-def test_all_points_identical():
-    assert CSF()(np.tile([[X0, Y0, 3.0]], (10, 1))).all()
-
-
-@pytest.mark.parametrize("layout", ["row", "column", "diagonal", "two"])
-def test_degenerate_layouts_do_not_crash(layout):
-    t = np.arange(40, dtype=np.float64)
-    xyz = {"row": np.column_stack([t + X0, np.full(40, Y0), np.zeros(40)]),
-           "column": np.column_stack([np.full(40, X0), t + Y0, np.zeros(40)]),
-           "diagonal": np.column_stack([t + X0, t + Y0, np.zeros(40)]),
-           "two": np.array([[X0, Y0, 1.0], [X0 + 25.0, Y0 + 3.0, 1.0]])}[layout]
-    g = CSF()(xyz)
-    assert g.shape == (len(xyz),) and g.all()
-
-
-@pytest.mark.parametrize("xyz", [np.empty((0, 3)), np.zeros((5, 2)), np.array([[0.0, np.nan, 1.0]])],
-                         ids=["empty", "2cols", "nan"])
-def test_bad_arrays_raise_input_error(xyz):
-    with pytest.raises(InputError):
-        CSF()(xyz)
-
 
 def test_too_fine_a_cloth_is_refused():
     xyz = np.array([[X0, Y0, 0.0], [X0 + 20000.0, Y0 + 20000.0, 0.0]])

@@ -1,13 +1,16 @@
 """What every ground filter promises the driver, checked once for all of them: progress stays
 within the range it is given, grows and ends at its top; a cancellation request stops the run
-through ``run`` and through ``__call__``. Filter-specific progress counts and mid-run
-cancellation are tested in each filter's own module."""
+through ``run`` and through ``__call__``; concurrent runs in threads agree with single runs; bad
+arrays (empty, wrong shape, NaN or infinite coordinates) raise InputError; and the terrain
+filters (SMRF, PMF, CSF, PTD) call every point ground on degenerate but valid input (one point,
+identical points, one height, points on a line or a grid). Filter-specific progress counts,
+mid-run cancellation and inputs are tested in each filter's own module."""
 import numpy as np
 import pytest
 
 from groundsieve.core.csf import CSF
 from groundsieve.core.echogrid import EchoGrid
-from groundsieve.core.errors import Cancelled
+from groundsieve.core.errors import Cancelled, InputError
 from groundsieve.core.evc import EVC
 from groundsieve.core.pmf import PMF
 from groundsieve.core.progress import Steps
@@ -73,3 +76,74 @@ def test_concurrent_runs_in_threads_give_the_same_results():
     assert not any(t.is_alive() for t in threads), "a thread did not finish"
     assert not problems, problems
     assert all(e.any() and not e.all() for e in expected)  # real classifications, not trivial ones
+
+
+# --- degenerate and bad inputs, the same answer from every filter -------------------------------
+
+X0, Y0 = 512000.0, 5403000.0
+#: The filters of a terrain surface: on degenerate but finite input every point is ground.
+TERRAIN_FILTERS = [SMRF(), PMF(), CSF(), PTD()]
+
+
+def _bad_arrays():
+    finite = plane(size=10.0)
+    cases = {"empty": np.empty((0, 3)), "empty1d": np.empty((0,)), "2cols": np.zeros((5, 2)),
+             "4cols": np.zeros((3, 4)), "1d": np.zeros(3)}
+    for column in range(3):
+        for name, value in (("nan", np.nan), ("inf", np.inf), ("-inf", -np.inf)):
+            xyz = finite.copy()
+            xyz[3, column] = value
+            cases[f"{name}-in-{'xyz'[column]}"] = xyz
+    return cases
+
+
+BAD_ARRAYS = _bad_arrays()
+
+
+@pytest.mark.parametrize("case", list(BAD_ARRAYS))
+@pytest.mark.parametrize("algorithm", FILTERS, ids=lambda f: f.name)
+def test_bad_arrays_raise_input_error(algorithm, case):
+    with pytest.raises(InputError) as info:
+        algorithm(BAD_ARRAYS[case])
+    if "-in-" in case:
+        assert "NaN or infinite" in str(info.value)
+
+
+@pytest.mark.parametrize("algorithm", TERRAIN_FILTERS, ids=lambda f: f.name)
+def test_one_point_is_ground(algorithm):
+    g = algorithm(np.array([[X0, Y0, 250.0]]))
+    assert g.shape == (1,) and g.dtype == bool and g[0]
+
+
+@pytest.mark.parametrize("algorithm", TERRAIN_FILTERS, ids=lambda f: f.name)
+def test_identical_points_are_ground(algorithm):
+    assert algorithm(np.tile([[X0, Y0, 3.0]], (1000, 1))).all()
+
+
+@pytest.mark.parametrize("algorithm", TERRAIN_FILTERS, ids=lambda f: f.name)
+def test_points_at_one_height_are_ground(algorithm):
+    rng = np.random.default_rng(11)
+    xyz = np.column_stack([rng.uniform(0, 30, 500) + X0, rng.uniform(0, 30, 500) + Y0, np.full(500, 7.0)])
+    assert algorithm(xyz).all()
+
+
+def _layouts():
+    t = np.arange(40, dtype=np.float64)
+    gx, gy = np.meshgrid(np.arange(20.0), np.arange(20.0))
+    return {"row": np.column_stack([t + X0, np.full(40, Y0), np.zeros(40)]),
+            "column": np.column_stack([np.full(40, X0), t + Y0, np.zeros(40)]),
+            "diagonal": np.column_stack([t + X0, t + Y0, np.zeros(40)]),
+            "two": np.array([[X0, Y0, 1.0], [X0 + 25.0, Y0 + 3.0, 1.5]]),
+            "grid": np.column_stack([gx.ravel() + X0, gy.ravel() + Y0, np.full(gx.size, 2.0)])}
+
+
+LAYOUTS = _layouts()
+
+
+@pytest.mark.parametrize("layout", list(LAYOUTS))
+@pytest.mark.parametrize("algorithm", TERRAIN_FILTERS, ids=lambda f: f.name)
+def test_degenerate_layouts_are_ground(algorithm, layout):
+    """Points on a line, a diagonal, a regular grid, or just two far apart: no crash, all ground."""
+    xyz = LAYOUTS[layout]
+    g = algorithm(xyz)
+    assert g.shape == (len(xyz),) and g.all()

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from numpy.lib.stride_tricks import sliding_window_view
 
-from groundsieve.core.errors import Cancelled, InputError, InvalidParameterError
+from groundsieve.core.errors import Cancelled, InvalidParameterError
 from groundsieve.core.io import new_las, write_las
 from groundsieve.core.pmf import (PMF, PMFResult, fill_nearest, square_dilate, square_erode,
                                   square_opening)
@@ -263,42 +263,6 @@ def test_float32_and_list_input():
     xyz32 = (xyz - [X0, Y0, 0.0]).astype(np.float32)
     assert PMF()(xyz32).all()
     assert PMF()(xyz[:50].tolist()).all()
-
-
-# --- degenerate inputs ------------------------------------------------------------------------
-
-def test_one_point():
-    g = PMF()(np.array([[X0, Y0, 250.0]]))
-    assert g.shape == (1,) and g.dtype == bool and g[0]
-
-
-def test_all_points_identical():
-    assert PMF()(np.tile([[X0, Y0, 3.0]], (10, 1))).all()
-
-
-@pytest.mark.parametrize("layout", ["row", "column", "diagonal", "two"])
-def test_degenerate_layouts_do_not_crash(layout):
-    t = np.arange(40, dtype=np.float64)
-    xyz = {"row": np.column_stack([t + X0, np.full(40, Y0), np.zeros(40)]),
-           "column": np.column_stack([np.full(40, X0), t + Y0, np.zeros(40)]),
-           "diagonal": np.column_stack([t + X0, t + Y0, np.zeros(40)]),
-           "two": np.array([[X0, Y0, 1.0], [X0 + 25.0, Y0 + 3.0, 1.05]])}[layout]
-    g = PMF()(xyz)
-    assert g.shape == (len(xyz),) and g.all()
-
-
-@pytest.mark.parametrize("bad_value", [np.nan, np.inf])
-def test_non_finite_coordinates_raise_input_error(bad_value):
-    xyz, _ = plane_scene(size=10.0)
-    xyz[3, 2] = bad_value
-    with pytest.raises(InputError, match="NaN or infinite"):
-        PMF()(xyz)
-
-
-@pytest.mark.parametrize("xyz", [np.empty((0, 3)), np.zeros((5, 2))], ids=["empty", "2cols"])
-def test_bad_arrays_raise_input_error(xyz):
-    with pytest.raises(InputError):
-        PMF()(xyz)
 
 
 # --- the window and threshold series -------------------------------------------------------------

@@ -11,7 +11,7 @@ import pytest
 from groundsieve.core.errors import Cancelled, InputError, InvalidParameterError
 from groundsieve.core.progress import Steps
 from groundsieve.core.smrf import SMRF, SMRFResult, validate_xyz
-from groundsieve.tests.core.scenes import BOX, X0, Y0, add_trees, plane_scene
+from groundsieve.tests.core.scenes import BOX, add_trees, plane_scene
 
 # scenes.BOX, 15 x 15 m, lies inside the 18 m default window.
 
@@ -85,48 +85,6 @@ def test_finer_cell_size():
 
 
 # --- degenerate inputs ----------------------------------------------------------------------
-
-def test_one_point():
-    g = SMRF()(np.array([[X0, Y0, 250.0]]))
-    assert g.shape == (1,) and g.dtype == bool and g[0]
-
-
-def test_all_points_at_the_same_height():
-    rng = np.random.default_rng(11)
-    xyz = np.column_stack([rng.uniform(0, 30, 500) + X0, rng.uniform(0, 30, 500) + Y0, np.full(500, 7.0)])
-    assert SMRF()(xyz).all()
-
-
-def test_all_points_identical():
-    assert SMRF()(np.tile([[X0, Y0, 3.0]], (10, 1))).all()
-
-
-@pytest.mark.parametrize("layout", ["row", "column", "diagonal", "two"])
-def test_degenerate_layouts_do_not_crash(layout):
-    t = np.arange(40, dtype=np.float64)
-    xyz = {"row": np.column_stack([t + X0, np.full(40, Y0), np.zeros(40)]),
-           "column": np.column_stack([np.full(40, X0), t + Y0, np.zeros(40)]),
-           "diagonal": np.column_stack([t + X0, t + Y0, np.zeros(40)]),
-           "two": np.array([[X0, Y0, 1.0], [X0 + 25.0, Y0 + 3.0, 1.5]])}[layout]
-    g = SMRF()(xyz)
-    assert g.shape == (len(xyz),) and g.all()
-
-
-@pytest.mark.parametrize("bad_value", [np.nan, np.inf, -np.inf])
-@pytest.mark.parametrize("column", [0, 1, 2])
-def test_non_finite_coordinates_raise_input_error(bad_value, column):
-    xyz, _ = plane_scene(size=10.0)
-    xyz[3, column] = bad_value
-    with pytest.raises(InputError, match="NaN or infinite"):
-        SMRF()(xyz)
-
-
-@pytest.mark.parametrize("xyz", [np.empty((0, 3)), np.empty((0,)), np.zeros((5, 2)), np.zeros((3, 4)),
-                                 np.zeros(3)], ids=["empty", "empty1d", "2cols", "4cols", "1d"])
-def test_bad_arrays_raise_input_error(xyz):
-    with pytest.raises(InputError):
-        SMRF()(xyz)
-
 
 def test_huge_coordinates_raise_input_error():
     xyz, _ = plane_scene(size=10.0)
