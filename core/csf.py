@@ -104,7 +104,7 @@ import numpy as np
 from .errors import InvalidParameterError
 from .grid import MAX_CELLS, GridSpec
 from .progress import Steps
-from .smrf import check_number, validate_xyz
+from .smrf import check_choice, check_number, validate_xyz
 
 #: Constants of the reference implementation.
 GRAVITY = 0.2                 #: gravity of the cloth (per unit time step squared)
@@ -223,14 +223,9 @@ class CSF:
                  f"low_outlier_m must be >= 0 (0 = off) (got {self.low_outlier_m})")
         _require(isinstance(self.slope_smooth, (bool, np.bool_)),
                  f"slope_smooth must be True or False (got {self.slope_smooth!r})")
-        _require(self.intersection_height in INTERSECTION_HEIGHTS,
-                 f"intersection_height must be one of {', '.join(INTERSECTION_HEIGHTS)} "
-                 f"(got {self.intersection_height!r})")
-        _require(self.sweep_order in SWEEP_ORDERS,
-                 f"sweep_order must be one of {', '.join(SWEEP_ORDERS)} (got {self.sweep_order!r})")
-        _require(self.constraint_scheme in CONSTRAINT_SCHEMES,
-                 f"constraint_scheme must be one of {', '.join(CONSTRAINT_SCHEMES)} "
-                 f"(got {self.constraint_scheme!r})")
+        check_choice(self, "intersection_height", INTERSECTION_HEIGHTS)
+        check_choice(self, "sweep_order", SWEEP_ORDERS)
+        check_choice(self, "constraint_scheme", CONSTRAINT_SCHEMES)
 
     @property
     def gravity_step_m(self) -> float:

@@ -36,7 +36,7 @@ import numpy as np
 
 from .errors import InvalidParameterError
 from .progress import Steps
-from .smrf import check_number, validate_xyz
+from .smrf import check_choice, check_number, validate_xyz
 
 MODES = ("faithful", "evidence")
 
@@ -73,8 +73,7 @@ class EchoGrid:
             raise InvalidParameterError(f"kernel_m must be > 0 (got {self.kernel_m})")
         if not (math.isfinite(self.dz_m) and self.dz_m >= 0):
             raise InvalidParameterError(f"dz_m must be >= 0 (got {self.dz_m})")
-        if self.mode not in MODES:
-            raise InvalidParameterError(f"mode must be one of {', '.join(MODES)} (got {self.mode!r})")
+        check_choice(self, "mode", MODES)
 
     def __call__(self, xyz, steps=None, **fields) -> np.ndarray:
         return self.run(xyz, steps, **fields).ground

@@ -44,7 +44,7 @@ from .errors import InvalidParameterError
 from .grid import GridSpec
 from .progress import Steps
 from .rasterize import cell_mean
-from .smrf import check_number, validate_xyz
+from .smrf import check_choice, check_number, validate_xyz
 
 DIFFERENCES = ("large_minus_small", "small_minus_large")
 #: class codes of the class raster
@@ -100,9 +100,7 @@ class EVC:
             raise InvalidParameterError(f"threshold must be > 0 (got {self.threshold})")
         if not (math.isfinite(self.ground_offset_m) and self.ground_offset_m >= 0):
             raise InvalidParameterError(f"ground_offset_m must be >= 0 (got {self.ground_offset_m})")
-        if self.difference not in DIFFERENCES:
-            raise InvalidParameterError(
-                f"difference must be one of {', '.join(DIFFERENCES)} (got {self.difference!r})")
+        check_choice(self, "difference", DIFFERENCES)
 
     def __call__(self, xyz, steps=None, **_fields) -> np.ndarray:
         return self.run(xyz, steps).ground

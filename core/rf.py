@@ -22,6 +22,7 @@ import numpy as np
 
 from .errors import InputError, InvalidParameterError
 from .io import atomic_path
+from .smrf import check_choice
 
 FORMAT = "groundsieve-rf"
 FORMAT_VERSION = 1
@@ -52,10 +53,8 @@ class ForestParams:
     def __post_init__(self):
         if isinstance(self.n_trees, bool) or not isinstance(self.n_trees, (int, np.integer)) or self.n_trees < 1:
             raise InvalidParameterError(f"n_trees must be a whole number >= 1 (got {self.n_trees!r})")
-        if self.criterion not in CRITERIA:
-            raise InvalidParameterError(f"criterion must be one of {', '.join(CRITERIA)} (got {self.criterion!r})")
-        if self.scaler not in SCALERS:
-            raise InvalidParameterError(f"scaler must be one of {', '.join(SCALERS)} (got {self.scaler!r})")
+        check_choice(self, "criterion", CRITERIA)
+        check_choice(self, "scaler", SCALERS)
         if self.max_depth is not None and (not isinstance(self.max_depth, (int, np.integer)) or self.max_depth < 1):
             raise InvalidParameterError(f"max_depth must be None or a whole number >= 1 (got {self.max_depth!r})")
         if self.max_samples is not None and (not isinstance(self.max_samples, (int, np.integer))

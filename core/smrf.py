@@ -47,6 +47,13 @@ def check_number(params, name: str) -> None:
         raise InvalidParameterError(f"{name} must be a number (got {value!r})")
 
 
+def check_choice(params, name: str, choices) -> None:
+    """Refuse a parameter that is not one of ``choices`` with the core's error."""
+    value = getattr(params, name)
+    if value not in choices:
+        raise InvalidParameterError(f"{name} must be one of {', '.join(choices)} (got {value!r})")
+
+
 def validate_xyz(xyz: np.ndarray, *, what: str = "point cloud") -> np.ndarray:
     """Return ``xyz`` as a contiguous float64 (n, 3) array; refuse empty or non-finite input."""
     xyz = np.asarray(xyz)
