@@ -97,12 +97,7 @@ import sys
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-_PLUGINS = REPO / ".build" / "plugins"
-if not (_PLUGINS / "groundsieve").exists():
-    sys.exit(f"{_PLUGINS / 'groundsieve'} is missing: run scripts/bootstrap first")
-if str(_PLUGINS) not in sys.path:
-    sys.path.insert(0, str(_PLUGINS))
+from _checkout import REPO  # noqa: E402,F401 (puts this checkout's groundsieve on sys.path)
 
 import numpy as np  # noqa: E402
 

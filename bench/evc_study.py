@@ -10,12 +10,9 @@ neighbourhood radius 1-6; (3) the threshold 1.0-2.0 (and natural breaks). Every 
 parameter can be fixed with --small, --offset, --difference.
 """
 import argparse
-import sys
 import time
-from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / ".build" / "plugins"))
+from _checkout import REPO  # noqa: E402,F401 (puts this checkout's groundsieve on sys.path)
 
 import numpy as np  # noqa: E402
 

@@ -33,19 +33,13 @@ import time
 from pathlib import Path
 from typing import Callable, Dict, List, Optional
 
-REPO = Path(__file__).resolve().parents[1]
-_PLUGINS = REPO / ".build" / "plugins"
-if not (_PLUGINS / "groundsieve").exists():
-    sys.exit(f"{_PLUGINS / 'groundsieve'} is missing: run scripts/bootstrap first")
-if str(_PLUGINS) not in sys.path:
-    sys.path.insert(0, str(_PLUGINS))
+from _checkout import REPO  # noqa: E402,F401 (puts this checkout's groundsieve on sys.path)
 
 import numpy as np  # noqa: E402
 
 from groundsieve.core.io import CLASS_GROUND, read_cloud  # noqa: E402
 from groundsieve.core.metrics import GroundAccuracy, ground_accuracy  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 from filters import FILTERS  # noqa: E402
 
 ParamsRow = Optional[Dict[str, str]]

@@ -21,10 +21,8 @@ skipped.
 import argparse
 import sys
 import time
-from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / ".build" / "plugins"))
+from _checkout import REPO  # noqa: E402,F401 (puts this checkout's groundsieve on sys.path)
 
 import numpy as np  # noqa: E402
 
@@ -46,7 +44,6 @@ def columns(cloud, names, cache):
 
 def isprs_sets(samples, configs, block_m, data):
     """(train X, train y, test X, test y) per configuration, pooled over the ISPRS samples."""
-    sys.path.insert(0, str(REPO / "bench"))
     from returns import SiteCache, load_isprs
 
     from groundsieve.core.features import FeatureSpec, compute_features

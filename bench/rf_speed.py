@@ -8,12 +8,9 @@
    timed, features excluded. Prints one markdown table.
 """
 import argparse
-import sys
 import time
-from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / ".build" / "plugins"))
+from _checkout import REPO  # noqa: E402,F401 (puts this checkout's groundsieve on sys.path)
 
 import numpy as np  # noqa: E402
 

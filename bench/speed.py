@@ -18,10 +18,8 @@ import os
 import subprocess
 import sys
 import time
-from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / ".build" / "plugins"))
+from _checkout import REPO  # noqa: E402,F401 (puts this checkout's groundsieve on sys.path)
 
 
 def _rss_kib(field):
@@ -36,7 +34,6 @@ def child(filter_name, n_points, density, seed):
     import numpy as np
 
     from groundsieve.core.synthetic import SceneSpec, make_scene
-    sys.path.insert(0, str(REPO / "bench"))
     from filters import make_filter
     algorithm = make_filter(filter_name, None)
     scene = make_scene(SceneSpec.for_points(n_points, density_per_m2=density, seed=seed))
