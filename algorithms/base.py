@@ -47,7 +47,8 @@ def core_modules(extra=None):
     from ..dependencies import require_dependencies
     try:
         require_dependencies(extra)
-        from ..core import errors, workflow
+        from ..core import errors
+        from ..core.engine import workflow
     except ImportError as err:
         raise QgsProcessingException(str(err)) from err
     return errors, workflow

@@ -105,7 +105,7 @@ samples give 7.0 to 7.6 %.</p>
             self.addParameter(param)
 
     def buildFilter(self, parameters, context):  # noqa: N802
-        from ..core.csf import CSF
+        from ..core.filters.csf import CSF
         return CSF(cloth_resolution_m=self.parameterAsDouble(parameters, self.RESOLUTION, context),
                    rigidness=self.parameterAsEnum(parameters, self.RIGIDNESS, context) + 1,
                    time_step=self.parameterAsDouble(parameters, self.TIME_STEP, context),

@@ -59,7 +59,7 @@ measured in docs/BENCHMARKS.md.</p>
             self.addParameter(param)
 
     def buildFilter(self, parameters, context):  # noqa: N802
-        from ..core.echogrid import EchoGrid
+        from ..core.filters.echogrid import EchoGrid
         return EchoGrid(kernel_m=self.parameterAsDouble(parameters, self.KERNEL, context),
                         dz_m=self.parameterAsDouble(parameters, self.DZ, context),
                         mode=MODES[self.parameterAsEnum(parameters, self.MODE, context)],

@@ -76,7 +76,7 @@ class EVCAlgorithm(GroundFilterAlgorithm):
             self.addParameter(param)
 
     def buildFilter(self, parameters, context):  # noqa: N802
-        from ..core.evc import EVC
+        from ..core.filters.evc import EVC
         radius = self.parameterAsInt(parameters, self.RADIUS, context)
         return EVC(small_scale_m=self.parameterAsDouble(parameters, self.SMALL_SCALE, context),
                    large_scale_m=self.parameterAsDouble(parameters, self.LARGE_SCALE, context),

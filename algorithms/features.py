@@ -129,7 +129,8 @@ the cloud's CRS. The output is written under a temporary name and renamed when c
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         errors, _workflow = core_modules()
-        from ..core import features
+        from ..core.engine import features_run
+        from ..core.learn import features
         input_path = self.parameterAsFile(parameters, self.INPUT, context)
         output_path = self.parameterAsFileOutput(parameters, self.OUTPUT, context)
         pairs = self.featurePairs(parameters, context)
@@ -139,7 +140,7 @@ the cloud's CRS. The output is written under a temporary name and renamed when c
         try:
             spec = features.FeatureSpec(tuple(pairs))
             feedback.pushInfo("Features: " + ", ".join(spec.names))
-            run = features.run_features(input_path, output_path, spec, **feedback_callables(feedback))
+            run = features_run.run_features(input_path, output_path, spec, **feedback_callables(feedback))
         except errors.GroundSieveError as err:
             raise QgsProcessingException(str(err)) from err
         warn_about_crs(feedback, input_path, run.cloud.crs_wkt, "every radius")

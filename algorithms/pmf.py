@@ -64,7 +64,7 @@ ticked.</p>
             self.EXPONENTIAL, "Exponential window growth (off: linear)", defaultValue=True))
 
     def buildFilter(self, parameters, context):  # noqa: N802
-        from ..core.pmf import PMF
+        from ..core.filters.pmf import PMF
         return PMF(cell_size_m=self.parameterAsDouble(parameters, self.CELL, context),
                    max_window_m=self.parameterAsDouble(parameters, self.MAX_WINDOW, context),
                    slope=self.parameterAsDouble(parameters, self.SLOPE, context),

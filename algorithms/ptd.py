@@ -86,7 +86,7 @@ docs/BENCHMARKS.md.</p>
             self.addParameter(param)
 
     def buildFilter(self, parameters, context):  # noqa: N802
-        from ..core.ptd import PTD
+        from ..core.filters.ptd import PTD
         return PTD(seed_cell_m=self.parameterAsDouble(parameters, self.SEED_CELL, context),
                    max_angle_deg=self.parameterAsDouble(parameters, self.MAX_ANGLE, context),
                    max_distance_m=self.parameterAsDouble(parameters, self.MAX_DISTANCE, context),

@@ -22,8 +22,9 @@ CLOUD_FILTER = "Point clouds (*.las *.laz *.LAS *.LAZ)"
 
 def _rf(extra=None):
     errors, _workflow = core_modules(extra)
-    from ..core import rf
-    return errors, rf
+    from ..core.engine import learning
+    from ..core.learn import rf
+    return errors, rf, learning
 
 
 class _RFBase(QgsProcessingAlgorithm):
@@ -135,7 +136,7 @@ importances, timings) with the same figures in a CSV beside it.</p>""")
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         from ..dependencies import TRAINING
-        errors, rf = _rf(TRAINING)
+        errors, rf, learning = _rf(TRAINING)
         try:
             preset = PRESET_NAMES[self.parameterAsEnum(parameters, self.PRESET, context)]
             if preset == "custom":
@@ -157,12 +158,12 @@ importances, timings) with the same figures in a CSV beside it.</p>""")
                 criterion=CRITERIA[self.parameterAsEnum(parameters, self.CRITERION, context)],
                 scaler=SCALERS[self.parameterAsEnum(parameters, self.SCALER, context)],
                 max_depth=depth or None, max_samples=samples or None)
-            options = rf.TrainOptions(features=features, classes=classes, params=params,
-                                      block_m=self.parameterAsDouble(parameters, self.BLOCK, context),
-                                      grid=self.parameterAsBoolean(parameters, self.GRID, context))
+            options = learning.TrainOptions(features=features, classes=classes, params=params,
+                                            block_m=self.parameterAsDouble(parameters, self.BLOCK, context),
+                                            grid=self.parameterAsBoolean(parameters, self.GRID, context))
             model_path = self.parameterAsFileOutput(parameters, self.MODEL, context)
             report_path = self.parameterAsFileOutput(parameters, self.REPORT, context)
-            run = rf.train_file(
+            run = learning.train_file(
                 self.parameterAsFile(parameters, self.INPUT, context), model_path, report_path, options,
                 validation_path=self.parameterAsFile(parameters, self.VALIDATION, context) or None,
                 test_path=self.parameterAsFile(parameters, self.TEST, context) or None,
@@ -213,16 +214,16 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
             self.DTM_FILL, "Fill DTM cells outside the ground hull (nearest value)", defaultValue=False))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        errors, rf = _rf()
-        from ..core.workflow import DTMOptions
+        errors, rf, learning = _rf()
+        from ..core.engine.workflow import DTMOptions
         output = self.parameterAsFileOutput(parameters, self.OUTPUT, context)
         dtm_path = self.parameterAsOutputLayer(parameters, self.DTM, context) or None
         try:
             dtm = DTMOptions(cell_size_m=self.parameterAsDouble(parameters, self.DTM_CELL, context),
                              fill_outside_hull=self.parameterAsBoolean(parameters, self.DTM_FILL, context))
-            rf.classify_file(self.parameterAsFile(parameters, self.INPUT, context), output,
-                             self.parameterAsFile(parameters, self.MODEL, context), dtm_path=dtm_path, dtm=dtm,
-                             **feedback_callables(feedback))
+            learning.classify_file(self.parameterAsFile(parameters, self.INPUT, context), output,
+                                   self.parameterAsFile(parameters, self.MODEL, context), dtm_path=dtm_path,
+                                   dtm=dtm, **feedback_callables(feedback))
         except errors.GroundSieveError as err:
             raise QgsProcessingException(str(err)) from err
         results = {self.OUTPUT: output}

@@ -56,7 +56,7 @@ it lowers the mean ISPRS total error with the single parameter set, see docs/BEN
             self.LOW_OUTLIER_FILL, "Remove low outliers before the opening", defaultValue=True))
 
     def buildFilter(self, parameters, context):  # noqa: N802
-        from ..core.smrf import SMRF
+        from ..core.filters.smrf import SMRF
         return SMRF(cell_size_m=self.parameterAsDouble(parameters, self.CELL, context),
                     slope=self.parameterAsDouble(parameters, self.SLOPE, context),
                     window_m=self.parameterAsDouble(parameters, self.WINDOW, context),

@@ -101,7 +101,7 @@ from _checkout import REPO  # noqa: E402,F401 (puts this checkout's groundsieve 
 
 import numpy as np  # noqa: E402
 
-from groundsieve.core.csf import CSF  # noqa: E402
+from groundsieve.core.filters.csf import CSF  # noqa: E402
 from groundsieve.core.io import read_cloud  # noqa: E402
 from groundsieve.core.metrics import ground_accuracy  # noqa: E402
 

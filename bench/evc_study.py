@@ -16,7 +16,7 @@ from _checkout import REPO  # noqa: E402,F401 (puts this checkout's groundsieve 
 
 import numpy as np  # noqa: E402
 
-from groundsieve.core.evc import EVC  # noqa: E402
+from groundsieve.core.filters.evc import EVC  # noqa: E402
 from groundsieve.core.io import CLASS_GROUND, NOISE_CLASSES, read_cloud  # noqa: E402
 from groundsieve.core.metrics import ground_accuracy  # noqa: E402
 

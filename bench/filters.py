@@ -7,7 +7,7 @@ ParamsRow = Optional[Dict[str, str]]
 
 def make_smrf(row: ParamsRow, **fixed):
     """SMRF with Pingel's per-sample parameters (cell 1 m, as in his runs), or the defaults."""
-    from groundsieve.core.smrf import SMRF
+    from groundsieve.core.filters.smrf import SMRF
     if row is None:
         return SMRF(**fixed)
     return SMRF(cell_size_m=1.0,
@@ -20,19 +20,19 @@ def make_smrf(row: ParamsRow, **fixed):
 def make_echogrid(row: ParamsRow, **fixed):
     """The echo grid filter (matrone2024 Method 2), paper defaults (5 m kernels, dz 2 m); the
     per-sample rows hold SMRF parameters, so ``row`` is ignored."""
-    from groundsieve.core.echogrid import EchoGrid
+    from groundsieve.core.filters.echogrid import EchoGrid
     return EchoGrid(**fixed)
 
 
 def make_evc(row: ParamsRow, **fixed):
     """The multiscale EVC filter (fan2023), paper defaults unless fixed; ``row`` is ignored."""
-    from groundsieve.core.evc import EVC
+    from groundsieve.core.filters.evc import EVC
     return EVC(**fixed)
 
 
 def make_pmf(row: ParamsRow, **fixed):
     """PMF (Zhang et al. 2003) with PDAL's defaults unless fixed; ``row`` (SMRF parameters) is ignored."""
-    from groundsieve.core.pmf import PMF
+    from groundsieve.core.filters.pmf import PMF
     return PMF(**fixed)
 
 
@@ -45,7 +45,7 @@ CSF_PAPER_GROUPS = {**{s: (3, False) for s in ("samp21", "samp31", "samp42", "sa
 
 def make_csf(row: ParamsRow, **fixed):
     """CSF with the reference implementation's defaults; ``row`` (SMRF parameters) is ignored."""
-    from groundsieve.core.csf import CSF
+    from groundsieve.core.filters.csf import CSF
     return CSF(**fixed)
 
 
@@ -53,7 +53,7 @@ def make_csf_paper(row: ParamsRow, **fixed):
     """CSF with Zhang et al.'s ISPRS settings: a 0.5 m cloth and the rigidness and slope smoothing
     of the sample's group, found from the row's file name (run bench/isprs.py with --params);
     without a row, the 0.5 m cloth with the other defaults."""
-    from groundsieve.core.csf import CSF
+    from groundsieve.core.filters.csf import CSF
     kw = {"cloth_resolution_m": 0.5}
     if row is not None:
         name = row["filename"].strip().split(".")[0].split("-")[0].lower()
@@ -65,7 +65,7 @@ def make_csf_paper(row: ParamsRow, **fixed):
 
 def make_ptd(row: ParamsRow, **fixed):
     """Progressive TIN densification (Axelsson 2000) with its defaults unless fixed; ``row`` is ignored."""
-    from groundsieve.core.ptd import PTD
+    from groundsieve.core.filters.ptd import PTD
     return PTD(**fixed)
 
 

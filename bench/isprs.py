@@ -19,7 +19,7 @@ definitions, in %) per sample and their means, and the filter time per sample.
 
 A new filter is added by one entry in :data:`FILTERS`: a name mapped to a
 function ``(params row or None) -> filter``, where the filter is a callable
-``filter(xyz) -> bool ground mask`` (as :class:`groundsieve.core.smrf.SMRF`).
+``filter(xyz) -> bool ground mask`` (as :class:`groundsieve.core.filters.smrf.SMRF`).
 """
 from __future__ import annotations
 

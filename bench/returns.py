@@ -9,7 +9,7 @@ Usage (from the repository root):
 For every data set, three filters run in the same process on the same arrays: ``echogrid``
 (matrone2024 Method 2 as published: 5 m kernels, dz 2 m, kernels of first returns only taken as
 ground), ``echogrid-evidence`` (the same grid using the echoes as evidence, see
-core/echogrid.py) and ``smrf`` (defaults). The table gives Type I, Type II, total error and
+core/filters/echogrid.py) and ``smrf`` (defaults). The table gives Type I, Type II, total error and
 Cohen's kappa (ISPRS definitions, in %), the filter time and the time relative to SMRF.
 
 Timing: each filter is called once untimed on the data set's arrays (numba compilation and
@@ -395,7 +395,7 @@ def describe_lengths(algorithm) -> str:
 
 
 def call(algorithm, ds: DataSet, messages: List[str]):
-    """One filter call as core.workflow.call_filter makes it (fields and log on request)."""
+    """One filter call as core.engine.workflow.call_filter makes it (fields and log on request)."""
     extra = {name: ds.fields[name] for name in getattr(algorithm, "point_fields", ())}
     if getattr(algorithm, "wants_log", False):
         extra["log"] = messages.append

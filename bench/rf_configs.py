@@ -26,10 +26,12 @@ from _checkout import REPO  # noqa: E402,F401 (puts this checkout's groundsieve 
 
 import numpy as np  # noqa: E402
 
-from groundsieve.core import rf  # noqa: E402
+from groundsieve.core import errors  # noqa: E402
+from groundsieve.core.engine import learning  # noqa: E402
+from groundsieve.core.learn import rf  # noqa: E402
 from groundsieve.core.io import read_cloud  # noqa: E402
 from groundsieve.core.metrics import class_report  # noqa: E402
-from groundsieve.core.report import class_name  # noqa: E402
+from groundsieve.core.learn.report import class_name  # noqa: E402
 
 
 def columns(cloud, names, cache):
@@ -46,7 +48,7 @@ def isprs_sets(samples, configs, block_m, data):
     """(train X, train y, test X, test y) per configuration, pooled over the ISPRS samples."""
     from returns import SiteCache, load_isprs
 
-    from groundsieve.core.features import FeatureSpec, compute_features
+    from groundsieve.core.learn.features import FeatureSpec, compute_features
     sites = SiteCache()
     pooled = {c: ([], [], [], []) for c in configs}
     for name in samples:
@@ -114,7 +116,7 @@ def main():
     if args.classes:
         classes = tuple(int(c) for c in args.classes.split(","))
     else:
-        classes = tuple(int(c) for c in np.unique(train.classification) if c not in rf.EXCLUDED_BY_DEFAULT)
+        classes = tuple(int(c) for c in np.unique(train.classification) if c not in learning.EXCLUDED_BY_DEFAULT)
     keep_train = np.isin(train.classification, classes)
     keep_test = np.isin(test.classification, classes)
     print(f"Train {args.train}: {int(keep_train.sum()):,} points; test {args.test}: {int(keep_test.sum()):,} "
@@ -134,7 +136,7 @@ def main():
             t2 = time.perf_counter()
             predicted = model.predict(Xte)
             t3 = time.perf_counter()
-        except rf.InputError as err:
+        except errors.InputError as err:
             print(f"### {config}: skipped ({err})\n")
             continue
         report = class_report(test.classification[keep_test], predicted, classes)

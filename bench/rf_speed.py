@@ -14,8 +14,8 @@ from _checkout import REPO  # noqa: E402,F401 (puts this checkout's groundsieve 
 
 import numpy as np  # noqa: E402
 
-from groundsieve.core import rf  # noqa: E402
-from groundsieve.core.features import FeatureSpec, compute_features  # noqa: E402
+from groundsieve.core.learn import rf  # noqa: E402
+from groundsieve.core.learn.features import FeatureSpec, compute_features  # noqa: E402
 from groundsieve.core.synthetic import SceneSpec, make_scene  # noqa: E402
 
 

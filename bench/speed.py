@@ -1,8 +1,8 @@
 """Speed and memory of the ground filters on generated clouds (file I/O excluded).
 
 Two timings per size: the filter alone on an (n, 3) array, and the driver's whole job without
-file I/O (core.workflow.classify_cloud: point selection, filter, ASPRS classes) plus the 1 m
-TIN DTM from the ground points (core.workflow.make_dtm).
+file I/O (core.engine.workflow.classify_cloud: point selection, filter, ASPRS classes) plus the 1 m
+TIN DTM from the ground points (core.engine.workflow.make_dtm).
 
     .venv/bin/python bench/speed.py [--filter smrf] [--millions 1 5 10] [--density 10]
 
@@ -44,7 +44,7 @@ def child(filter_name, n_points, density, seed):
     fields = {name: {"return_number": rn, "number_of_returns": nr}[name]
               for name in getattr(algorithm, "point_fields", ())}
     from groundsieve.core.io import PointCloud
-    from groundsieve.core.workflow import DTMOptions, FilterOptions, classify_cloud, make_dtm
+    from groundsieve.core.engine.workflow import DTMOptions, FilterOptions, classify_cloud, make_dtm
     # Compile the numba kernels (cached on disk after the first run).
     algorithm(xyz[:20000], **{name: values[:20000] for name, values in fields.items()})
     with open("/proc/self/clear_refs", "w") as refs:

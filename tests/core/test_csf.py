@@ -1,4 +1,4 @@
-"""CSF (core.csf) on generated scenes with known truth, its validation, progress and
+"""CSF (core.filters.csf) on generated scenes with known truth, its validation, progress and
 cancellation, and the behaviour of its kernels against the reference implementation."""
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from groundsieve.core.csf import CSF, CSFResult
+from groundsieve.core.filters.csf import CSF, CSFResult
 from groundsieve.core.errors import Cancelled, InvalidParameterError
 from groundsieve.core.progress import Steps
 from groundsieve.tests.core.scenes import BOX, X0, Y0, add_trees, plane_scene
@@ -214,8 +214,8 @@ def test_each_rotating_sweep_is_the_reference_sweep_on_the_turned_cloth(shape):
     """sweep_order='rotating' cycles through 8 sweeps; sweep g over the cloth must be, bit for
     bit, the reference sweep over the cloth transformed by g (mirrored and/or turned), so that
     turning the cloud only changes which of the 8 comes first."""
-    from groundsieve.core import _csf_kernels as k
-    from groundsieve.core.csf import sweeps
+    from groundsieve.core.filters import _csf_cloth as cloth
+    from groundsieve.core.filters.csf import sweeps
     H, W = shape
     rng = np.random.default_rng(8)
     hv = -(100.0 + rng.uniform(0, 3, (H, W)))
@@ -231,7 +231,7 @@ def test_each_rotating_sweep_is_the_reference_sweep_on_the_turned_cloth(shape):
         quiet = np.zeros(h * w, dtype=bool)
         extra = () if neighbours is None else (neighbours, *flags)
         for _ in range(40):
-            k._time_step_kernel(pos, old, movable, quiet, hv2d.ravel().copy(), w, h, acc, 0.51, 0.42, *extra)
+            cloth._time_step_kernel(pos, old, movable, quiet, hv2d.ravel().copy(), w, h, acc, 0.51, 0.42, *extra)
         return pos, movable
 
     orders = sweeps()
@@ -266,16 +266,16 @@ def test_rotating_and_fixed_sweeps_on_the_box_scene():
 def test_rotating_sweep_runs_the_eight_orders_in_turn(monkeypatch):
     """CSF.run with the default sweep calls the kernel with sweeps()[0], [1], ..., [7], [0], ...
     from the first iteration after the free fall, and stops only after whole cycles."""
-    from groundsieve.core import _csf_kernels as k
-    from groundsieve.core.csf import sweeps
+    from groundsieve.core.filters import _csf_cloth as cloth
+    from groundsieve.core.filters.csf import sweeps
     seen = []
-    real = k._time_step_kernel
+    real = cloth._time_step_kernel
 
     def recording(*args):
         seen.append(None if len(args) == 10 else (args[10].tobytes(), tuple(args[11:])))
         return real(*args)
 
-    monkeypatch.setattr(k, "_time_step_kernel", recording)
+    monkeypatch.setattr(cloth, "_time_step_kernel", recording)
     xyz, _ = plane_scene(tilt=(0.05, 0.02), box=BOX)
     res = CSF().run(xyz)
     orders = [(n.tobytes(), tuple(f)) for n, f in sweeps()]
@@ -288,7 +288,7 @@ def test_rotating_sweep_runs_the_eight_orders_in_turn(monkeypatch):
 
 
 def test_free_fall_shortcut_is_exactly_the_simulation():
-    from groundsieve.core import _csf_kernels as k
+    from groundsieve.core.filters import _csf_cloth as cloth
     rng = np.random.default_rng(1)
     W, H = 30, 20
     hv = -(100.0 + rng.uniform(0, 8, W * H))
@@ -302,10 +302,10 @@ def test_free_fall_shortcut_is_exactly_the_simulation():
         quiet = np.zeros(W * H, dtype=bool)
         done = 0
         if shortcut:
-            done, stopped = k._free_fall_kernel(pos, old, hv, acc, 300, 0.005)
+            done, stopped = cloth._free_fall_kernel(pos, old, hv, acc, 300, 0.005)
             assert done > 10 and not stopped and movable.all()
         while done < 300:
-            md, _ = k._time_step_kernel(pos, old, movable, quiet, hv, W, H, acc, 0.3, 0.3)
+            md, _ = cloth._time_step_kernel(pos, old, movable, quiet, hv, W, H, acc, 0.3, 0.3)
             done += 1
             if md != 0 and md < 0.005:
                 break
@@ -316,14 +316,14 @@ def test_free_fall_shortcut_is_exactly_the_simulation():
 
 
 def test_scanline_fill_follows_the_reference_order():
-    from groundsieve.core import _csf_kernels as k
+    from groundsieve.core.filters import _csf_terrain as terrain
     W, H = 6, 5
     has = np.zeros(W * H, dtype=bool)
     hv = np.full(W * H, -np.inf)
     for (c, r, v) in [(4, 2, 1.0), (1, 2, 2.0), (0, 4, 3.0), (5, 0, 4.0)]:
         has[r * W + c] = True
         hv[r * W + c] = v
-    out = k._scanline_fill_kernel(hv, has, W, H)
+    out = terrain._scanline_fill_kernel(hv, has, W, H)
     grid = out.reshape(H, W)
     assert grid[2, 0] == 2.0 and grid[2, 2] == 1.0 and grid[2, 5] == 1.0  # east first, then west
     assert grid[4, 1] == 3.0 and grid[4, 5] == 3.0    # west when nothing to the east
@@ -336,7 +336,7 @@ def test_scanline_fill_follows_the_reference_order():
 def test_nearest_heights_are_the_nearest_point():
     from scipy.spatial import cKDTree
 
-    from groundsieve.core import _csf_kernels as k
+    from groundsieve.core.filters import _csf_terrain as terrain
     rng = np.random.default_rng(3)
     x, y = rng.uniform(0, 30, 200), rng.uniform(0, 20, 200)
     z = rng.uniform(0, 5, 200)
@@ -344,7 +344,7 @@ def test_nearest_heights_are_the_nearest_point():
     ox, oy = -1.0, -1.0
     hv = np.full(W * H, -np.inf)
     found = np.zeros(W * H, dtype=bool)
-    k._nearest_heights_kernel(x, y, z, np.ones(200, dtype=bool), ox, oy, res, W, H, 100, hv, found)
+    terrain._nearest_heights_kernel(x, y, z, np.ones(200, dtype=bool), ox, oy, res, W, H, 100, hv, found)
     assert found.all()
     gx, gy = np.meshgrid(ox + np.arange(W) * res, oy + np.arange(H) * res)
     _, idx = cKDTree(np.column_stack([x, y])).query(np.column_stack([gx.ravel(), gy.ravel()]))
@@ -374,7 +374,7 @@ def test_matches_the_reference_library_when_installed():
 def _one_2016_step(W, H, pinned_at, passes=1):
     """A flat cloth at height 1 with one pinned particle at height 0 (row-major ``pinned_at``),
     no gravity: one iteration of the 2016 kernel. Returns the heights, row-major (H, W)."""
-    from groundsieve.core import _csf_kernels as k
+    from groundsieve.core.filters import _csf_cloth as cloth
     pos = np.ones(W * H)
     movable = np.ones(W * H, dtype=bool)
     pos[pinned_at] = 0.0
@@ -382,7 +382,7 @@ def _one_2016_step(W, H, pinned_at, passes=1):
     hv = np.full(W * H, -np.inf)
     t = lambda a: np.ascontiguousarray(a.reshape(H, W).T).ravel()  # noqa: E731 (column-major)
     pos_c, mov_c = t(pos), t(movable)
-    k._time_step_2016_kernel(pos_c, pos_c.copy(), mov_c, t(hv), W, H, 0.0, passes)
+    cloth._time_step_2016_kernel(pos_c, pos_c.copy(), mov_c, t(hv), W, H, 0.0, passes)
     return pos_c.reshape(W, H).T
 
 
@@ -392,7 +392,7 @@ def test_2016_scheme_a_pinned_particle_pulls_only_the_neighbours_that_list_it_se
     gravity, a particle pinned below it at the south-west corner therefore moves nothing (it is
     every pair's first particle), while at the north-east corner it pulls its three neighbours;
     the library's scheme pulls them in both cases."""
-    from groundsieve.core import _csf_kernels as k
+    from groundsieve.core.filters import _csf_cloth as cloth
     sw = _one_2016_step(3, 3, 0)
     assert (np.delete(sw.ravel(), 0) == 1.0).all()
     ne = _one_2016_step(3, 3, 8)
@@ -402,7 +402,7 @@ def test_2016_scheme_a_pinned_particle_pulls_only_the_neighbours_that_list_it_se
         pos[pinned_at] = 0.0
         movable = np.ones(9, dtype=bool)
         movable[pinned_at] = False
-        k._time_step_kernel(pos, pos.copy(), movable, np.zeros(9, dtype=bool), np.full(9, -np.inf),
+        cloth._time_step_kernel(pos, pos.copy(), movable, np.zeros(9, dtype=bool), np.full(9, -np.inf),
                             3, 3, 0.0, 0.3, 0.3)
         assert (np.delete(pos, pinned_at) < 1.0).all()
 
@@ -443,7 +443,7 @@ def _reference_2016_step(pos, old, movable, hv, W, H, acceleration, passes):
 def test_2016_kernel_is_the_plain_constraint_list(W, H, passes):
     """The column-major numba kernel against the plain constraint list, bit for bit, over 25
     iterations with particles pinned along the way."""
-    from groundsieve.core import _csf_kernels as k
+    from groundsieve.core.filters import _csf_cloth as cloth
     rng = np.random.default_rng(W * 100 + H)
     hv = rng.uniform(-0.4, 0.2, W * H)
     pos = rng.uniform(0.0, 0.3, W * H)
@@ -457,7 +457,7 @@ def test_2016_kernel_is_the_plain_constraint_list(W, H, passes):
     moving_after_first = 0
     for i in range(25):
         _reference_2016_step(*ref, hv, W, H, -0.036, passes)
-        k._time_step_2016_kernel(ours[0], ours[1], ours[2], hv_c, W, H, -0.036, passes)
+        cloth._time_step_2016_kernel(ours[0], ours[1], ours[2], hv_c, W, H, -0.036, passes)
         if i == 0:
             moving_after_first = int(ref[2].sum())
     back = lambda a: np.ascontiguousarray(a.reshape(W, H).T).ravel()  # noqa: E731
@@ -582,15 +582,15 @@ def test_progress_is_monotonic_and_complete():
 @pytest.mark.parametrize("after", [3, 10, 40])
 def test_cancellation_stops_within_one_iteration(after, monkeypatch):
     """Cancel once ``after`` iterations have run: no further iteration starts."""
-    from groundsieve.core import _csf_kernels as k
+    from groundsieve.core.filters import _csf_cloth as cloth
     calls = {"n": 0}
-    real = k._time_step_kernel
+    real = cloth._time_step_kernel
 
     def counting(*args):
         calls["n"] += 1
         return real(*args)
 
-    monkeypatch.setattr(k, "_time_step_kernel", counting)
+    monkeypatch.setattr(cloth, "_time_step_kernel", counting)
     xyz, _ = plane_scene(seed=4, tilt=(0.2, 0.1), size=80.0)  # a long fall: many iterations
     assert CSF().run(xyz).iterations > 45
     calls["n"] = 0

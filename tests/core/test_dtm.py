@@ -1,4 +1,4 @@
-"""TIN DTM rasterization (core.rasterize.tin_dtm) and the grid convention (core.grid)."""
+"""TIN DTM rasterization (core.grids.rasterize.tin_dtm) and the grid convention (core.grids.spec)."""
 from __future__ import annotations
 
 import numpy as np
@@ -6,8 +6,8 @@ import pytest
 from scipy.spatial import Delaunay
 
 from groundsieve.core.errors import InputError, InvalidParameterError
-from groundsieve.core.grid import GridSpec
-from groundsieve.core.rasterize import cell_mean, cell_min, tin_dtm
+from groundsieve.core.grids.spec import GridSpec
+from groundsieve.core.grids.rasterize import cell_mean, cell_min, tin_dtm
 
 X0, Y0 = 512000.0, 5403000.0
 A, B, C = 0.13, -0.07, 250.0

@@ -1,4 +1,4 @@
-"""The return-number grid filter (core.echogrid, Matrone et al. 2024 Method 2): numpy oracles of
+"""The return-number grid filter (core.filters.echogrid, Matrone et al. 2024 Method 2): numpy oracles of
 the faithful and the evidence rules on random clouds with random return numbers, known answers
 on small built scenes (plane, building, tree, a stepped kernel of single returns), clouds without
 return information, the result counts, validation, and the driver passing the return arrays of
@@ -11,11 +11,11 @@ import warnings
 import numpy as np
 import pytest
 
-from groundsieve.core.echogrid import MODES, EchoGrid, EchoGridResult
+from groundsieve.core.filters.echogrid import MODES, EchoGrid, EchoGridResult
 from groundsieve.core.errors import InvalidParameterError
 from groundsieve.core.io import PointCloud
 from groundsieve.core.progress import Steps
-from groundsieve.core.workflow import FilterOptions, classify_cloud
+from groundsieve.core.engine.workflow import FilterOptions, classify_cloud
 
 X0, Y0 = 512000.0, 5403000.0  # UTM-sized coordinates, as real data
 
@@ -48,7 +48,7 @@ def oracle_faithful(xyz, rn, nr, kernel, dz):
 
 
 def oracle_evidence(xyz, rn, nr, kernel, dz, neighbourhood=5.0, slope=0.15):
-    """The evidence rule as documented in core/echogrid.py."""
+    """The evidence rule as documented in core/filters/echogrid.py."""
     z = xyz[:, 2]
     col, row, k, nx, ny = _kernels(xyz, kernel)
     zmin = np.full((ny, nx), np.inf)
@@ -556,7 +556,7 @@ def test_run_ground_filter_on_an_isprs_text_file(tmp_path):
     """File to file: ISPRS text has no returns; the warning goes to the log, the step is found."""
     import laspy
 
-    from groundsieve.core.workflow import run_ground_filter
+    from groundsieve.core.engine.workflow import run_ground_filter
     x, y, z = plane(size=20.0, density=2.0, seed=14)
     high = (x > 12.5) & (x < 15.0) & (y > 10.0) & (y < 15.0)
     z = z + 3.0 * high

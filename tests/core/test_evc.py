@@ -1,4 +1,4 @@
-"""The multiscale EVC filter (core.evc, Fan et al. 2023): a numpy oracle of the whole faithful
+"""The multiscale EVC filter (core.filters.evc, Fan et al. 2023): a numpy oracle of the whole faithful
 pipeline (mean grids, difference, focal statistics with window growth, EVC, Table 2 classes,
 points), the sign option and the ground offset, what a perfectly flat plane gives, noisy planes,
 a shrub patch, sparse clouds, the natural-break threshold, and validation."""
@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from groundsieve.core.errors import InvalidParameterError
-from groundsieve.core.evc import (EMPTY, EVC, GROUND, VEGETATION_AREA, VEGETATION_BOUNDARY, EVCResult,
-                                  natural_break)
+from groundsieve.core.filters.evc import (EMPTY, EVC, GROUND, VEGETATION_AREA, VEGETATION_BOUNDARY,
+                                          EVCResult, natural_break)
 from groundsieve.core.io import PointCloud
 from groundsieve.core.progress import Steps
-from groundsieve.core.workflow import classify_cloud
+from groundsieve.core.engine.workflow import classify_cloud
 
 from groundsieve.tests.core.scenes import X0, Y0, plane_scene
 

@@ -1,4 +1,4 @@
-"""Per-point geometric features (core.features): against a numpy oracle (cKDTree neighbours,
+"""Per-point geometric features (core.learn.features): against a numpy oracle (cKDTree neighbours,
 np.linalg.eigh) on random clouds, on shapes with known values (plane, wall, line, ball, column,
 lattice), points with too few neighbours, names, validation, progress and cancellation, and
 the LAS/LAZ round trip with the features as extra bytes."""
@@ -12,11 +12,12 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from groundsieve.core import _features_kernels as K
+from groundsieve.core.learn import _features_kernels as K
 from groundsieve.core.errors import Cancelled, InputError, InvalidParameterError, OutputError
-from groundsieve.core.features import (COLUMN_FEATURES, EIGEN_FEATURES, FEATURES, MIN_POINTS, PAPER_FEATURES,
-                                       SPHERE_FEATURES, FeatureSpec, compute_features, feature_name,
-                                       parse_feature_name, radius_text, run_features, write_features)
+from groundsieve.core.engine.features_run import run_features, write_features
+from groundsieve.core.learn.features import (COLUMN_FEATURES, EIGEN_FEATURES, FEATURES, MIN_POINTS,
+                                             PAPER_FEATURES, SPHERE_FEATURES, FeatureSpec, compute_features,
+                                             feature_name, parse_feature_name, radius_text)
 from groundsieve.core.io import new_las, read_cloud, write_las
 from groundsieve.core.progress import Steps
 

@@ -8,14 +8,14 @@ mid-run cancellation and inputs are tested in each filter's own module."""
 import numpy as np
 import pytest
 
-from groundsieve.core.csf import CSF
-from groundsieve.core.echogrid import EchoGrid
+from groundsieve.core.filters.csf import CSF
+from groundsieve.core.filters.echogrid import EchoGrid
 from groundsieve.core.errors import Cancelled, InputError
-from groundsieve.core.evc import EVC
-from groundsieve.core.pmf import PMF
+from groundsieve.core.filters.evc import EVC
+from groundsieve.core.filters.pmf import PMF
 from groundsieve.core.progress import Steps
-from groundsieve.core.ptd import PTD
-from groundsieve.core.smrf import SMRF
+from groundsieve.core.filters.ptd import PTD
+from groundsieve.core.filters.smrf import SMRF
 
 FILTERS = [SMRF(), PMF(), CSF(), PTD(), EchoGrid(), EVC()]
 

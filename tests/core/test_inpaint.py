@@ -1,11 +1,11 @@
-"""Harmonic inpainting of NaN cells (core.inpaint)."""
+"""Harmonic inpainting of NaN cells (core.grids.inpaint)."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 from groundsieve.core.errors import GroundSieveError, InputError
-from groundsieve.core.inpaint import inpaint_harmonic
+from groundsieve.core.grids.inpaint import inpaint_harmonic
 
 
 def ramp(shape=(30, 40), a=0.3, b=-0.7, c=2.0):

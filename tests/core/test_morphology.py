@@ -1,18 +1,18 @@
-"""Disk morphology of core.morphology against a plain-numpy oracle."""
+"""Disk morphology of core.grids.morphology against a plain-numpy oracle."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 from groundsieve.core.errors import InvalidParameterError
-from groundsieve.core.morphology import dilate, disk, erode, opening, progressive_filter
+from groundsieve.core.grids.morphology import dilate, disk, erode, opening, progressive_filter
 
 SHAPES = [(1, 1), (1, 9), (9, 1), (2, 3), (3, 2), (5, 7), (13, 4), (4, 13), (17, 19)]
 RADII = range(0, 7)
 
 
 def offsets(radius: int):
-    """(dy, dx) with dx² + dy² <= r², built independently of core.morphology.disk."""
+    """(dy, dx) with dx² + dy² <= r², built independently of core.grids.morphology.disk."""
     return [(dy, dx) for dy in range(-radius, radius + 1) for dx in range(-radius, radius + 1)
             if dx * dx + dy * dy <= radius * radius]
 

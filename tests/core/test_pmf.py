@@ -1,4 +1,4 @@
-"""PMF (core.pmf): the square-window kernels against a numpy oracle, known answers on generated
+"""PMF (core.filters.pmf): the square-window kernels against a numpy oracle, known answers on generated
 scenes, the paper's window and threshold series, validation, progress and cancellation, the
 file-to-file driver, and a regression guard on the ISPRS samples of the shared data."""
 from __future__ import annotations
@@ -13,10 +13,10 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 from groundsieve.core.errors import Cancelled, InvalidParameterError
 from groundsieve.core.io import new_las, write_las
-from groundsieve.core.pmf import (PMF, PMFResult, fill_nearest, square_dilate, square_erode,
-                                  square_opening)
+from groundsieve.core.filters.pmf import (PMF, PMFResult, fill_nearest, square_dilate, square_erode,
+                                          square_opening)
 from groundsieve.core.progress import Steps
-from groundsieve.core.workflow import FilterOptions, run_ground_filter
+from groundsieve.core.engine.workflow import FilterOptions, run_ground_filter
 from groundsieve.tests.core.scenes import BOX, X0, Y0, plane_scene
 
 

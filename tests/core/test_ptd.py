@@ -1,4 +1,4 @@
-"""PTD (core.ptd, progressive TIN densification) on generated scenes with known truth; its TIN
+"""PTD (core.filters.ptd, progressive TIN densification) on generated scenes with known truth; its TIN
 kernels against scipy's Delaunay and brute-force oracles; validation, progress, cancellation;
 and its accuracy on the ISPRS reference samples of the shared data."""
 from __future__ import annotations
@@ -9,10 +9,11 @@ from functools import partial
 import numpy as np
 import pytest
 
-from groundsieve.core import _ptd_kernels as K
+from groundsieve.core.filters import _ptd_kernels as K
+from groundsieve.core.filters import _ptd_tin as T
 from groundsieve.core.errors import Cancelled, InvalidParameterError
 from groundsieve.core.progress import Steps
-from groundsieve.core.ptd import PTD, PTDResult, triangulate
+from groundsieve.core.filters.ptd import PTD, PTDResult, triangulate
 from groundsieve.tests.core import scenes
 from groundsieve.tests.core.scenes import X0, Y0, add_trees
 
@@ -251,11 +252,11 @@ def _tin(x, y, vertices):
     tv, tn = np.empty((cap, 3), np.int32), np.empty((cap, 3), np.int32)
     tstamp, head, dirty = np.empty(cap, np.int32), np.empty(cap, np.int32), np.empty(cap, np.int32)
     state, status, nxt = np.zeros(3, np.int64), np.zeros(n, np.uint8), np.empty(n, np.int32)
-    K.init_box_kernel(tv, tn, tstamp, head, state, n, n + 1, n + 2, n + 3)
-    status[vertices] = K.GROUND_VERTEX
-    K.insert_vertices_kernel(tv, tn, tstamp, dirty, state, vx, vy, head, nxt, status,
+    T.init_box_kernel(tv, tn, tstamp, head, state, n, n + 1, n + 2, n + 3)
+    status[vertices] = T.GROUND_VERTEX
+    T.insert_vertices_kernel(tv, tn, tstamp, dirty, state, vx, vy, head, nxt, status,
                              np.asarray(vertices, np.int32), np.zeros(len(vertices), bool))
-    K.fill_buckets_kernel(tv, tn, int(state[0]), vx, vy, n, status, head, nxt)
+    T.fill_buckets_kernel(tv, tn, int(state[0]), vx, vy, n, status, head, nxt)
     return dict(tv=tv, tn=tn, tstamp=tstamp, head=head, dirty=dirty, state=state, status=status, nxt=nxt,
                 vx=vx, vy=vy)
 
@@ -273,9 +274,9 @@ def test_point_location_matches_brute_force():
     tin = _tin(x, y, np.arange(400))
     qx, qy = rng.uniform(-5, 55, 2000), rng.uniform(-5, 55, 2000)
     found = np.empty(2000, np.int64)
-    K.locate_kernel(tin["tv"], tin["tn"], int(tin["state"][0]), tin["vx"], tin["vy"], qx, qy, found)
+    T.locate_kernel(tin["tv"], tin["tn"], int(tin["state"][0]), tin["vx"], tin["vy"], qx, qy, found)
     for k in range(2000):
-        brute = K._locate_brute(tin["tv"], int(tin["state"][0]), tin["vx"], tin["vy"], qx[k], qy[k])
+        brute = T._locate_brute(tin["tv"], int(tin["state"][0]), tin["vx"], tin["vy"], qx[k], qy[k])
         assert found[k] >= 0 and _contains(tin, found[k], qx[k], qy[k])
         assert brute >= 0 and _contains(tin, brute, qx[k], qy[k])
 
@@ -289,18 +290,18 @@ def test_point_lists_follow_splits_and_flips():
     tin = _tin(x, y, np.arange(50))
     stack = np.empty(4096, np.int32)
     for v in range(50, 700):
-        tin["status"][v] = K.GROUND_VERTEX
-        t = K._locate(tin["tv"], tin["tn"], tin["state"][0], tin["vx"], tin["vy"], 0, x[v], y[v])
+        tin["status"][v] = T.GROUND_VERTEX
+        t = T._locate(tin["tv"], tin["tn"], tin["state"][0], tin["vx"], tin["vy"], 0, x[v], y[v])
         tin["state"][1] = 0
         tin["state"][2] += 1
-        K._insert(tin["tv"], tin["tn"], tin["tstamp"], tin["dirty"], tin["state"], tin["vx"], tin["vy"],
+        T._insert(tin["tv"], tin["tn"], tin["tstamp"], tin["dirty"], tin["state"], tin["vx"], tin["vy"],
                   tin["head"], tin["nxt"], tin["status"], v, t, stack)
     seen = np.zeros(n, int)
     ntri = int(tin["state"][0])
     for t in range(ntri):
         p = tin["head"][t]
         while p >= 0:
-            if tin["status"][p] == K.CANDIDATE:
+            if tin["status"][p] == T.CANDIDATE:
                 seen[p] += 1
                 assert _contains(tin, t, x[p], y[p])
             p = tin["nxt"][p]

@@ -7,7 +7,9 @@ import zipfile
 import numpy as np
 import pytest
 
-from groundsieve.core import rf
+from groundsieve.core.engine import learning
+from groundsieve.core.learn import model_file
+from groundsieve.core.learn import rf
 from groundsieve.core.errors import InputError, InvalidParameterError
 from groundsieve.core.metrics import class_report
 
@@ -44,8 +46,8 @@ def test_trained_model_separates_and_round_trips(tmp_path, scaler, criterion):
     Xt, yt = _data(2)
     assert (model.predict(Xt) == yt).mean() > 0.85
     path = tmp_path / "model.npz"
-    rf.save_model(model, str(path))
-    again = rf.load_model(str(path))
+    model_file.save_model(model, str(path))
+    again = model_file.load_model(str(path))
     np.testing.assert_array_equal(again.predict_proba(Xt), model.predict_proba(Xt))
     assert again.features == ["a", "b", "c", "d"]
     assert again.classes.tolist() == [1, 2, 6]
@@ -57,7 +59,7 @@ def _saved(tmp_path):
     X, y = _data()
     model = rf.train_forest(X, y, ["a", "b", "c", "d"], rf.ForestParams(n_trees=5))
     path = tmp_path / "model.npz"
-    rf.save_model(model, str(path))
+    model_file.save_model(model, str(path))
     return path
 
 
@@ -73,7 +75,7 @@ def test_tampered_threshold_is_refused(tmp_path):
     path = _saved(tmp_path)
     _rewrite(path, lambda a: a["threshold"].__setitem__(0, 1e9))
     with pytest.raises(InputError, match="checksum"):
-        rf.load_model(str(path))
+        model_file.load_model(str(path))
 
 
 def test_edited_header_is_refused(tmp_path):
@@ -85,7 +87,7 @@ def test_edited_header_is_refused(tmp_path):
         arrays["header"] = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
     _rewrite(path, edit)
     with pytest.raises(InputError, match="checksum"):
-        rf.load_model(str(path))
+        model_file.load_model(str(path))
 
 
 def test_pickled_content_is_never_executed(tmp_path):
@@ -93,7 +95,7 @@ def test_pickled_content_is_never_executed(tmp_path):
     with open(path, "wb") as handle:
         np.savez(handle, header=np.array([{"format": "groundsieve-rf"}], dtype=object))
     with pytest.raises(InputError, match="evil.npz"):
-        rf.load_model(str(path))
+        model_file.load_model(str(path))
 
 
 @pytest.mark.parametrize("content", [b"", b"not a zip at all", None])
@@ -105,7 +107,7 @@ def test_foreign_files_are_refused(tmp_path, content):
     else:
         path.write_bytes(content)
     with pytest.raises(InputError, match="other.npz"):
-        rf.load_model(str(path))
+        model_file.load_model(str(path))
 
 
 def test_unsupported_format_version_is_refused(tmp_path):
@@ -117,16 +119,16 @@ def test_unsupported_format_version_is_refused(tmp_path):
         arrays["header"] = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
     _rewrite(path, edit)
     with pytest.raises(InputError, match="version 99"):
-        rf.load_model(str(path))
+        model_file.load_model(str(path))
 
 
 def test_missing_model_and_wrong_extension(tmp_path):
     with pytest.raises(InputError, match="no such model file"):
-        rf.load_model(str(tmp_path / "none.npz"))
+        model_file.load_model(str(tmp_path / "none.npz"))
     X, y = _data()
     model = rf.train_forest(X, y, ["a", "b", "c", "d"], rf.ForestParams(n_trees=2))
     with pytest.raises(InvalidParameterError, match=".npz"):
-        rf.save_model(model, str(tmp_path / "model.pkl"))
+        model_file.save_model(model, str(tmp_path / "model.pkl"))
     assert os.listdir(tmp_path) == []
 
 
@@ -199,8 +201,8 @@ def labelled_files(tmp_path_factory):
 
 def test_train_file_with_separate_validation_and_test_files(labelled_files, tmp_path):
     train, validation, test = labelled_files
-    run = rf.train_file(str(train), str(tmp_path / "m.npz"), str(tmp_path / "r.html"),
-                        rf.TrainOptions(params=rf.ForestParams(n_trees=10)),
+    run = learning.train_file(str(train), str(tmp_path / "m.npz"), str(tmp_path / "r.html"),
+                        learning.TrainOptions(params=rf.ForestParams(n_trees=10)),
                         validation_path=str(validation), test_path=str(test))
     from groundsieve.core.io import read_cloud
     n_test = len(read_cloud(str(test)))
@@ -211,11 +213,11 @@ def test_train_file_with_separate_validation_and_test_files(labelled_files, tmp_
 
 def test_train_file_runs_the_paper_grid_and_keeps_the_best(labelled_files, tmp_path):
     train = labelled_files[0]
-    run = rf.train_file(str(train), str(tmp_path / "m.npz"), None,
-                        rf.TrainOptions(features=rf.PRESETS["C2"], grid=True, block_m=10.0,
+    run = learning.train_file(str(train), str(tmp_path / "m.npz"), None,
+                        learning.TrainOptions(features=rf.PRESETS["C2"], grid=True, block_m=10.0,
                                         params=rf.ForestParams(max_samples=2000)))
     assert len(run.grid) == 18
-    assert {(g["criterion"], g["n_trees"], g["scaler"]) for g in run.grid} == set(rf.PAPER_GRID)
+    assert {(g["criterion"], g["n_trees"], g["scaler"]) for g in run.grid} == set(learning.PAPER_GRID)
     best = max(run.grid, key=lambda g: g["f1"])
     kept = run.model.meta["params"]
     assert (kept["criterion"], kept["n_trees"], kept["scaler"]) == (best["criterion"], best["n_trees"],
@@ -225,13 +227,13 @@ def test_train_file_runs_the_paper_grid_and_keeps_the_best(labelled_files, tmp_p
 def test_classify_file_refuses_a_cloud_without_the_model_features(labelled_files, tmp_path):
     from groundsieve.core.io import new_las, write_las
     train = labelled_files[0]
-    rf.train_file(str(train), str(tmp_path / "m.npz"), None,
-                  rf.TrainOptions(features=("intensity", "return_number", "gps_time"),
+    learning.train_file(str(train), str(tmp_path / "m.npz"), None,
+                  learning.TrainOptions(features=("intensity", "return_number", "gps_time"),
                                   params=rf.ForestParams(n_trees=3)))
     rng = np.random.default_rng(0)
     xyz = rng.uniform(0, 50, (500, 3))
     bare = tmp_path / "format0.las"  # point format 0: no GPS time
     write_las(new_las(xyz[:, 0], xyz[:, 1], xyz[:, 2], point_format=0), str(bare))
     with pytest.raises(InputError, match="gps_time"):
-        rf.classify_file(str(bare), str(tmp_path / "o.laz"), str(tmp_path / "m.npz"))
+        learning.classify_file(str(bare), str(tmp_path / "o.laz"), str(tmp_path / "m.npz"))
     assert not (tmp_path / "o.laz").exists()

@@ -1,4 +1,4 @@
-"""SMRF (core.smrf) on generated scenes with known truth, its validation, progress and
+"""SMRF (core.filters.smrf) on generated scenes with known truth, its validation, progress and
 cancellation, and its accuracy on the ISPRS reference samples of the shared data."""
 from __future__ import annotations
 
@@ -10,7 +10,8 @@ import pytest
 
 from groundsieve.core.errors import Cancelled, InputError, InvalidParameterError
 from groundsieve.core.progress import Steps
-from groundsieve.core.smrf import SMRF, SMRFResult, validate_xyz
+from groundsieve.core.filters.smrf import SMRF, SMRFResult
+from groundsieve.core.validate import validate_xyz
 from groundsieve.tests.core.scenes import BOX, add_trees, plane_scene
 
 # scenes.BOX, 15 x 15 m, lies inside the 18 m default window.

@@ -1,4 +1,4 @@
-"""The file-to-file driver (core.workflow.run_ground_filter) on a generated LAS scene:
+"""The file-to-file driver (core.engine.workflow.run_ground_filter) on a generated LAS scene:
 classes written, noise and existing classes kept, last returns, DTM GeoTIFF, cancellation
 and refusal to overwrite the input."""
 from __future__ import annotations
@@ -14,10 +14,10 @@ import pytest
 from scipy.spatial import Delaunay
 
 from groundsieve.core.errors import Cancelled, InputError, InvalidParameterError, OutputError
-from groundsieve.core.grid import GridSpec
+from groundsieve.core.grids.spec import GridSpec
 from groundsieve.core.io import new_las, read_cloud, write_las
-from groundsieve.core.smrf import SMRF
-from groundsieve.core.workflow import DTMOptions, FilterOptions, run_ground_filter, select_points
+from groundsieve.core.filters.smrf import SMRF
+from groundsieve.core.engine.workflow import DTMOptions, FilterOptions, run_ground_filter, select_points
 
 X0, Y0 = 512000.0, 5403000.0
 SIZE = 60.0

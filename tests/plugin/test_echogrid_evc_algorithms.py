@@ -161,7 +161,7 @@ def test_csf_form_maps_to_the_core_filter(groundsieve_provider, index, scheme):
         (scheme, 1, 0.5, "cell", ("rotating", "fixed")[index])
     assert (f.time_step, f.class_threshold_m, f.iterations, f.low_outlier_m) == (0.65, 0.5, 500, 5.0)
     f = algorithm.buildFilter({}, QgsProcessingContext())  # the form's defaults are the core's
-    from groundsieve.core.csf import CSF
+    from groundsieve.core.filters.csf import CSF
     assert f == CSF(rigidness=3)
 
 

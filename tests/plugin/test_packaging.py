@@ -13,7 +13,7 @@ def test_zip_is_installable_and_lean(tmp_path):
                    cwd=REPO, check=True)
     names = zipfile.ZipFile(archive).namelist()
     assert "groundsieve/metadata.txt" in names and "groundsieve/__init__.py" in names
-    assert "groundsieve/core/smrf.py" in names and "groundsieve/icons/groundsieve.svg" in names
+    assert "groundsieve/core/filters/smrf.py" in names and "groundsieve/icons/groundsieve.svg" in names
     for dev in ("tests/", "bench/", "scripts/", ".ci/", "Makefile", "pytest.ini"):
         assert not [n for n in names if n.startswith("groundsieve/" + dev)], dev
     plugins = tmp_path / "plugins"

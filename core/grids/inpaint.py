@@ -13,7 +13,7 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse.linalg import spsolve
 
-from .errors import InputError
+from ..errors import InputError
 
 
 def inpaint_harmonic(grid: np.ndarray) -> np.ndarray:

@@ -1,6 +1,6 @@
 """The driver shared by every ground filter: from a file to a classified file and a DTM.
 
-A filter (e.g. :class:`~groundsieve.core.smrf.SMRF`) only maps the x, y, z of the
+A filter (e.g. :class:`~groundsieve.core.filters.smrf.SMRF`) only maps the x, y, z of the
 points it is given to a ground mask. This module does the rest, the same for every
 filter: select the points to filter (drop noise, optionally keep only last returns),
 write ASPRS classes (2 ground, 1 other, or keep the other existing classes), write
@@ -15,11 +15,11 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from .errors import InvalidParameterError
-from .grid import GridSpec
-from .io import (CLASS_GROUND, CLASS_UNCLASSIFIED, NOISE_CLASSES, PointCloud, atomic_path,
-                 check_output_path, read_cloud, write_classified)
-from .progress import Steps
+from ..errors import InvalidParameterError
+from ..grids.spec import GridSpec
+from ..io import (CLASS_GROUND, CLASS_UNCLASSIFIED, NOISE_CLASSES, PointCloud, atomic_path, check_output_path,
+                 read_cloud, write_classified)
+from ..progress import Steps
 
 
 @dataclass(frozen=True)
@@ -128,7 +128,7 @@ def classify_cloud(cloud: PointCloud, algorithm, options: FilterOptions = Filter
 
 def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions):
     """DTM grid covering all the points, interpolated from the ground points."""
-    from .rasterize import tin_dtm
+    from ..grids.rasterize import tin_dtm
     grid = GridSpec.covering(x, y, options.cell_size_m, what="DTM")
     if not ground.any():
         raise InvalidParameterError("the filter found no ground point: no DTM can be made")
@@ -139,7 +139,7 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions):
 
 def check_outputs(input_path: str, output_path: Optional[str], raster_paths=()) -> None:
     """Refuse bad output paths before any work: wrong extension, missing folder, the input itself."""
-    from .raster import check_raster_path
+    from ..raster.geotiff import check_raster_path
     if output_path:
         check_output_path(output_path, inputs=[input_path])
     for path in raster_paths:
@@ -152,7 +152,7 @@ def write_outputs(cloud: PointCloud, classification: np.ndarray, output_path: Op
     """Write the classified cloud and the rasters ``[(path, values, grid), ...]`` (GeoTIFF, the
     cloud's CRS). Every output goes to a temporary file first; all are renamed into place only
     once all are complete and no cancellation came, so a failed or cancelled run leaves none."""
-    from .raster import write_geotiff
+    from ..raster.geotiff import write_geotiff
     steps = steps or Steps()
     with contextlib.ExitStack() as stack:
         if output_path:

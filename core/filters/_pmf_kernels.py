@@ -1,5 +1,5 @@
-"""numba kernels of the progressive morphological filter (core.pmf). Private: call them through
-:mod:`groundsieve.core.pmf`, which validates and casts first.
+"""numba kernels of the progressive morphological filter (core.filters.pmf). Private: call them through
+:mod:`groundsieve.core.filters.pmf`, which validates and casts first.
 
 Square-window erosion and dilation are separable (a square is a row segment times a column
 segment), and each 1-D pass uses the van Herk / Gil-Werman scheme: the line, padded with
@@ -8,7 +8,7 @@ of ``w = 2r + 1`` cells; a running extreme from the start of each block (``g``) 
 end (``h``) make every window of ``w`` cells the extreme of two values, ``h[i]`` and
 ``g[i + w - 1]``. About three comparisons a cell whatever the window, so the 33-cell window costs
 what the 3-cell one does. Cells outside the grid are ignored (the neutral padding), as in
-``core.morphology``.
+``core.grids.morphology``.
 """
 from __future__ import annotations
 

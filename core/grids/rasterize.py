@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import InputError
-from .grid import GridSpec
+from ..errors import InputError
+from .spec import GridSpec
 
 
 def _xyz(x, y, z):

@@ -59,7 +59,7 @@ on TerraScan and LP360 ground parameters):
 The angle, distance, seed cell and offset were chosen among literature values with the 8 ISPRS
 samples at hand (docs/BENCHMARKS.md), so the ISPRS figures of these defaults are optimistic.
 
-Implementation (numba, core/_ptd_kernels.py): one incremental Delaunay triangulation with an
+Implementation (numba, core/filters/_ptd_tin.py and _ptd_kernels.py): one incremental Delaunay triangulation with an
 adjacency structure, never rebuilt. Every triangle keeps the list of candidate points inside
 it; a split or flip shares the points of the old triangles among the new ones, so no point is
 ever searched for. Only the triangles changed in the last round are tested again (in parallel),
@@ -73,9 +73,9 @@ from typing import Tuple
 
 import numpy as np
 
-from .errors import InvalidParameterError
-from .progress import Steps
-from .smrf import check_number, validate_xyz
+from ..errors import InvalidParameterError
+from ..progress import Steps
+from ..validate import check_number, validate_xyz
 
 #: Largest seed grid accepted (cells): a guard against a seed cell far too small.
 MAX_SEED_CELLS = 50_000_000
@@ -161,6 +161,7 @@ class PTD:
 
     def run(self, xyz: np.ndarray, steps: Steps | None = None) -> PTDResult:
         from . import _ptd_kernels as K
+        from . import _ptd_tin as T
         steps = steps or Steps()
         xyz = validate_xyz(xyz)
         steps.report(0.0)
@@ -241,13 +242,13 @@ class PTD:
         head = np.empty(capacity, dtype=np.int32)
         dirty = np.empty(capacity, dtype=np.int32)
         state = np.zeros(3, dtype=np.int64)  # triangles, dirty-list length, dirty-list mark
-        K.init_box_kernel(tv, tn, tstamp, head, state, n, n + 1, n + 2, n + 3)
+        T.init_box_kernel(tv, tn, tstamp, head, state, n, n + 1, n + 2, n + 3)
         order = np.concatenate([np.arange(n + 4, nv), seeds]).astype(np.int32)
         inserted = np.zeros(order.size, dtype=np.bool_)
-        K.insert_vertices_kernel(tv, tn, tstamp, dirty, state, vx, vy, head, nxt, status, order, inserted)
+        T.insert_vertices_kernel(tv, tn, tstamp, dirty, state, vx, vy, head, nxt, status, order, inserted)
         status[seeds] = np.where(inserted[ring.shape[0]:], K.GROUND_VERTEX, K.GROUND_OTHER)
         ntri = int(state[0])
-        K.fill_buckets_kernel(tv, tn, ntri, vx, vy, n, status, head, nxt)
+        T.fill_buckets_kernel(tv, tn, ntri, vx, vy, n, status, head, nxt)
         # Every triangle is dirty for the first round.
         mark = 0
         dirty[:ntri] = np.arange(ntri, dtype=np.int32)
@@ -342,7 +343,7 @@ def triangulate(x, y) -> np.ndarray:
     """Delaunay triangles (k, 3) of the points (x, y) made by PTD's TIN kernels, as indices into
     x, y, counter-clockwise; the triangles that use the enclosing box's corners are left out,
     and a point at the position of an earlier one is not a vertex. For tests and inspection."""
-    from . import _ptd_kernels as K
+    from . import _ptd_tin as T
     x = np.ascontiguousarray(x, dtype=np.float64)
     y = np.ascontiguousarray(y, dtype=np.float64)
     n = x.size
@@ -362,9 +363,9 @@ def triangulate(x, y) -> np.ndarray:
     state = np.zeros(3, dtype=np.int64)
     status = np.zeros(n, dtype=np.uint8)
     nxt = np.empty(n, dtype=np.int32)
-    K.init_box_kernel(tv, tn, tstamp, head, state, n, n + 1, n + 2, n + 3)
+    T.init_box_kernel(tv, tn, tstamp, head, state, n, n + 1, n + 2, n + 3)
     inserted = np.zeros(n, dtype=np.bool_)
-    K.insert_vertices_kernel(tv, tn, tstamp, dirty, state, vx, vy, head, nxt, status,
+    T.insert_vertices_kernel(tv, tn, tstamp, dirty, state, vx, vy, head, nxt, status,
                              np.arange(n, dtype=np.int32), inserted)
     tris = tv[:state[0]]
     return tris[(tris < n).all(axis=1)].astype(np.int64)

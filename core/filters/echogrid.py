@@ -34,9 +34,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InvalidParameterError
-from .progress import Steps
-from .smrf import check_choice, check_number, validate_xyz
+from ..errors import InvalidParameterError
+from ..progress import Steps
+from ..validate import check_choice, check_number, validate_xyz
 
 MODES = ("faithful", "evidence")
 
@@ -80,8 +80,7 @@ class EchoGrid:
 
     def run(self, xyz, steps: Steps | None = None, *, return_number=None, number_of_returns=None,
             log=None) -> EchoGridResult:
-        from ._kernels import (_echo_grid_classify_kernel, _echo_grid_stats_kernel,
-                               _lower_envelope_kernel)
+        from ._echogrid_kernels import _echo_grid_classify_kernel, _echo_grid_stats_kernel, _lower_envelope_kernel
         steps = steps or Steps()
         log = log or (lambda _msg: None)
         xyz = validate_xyz(xyz)

@@ -1,5 +1,5 @@
-"""numba kernels of the core. Private: call them through the public functions of
-``morphology``, ``rasterize`` and the filters, which validate and cast first."""
+"""numba kernels of the grid machinery. Private: call them through the public functions of
+``morphology`` and ``rasterize``, which validate and cast first."""
 from __future__ import annotations
 
 import math
@@ -10,7 +10,7 @@ from numba import njit, prange
 
 @njit(cache=True, nogil=True)
 def _cell_of(x, y, x0, top, cell, nrows, ncols):
-    """(row, col) of the grid cell holding (x, y), clamped to the grid (see core/grid.py)."""
+    """(row, col) of the grid cell holding (x, y), clamped to the grid (see core/grids/spec.py)."""
     c = min(max(int(math.floor((x - x0) / cell)), 0), ncols - 1)
     r = min(max(int(math.floor((top - y) / cell)), 0), nrows - 1)
     return r, c
@@ -175,111 +175,9 @@ def _rasterize_tin_kernel(px, py, pz, simplices, x0, top, cell, out):
 
 
 @njit(cache=True, nogil=True)
-def _classify_against_surface_kernel(x, y, z, surface, slope, x0, top, cell,
-                                     threshold, scalar, out_ground):
-    """SMRF's last step: ground where |z - surface(x, y)| <= threshold + scalar * slope(x, y),
-    both grids interpolated by cubic convolution at the point."""
-    wx = np.empty(4)
-    wy = np.empty(4)
-    for k in range(x.shape[0]):
-        fc = (x[k] - x0) / cell - 0.5
-        fr = (top - y[k]) / cell - 0.5
-        zs = _cubic_one(surface, fc, fr, wx, wy)
-        ss = _cubic_one(slope, fc, fr, wx, wy)
-        out_ground[k] = abs(z[k] - zs) <= threshold + scalar * ss
-
-
-@njit(cache=True, nogil=True)
-def _kernel_index(x, y, x0, y0, size, nx):
-    return int(math.floor((y - y0) / size)) * nx + int(math.floor((x - x0) / size))
-
-
-@njit(cache=True, nogil=True)
-def _echo_grid_stats_kernel(x, y, z, rn, nr, x0, y0, size, nx, ny, zmin, zmax, only_first, only_single):
-    """Per square kernel: lowest and highest z, whether every return number is 1 (the paper's
-    bypass test) and whether every point is a single return (1 of 1)."""
-    zmin[:] = np.inf
-    zmax[:] = -np.inf
-    only_first[:] = True
-    only_single[:] = True
-    for k in range(x.shape[0]):
-        c = _kernel_index(x[k], y[k], x0, y0, size, nx)
-        if z[k] < zmin[c]:
-            zmin[c] = z[k]
-        if z[k] > zmax[c]:
-            zmax[c] = z[k]
-        if rn[k] != 1:
-            only_first[c] = False
-        if nr[k] > 1:
-            only_single[c] = False
-
-
-@njit(cache=True, nogil=True)
-def _echo_grid_classify_kernel(x, y, z, x0, y0, size, nx, reference, bypass, dz, out_ground):
-    """Ground where the kernel is bypassed, or z <= reference z of the kernel + dz."""
-    for k in range(x.shape[0]):
-        c = _kernel_index(x[k], y[k], x0, y0, size, nx)
-        out_ground[k] = bypass[c] or z[k] <= reference[c] + dz
-
-
-@njit(cache=True, nogil=True)
-def _focal_cv_kernel(values, radius, max_radius, min_cells, out_mean, out_std):
-    """Mean and (population) standard deviation of the non-NaN ``values`` in the square window
-    of ``radius`` cells around each non-NaN cell. Where fewer than ``min_cells`` cells of the
-    window hold a value, the window grows one cell at a time up to ``max_radius``. Cells left
-    with fewer than 2 values, and NaN cells, get NaN."""
-    nrows, ncols = values.shape
-    for r in range(nrows):
-        for c in range(ncols):
-            out_mean[r, c] = np.nan
-            out_std[r, c] = np.nan
-            if np.isnan(values[r, c]):
-                continue
-            rad = radius
-            while True:
-                count = 0
-                total = 0.0
-                total2 = 0.0
-                for rr in range(max(r - rad, 0), min(r + rad + 1, nrows)):
-                    for cc in range(max(c - rad, 0), min(c + rad + 1, ncols)):
-                        v = values[rr, cc]
-                        if not np.isnan(v):
-                            count += 1
-                            total += v
-                            total2 += v * v
-                if count >= min_cells or rad >= max_radius:
-                    break
-                rad += 1
-            if count >= 2:
-                mean = total / count
-                var = total2 / count - mean * mean
-                out_mean[r, c] = mean
-                out_std[r, c] = math.sqrt(var) if var > 0.0 else 0.0
-
-
-@njit(cache=True, nogil=True)
 def _cell_lookup_kernel(x, y, grid, x0, top, cell, out):
     """out[k] = grid value of the cell holding point k."""
     nrows, ncols = grid.shape
     for k in range(x.shape[0]):
         r, c = _cell_of(x[k], y[k], x0, top, cell, nrows, ncols)
         out[k] = grid[r, c]
-
-
-@njit(cache=True, nogil=True)
-def _lower_envelope_kernel(zmin, radius, step, slope, out):
-    """out[k] = min over kernels j within ``radius`` kernels of (zmin[j] + slope * distance(k, j)):
-    the lowest point around each kernel, raised by the slope the terrain may climb to reach it.
-    Empty kernels (inf) are ignored; a kernel with none around stays inf."""
-    ny, nx = zmin.shape
-    for r in range(ny):
-        for c in range(nx):
-            best = np.inf
-            for rr in range(max(r - radius, 0), min(r + radius + 1, ny)):
-                for cc in range(max(c - radius, 0), min(c + radius + 1, nx)):
-                    v = zmin[rr, cc]
-                    if v < np.inf:
-                        v += slope * step * math.sqrt((rr - r) ** 2 + (cc - c) ** 2)
-                        if v < best:
-                            best = v
-            out[r, c] = best

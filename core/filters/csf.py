@@ -101,10 +101,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InvalidParameterError
-from .grid import MAX_CELLS, GridSpec
-from .progress import Steps
-from .smrf import check_choice, check_number, validate_xyz
+from ..errors import InvalidParameterError
+from ..grids.spec import MAX_CELLS, GridSpec
+from ..progress import Steps
+from ..validate import check_choice, check_number, validate_xyz
 
 #: Constants of the reference implementation.
 GRAVITY = 0.2                 #: gravity of the cloth (per unit time step squared)
@@ -138,11 +138,11 @@ def _require(condition: bool, message: str) -> None:
 def sweeps():
     """The sweep orders of ``sweep_order="rotating"``: for each of the 8 symmetries g of the
     square (columns mirrored or not, then 0-3 quarter turns, as np.rot90), the neighbour list
-    and the traversal flags (transpose, rev_outer, rev_inner) of _csf_kernels._time_step_kernel
+    and the traversal flags (transpose, rev_outer, rev_inner) of _csf_cloth._time_step_kernel
     under which its sweep over the cloth is the reference's sweep over the cloth transformed by
     g. Found on small probe grids (a 5 x 4 index grid for the traversal, 5 x 5 for the
     neighbours); ``tests/core/test_csf.py`` checks the equivalence bit for bit."""
-    from ._csf_kernels import NEIGHBOURS
+    from ._csf_cloth import NEIGHBOURS
     out = []
     W, H = 5, 4
     index = np.arange(W * H).reshape(H, W)
@@ -237,7 +237,8 @@ class CSF:
         return self.run(xyz, steps).ground
 
     def run(self, xyz: np.ndarray, steps: Steps | None = None) -> CSFResult:
-        from . import _csf_kernels as k
+        from . import _csf_cloth as cloth
+        from . import _csf_terrain as terrain
         steps = steps or Steps()
         xyz = validate_xyz(xyz)
         x, y, z = (np.ascontiguousarray(xyz[:, i]) for i in range(3))
@@ -249,7 +250,7 @@ class CSF:
             x0, y0 = float(x.min()), float(y.min())
             ncols = int((float(x.max()) - x0) / LOW_OUTLIER_CELL_M) + 1
             nrows = int((float(y.max()) - y0) / LOW_OUTLIER_CELL_M) + 1
-            k._low_outliers_kernel(x, y, z, x0, y0, LOW_OUTLIER_CELL_M, ncols, nrows,
+            terrain._low_outliers_kernel(x, y, z, x0, y0, LOW_OUTLIER_CELL_M, ncols, nrows,
                                    float(self.low_outlier_m), low)
         use = ~low
         xu, yu, zu = (x, y, z) if not low.any() else (x[use], y[use], z[use])
@@ -268,10 +269,10 @@ class CSF:
         hv = np.full(W * H, -np.inf)
         has = np.zeros(W * H, dtype=np.bool_)
         if self.intersection_height == "cell":
-            k._cell_heights_kernel(x, y, z, use, ox, oy, res, W, H, hv, has)
-            hv = k._scanline_fill_kernel(hv, has, W, H)
+            terrain._cell_heights_kernel(x, y, z, use, ox, oy, res, W, H, hv, has)
+            hv = terrain._scanline_fill_kernel(hv, has, W, H)
         else:
-            k._nearest_heights_kernel(x, y, z, use, ox, oy, res, W, H, NEAREST_MAX_RING, hv, has)
+            terrain._nearest_heights_kernel(x, y, z, use, ox, oy, res, W, H, NEAREST_MAX_RING, hv, has)
             if not has.all():
                 from scipy.ndimage import distance_transform_edt
                 idx = distance_transform_edt(~has.reshape(H, W), return_distances=False,
@@ -289,7 +290,7 @@ class CSF:
         acceleration = -self.gravity_step_m
         single, double = SINGLE_MOVE[int(self.rigidness)], DOUBLE_MOVE[int(self.rigidness)]
         total = int(self.iterations)
-        done, stopped = k._free_fall_kernel(pos, old, hv, acceleration, total, STOP_DIFF_M)
+        done, stopped = cloth._free_fall_kernel(pos, old, hv, acceleration, total, STOP_DIFF_M)
         sim = steps.sub(0.1, 0.9)
         scheme_2016 = self.constraint_scheme == "2016"
         if scheme_2016:  # that kernel runs on column-major arrays
@@ -301,14 +302,14 @@ class CSF:
         while done < total and not stopped:
             sim.report(done / total)  # also raises Cancelled: a long run stops within an iteration
             if scheme_2016:
-                max_diff, _pinned = k._time_step_2016_kernel(pos, old, movable, hv_sim, W, H, acceleration,
+                max_diff, _pinned = cloth._time_step_2016_kernel(pos, old, movable, hv_sim, W, H, acceleration,
                                                              int(self.rigidness))
             elif rotating:
                 neighbours, flags = orders[(done - first) % len(orders)]
-                k._time_step_kernel(pos, old, movable, quiet, hv, W, H, acceleration, single, double,
+                cloth._time_step_kernel(pos, old, movable, quiet, hv, W, H, acceleration, single, double,
                                     neighbours, *flags)
             else:
-                max_diff, _pinned = k._time_step_kernel(pos, old, movable, quiet, hv, W, H, acceleration,
+                max_diff, _pinned = cloth._time_step_kernel(pos, old, movable, quiet, hv, W, H, acceleration,
                                                         single, double)
             done += 1
             if not rotating:
@@ -316,7 +317,7 @@ class CSF:
             elif (done - first) % len(orders) == 0:
                 # One stop test per cycle of the 8 orders: each order has its own resting state,
                 # so the step to step change never settles; the cycle to cycle one does.
-                stopped = k._max_change(pos, cycle_start, movable) < len(orders) * STOP_DIFF_M
+                stopped = cloth._max_change(pos, cycle_start, movable) < len(orders) * STOP_DIFF_M
                 cycle_start[:] = pos
         del cycle_start
         if scheme_2016:
@@ -325,11 +326,11 @@ class CSF:
         del old, quiet
         sim.report(1.0)
         if self.slope_smooth:
-            k._slope_smooth_kernel(pos, movable, hv, W, H, float(self.slope_smooth_height_m), SMOOTH_MIN_GROUP)
+            cloth._slope_smooth_kernel(pos, movable, hv, W, H, float(self.slope_smooth_height_m), SMOOTH_MIN_GROUP)
         steps.report(0.92)
 
         ground = np.empty(n, dtype=np.bool_)
-        k._classify_kernel(x, y, z, use, ox, oy, res, W, H, pos, float(self.class_threshold_m), ground)
+        cloth._classify_kernel(x, y, z, use, ox, oy, res, W, H, pos, float(self.class_threshold_m), ground)
         grid = GridSpec(ox - res / 2, oy + (H - 1) * res + res / 2, res, H, W)
         cloth = (-pos).reshape(H, W)[::-1].copy()
         pinned = (~movable).reshape(H, W)[::-1].copy()

@@ -1,23 +1,22 @@
 """Reading and writing point clouds: LAS/LAZ (laspy + lazrs) and the ISPRS text format.
 
-Writes are atomic: the file is written under a temporary name in the target folder
+Writes are atomic (``outputs.atomic_path``): the file is written under a temporary name in the target folder
 and renamed over the target only when complete, so a failed or cancelled run leaves
 nothing half-written. Input files are only ever opened for reading.
 """
 from __future__ import annotations
 
-import contextlib
 import os
-import tempfile
 import warnings
 from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
 
-from .errors import InputError, OutputError, UnsupportedFormatError
+from ..errors import InputError, OutputError, UnsupportedFormatError
+from .outputs import LAS_EXTENSIONS, _ext, atomic_path, check_output_path
 
-LAS_EXTENSIONS = (".las", ".laz")
+
 TEXT_EXTENSIONS = (".txt",)
 READ_EXTENSIONS = LAS_EXTENSIONS + TEXT_EXTENSIONS
 
@@ -49,10 +48,6 @@ class PointCloud:
     @property
     def xyz(self) -> np.ndarray:
         return np.column_stack([self.x, self.y, self.z])
-
-
-def _ext(path: str) -> str:
-    return os.path.splitext(str(path))[1].lower()
 
 
 def read_cloud(path: str) -> PointCloud:
@@ -133,43 +128,6 @@ def _read_isprs_text(path: str) -> PointCloud:
                       classification=np.zeros(n, dtype=np.uint8), return_number=ones,
                       number_of_returns=ones.copy(), crs_wkt=None, has_return_info=False,
                       reference_label=label)
-
-
-def check_output_path(path: str, *, inputs=(), extensions=LAS_EXTENSIONS, what: str = "output") -> str:
-    """Refuse an output path that equals an input, has the wrong extension or an absent folder."""
-    path = os.fspath(path)
-    ext = _ext(path)
-    if ext not in extensions:
-        raise OutputError(f"{path}: the {what} must end in {' or '.join(extensions)} (got '{ext or '(none)'}')")
-    real = os.path.realpath(path)
-    for other in inputs:
-        if other and os.path.realpath(os.fspath(other)) == real:
-            raise OutputError(f"{path}: the {what} must not be the input file; choose another name")
-    folder = os.path.dirname(real) or "."
-    if not os.path.isdir(folder):
-        raise OutputError(f"{path}: the folder {folder} does not exist")
-    return path
-
-
-@contextlib.contextmanager
-def atomic_path(path: str):
-    """Yield a temporary path beside ``path`` (same extension); rename it to ``path`` on success,
-    delete it on any failure."""
-    path = os.fspath(path)
-    folder = os.path.dirname(os.path.abspath(path))
-    base = os.path.basename(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{base}.", suffix=f".part{_ext(path)}", dir=folder)
-    os.close(fd)
-    try:
-        yield tmp
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; the output follows the umask like any file
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.remove(tmp)
-        raise
 
 
 def new_las(x, y, z, *, point_format: int = 1, version: str = "1.2", scale: float = 0.01,

@@ -57,19 +57,18 @@ covariance sums), in numba kernels run in parallel (see ``_features_kernels``).
 """
 from __future__ import annotations
 
-import copy
 import math
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Callable, Dict, Optional, Tuple
+from typing import Dict, Optional, Tuple
 
 import numpy as np
 
-from .errors import InvalidParameterError, OutputError
-from .io import PointCloud, check_output_path, new_las, read_cloud, write_las
-from .progress import Steps
-from .smrf import validate_xyz
+from ..errors import InvalidParameterError
+from ..progress import Steps
+from ..validate import validate_xyz
+
 
 #: Features of the eigenvalues of the covariance in a sphere.
 EIGEN_FEATURES = ("linearity", "planarity", "sphericity", "omnivariance", "anisotropy", "eigenentropy",
@@ -285,113 +284,3 @@ def compute_features(xyz: np.ndarray, spec: FeatureSpec = FeatureSpec(), *,
         done += 1
     steps.report(1.0)
     return {name: results[name] for name in spec.names}
-
-
-# --------------------------------------------------------------------------- files
-
-def _description(name: str) -> str:
-    """The extra-bytes description of a feature (at most 32 characters)."""
-    try:
-        feature, radius = parse_feature_name(name)
-    except InvalidParameterError:
-        return ""
-    shape = "column" if feature in COLUMN_FEATURES else "sphere"
-    return f"{feature} {shape} r={radius:g}"[:32]
-
-
-def _check_feature_arrays(features: Mapping, n: int, path: str) -> Dict[str, np.ndarray]:
-    arrays: Dict[str, np.ndarray] = {}
-    lowered = {}
-    for name, values in features.items():
-        if not isinstance(name, str) or not _NAME_RE.match(name) or len(name) > MAX_NAME_LENGTH:
-            raise OutputError(f"{path}: {name!r} cannot name a LAS extra dimension: use at most "
-                              f"{MAX_NAME_LENGTH} letters, digits or underscores, starting with a letter")
-        if name.lower() in lowered:
-            raise OutputError(f"{path}: feature names {lowered[name.lower()]!r} and {name!r} differ only by case")
-        lowered[name.lower()] = name
-        values = np.asarray(values)
-        if values.shape != (n,):
-            raise OutputError(f"{path}: feature {name} has {values.shape} values for {n} points")
-        arrays[name] = values.astype(np.float32, copy=False)
-    if not arrays:
-        raise OutputError(f"{path}: no feature to write")
-    return arrays
-
-
-def check_names_free(cloud: PointCloud, names, path: str) -> None:
-    """Refuse (OutputError) feature names already taken by a dimension of ``cloud`` (case ignored,
-    as PDAL does), e.g. when the input is the output of an earlier run."""
-    if cloud.las is not None:
-        taken = list(cloud.las.point_format.dimension_names)
-    else:
-        taken = ["X", "Y", "Z", "classification"] + (["reference_label"] if cloud.reference_label is not None else [])
-    existing = {d.lower(): d for d in taken}
-    for name in names:
-        if name.lower() in existing:
-            raise OutputError(
-                f"{path}: the input {cloud.path} already has a dimension named '{existing[name.lower()]}' "
-                f"(from an earlier run?); the feature {name} cannot be added beside it. Compute the "
-                "features on the original cloud, or at other radii.")
-
-
-def write_features(cloud: PointCloud, features: Mapping, path: str, *, atomic: bool = True) -> None:
-    """Write ``cloud`` (LAS/LAZ by the extension of ``path``) with every dimension, extra bytes,
-    VLR and the CRS of a LAS/LAZ input kept, plus one float32 extra-bytes dimension per entry of
-    ``features`` ({name: array}); NaN marks points without a value. An ISPRS text input becomes
-    LAS 1.2 point format 0 (its label column kept as ``reference_label``, as
-    :func:`~groundsieve.core.io.write_classified` does). A name already used by a dimension of
-    the input (case ignored, as PDAL does) is refused with an :class:`OutputError`."""
-    import laspy
-    path = check_output_path(path, inputs=[cloud.path])
-    arrays = _check_feature_arrays(features, len(cloud), path)
-    check_names_free(cloud, arrays, path)
-    if cloud.las is not None:
-        # A copy: the cloud in memory stays as read.
-        las = laspy.LasData(copy.deepcopy(cloud.las.header), points=cloud.las.points.copy())
-    else:
-        extra = {"reference_label": cloud.reference_label} if cloud.reference_label is not None else None
-        las = new_las(cloud.x, cloud.y, cloud.z, point_format=0, crs_wkt=cloud.crs_wkt, extra=extra,
-                      classification=cloud.classification)
-    las.add_extra_dims([laspy.ExtraBytesParams(name=name, type=np.float32, description=_description(name))
-                        for name in arrays])
-    for name, values in arrays.items():
-        las[name] = values
-    write_las(las, path, atomic=atomic)
-
-
-@dataclass
-class FeaturesRun:
-    cloud: PointCloud
-    features: Dict[str, np.ndarray]   #: {name: float32 per point}
-
-    @property
-    def names(self) -> Tuple[str, ...]:
-        return tuple(self.features)
-
-
-def run_features(input_path: str, output_path: str, spec: FeatureSpec = FeatureSpec(), *,
-                 progress: Optional[Callable[[float], None]] = None,
-                 is_cancelled: Optional[Callable[[], bool]] = None,
-                 log: Optional[Callable[[str], None]] = None) -> FeaturesRun:
-    """Read ``input_path``, compute the features of ``spec`` for every point and write
-    ``output_path`` (LAS/LAZ) with them as extra bytes. The output is written under a temporary
-    name and renamed when complete; the input is never modified."""
-    steps = Steps(progress, is_cancelled)
-    log = log or (lambda _msg: None)
-    check_output_path(output_path, inputs=[input_path])
-    steps.check()
-    cloud = read_cloud(input_path)
-    log(f"Read {len(cloud):,} points from {input_path}.")
-    check_names_free(cloud, spec.names, output_path)
-    steps.report(0.05)
-    features = compute_features(cloud.xyz, spec, steps=steps.sub(0.05, 0.85))
-    for radius, wanted in spec.sphere_passes().items():
-        eigen = [name for feature, name in wanted if feature in EIGEN_FEATURES]
-        missing = int(np.isnan(features[eigen[0]]).sum()) if eigen else 0
-        if missing:
-            log(f"{missing:,} point(s) ({100.0 * missing / len(cloud):.1f} %) have fewer than {MIN_POINTS} points "
-                f"(or only coincident ones) within {radius:g} m: no value (NaN) for {', '.join(eigen)}.")
-    steps.check()
-    write_features(cloud, features, output_path)
-    steps.report(1.0)
-    return FeaturesRun(cloud, features)

@@ -1,4 +1,4 @@
-"""numba kernels of the Random Forest predictor (private; see core/rf.py)."""
+"""numba kernels of the Random Forest predictor (private; see core/learn/rf.py)."""
 import numpy as np
 from numba import njit, prange
 

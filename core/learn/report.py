@@ -12,8 +12,8 @@ from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
-from .io import atomic_path
-from .metrics import ClassReport
+from ..io import atomic_path
+from ..metrics import ClassReport
 
 #: ASPRS class names for the report.
 ASPRS_NAMES = {0: "never classified", 1: "unclassified", 2: "ground", 3: "low vegetation",

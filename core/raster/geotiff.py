@@ -7,16 +7,16 @@ from typing import Optional
 
 import numpy as np
 
-from .errors import OutputError
-from .grid import GridSpec
-from .io import atomic_path
+from ..errors import OutputError
+from ..grids.spec import GridSpec
+from ..io import atomic_path
 
 NODATA = -9999.0
 RASTER_EXTENSIONS = (".tif", ".tiff")
 
 
 def check_raster_path(path: str, *, inputs=()) -> str:
-    from .io import check_output_path
+    from ..io import check_output_path
     return check_output_path(path, inputs=inputs, extensions=RASTER_EXTENSIONS, what="raster output")
 
 

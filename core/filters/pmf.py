@@ -77,10 +77,10 @@ from typing import Optional
 
 import numpy as np
 
-from .errors import InvalidParameterError
-from .grid import GridSpec
-from .progress import Steps
-from .smrf import check_number, validate_xyz
+from ..errors import InvalidParameterError
+from ..grids.spec import GridSpec
+from ..progress import Steps
+from ..validate import check_number, validate_xyz
 
 #: Longest window series accepted (a guard against a linear series of thousands of windows).
 MAX_WINDOWS = 1000

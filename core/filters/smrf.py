@@ -27,49 +27,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError, InvalidParameterError
-from .grid import GridSpec
-from .inpaint import inpaint_harmonic
-from .morphology import progressive_filter
-from .progress import Steps
-from .rasterize import cell_min
-
-
-def _require(condition: bool, message: str) -> None:
-    if not condition:
-        raise InvalidParameterError(message)
-
-
-def check_number(params, name: str) -> None:
-    """Refuse a parameter that is not a real number (None, text, ...) with the core's error."""
-    value = getattr(params, name)
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise InvalidParameterError(f"{name} must be a number (got {value!r})")
-
-
-def check_choice(params, name: str, choices) -> None:
-    """Refuse a parameter that is not one of ``choices`` with the core's error."""
-    value = getattr(params, name)
-    if value not in choices:
-        raise InvalidParameterError(f"{name} must be one of {', '.join(choices)} (got {value!r})")
-
-
-def validate_xyz(xyz: np.ndarray, *, what: str = "point cloud") -> np.ndarray:
-    """Return ``xyz`` as a contiguous float64 (n, 3) array; refuse empty or non-finite input."""
-    xyz = np.asarray(xyz)
-    if xyz.ndim != 2 or xyz.shape[1] != 3:
-        raise InputError(f"{what}: expected an (n, 3) array of x, y, z (got shape {xyz.shape})")
-    if xyz.shape[0] == 0:
-        raise InputError(f"{what}: holds no points")
-    xyz = np.ascontiguousarray(xyz, dtype=np.float64)
-    finite = np.isfinite(xyz).all(axis=1)
-    if not finite.all():
-        bad = int((~finite).sum())
-        raise InputError(f"{what}: {bad} point(s) have NaN or infinite coordinates")
-    if np.abs(xyz).max() > 1e9:
-        raise InputError(f"{what}: coordinates beyond ±1e9 m (max |value| {np.abs(xyz).max():.3g}); "
-                         "the file's scale/offset or coordinate system is probably wrong")
-    return xyz
+from ..grids.inpaint import inpaint_harmonic
+from ..grids.morphology import progressive_filter
+from ..grids.rasterize import cell_min
+from ..grids.spec import GridSpec
+from ..progress import Steps
+from ..validate import _require, check_number, validate_xyz
 
 
 @dataclass(frozen=True)
@@ -121,7 +84,7 @@ class SMRF:
         return self.run(xyz, steps).ground
 
     def run(self, xyz: np.ndarray, steps: Steps | None = None) -> SMRFResult:
-        from ._kernels import _classify_against_surface_kernel
+        from ._smrf_kernels import _classify_against_surface_kernel
         steps = steps or Steps()
         xyz = validate_xyz(xyz)
         x, y, z = (np.ascontiguousarray(xyz[:, i]) for i in range(3))

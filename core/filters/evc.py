@@ -40,11 +40,11 @@ from typing import Optional
 
 import numpy as np
 
-from .errors import InvalidParameterError
-from .grid import GridSpec
-from .progress import Steps
-from .rasterize import cell_mean
-from .smrf import check_choice, check_number, validate_xyz
+from ..errors import InvalidParameterError
+from ..grids.spec import GridSpec
+from ..progress import Steps
+from ..grids.rasterize import cell_mean
+from ..validate import check_choice, check_number, validate_xyz
 
 DIFFERENCES = ("large_minus_small", "small_minus_large")
 #: class codes of the class raster
@@ -108,7 +108,8 @@ class EVC:
     def run(self, xyz, steps: Optional[Steps] = None, **_fields) -> EVCResult:
         from scipy.ndimage import distance_transform_edt
 
-        from ._kernels import _cell_lookup_kernel, _focal_cv_kernel
+        from ._evc_kernels import _focal_cv_kernel
+        from ..grids._kernels import _cell_lookup_kernel
         steps = steps or Steps()
         xyz = validate_xyz(xyz)
         x, y, z = (np.ascontiguousarray(xyz[:, i]) for i in range(3))

@@ -1,5 +1,5 @@
-"""numba kernels of ``core.features``. Private: call them through
-:func:`groundsieve.core.features.compute_features`, which validates, sorts and casts first.
+"""numba kernels of ``core.learn.features``. Private: call them through
+:func:`groundsieve.core.learn.features.compute_features`, which validates, sorts and casts first.
 
 Neighbour search. The points are binned in vertical columns of square cells (``cell`` = the
 radius divided by ``split``), identified by the key ``ix * ny + iy``; they are sorted by (key, z),

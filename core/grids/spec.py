@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InvalidParameterError
+from ..errors import InvalidParameterError
 
 #: Largest grid the core agrees to allocate (cells); a guard against a cell size
 #: that is far too small for the extent of the cloud.

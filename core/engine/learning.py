@@ -1,0 +1,199 @@
+"""matrone2024 Method 3 from file to file: train a Random Forest on a labelled cloud (model file,
+HTML/CSV report) and classify a cloud with a saved model (classified cloud, optional DTM)."""
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+from typing import List, Optional
+
+import numpy as np
+
+from ..errors import InputError
+from ..learn.model_file import MODEL_EXTENSION, load_model, save_model
+from ..learn.rf import (CRITERIA, DEFAULT_PRESET, PRESETS, SCALERS, ForestParams, Model, feature_matrix,
+                        permutation_importance, resolve_features, spatial_split, train_forest)
+
+
+# -- file to file ------------------------------------------------------------------------------
+
+#: The paper's grid: splitting criterion x number of trees x scaler.
+PAPER_GRID = tuple((c, t, s) for c in CRITERIA for t in (100, 150, 200) for s in SCALERS)
+EXCLUDED_BY_DEFAULT = (0, 7, 18)  # never classified, noise
+
+
+@dataclass(frozen=True)
+class TrainOptions:
+    features: tuple = PRESETS[DEFAULT_PRESET]
+    classes: Optional[tuple] = None      #: ASPRS codes to learn; None = all present but 0, 7, 18
+    params: ForestParams = ForestParams()
+    block_m: float = 25.0                #: spatial blocks of the train/validation/test split
+    fractions: tuple = (0.6, 0.2, 0.2)
+    grid: bool = False                   #: run the paper's grid, keep the best on validation
+    permutation_points: int = 20_000     #: test points used for permutation importance
+    permutation_repeats: int = 2
+
+
+@dataclass
+class TrainRun:
+    model: Model
+    evaluations: dict
+    features: List[str]
+    timings: dict
+    grid: Optional[List[dict]] = None
+
+
+def _labelled(cloud, classes, log):
+    labels = cloud.classification
+    if classes is None:
+        present = np.unique(labels)
+        classes = tuple(int(c) for c in present if c not in EXCLUDED_BY_DEFAULT)
+        log(f"Learning the classes present in {cloud.path}: {', '.join(map(str, classes))}.")
+    missing = [c for c in classes if not np.any(labels == c)]
+    if missing:
+        raise InputError(f"{cloud.path}: no point of class {', '.join(map(str, missing))} to learn from")
+    if len(classes) < 2:
+        raise InputError(f"{cloud.path}: at least two classes are needed to train (got {list(classes)})")
+    return np.isin(labels, classes), tuple(classes)
+
+
+def train_file(input_path: str, model_path: str, report_path: Optional[str] = None,
+               options: TrainOptions = TrainOptions(), *, validation_path: Optional[str] = None,
+               test_path: Optional[str] = None, progress=None, is_cancelled=None, log=None) -> TrainRun:
+    """Train on the labelled cloud ``input_path`` (its classification is the label) and write the
+    model and the report. Validation and test sets are spatial blocks of the input, or the
+    separate files ``validation_path`` / ``test_path`` when given."""
+    from ..io import check_output_path, read_cloud
+    from ..metrics import class_report
+    from ..progress import Steps
+    from ..learn.report import write_report
+    steps = Steps(progress, is_cancelled)
+    log = log or (lambda _msg: None)
+    check_output_path(model_path, inputs=[input_path, validation_path, test_path], extensions=(MODEL_EXTENSION,),
+                      what="model file")
+    if report_path:
+        check_output_path(report_path, inputs=[input_path, model_path], extensions=(".html", ".htm"),
+                          what="report")
+    timings = {}
+    t0 = time.perf_counter()
+    cloud = read_cloud(input_path)
+    keep, classes = _labelled(cloud, options.classes, log)
+    names = resolve_features(options.features, cloud, log)
+    X = feature_matrix(cloud, names, steps.sub(0.0, 0.3))
+    y = cloud.classification
+    timings["features (training cloud)"] = time.perf_counter() - t0
+    sets = {}
+    if validation_path or test_path:
+        sets["train"] = (X[keep], y[keep])
+        for label, path in (("validation", validation_path), ("test", test_path)):
+            if path:
+                t1 = time.perf_counter()
+                other = read_cloud(path)
+                other_keep = np.isin(other.classification, classes)
+                other_names = resolve_features(options.features, other, log)
+                if other_names != names:
+                    raise InputError(f"{path}: gives the features {other_names}, the training cloud {names}")
+                Xo = feature_matrix(other, names)
+                sets[label] = (Xo[other_keep], other.classification[other_keep])
+                timings[f"features ({label} file)"] = time.perf_counter() - t1
+    if not ("validation" in sets and "test" in sets):
+        split = spatial_split(cloud.x, cloud.y, options.block_m, options.fractions, seed=options.params.seed)
+        for label, code in (("train", 0), ("validation", 1), ("test", 2)):
+            if label in sets and label != "train":
+                continue
+            mask = keep & (split == code)
+            sets[label] = (X[mask], y[mask])
+        if validation_path or test_path:
+            log("Blocks of the input fill in the set not given as a file.")
+    for label, (Xs, _ys) in sets.items():
+        if len(Xs) == 0:
+            raise InputError(f"{input_path}: the {label} set is empty; use smaller blocks "
+                             f"(now {options.block_m:g} m) or give it as a file")
+    log(", ".join(f"{label}: {len(v[0]):,} points" for label, v in sets.items()))
+    steps.report(0.35)
+    meta = dict(groundsieve_trained_from=os.path.basename(input_path), preset_features=list(options.features))
+    candidates = [options.params]
+    if options.grid:
+        candidates = [ForestParams(n_trees=t, criterion=c, scaler=s, max_depth=options.params.max_depth,
+                                   max_samples=options.params.max_samples, seed=options.params.seed)
+                      for c, t, s in PAPER_GRID]
+    best = None
+    grid_rows = [] if options.grid else None
+    t1 = time.perf_counter()
+    for k, params in enumerate(candidates):
+        steps.check()
+        t_fit = time.perf_counter()
+        model = train_forest(*sets["train"], names, params, meta=meta)
+        Xv, yv = sets["validation"]
+        report = class_report(yv, model.predict(Xv), classes)
+        score = report.weighted(report.f1)
+        if grid_rows is not None:
+            grid_rows.append(dict(criterion=params.criterion, n_trees=params.n_trees, scaler=params.scaler,
+                                  accuracy=report.accuracy, f1=score, seconds=time.perf_counter() - t_fit))
+        if best is None or score > best[0]:
+            best = (score, model)
+        steps.report(0.35 + 0.5 * (k + 1) / len(candidates))
+    model = best[1]
+    timings["training" + (" (grid)" if options.grid else "")] = time.perf_counter() - t1
+    t2 = time.perf_counter()
+    evaluations = {}
+    for label in ("validation", "test"):
+        Xs, ys = sets[label]
+        evaluations[f"{label} set"] = class_report(ys, model.predict(Xs), classes)
+    timings["prediction (validation + test)"] = time.perf_counter() - t2
+    Xt, yt = sets["test"]
+    if len(Xt) > options.permutation_points:
+        pick = np.random.default_rng(0).choice(len(Xt), options.permutation_points, replace=False)
+        Xt, yt = Xt[pick], yt[pick]
+    t3 = time.perf_counter()
+    perm = permutation_importance(model, Xt, yt, options.permutation_repeats)
+    timings["permutation importance"] = time.perf_counter() - t3
+    model.meta.update(classes_learned=list(classes), test_accuracy=evaluations["test set"].accuracy)
+    steps.check()
+    save_model(model, model_path)
+    if report_path:
+        settings = dict(input=input_path, features=", ".join(names), classes=", ".join(map(str, classes)),
+                        criterion=model.meta["params"]["criterion"], trees=model.meta["params"]["n_trees"],
+                        scaler=model.meta["params"]["scaler"], max_depth=model.meta["params"]["max_depth"],
+                        samples_per_tree=model.meta["params"]["max_samples"],
+                        split=(f"spatial blocks of {options.block_m:g} m, fractions {options.fractions}"
+                               if not (validation_path and test_path) else "separate files"))
+        write_report(report_path, title="GroundSieve Random Forest training", evaluations=evaluations,
+                     features=names, impurity=model.meta["impurity_importance"], permutation=perm,
+                     timings=timings, settings=settings, grid=grid_rows)
+    steps.report(1.0)
+    return TrainRun(model, evaluations, names, timings, grid_rows)
+
+
+def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_path: Optional[str] = None,
+                  dtm=None, progress=None, is_cancelled=None, log=None):
+    """Apply a saved model to ``input_path``; write the classified cloud (the model's ASPRS codes)
+    and, optionally, a DTM from the points predicted as ground (class 2)."""
+    from ..io import CLASS_GROUND, read_cloud
+    from ..progress import Steps
+    from .workflow import DTMOptions, check_outputs, make_dtm, write_outputs
+    steps = Steps(progress, is_cancelled)
+    log = log or (lambda _msg: None)
+    dtm = dtm or DTMOptions()
+    check_outputs(input_path, output_path, [dtm_path])
+    model = load_model(model_path)
+    cloud = read_cloud(input_path)
+    names = resolve_features(model.meta.get("preset_features", model.features), cloud, log)
+    if names != list(model.features):
+        raise InputError(f"{input_path}: this cloud gives the features {names} but the model "
+                         f"{model_path} was trained on {list(model.features)} (e.g. colour present in one "
+                         "and not the other)")
+    X = feature_matrix(cloud, names, steps.sub(0.0, 0.5))
+    predicted = model.predict(X).astype(np.uint8)
+    steps.report(0.7)
+    log(", ".join(f"class {c}: {int((predicted == c).sum()):,}" for c in model.classes))
+    rasters = []
+    if dtm_path:
+        ground = predicted == CLASS_GROUND
+        if not ground.any():
+            raise InputError(f"{input_path}: no point was predicted as ground (class 2): no DTM can be made")
+        grid, values = make_dtm(cloud.x, cloud.y, cloud.z, ground, dtm)
+        rasters.append((dtm_path, values, grid))
+    write_outputs(cloud, predicted, output_path, rasters, steps)
+    steps.report(1.0)
+    return cloud, predicted

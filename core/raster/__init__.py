@@ -1,0 +1,2 @@
+"""Raster files: GeoTIFF writing (``geotiff``), the only place the core imports GDAL.
+May import: errors, io, grids."""

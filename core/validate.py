@@ -1,0 +1,45 @@
+"""The checks every filter and learner applies to its parameters and its points, with the core's
+errors: a number that is not a number, a choice that is not offered, an array of points that is
+not ``(n, 3)`` finite float coordinates."""
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import InputError, InvalidParameterError
+
+
+def _require(condition: bool, message: str) -> None:
+    if not condition:
+        raise InvalidParameterError(message)
+
+
+def check_number(params, name: str) -> None:
+    """Refuse a parameter that is not a real number (None, text, ...) with the core's error."""
+    value = getattr(params, name)
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise InvalidParameterError(f"{name} must be a number (got {value!r})")
+
+
+def check_choice(params, name: str, choices) -> None:
+    """Refuse a parameter that is not one of ``choices`` with the core's error."""
+    value = getattr(params, name)
+    if value not in choices:
+        raise InvalidParameterError(f"{name} must be one of {', '.join(choices)} (got {value!r})")
+
+
+def validate_xyz(xyz: np.ndarray, *, what: str = "point cloud") -> np.ndarray:
+    """Return ``xyz`` as a contiguous float64 (n, 3) array; refuse empty or non-finite input."""
+    xyz = np.asarray(xyz)
+    if xyz.ndim != 2 or xyz.shape[1] != 3:
+        raise InputError(f"{what}: expected an (n, 3) array of x, y, z (got shape {xyz.shape})")
+    if xyz.shape[0] == 0:
+        raise InputError(f"{what}: holds no points")
+    xyz = np.ascontiguousarray(xyz, dtype=np.float64)
+    finite = np.isfinite(xyz).all(axis=1)
+    if not finite.all():
+        bad = int((~finite).sum())
+        raise InputError(f"{what}: {bad} point(s) have NaN or infinite coordinates")
+    if np.abs(xyz).max() > 1e9:
+        raise InputError(f"{what}: coordinates beyond ±1e9 m (max |value| {np.abs(xyz).max():.3g}); "
+                         "the file's scale/offset or coordinate system is probably wrong")
+    return xyz
