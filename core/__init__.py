@@ -3,8 +3,8 @@
 Layers, each importing only from the ones below it (tests/core/test_architecture.py checks it):
 
     engine/     drivers: file to file (read, select, filter, classify, write, DTM), training runs
+    learn/      point features, the Random Forest, its model file and report (may use filters)
     filters/    one module per ground filter, its numba kernels beside it; no filter imports another
-    learn/      point features, the Random Forest, its model file and report
     raster/     GeoTIFF writing (the only place GDAL is imported)
     io/ grids/  point clouds in and out, atomic outputs | grid spec, rasterize, inpaint, morphology
     validate.py progress.py metrics.py errors.py   shared checks, progress/cancel callables,
