@@ -1,16 +1,34 @@
-"""Which of the Python packages GroundSieve needs are missing (no QGIS import here)."""
+"""Which of the Python packages GroundSieve needs are missing, and how to install them into the
+Python that QGIS runs (no QGIS import here: plugin.py shows the message and asks first).
+
+The installer runs ``<QGIS's python> -m pip install --user ...``: the user site needs no
+administrator rights on any platform, is on QGIS's ``sys.path`` on Windows (OSGeo4W and the
+standalone installer), macOS and Linux, and is added to ``sys.path`` after the install so the
+algorithms run without a restart. numpy (and scipy) are pinned to the versions QGIS runs with, so
+pip never replaces the numpy that QGIS's own modules (GDAL's gdal_array) were built against.
+"""
+import importlib
 import importlib.util
+import os
+import site
+import subprocess
+import sys
+import sysconfig
+import tempfile
 
 #: import name -> pip requirement
 REQUIRED = {"numpy": "numpy", "scipy": "scipy", "laspy": "laspy", "lazrs": "lazrs", "numba": "numba",
             "osgeo": "GDAL (python3-gdal)"}
 #: needed by one algorithm only (training a Random Forest)
 TRAINING = {"sklearn": "scikit-learn"}
+#: what pip cannot install into QGIS's Python: it comes with QGIS (or the system's GDAL bindings)
+NOT_PIP = {"GDAL (python3-gdal)"}
 
-INSTALL_HINT = ("Install them into QGIS's Python, e.g. on Debian/Ubuntu: "
-                "/usr/bin/python3 -m pip install --user --break-system-packages "
-                "-c constraints.txt -r requirements.txt (from the plugin folder); on Windows, from the "
-                "OSGeo4W shell: python -m pip install laspy lazrs numba scikit-learn")
+INSTALL_HINT = ("Install them into QGIS's Python: Plugins > GroundSieve offers to do it (the message bar's "
+                "'Install…' button), or run the command it shows in the QGIS log (Log Messages > GroundSieve), "
+                "e.g. on Debian/Ubuntu: /usr/bin/python3 -m pip install --user --break-system-packages "
+                "laspy lazrs numba scikit-learn numpy==<the numpy version QGIS runs>; on Windows, from the "
+                "OSGeo4W shell: python -m pip install --user laspy lazrs numba scikit-learn")
 
 
 def missing_dependencies(extra=None):
@@ -24,3 +42,87 @@ def require_dependencies(extra=None):
     if missing:
         raise ImportError(f"GroundSieve needs the Python package(s) {', '.join(missing)}, "
                           f"not found in QGIS's Python. {INSTALL_HINT}")
+
+
+def qgis_python():
+    """The Python interpreter of the running QGIS. Inside QGIS ``sys.executable`` is QGIS itself
+    (qgis-bin.exe, QGIS.app, /usr/bin/qgis), so look beside the running Python's prefix: OSGeo4W and
+    the standalone installer keep python.exe in ``sys.exec_prefix``, QGIS.app in
+    ``Contents/MacOS/bin``, Linux distributions in ``<prefix>/bin``. Returns None when none is found."""
+    version = f"{sys.version_info[0]}.{sys.version_info[1]}"
+    names = ("python.exe", "python3.exe") if os.name == "nt" else (f"python{version}", "python3", "python")
+    folders = [sys.exec_prefix, os.path.join(sys.exec_prefix, "bin"), os.path.dirname(sys.executable)]
+    if os.path.basename(sys.executable).lower().startswith("python"):
+        return sys.executable  # a plain Python (qgis_process's embedded Python reports QGIS too)
+    for folder in folders:
+        for name in names:
+            path = os.path.join(folder, name)
+            if os.path.isfile(path) and os.access(path, os.X_OK):
+                return path
+    return None
+
+
+def _externally_managed():
+    """Debian/Ubuntu (PEP 668) refuse pip into the system Python unless told it is meant."""
+    return os.path.isfile(os.path.join(sysconfig.get_path("stdlib"), "EXTERNALLY-MANAGED"))
+
+
+def install_command(packages, python=None, constraints_path=None):
+    """The pip command that installs ``packages`` (pip names) into the user site of QGIS's
+    Python, pinned to the numpy/scipy QGIS runs with through ``constraints_path``."""
+    python = python or qgis_python()
+    if python is None:
+        raise RuntimeError("QGIS's Python interpreter was not found next to "
+                           f"{sys.exec_prefix}; install the packages {', '.join(packages)} by hand")
+    cmd = [python, "-m", "pip", "install", "--user", "--disable-pip-version-check", "--no-input"]
+    if _externally_managed():
+        cmd.append("--break-system-packages")
+    if constraints_path:
+        cmd += ["-c", constraints_path]
+    return cmd + list(packages)
+
+
+def pinned_versions():
+    """numpy and scipy as QGIS runs them (None when not importable)."""
+    pins = {}
+    for name in ("numpy", "scipy"):
+        try:
+            pins[name] = importlib.import_module(name).__version__
+        except Exception:  # absent or broken: nothing to pin
+            pass
+    return pins
+
+
+def command_text(cmd):
+    return " ".join(f'"{a}"' if " " in a else a for a in cmd)
+
+
+def install(packages, log=print, run=subprocess.run, timeout=1800):
+    """Install ``packages`` (pip names) into QGIS's Python; return (ok, what pip printed).
+    Blocking: call it off the GUI thread. Activates the user site afterwards."""
+    packages = [p for p in packages if p not in NOT_PIP]
+    if not packages:
+        return True, ""
+    with tempfile.TemporaryDirectory(prefix="groundsieve-pip-") as folder:
+        constraints = os.path.join(folder, "constraints.txt")
+        with open(constraints, "w", encoding="utf-8") as handle:
+            handle.writelines(f"{name}=={version}\n" for name, version in pinned_versions().items())
+        cmd = install_command(packages, constraints_path=constraints)
+        log(f"Running: {command_text(cmd)}")
+        try:
+            done = run(cmd, capture_output=True, text=True, timeout=timeout,
+                       env=dict(os.environ, PIP_NO_INPUT="1"))
+        except (OSError, subprocess.TimeoutExpired) as err:
+            return False, str(err)
+    output = (done.stdout or "") + (done.stderr or "")
+    activate_user_site()
+    return done.returncode == 0, output
+
+
+def activate_user_site():
+    """Put the user site on sys.path when pip has just created it (Python adds it at start-up
+    only if it existed then), so newly installed packages import without restarting QGIS."""
+    user_site = site.getusersitepackages()
+    if site.ENABLE_USER_SITE is not False and os.path.isdir(user_site) and user_site not in sys.path:
+        site.addsitedir(user_site)
+    importlib.invalidate_caches()
