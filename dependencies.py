@@ -14,7 +14,6 @@ import site
 import subprocess
 import sys
 import sysconfig
-import tempfile
 
 #: import name -> pip requirement
 REQUIRED = {"numpy": "numpy", "scipy": "scipy", "laspy": "laspy", "lazrs": "lazrs", "numba": "numba",
@@ -45,21 +44,37 @@ def require_dependencies(extra=None):
 
 
 def qgis_python():
-    """The Python interpreter of the running QGIS. Inside QGIS ``sys.executable`` is QGIS itself
-    (qgis-bin.exe, QGIS.app, /usr/bin/qgis), so look beside the running Python's prefix: OSGeo4W and
-    the standalone installer keep python.exe in ``sys.exec_prefix``, QGIS.app in
-    ``Contents/MacOS/bin``, Linux distributions in ``<prefix>/bin``. Returns None when none is found."""
+    """The Python interpreter of the running QGIS, or None. Inside QGIS ``sys.executable`` is QGIS
+    itself or whatever ``python3`` comes first on the PATH (seen on Linux: a pyenv shim), so the
+    candidates are looked for in the running Python's prefix (OSGeo4W and the Windows installer keep
+    python.exe in ``sys.exec_prefix``, QGIS.app in ``Contents/MacOS/bin``, Linux in ``<prefix>/bin``)
+    and each is asked for its ``sys.prefix`` and version: only the very Python QGIS runs is taken."""
     version = f"{sys.version_info[0]}.{sys.version_info[1]}"
     names = ("python.exe", "python3.exe") if os.name == "nt" else (f"python{version}", "python3", "python")
-    folders = [sys.exec_prefix, os.path.join(sys.exec_prefix, "bin"), os.path.dirname(sys.executable)]
-    if os.path.basename(sys.executable).lower().startswith("python"):
-        return sys.executable  # a plain Python (qgis_process's embedded Python reports QGIS too)
-    for folder in folders:
-        for name in names:
-            path = os.path.join(folder, name)
-            if os.path.isfile(path) and os.access(path, os.X_OK):
-                return path
+    folders = []
+    for prefix in (sys.exec_prefix, sys.base_exec_prefix):
+        folders += [prefix, os.path.join(prefix, "bin")]
+    candidates = [os.path.join(folder, name) for folder in folders for name in names]
+    candidates.append(sys.executable)
+    seen = set()
+    for path in candidates:
+        if not path or path in seen or not os.path.isfile(path) or not os.access(path, os.X_OK):
+            continue
+        seen.add(path)
+        if _same_python(path):
+            return path
     return None
+
+
+def _same_python(path):
+    """Whether ``path`` runs as the current Python (same prefix and version)."""
+    want = f"{os.path.realpath(sys.prefix)}|{sys.version_info[0]}.{sys.version_info[1]}"
+    code = "import os, sys; print(os.path.realpath(sys.prefix) + '|%d.%d' % sys.version_info[:2])"
+    try:
+        done = subprocess.run([path, "-I", "-c", code], capture_output=True, text=True, timeout=30)
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+    return done.returncode == 0 and done.stdout.strip() == want
 
 
 def _externally_managed():
@@ -67,23 +82,8 @@ def _externally_managed():
     return os.path.isfile(os.path.join(sysconfig.get_path("stdlib"), "EXTERNALLY-MANAGED"))
 
 
-def install_command(packages, python=None, constraints_path=None):
-    """The pip command that installs ``packages`` (pip names) into the user site of QGIS's
-    Python, pinned to the numpy/scipy QGIS runs with through ``constraints_path``."""
-    python = python or qgis_python()
-    if python is None:
-        raise RuntimeError("QGIS's Python interpreter was not found next to "
-                           f"{sys.exec_prefix}; install the packages {', '.join(packages)} by hand")
-    cmd = [python, "-m", "pip", "install", "--user", "--disable-pip-version-check", "--no-input"]
-    if _externally_managed():
-        cmd.append("--break-system-packages")
-    if constraints_path:
-        cmd += ["-c", constraints_path]
-    return cmd + list(packages)
-
-
 def pinned_versions():
-    """numpy and scipy as QGIS runs them (None when not importable)."""
+    """numpy and scipy as QGIS runs them (left out when not importable)."""
     pins = {}
     for name in ("numpy", "scipy"):
         try:
@@ -91,6 +91,21 @@ def pinned_versions():
         except Exception:  # absent or broken: nothing to pin
             pass
     return pins
+
+
+def install_command(packages, python=None, pins=None):
+    """The pip command that installs ``packages`` (pip names) into the user site of QGIS's
+    Python, with numpy and scipy required at the versions QGIS runs (``pins``, default
+    :func:`pinned_versions`), so pip keeps them instead of upgrading them."""
+    python = python or qgis_python()
+    if python is None:
+        raise RuntimeError("QGIS's Python interpreter was not found next to "
+                           f"{sys.exec_prefix}; install the packages {', '.join(packages)} by hand")
+    cmd = [python, "-m", "pip", "install", "--user", "--disable-pip-version-check", "--no-input"]
+    if _externally_managed():
+        cmd.append("--break-system-packages")
+    pins = pinned_versions() if pins is None else pins
+    return cmd + list(packages) + [f"{name}=={version}" for name, version in pins.items()]
 
 
 def command_text(cmd):
@@ -103,17 +118,12 @@ def install(packages, log=print, run=subprocess.run, timeout=1800):
     packages = [p for p in packages if p not in NOT_PIP]
     if not packages:
         return True, ""
-    with tempfile.TemporaryDirectory(prefix="groundsieve-pip-") as folder:
-        constraints = os.path.join(folder, "constraints.txt")
-        with open(constraints, "w", encoding="utf-8") as handle:
-            handle.writelines(f"{name}=={version}\n" for name, version in pinned_versions().items())
-        cmd = install_command(packages, constraints_path=constraints)
-        log(f"Running: {command_text(cmd)}")
-        try:
-            done = run(cmd, capture_output=True, text=True, timeout=timeout,
-                       env=dict(os.environ, PIP_NO_INPUT="1"))
-        except (OSError, subprocess.TimeoutExpired) as err:
-            return False, str(err)
+    cmd = install_command(packages)
+    log(f"Running: {command_text(cmd)}")
+    try:
+        done = run(cmd, capture_output=True, text=True, timeout=timeout, env=dict(os.environ, PIP_NO_INPUT="1"))
+    except (OSError, subprocess.TimeoutExpired) as err:
+        return False, str(err)
     output = (done.stdout or "") + (done.stderr or "")
     activate_user_site()
     return done.returncode == 0, output

@@ -41,13 +41,14 @@ class GroundSievePlugin:
         if not missing:
             return []
         pip_names = [m for m in missing if m not in NOT_PIP]
-        text = (f"Python packages missing: {', '.join(missing)}. The GroundSieve algorithms that need "
-                "them stop with a message until they are installed into QGIS's Python.")
+        text = f"needs the Python packages {', '.join(missing)}."
+        detail = ("The GroundSieve algorithms that need them stop with a message until they are installed "
+                  "into QGIS's Python.")
         try:
-            command = command_text(install_command(pip_names, constraints_path="<numpy/scipy pins>"))
+            command = command_text(install_command(pip_names))
         except RuntimeError as err:
             command = str(err)
-        QgsMessageLog.logMessage(f"{text} Install command: {command}", LOG_TAG, Qgis.Warning)
+        QgsMessageLog.logMessage(f"GroundSieve {text} {detail} Install command: {command}", LOG_TAG, Qgis.Warning)
         bar = self.iface.messageBar()
         item = bar.createMessage("GroundSieve", text)
         if pip_names:
@@ -62,7 +63,7 @@ class GroundSievePlugin:
         from qgis.PyQt.QtWidgets import QMessageBox
 
         from .dependencies import command_text, install_command
-        command = command_text(install_command(packages, constraints_path="<numpy/scipy pins>"))
+        command = command_text(install_command(packages))
         question = (f"GroundSieve will install {', '.join(packages)} into QGIS's Python for this user "
                     f"with pip, keeping numpy and scipy at the versions QGIS runs with:\n\n{command}\n\n"
                     "This downloads the packages from the Python Package Index. Go ahead?")

@@ -16,28 +16,36 @@ SYSTEM_PYTHON = "/usr/bin/python3"  # the Python QGIS runs on Debian (where the 
 
 
 def test_install_command_targets_the_user_site_and_pins(tmp_path):
-    cmd = deps.install_command(["laspy", "numba"], python="/opt/qgis/python", constraints_path="pins.txt")
+    import numpy
+    cmd = deps.install_command(["laspy", "numba"], python="/opt/qgis/python")
     assert cmd[:4] == ["/opt/qgis/python", "-m", "pip", "install"]
-    assert "--user" in cmd and cmd[cmd.index("-c") + 1] == "pins.txt"
-    assert cmd[-2:] == ["laspy", "numba"]
+    assert "--user" in cmd and cmd.index("laspy") < cmd.index("numba")
+    assert f"numpy=={numpy.__version__}" in cmd  # kept at the version QGIS runs
+    assert deps.install_command(["laspy"], python="p", pins={})[-1] == "laspy"
     managed = os.path.isfile(os.path.join(__import__("sysconfig").get_path("stdlib"), "EXTERNALLY-MANAGED"))
     assert ("--break-system-packages" in cmd) == managed
 
 
 def test_qgis_python_is_found_beside_the_qgis_binary(monkeypatch, tmp_path):
-    assert deps.qgis_python() == sys.executable  # a plain Python: itself
-    # Inside QGIS sys.executable is QGIS; the interpreter is under the prefix.
+    found = deps.qgis_python()  # a plain Python (here the venv's): itself
+    assert found and os.path.realpath(found) == os.path.realpath(sys.executable)
+    # Inside QGIS sys.executable is QGIS, or another python3 first on the PATH (a pyenv shim, seen
+    # on Linux): the interpreter is the one under the prefix that reports the same sys.prefix.
     version = f"{sys.version_info[0]}.{sys.version_info[1]}"
     (tmp_path / "bin").mkdir()
+    impostor = tmp_path / "bin" / "python3"  # another Python: answers with another prefix
+    impostor.write_text("#!/bin/sh\necho /somewhere/else\\|" + version + "\n")
+    impostor.chmod(0o755)
     python = tmp_path / "bin" / f"python{version}"
-    python.write_text("#!/bin/sh\n")
+    python.write_text(f"#!/bin/sh\necho {os.path.realpath(sys.prefix)}\\|{version}\n")
     python.chmod(0o755)
-    monkeypatch.setattr(sys, "executable", str(tmp_path / "bin" / "qgis"))
+    monkeypatch.setattr(sys, "executable", str(impostor))
     monkeypatch.setattr(sys, "exec_prefix", str(tmp_path))
+    monkeypatch.setattr(sys, "base_exec_prefix", str(tmp_path))
     monkeypatch.setattr(os, "name", "posix")
     assert deps.qgis_python() == str(python)
     python.unlink()
-    assert deps.qgis_python() is None
+    assert deps.qgis_python() is None  # the impostor is never taken
     with pytest.raises(RuntimeError, match="not found"):
         deps.install_command(["laspy"])
 
