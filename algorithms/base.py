@@ -13,6 +13,8 @@ from qgis.core import (QgsCoordinateReferenceSystem, QgsFeature, QgsFeatureSink,
 from qgis.PyQt.QtCore import QVariant
 from qgis.PyQt.QtGui import QIcon
 
+from .discovery import Discoverable
+
 _ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
 
 COMMON_HELP = """
@@ -71,7 +73,7 @@ def warn_about_crs(feedback, input_path, crs_wkt, lengths="every length paramete
                              f"{lengths} was read in that unit.")
 
 
-class GroundFilterAlgorithm(QgsProcessingAlgorithm):
+class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
     """Base class of the ground filters. Subclasses declare their own parameters in
     ``initFilterParameters`` and build the core filter object in ``buildFilter``."""
 

@@ -62,7 +62,7 @@ this off. A single low outlier otherwise pins a tent of cloth tens of metres bel
 the reference. <b>Particle heights from</b>: the height each particle cannot fall below is that of the
 nearest point (the paper's definition, the default) or, as the reference library does, of the points
 that fall in the particle's cell, empty cells taking the first value to the east along their row;
-the library's way is much worse where points are sparser than the cloth (see docs/BENCHMARKS.md).
+the library's way is much worse where points are sparser than the cloth (see <a href="https://github.com/groundsieve/groundsieve/blob/main/docs/BENCHMARKS.md">the benchmarks</a>).
 <b>Sweep order</b>: the library updates the particles one after another, row by row from the
 south-west corner, each with the new heights of those before it, so the result depends on how the
 cloud is oriented (the 8 ISPRS samples turned by 0, 90, 180, 270 degrees: mean total error 6.1 to

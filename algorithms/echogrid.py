@@ -39,7 +39,7 @@ not raised above its neighbours (flat roofs are no longer ground); a raised kern
 more than the threshold above the lowest points within <i>neighbourhood</i>, each raised by
 <i>slope</i> x distance) is tested against that height. A neighbourhood of half the largest
 building's width also finds the middle of wide roofs, at a cost on steep terrain. Both modes are
-measured in docs/BENCHMARKS.md.</p>
+measured in <a href="https://github.com/groundsieve/groundsieve/blob/main/docs/BENCHMARKS.md">the benchmarks</a>.</p>
 """ + COMMON_HELP)
 
     def initFilterParameters(self):  # noqa: N802

@@ -22,7 +22,7 @@ where a window holds fewer than <i>Minimum non-empty cells</i>, it grows up to <
 A cell still without an EVC is not ground.</p>
 <p><b>Difference</b>: the paper's vegetation values are negative, i.e. large minus small (default).
 <b>Ground offset</b> (0 = paper): added to the mean difference before the ratio, which is otherwise
-unstable on open ground far from vegetation (see docs/BENCHMARKS.md for what each measured).</p>
+unstable on open ground far from vegetation (see <a href="https://github.com/groundsieve/groundsieve/blob/main/docs/BENCHMARKS.md">the benchmarks</a> for what each measured).</p>
 """
 
 

@@ -9,6 +9,7 @@ from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException,
 from qgis.PyQt.QtGui import QIcon
 
 from .base import core_modules, dialog_help, feedback_callables, warn_about_crs
+from .discovery import Discoverable
 
 _ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
 Double = QgsProcessingParameterNumber.Type.Double
@@ -25,7 +26,7 @@ EXTRA_FEATURES = (
 )
 
 
-class FeaturesAlgorithm(QgsProcessingAlgorithm):
+class FeaturesAlgorithm(Discoverable, QgsProcessingAlgorithm):
     INPUT = "INPUT"
     VERTICALITY_RADIUS = "VERTICALITY_RADIUS"
     PLANARITY_RADIUS = "PLANARITY_RADIUS"

@@ -58,7 +58,7 @@ fails is tested again as its mirror image through the nearest corner, which lets
 steep slopes but also lets it climb onto objects joined to sloping ground (off).
 <b>Reject low outliers</b>: on.</p>
 <p>The defaults and what each choice does on the ISPRS filter-test samples are in
-docs/BENCHMARKS.md.</p>
+<a href="https://github.com/groundsieve/groundsieve/blob/main/docs/BENCHMARKS.md">the benchmarks</a>.</p>
 """ + COMMON_HELP)
 
     def initFilterParameters(self):  # noqa: N802

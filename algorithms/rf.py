@@ -10,6 +10,7 @@ from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException, QgsProces
 from qgis.PyQt.QtGui import QIcon
 
 from .base import core_modules, dialog_help, feedback_callables
+from .discovery import Discoverable
 
 _ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
 Double = QgsProcessingParameterNumber.Type.Double
@@ -27,7 +28,7 @@ def _rf(extra=None):
     return errors, rf, learning
 
 
-class _RFBase(QgsProcessingAlgorithm):
+class _RFBase(Discoverable, QgsProcessingAlgorithm):
     def group(self):
         return "Classification"
 

@@ -38,7 +38,7 @@ surface interpolated over the object cells; finally each point is ground when it
 <b>Elevation threshold (m)</b> and <b>elevation scalar</b>: the final point test (0.5 m, 1.25).
 <b>Remove low outliers before the opening</b>: low-outlier cells are refilled from their
 neighbours before the progressive opening (on by default; Pingel's Python code leaves it off;
-it lowers the mean ISPRS total error with the single parameter set, see docs/BENCHMARKS.md).</p>
+it lowers the mean ISPRS total error with the single parameter set, see <a href="https://github.com/groundsieve/groundsieve/blob/main/docs/BENCHMARKS.md">the benchmarks</a>).</p>
 """ + COMMON_HELP)
 
     def initFilterParameters(self):  # noqa: N802

@@ -1,0 +1,65 @@
+"""What makes an algorithm easy to find and to read up on: toolbox-search tags, the one-line
+description shown in the toolbox's tooltip and the dialog, and the URL of the dialog's Help button.
+One table for every algorithm, so that the words stay consistent."""
+
+HOMEPAGE = "https://github.com/groundsieve/groundsieve"
+HELP_URL = f"{HOMEPAGE}/blob/main/README.md"
+BENCHMARKS_URL = f"{HOMEPAGE}/blob/main/docs/BENCHMARKS.md"
+
+#: Words a user types in the toolbox search to find any of GroundSieve's algorithms.
+COMMON_TAGS = ("lidar", "point cloud", "pointcloud", "las", "laz", "als", "uav", "drone")
+#: ... and to find the ground filters.
+FILTER_TAGS = ("ground", "ground filter", "bare earth", "terrain", "dtm", "dem", "classify", "classification",
+               "filter")
+
+TAGS = {
+    "smrf": FILTER_TAGS + ("smrf", "morphological", "simple morphological filter", "pingel"),
+    "pmf": FILTER_TAGS + ("pmf", "morphological", "progressive morphological filter", "zhang"),
+    "csf": FILTER_TAGS + ("csf", "cloth", "cloth simulation"),
+    "ptd": FILTER_TAGS + ("ptd", "tin", "triangulation", "progressive tin densification", "axelsson",
+                          "lasground"),
+    "echogrid": FILTER_TAGS + ("returns", "echo", "return number", "multi-return", "matrone", "zenmuse"),
+    "evc": FILTER_TAGS + ("evc", "photogrammetry", "low vegetation", "coefficient of variation", "fan"),
+    "evcrasters": FILTER_TAGS + ("evc", "photogrammetry", "low vegetation", "raster", "coefficient of variation",
+                                 "fan"),
+    "features": ("features", "eigen", "geometric features", "verticality", "planarity", "eigenentropy",
+                 "classification", "machine learning"),
+    "rftrain": ("random forest", "train", "training", "machine learning", "classification", "classify",
+                "ground", "model", "matrone"),
+    "rfclassify": ("random forest", "machine learning", "classification", "classify", "ground", "model", "dtm",
+                   "dem", "matrone"),
+}
+
+SHORT = {
+    "smrf": "Separates ground from objects with the Simple Morphological Filter; the most accurate "
+            "general-purpose filter here. Classified LAS/LAZ and an optional DTM.",
+    "pmf": "Separates ground from objects with the progressive morphological filter (Zhang et al. 2003); fast.",
+    "csf": "Separates ground from objects with the cloth simulation filter; set the cloth resolution and "
+           "rigidness for the scene.",
+    "ptd": "Separates ground from objects by progressive TIN densification (Axelsson 2000).",
+    "echogrid": "A fast first pass for multi-return UAV LiDAR: the lowest points of a grid, using the "
+                "return numbers (Matrone et al. 2024).",
+    "evc": "Ground of UAV photogrammetry clouds with low vegetation, by the multiscale elevation "
+           "coefficient of variation (Fan et al. 2023).",
+    "evcrasters": "The multiscale EVC filter with its intermediate rasters (mean elevations, difference, EVC, "
+                  "classes) as GeoTIFFs.",
+    "features": "Adds per-point geometric features (verticality, planarity, eigenentropy, ...) to a LAS/LAZ "
+                "as extra dimensions.",
+    "rftrain": "Trains a Random Forest point classifier on a labelled LAS/LAZ; writes the model and an "
+               "HTML report.",
+    "rfclassify": "Classifies a LAS/LAZ with a trained Random Forest model; optional DTM from the ground "
+                  "points.",
+}
+
+
+class Discoverable:
+    """Mixin of every GroundSieve algorithm: tags, short description and help URL by its name."""
+
+    def tags(self):
+        return list(COMMON_TAGS + TAGS.get(self.name(), ()))
+
+    def shortDescription(self):  # noqa: N802
+        return SHORT.get(self.name(), "")
+
+    def helpUrl(self):  # noqa: N802
+        return f"{HELP_URL}#algorithms"

@@ -1,0 +1,70 @@
+"""Finding the algorithms: QGIS's own toolbox search (QgsProcessingToolboxProxyModel) on the words
+users type, and what every algorithm offers besides (short description, help URL, help that
+stands on its own inside the plugin zip)."""
+import re
+
+import pytest
+
+QUERIES = {
+    # what a user types -> GroundSieve algorithms that must be found
+    "dtm": {"smrf", "pmf", "csf", "ptd", "echogrid", "evc", "evcrasters", "rfclassify"},
+    "lidar": {"smrf", "pmf", "csf", "ptd", "echogrid", "evc", "evcrasters", "features", "rftrain", "rfclassify"},
+    "point cloud": {"smrf", "pmf", "csf", "ptd", "echogrid", "evc", "features", "rftrain", "rfclassify"},
+    "ground": {"smrf", "pmf", "csf", "ptd", "echogrid", "evc", "rftrain", "rfclassify"},
+    "las": {"smrf", "pmf", "csf", "ptd", "echogrid", "evc", "features", "rftrain", "rfclassify"},
+    "bare earth": {"smrf", "pmf", "csf", "ptd"},
+    "csf": {"csf"},
+    "tin": {"ptd"},
+    "cloth": {"csf"},
+    "random forest": {"rftrain", "rfclassify"},
+    "photogrammetry": {"evc", "evcrasters"},
+}
+
+
+def _found(proxy, text):
+    from qgis.PyQt.QtCore import QModelIndex
+    proxy.setFilterString(text)
+    found, stack = set(), [QModelIndex()]
+    while stack:
+        parent = stack.pop()
+        for row in range(proxy.rowCount(parent)):
+            index = proxy.index(row, 0, parent)
+            algorithm = proxy.toolboxModel().algorithmForIndex(proxy.mapToSource(index))
+            if algorithm is not None and algorithm.provider().id() == "groundsieve":
+                found.add(algorithm.name())
+            stack.append(index)
+    return found
+
+
+@pytest.fixture(scope="module")
+def toolbox(groundsieve_provider):
+    from qgis.core import QgsApplication
+    from qgis.gui import QgsProcessingToolboxProxyModel
+    return QgsProcessingToolboxProxyModel(None, QgsApplication.processingRegistry())
+
+
+@pytest.mark.parametrize("text", sorted(QUERIES))
+def test_toolbox_search_finds_the_right_algorithms(toolbox, text):
+    found = _found(toolbox, text)
+    assert QUERIES[text] <= found, f"searching {text!r} misses {sorted(QUERIES[text] - found)}"
+
+
+def test_a_specific_search_finds_only_its_algorithm(toolbox):
+    assert _found(toolbox, "csf") == {"csf"}
+    assert _found(toolbox, "smrf") == {"smrf"}
+    assert _found(toolbox, "nothing-like-this") == set()
+
+
+def test_every_algorithm_has_tags_description_and_help_url(groundsieve_provider):
+    for algorithm in groundsieve_provider.algorithms():
+        assert len(algorithm.tags()) >= 5, algorithm.id()
+        assert 20 < len(algorithm.shortDescription()) < 200, algorithm.id()
+        assert algorithm.helpUrl().startswith("https://"), algorithm.id()
+
+
+def test_help_points_at_nothing_the_zip_leaves_out(groundsieve_provider):
+    """The zip ships neither docs/, bench/ nor scripts/: the help links to the web instead."""
+    for algorithm in groundsieve_provider.algorithms():
+        text = re.sub(r'href="[^"]*"', "", algorithm.shortHelpString())
+        for folder in ("docs/", "bench/", "scripts/", "tests/"):
+            assert folder not in text, f"{algorithm.id()}'s help names {folder}"
