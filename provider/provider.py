@@ -45,3 +45,10 @@ class GroundSieveProvider(QgsProcessingProvider):
 
     def versionInfo(self):  # noqa: N802 (QGIS API name)
         return plugin_version()
+
+    def supportedOutputRasterLayerExtensions(self):  # noqa: N802 (QGIS API name)
+        """The core writes GeoTIFF only: the raster outputs' save dialogs offer just that."""
+        return ["tif"]
+
+    def defaultRasterFileExtension(self):  # noqa: N802 (QGIS API name)
+        return "tif"

@@ -68,3 +68,18 @@ def test_help_points_at_nothing_the_zip_leaves_out(groundsieve_provider):
         text = re.sub(r'href="[^"]*"', "", algorithm.shortHelpString())
         for folder in ("docs/", "bench/", "scripts/", "tests/"):
             assert folder not in text, f"{algorithm.id()}'s help names {folder}"
+
+
+def test_raster_outputs_offer_only_geotiff(groundsieve_provider):
+    """The save dialog of every raster output lists GeoTIFF alone (QGIS offered 37 formats, all but
+    GeoTIFF refused after Run)."""
+    from qgis.core import QgsProcessingParameterRasterDestination
+    seen = 0
+    for algorithm in groundsieve_provider.algorithms():
+        for parameter in algorithm.parameterDefinitions():
+            if isinstance(parameter, QgsProcessingParameterRasterDestination):
+                seen += 1
+                assert parameter.supportedOutputRasterLayerExtensions() == ["tif"], algorithm.id()
+                assert parameter.defaultFileExtension() == "tif"
+                assert "tif" in parameter.createFileFilter().lower() and "png" not in parameter.createFileFilter().lower()
+    assert seen >= 9
