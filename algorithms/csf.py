@@ -81,13 +81,13 @@ samples give 7.0 to 7.6 %.</p>
 
     def initFilterParameters(self):  # noqa: N802
         self.addParameter(QgsProcessingParameterNumber(
-            self.RESOLUTION, "Cloth resolution (m)", type=Double, defaultValue=1.0, minValue=0.0))
+            self.RESOLUTION, "Cloth resolution (m)", type=Double, defaultValue=1.0, minValue=0.01))
         self.addParameter(QgsProcessingParameterEnum(
             self.RIGIDNESS, "Rigidness (scene)", options=RIGIDNESS_OPTIONS, defaultValue=2))
         self.addParameter(QgsProcessingParameterNumber(
-            self.TIME_STEP, "Time step", type=Double, defaultValue=0.65, minValue=0.0))
+            self.TIME_STEP, "Time step", type=Double, defaultValue=0.65, minValue=0.01))
         self.addParameter(QgsProcessingParameterNumber(
-            self.CLASS_THRESHOLD, "Class threshold (m)", type=Double, defaultValue=0.5, minValue=0.0))
+            self.CLASS_THRESHOLD, "Class threshold (m)", type=Double, defaultValue=0.5, minValue=0.001))
         self.addParameter(QgsProcessingParameterNumber(
             self.ITERATIONS, "Maximum iterations", type=Integer, defaultValue=500, minValue=1))
         self.addParameter(QgsProcessingParameterBoolean(

@@ -44,7 +44,7 @@ measured in <a href="https://github.com/groundsieve/groundsieve/blob/main/docs/B
 
     def initFilterParameters(self):  # noqa: N802
         self.addParameter(QgsProcessingParameterNumber(
-            self.KERNEL, "Kernel size (m)", type=Double, defaultValue=5.0, minValue=0.0))
+            self.KERNEL, "Kernel size (m)", type=Double, defaultValue=5.0, minValue=0.01))
         self.addParameter(QgsProcessingParameterNumber(
             self.DZ, "Height above the kernel's lowest point (m)", type=Double, defaultValue=2.0, minValue=0.0))
         self.addParameter(QgsProcessingParameterEnum(

@@ -51,13 +51,13 @@ class EVCAlgorithm(GroundFilterAlgorithm):
 
     def initFilterParameters(self):  # noqa: N802
         self.addParameter(QgsProcessingParameterNumber(
-            self.SMALL_SCALE, "Small-scale grid (m)", type=Double, defaultValue=0.2, minValue=0.0))
+            self.SMALL_SCALE, "Small-scale grid (m)", type=Double, defaultValue=0.2, minValue=0.01))
         self.addParameter(QgsProcessingParameterNumber(
-            self.LARGE_SCALE, "Large-scale grid (m)", type=Double, defaultValue=2.0, minValue=0.0))
+            self.LARGE_SCALE, "Large-scale grid (m)", type=Double, defaultValue=2.0, minValue=0.01))
         self.addParameter(QgsProcessingParameterNumber(
-            self.RADIUS, "Neighbourhood radius (cells)", type=Integer, defaultValue=1, minValue=0))
+            self.RADIUS, "Neighbourhood radius (cells)", type=Integer, defaultValue=1, minValue=1))
         self.addParameter(QgsProcessingParameterNumber(
-            self.THRESHOLD, "Threshold (EVC)", type=Double, defaultValue=1.5, minValue=0.0))
+            self.THRESHOLD, "Threshold (EVC)", type=Double, defaultValue=1.5, minValue=0.001))
         self.addParameter(QgsProcessingParameterBoolean(
             self.AUTO_THRESHOLD, "Threshold by natural breaks (Jenks)", defaultValue=False))
         advanced = [

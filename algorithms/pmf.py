@@ -49,9 +49,9 @@ ticked.</p>
 
     def initFilterParameters(self):  # noqa: N802
         self.addParameter(QgsProcessingParameterNumber(
-            self.CELL, "Cell size (m)", type=Double, defaultValue=1.0, minValue=0.0))
+            self.CELL, "Cell size (m)", type=Double, defaultValue=1.0, minValue=0.01))
         self.addParameter(QgsProcessingParameterNumber(
-            self.MAX_WINDOW, "Maximum window size (m)", type=Double, defaultValue=33.0, minValue=0.0))
+            self.MAX_WINDOW, "Maximum window size (m)", type=Double, defaultValue=33.0, minValue=0.01))
         self.addParameter(QgsProcessingParameterNumber(
             self.SLOPE, "Slope (rise/run)", type=Double, defaultValue=1.0, minValue=0.0))
         self.addParameter(QgsProcessingParameterNumber(
@@ -59,7 +59,7 @@ ticked.</p>
             type=Double, defaultValue=0.15, minValue=0.0))
         self.addParameter(QgsProcessingParameterNumber(
             self.MAX_DISTANCE, "Maximum distance (largest elevation threshold, m)", type=Double,
-            defaultValue=2.5, minValue=0.0))
+            defaultValue=2.5, minValue=0.001))
         self.addParameter(QgsProcessingParameterBoolean(
             self.EXPONENTIAL, "Exponential window growth (off: linear)", defaultValue=True))
 

@@ -64,12 +64,12 @@ steep slopes but also lets it climb onto objects joined to sloping ground (off).
     def initFilterParameters(self):  # noqa: N802
         self.addParameter(QgsProcessingParameterNumber(
             self.SEED_CELL, "Seed cell size: largest building size (m)", type=Double, defaultValue=30.0,
-            minValue=0.0))
+            minValue=0.01))
         self.addParameter(QgsProcessingParameterNumber(
-            self.MAX_ANGLE, "Iteration angle (degrees)", type=Double, defaultValue=30.0, minValue=0.0,
-            maxValue=90.0))
+            self.MAX_ANGLE, "Iteration angle (degrees)", type=Double, defaultValue=30.0, minValue=0.1,
+            maxValue=89.9))
         self.addParameter(QgsProcessingParameterNumber(
-            self.MAX_DISTANCE, "Iteration distance (m)", type=Double, defaultValue=1.4, minValue=0.0))
+            self.MAX_DISTANCE, "Iteration distance (m)", type=Double, defaultValue=1.4, minValue=0.001))
         self.addParameter(QgsProcessingParameterNumber(
             self.MAX_EDGE, "Maximum edge length of an accepting triangle (m, 0 = off)", type=Double,
             defaultValue=0.0, minValue=0.0))
@@ -77,7 +77,7 @@ steep slopes but also lets it climb onto objects joined to sloping ground (off).
                 QgsProcessingParameterNumber(self.MIN_EDGE, "Minimum edge length: stop densifying below (m, 0 = off)",
                                              type=Double, defaultValue=0.0, minValue=0.0),
                 QgsProcessingParameterNumber(self.TERRAIN_ANGLE, "Maximum terrain angle (degrees)", type=Double,
-                                             defaultValue=75.0, minValue=0.0, maxValue=90.0),
+                                             defaultValue=75.0, minValue=0.1, maxValue=90.0),
                 QgsProcessingParameterNumber(self.OFFSET, "Offset: points this close to the final TIN are ground "
                                              "(m, 0 = off)", type=Double, defaultValue=0.2, minValue=0.0),
                 QgsProcessingParameterBoolean(self.MIRROR, "Mirror points (Axelsson)", defaultValue=False),

@@ -43,11 +43,11 @@ it lowers the mean ISPRS total error with the single parameter set, see <a href=
 
     def initFilterParameters(self):  # noqa: N802
         self.addParameter(QgsProcessingParameterNumber(
-            self.CELL, "Cell size (m)", type=Double, defaultValue=1.0, minValue=0.0))
+            self.CELL, "Cell size (m)", type=Double, defaultValue=1.0, minValue=0.01))
         self.addParameter(QgsProcessingParameterNumber(
             self.SLOPE, "Slope (rise/run)", type=Double, defaultValue=0.15, minValue=0.0))
         self.addParameter(QgsProcessingParameterNumber(
-            self.WINDOW, "Maximum window radius (m)", type=Double, defaultValue=18.0, minValue=0.0))
+            self.WINDOW, "Maximum window radius (m)", type=Double, defaultValue=18.0, minValue=0.01))
         self.addParameter(QgsProcessingParameterNumber(
             self.THRESHOLD, "Elevation threshold (m)", type=Double, defaultValue=0.5, minValue=0.0))
         self.addParameter(QgsProcessingParameterNumber(
