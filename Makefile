@@ -3,7 +3,12 @@
 PY := .venv/bin/python
 VERSION := $(shell sed -n 's/^version=//p' metadata.txt)
 
-.PHONY: env demo test test-core zip bench clean
+.PHONY: env demo test test-core test-qgis340 zip bench clean
+
+# The plugin tests run on Debian 12's QGIS 3.22 (the system's) and again on QGIS 3.40 LTR from
+# bookworm-backports, unpacked beside it by scripts/qgis-340. The installer test needs the
+# system's bare Python, so it runs in the first pass only.
+QGIS340_ONLY := --deselect tests/plugin/test_dependencies.py::test_installer_puts_the_packages_into_a_bare_qgis_python_and_the_algorithms_run
 
 env:
 	@scripts/bootstrap
@@ -13,6 +18,11 @@ demo: env
 
 test: env
 	$(PY) -m pytest -q -ra
+	@$(MAKE) --no-print-directory test-qgis340
+
+test-qgis340: env
+	@scripts/qgis-340
+	env $$(scripts/qgis-340 --env) GROUNDSIEVE_EXPECT_QGIS=3.40 $(PY) -m pytest -q -ra tests/plugin $(QGIS340_ONLY)
 
 test-core: env
 	$(PY) -m pytest -q -ra tests/core

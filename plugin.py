@@ -16,8 +16,10 @@ class GroundSievePlugin:
 
     def initProcessing(self):  # noqa: N802 (QGIS API name)
         if self.provider is None:
-            self.provider = GroundSieveProvider()
-            QgsApplication.processingRegistry().addProvider(self.provider)
+            provider = GroundSieveProvider()
+            # A refused provider (e.g. the id already registered) is deleted by the registry.
+            if QgsApplication.processingRegistry().addProvider(provider):
+                self.provider = provider
 
     def initGui(self):  # noqa: N802 (QGIS API name)
         self.initProcessing()

@@ -81,7 +81,7 @@ def test_missing_packages_message_stays_offers_install_and_logs_the_command(qgis
     iface = _Iface()
     plugin = groundsieve.classFactory(iface)
     try:
-        plugin.initGui()
+        plugin.check_dependencies()  # what initGui does after registering the provider
         item = iface.bar.currentItem()
         assert item is not None and item.duration() == 0  # stays until dealt with
         assert "numba, scikit-learn" in item.text()

@@ -5,6 +5,7 @@ import zipfile
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
+QGIS_PROCESS = os.environ.get("QGIS_PROCESS", "/usr/bin/qgis_process.bin")
 
 
 def test_zip_is_installable_and_lean(tmp_path):
@@ -25,9 +26,9 @@ def test_zip_is_installable_and_lean(tmp_path):
     runtime.mkdir(mode=0o700)
     env = dict(os.environ, QGIS_PLUGINPATH=str(plugins), QGIS_CUSTOM_CONFIG_PATH=str(tmp_path / "profile"),
                QT_QPA_PLATFORM="offscreen", PROJ_DATA="/usr/share/proj", XDG_RUNTIME_DIR=str(runtime),
-               PYTHONPATH=site)
-    subprocess.run(["/usr/bin/qgis_process.bin", "plugins", "enable", "groundsieve"], env=env,
+               PYTHONPATH=os.pathsep.join(p for p in (site, os.environ.get("PYTHONPATH")) if p))
+    subprocess.run([QGIS_PROCESS, "plugins", "enable", "groundsieve"], env=env,
                    capture_output=True, timeout=300)
-    listing = subprocess.run(["/usr/bin/qgis_process.bin", "list"], env=env, capture_output=True, text=True,
+    listing = subprocess.run([QGIS_PROCESS, "list"], env=env, capture_output=True, text=True,
                              timeout=300)
     assert "groundsieve:smrf" in listing.stdout, listing.stdout[-2000:] + listing.stderr[-2000:]

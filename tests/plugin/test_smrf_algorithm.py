@@ -87,7 +87,7 @@ def test_bad_input_is_a_processing_error(groundsieve_provider, scene_laz, tmp_pa
         params.update(DTM=str(tmp_path / "d.tif"), DTM_CELL=0.0)
         expect = "cell size"
     elif case == "bad_slope":
-        params["WINDOW"] = 0.0
+        params["WINDOW"] = 0.5  # the form allows it; smaller than the 1 m cell, the core refuses it
         expect = "window_m"
     with pytest.raises(QgsProcessingException, match=expect):
         _run(params)
