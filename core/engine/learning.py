@@ -166,33 +166,51 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
 
 
 def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_path: Optional[str] = None,
-                  dtm=None, progress=None, is_cancelled=None, log=None):
+                  dtm=None, ignore_classes=(7, 18), progress=None, is_cancelled=None, log=None):
     """Apply a saved model to ``input_path``; write the classified cloud (the model's ASPRS codes)
-    and, optionally, a DTM from the points predicted as ground (class 2)."""
+    and, optionally, a DTM from the points predicted as ground (class 2).
+
+    The ground filters' rules on marked points hold here too: withheld points and points of
+    ``ignore_classes`` (noise 7 and 18 by default; a list or text such as "7,18,20-25") keep their
+    class and flags, and stay out of the features' neighbourhoods, the prediction and the DTM,
+    whose grid spans only the other points."""
     from ..io import CLASS_GROUND, read_cloud
     from ..progress import Steps
-    from .workflow import DTMOptions, check_outputs, make_dtm, write_outputs
+    from .workflow import DTMOptions, FilterOptions, check_outputs, make_dtm, processable, write_outputs
     steps = Steps(progress, is_cancelled)
     log = log or (lambda _msg: None)
     dtm = dtm or DTMOptions()
+    options = FilterOptions(ignore_classes=ignore_classes if ignore_classes is not None else ())
     check_outputs(input_path, output_path, [dtm_path])
     model = load_model(model_path)
     cloud = read_cloud(input_path)
-    names = resolve_features(model.meta.get("preset_features", model.features), cloud, log)
+    may = processable(cloud, options)
+    n_may = int(may.sum())
+    if n_may == 0:
+        raise InputError(f"{input_path}: every point is withheld or of an ignored class "
+                         f"({', '.join(map(str, options.ignored)) or 'none'}): nothing to classify")
+    if n_may < len(cloud):
+        log(f"Classifying {n_may:,} of {len(cloud):,} points: {int(cloud.withheld_mask.sum()):,} withheld and "
+            f"{int((~may & ~cloud.withheld_mask).sum()):,} of an ignored class keep their class and are "
+            "left out of the features, the prediction and the DTM.")
+    part = cloud if n_may == len(cloud) else cloud.subset(may)
+    names = resolve_features(model.meta.get("preset_features", model.features), part, log)
     if names != list(model.features):
         raise InputError(f"{input_path}: this cloud gives the features {names} but the model "
                          f"{model_path} was trained on {list(model.features)} (e.g. colour present in one "
                          "and not the other)")
-    X = feature_matrix(cloud, names, steps.sub(0.0, 0.5))
-    predicted = model.predict(X).astype(np.uint8)
+    X = feature_matrix(part, names, steps.sub(0.0, 0.5))
+    predicted_part = model.predict(X).astype(np.uint8)
+    predicted = cloud.classification.astype(np.uint8)  # a copy: withheld and ignored points as read
+    predicted[may] = predicted_part
     steps.report(0.7)
-    log(", ".join(f"class {c}: {int((predicted == c).sum()):,}" for c in model.classes))
+    log(", ".join(f"class {c}: {int((predicted_part == c).sum()):,}" for c in model.classes))
     rasters = []
     if dtm_path:
-        ground = predicted == CLASS_GROUND
+        ground = predicted_part == CLASS_GROUND
         if not ground.any():
             raise InputError(f"{input_path}: no point was predicted as ground (class 2): no DTM can be made")
-        grid, values = make_dtm(cloud.x, cloud.y, cloud.z, ground, dtm)
+        grid, values = make_dtm(part.x, part.y, part.z, ground, dtm)
         rasters.append((dtm_path, values, grid))
     write_outputs(cloud, predicted, output_path, rasters, steps)
     steps.report(1.0)

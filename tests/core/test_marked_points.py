@@ -170,3 +170,45 @@ def test_parse_classes(text, codes):
 def test_parse_classes_refuses(text):
     with pytest.raises(InvalidParameterError, match="class"):
         parse_classes(text)
+
+
+def test_rfclassify_keeps_marked_points_out_of_features_prediction_and_dtm(tmp_path):
+    from groundsieve.core.engine import learning
+    from groundsieve.core.learn import rf
+    # A model of ground (2) against the block (1) from the height above the lowest point within 2.5 m:
+    # a withheld point 5 m below would change that feature for its neighbours if it were used.
+    train = tmp_path / "train.las"
+    kind, _ = write_scene(train, marked=False, seed=5)
+    las = laspy.read(str(train))
+    las.classification = np.where(kind == "block", 1, 2).astype(np.uint8)
+    las.write(str(train))
+    model = tmp_path / "m.npz"
+    learning.train_file(str(train), str(model), None,
+                        learning.TrainOptions(features=("height_above_min_r2p5",), classes=(1, 2), block_m=10.0,
+                                              params=rf.ForestParams(n_trees=5)))
+    src = tmp_path / "in.las"
+    kind, cls_in = write_scene(src, far_noise=True)
+    _, wh_in, syn_in = read(src)
+    out, dtm = tmp_path / "out.las", tmp_path / "dtm.tif"
+    cloud, predicted = learning.classify_file(str(src), str(out), str(model), dtm_path=str(dtm))
+    cls, wh, syn = read(out)
+    np.testing.assert_array_equal(cls, predicted)
+    marked = np.isin(kind, ["withheld", "noise7", "noise18", "far"])
+    np.testing.assert_array_equal(cls[marked], cls_in[marked])
+    np.testing.assert_array_equal(wh, wh_in)
+    np.testing.assert_array_equal(syn, syn_in)
+    assert (cls[kind == "ground"] == 2).mean() > 0.95
+    # Exactly what the file without the marked points gives: the same predictions, the same DTM.
+    clean = tmp_path / "clean.las"
+    laspy.read(str(src))[~marked].write(str(clean))
+    _, predicted_clean = learning.classify_file(str(clean), str(tmp_path / "c.las"), str(model),
+                                                dtm_path=str(tmp_path / "c.tif"))
+    np.testing.assert_array_equal(predicted[~marked], predicted_clean)
+    from osgeo import gdal
+    a, b = gdal.Open(str(dtm)), gdal.Open(str(tmp_path / "c.tif"))
+    assert a.GetGeoTransform() == b.GetGeoTransform() and a.RasterXSize <= 41
+    np.testing.assert_array_equal(a.ReadAsArray(), b.ReadAsArray())
+    # Ignoring nothing: the noise is predicted (and the far point then spans the DTM's grid).
+    _, predicted_all = learning.classify_file(str(src), str(tmp_path / "all.las"), str(model), ignore_classes="")
+    assert np.isin(predicted_all[np.isin(kind, ["noise7", "noise18"])], [1, 2]).all()
+    np.testing.assert_array_equal(predicted_all[kind == "withheld"], cls_in[kind == "withheld"])

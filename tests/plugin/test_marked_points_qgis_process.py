@@ -76,3 +76,31 @@ def test_ignore_classes_parameter_and_its_refusal(tmp_path):
     assert "Ignored classes: 'seven' is not a class code" in text
     assert "Traceback" not in text
     assert not bad.exists() and not list(tmp_path.glob(".bad.las*"))
+
+
+def test_rfclassify_keeps_withheld_and_noise(tmp_path):
+    from groundsieve.core.engine import learning
+    from groundsieve.core.learn import rf
+    train = tmp_path / "train.las"
+    kind, _ = write_scene(train, marked=False, seed=5)
+    las = laspy.read(str(train))
+    las.classification = np.where(kind == "block", 1, 2).astype(np.uint8)
+    las.write(str(train))
+    model = tmp_path / "m.npz"
+    learning.train_file(str(train), str(model), None,
+                        learning.TrainOptions(features=("height_above_min_r2p5",), classes=(1, 2), block_m=10.0,
+                                              params=rf.ForestParams(n_trees=5)))
+    src = tmp_path / "in.las"
+    kind, cls_in = write_scene(src, fmt=1, far_noise=True)
+    _, wh_in, syn_in = _read(src)
+    out, dtm = tmp_path / "out.laz", tmp_path / "dtm.tif"
+    rc, text = _run("groundsieve:rfclassify", f"--INPUT={src}", f"--MODEL={model}", f"--OUTPUT={out}",
+                    f"--DTM={dtm}")
+    assert rc == 0, text
+    cls, wh, syn = _read(out)
+    marked = np.isin(kind, ["withheld", "noise7", "noise18", "far"])
+    np.testing.assert_array_equal(cls[marked], cls_in[marked])
+    np.testing.assert_array_equal(wh, wh_in)
+    np.testing.assert_array_equal(syn, syn_in)
+    gt, a = _dtm(dtm)
+    assert a.shape[1] <= 41 and a[a != -9999].min() > -0.06   # neither the far point nor the -5 m points
