@@ -162,6 +162,8 @@ class GroundFilterAlgorithm(QgsProcessingAlgorithm):
             algorithm = self.buildFilter(parameters, context)
             rasters = {name: (path, make) for name, (path, make) in self.rasterOutputs(parameters, context).items()
                        if path}
+            self.checkDistinctOutputs([(self.OUTPUT, output_path), (self.DTM, dtm_path),
+                                       *((name, path) for name, (path, _make) in rasters.items())])
             options = workflow.FilterOptions(
                 last_returns_only=self.parameterAsBoolean(parameters, self.LAST_RETURNS, context),
                 ignore_classes=self.ignoredClasses(parameters, context, errors),
@@ -186,6 +188,11 @@ class GroundFilterAlgorithm(QgsProcessingAlgorithm):
         if sink_id is not None:
             results[self.GROUND_POINTS] = sink_id
         return results
+
+    def checkDistinctOutputs(self, outputs):  # noqa: N802
+        """Refuse two outputs on one file before any work, naming them as the dialog does."""
+        from ..core.io.outputs import check_distinct_outputs
+        check_distinct_outputs([(self.parameterDefinition(name).description(), path) for name, path in outputs])
 
     def ignoredClasses(self, parameters, context, errors):  # noqa: N802
         """IGNORE_CLASSES as codes; IGNORE_NOISE=false (older models and scripts) drops 7 and 18."""

@@ -32,6 +32,7 @@ from ..grids.spec import GridSpec, memory_budget
 from ..io import (CLASS_GROUND, CLASS_UNCLASSIFIED, NOISE_CLASSES, PointCloud, atomic_path, check_output_path,
                  read_cloud, write_classified)
 from ..io.clouds import parse_classes
+from ..io.outputs import check_distinct_outputs
 
 #: Classes a ground filter may rewrite when existing classes are kept: never classified,
 #: unclassified, ground.
@@ -214,11 +215,15 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions):
 
 
 def check_outputs(input_path: str, output_path: Optional[str], raster_paths=()) -> None:
-    """Refuse bad output paths before any work: wrong extension, missing folder, the input itself."""
+    """Refuse bad output paths before any work: wrong extension, missing folder, the input itself,
+    two outputs on one file (``raster_paths`` may be paths or ``(label, path)`` pairs)."""
     from ..raster.geotiff import check_raster_path
+    labelled = [item if isinstance(item, tuple) else (f"raster {i + 1}" if i else "DTM", item)
+                for i, item in enumerate(raster_paths)]
+    check_distinct_outputs([("classified point cloud", output_path), *labelled])
     if output_path:
         check_output_path(output_path, inputs=[input_path])
-    for path in raster_paths:
+    for _label, path in labelled:
         if path:
             check_raster_path(path, inputs=[input_path, output_path])
 

@@ -104,3 +104,16 @@ def test_rfclassify_keeps_withheld_and_noise(tmp_path):
     np.testing.assert_array_equal(syn, syn_in)
     gt, a = _dtm(dtm)
     assert a.shape[1] <= 41 and a[a != -9999].min() > -0.06   # neither the far point nor the -5 m points
+
+
+def test_two_outputs_on_one_file_are_refused_before_any_work(tmp_path):
+    src = tmp_path / "in.las"
+    write_scene(src, fmt=6, marked=False)
+    same = tmp_path / "same.tif"
+    rc, text = _run("groundsieve:evcrasters", f"--INPUT={src}", f"--OUTPUT={tmp_path / 'out.las'}",
+                    f"--EVC_RASTER={same}", f"--CLASS_RASTER={same}")
+    assert rc != 0
+    assert ("same.tif: chosen for two outputs (Elevation variation coefficient (EVC) and EVC classes "
+            "(1 ground, 2 vegetation area, 3 vegetation boundary))") in text, text
+    assert "Traceback" not in text
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.las"]
