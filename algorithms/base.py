@@ -26,8 +26,8 @@ are read in the unit of the cloud's CRS (a warning says so when that unit is not
 and the CRS of the input kept. Ground points get ASPRS class 2, the other filtered points class 1
 (with <i>Keep existing classes other than 0, 1, 2</i>, every point of another class, e.g. building 6,
 water 9, bridge deck 17 or a class of your own, keeps it exactly and is never made ground).</p>
-<p><b>Withheld points</b> (the LAS flag meaning, in the ASPRS LAS specification, "this point should
-not be included in processing"; bit 7 of the classification byte in point formats 0-5) are never
+<p><b>Withheld points</b> (the LAS flag meaning, in the ASPRS LAS specification, "if set, this point should
+not be included in processing (synonymous with Deleted)"; bit 7 of the classification byte in point formats 0-5) are never
 given to the filter, never become ground, never enter the DTM, and keep their class and flags.</p>
 <p><b>Ignored classes</b> (default <code>7,18</code>: low and high noise; a list or ranges such as
 <code>7,18,20-25</code>, as PDAL's <code>ignore</code> and LAStools' <code>-ignore_class</code>;
@@ -38,8 +38,13 @@ triangulation, cell size <i>DTM cell size</i>, the cloud's CRS, nodata -9999 out
 the ground points unless <i>Fill cells outside the ground hull</i> is ticked (nearest value).</p>
 <p><b>Ground points</b> (optional, off by default): the ground points as a PointZ layer with return
 number and intensity; meant for small clouds.</p>
-<p>Outputs are written under a temporary name and renamed when complete: a failed or cancelled run
-leaves nothing half-written.</p>
+<p>Outputs are written under a temporary name (<code>.NAME.gs&lt;process id&gt;-&lt;random&gt;.part</code> and the
+extension, hidden, beside the output) and renamed when complete: a failed or cancelled run leaves
+nothing half-written, and the next run to the same output deletes what a killed run left. Two
+outputs on one file are refused before any work.</p>
+<p><b>Memory</b>: before a grid (the filter's or the DTM's) is allocated, its peak memory is estimated
+and the run is refused above 60 % of the memory available, with the estimate, the extent and the
+likely cause (e.g. one point kilometres away from the others: class it as noise or remove it).</p>
 """
 
 

@@ -194,7 +194,8 @@ class RFClassifyAlgorithm(_RFBase):
         return dialog_help("""<p>Applies a model trained with <i>Train Random Forest classifier</i> to another cloud and
 writes it with the predicted ASPRS classes (every other dimension kept); optionally a DTM GeoTIFF
 from the points predicted as ground (class 2), as the ground filters make it.</p>
-<p><b>Withheld points</b> (the LAS flag: "this point should not be included in processing") and
+<p><b>Withheld points</b> (the LAS flag: "if set, this point should not be included in processing (synonymous with
+Deleted)") and
 points of the <b>Ignored classes</b> (default <code>7,18</code>, noise; a list or ranges such as
 <code>7,18,20-25</code>; empty = none) keep their class and flags and are left out of the features'
 neighbourhoods, the prediction and the DTM, whose grid spans only the other points.</p>
