@@ -184,6 +184,8 @@ def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_pat
     check_outputs(input_path, output_path, [dtm_path])
     model = load_model(model_path)
     cloud = read_cloud(input_path)
+    for note in cloud.notes:
+        log(note)
     may = processable(cloud, options)
     n_may = int(may.sum())
     if n_may == 0:

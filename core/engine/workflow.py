@@ -159,6 +159,8 @@ def classify_cloud(cloud: PointCloud, algorithm, options: FilterOptions = Filter
     """Run ``algorithm`` on the selected points and give every point its ASPRS class."""
     steps = steps or Steps()
     log = log or (lambda _msg: None)
+    for note in cloud.notes:
+        log(note)
     may = processable(cloud, options)
     filtered = select_points(cloud, options)
     n_sel = int(filtered.sum())

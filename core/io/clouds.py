@@ -100,6 +100,7 @@ class PointCloud:
     #: bit 7 of the classification byte in point formats 0-5, a classification flag in 6-10); None = none
     withheld: Optional[np.ndarray] = None
     scale: Optional[float] = None       #: text input: the LAS scale that keeps its decimals
+    notes: list = field(default_factory=list)  #: what the reader had to say about the file (to log)
 
     def __len__(self) -> int:
         return int(self.x.shape[0])
@@ -123,7 +124,7 @@ class PointCloud:
                           number_of_returns=self.number_of_returns[mask], intensity=pick(self.intensity),
                           crs_wkt=self.crs_wkt, has_return_info=self.has_return_info, las=las,
                           reference_label=pick(self.reference_label), withheld=pick(self.withheld),
-                          scale=self.scale)
+                          scale=self.scale, notes=list(self.notes))
 
     @property
     def xyz(self) -> np.ndarray:
@@ -157,10 +158,38 @@ def read_cloud(path: str) -> PointCloud:
     return cloud
 
 
+def _records_before_evlrs(header) -> Optional[int]:
+    """How many point records fit between the point data's start and the first EVLR of an
+    uncompressed LAS 1.4 file (None when there is no such bound)."""
+    if header.are_points_compressed or header.version.minor < 4 or not header.number_of_evlrs:
+        return None
+    start = int(header.start_of_first_evlr or 0)
+    if start <= int(header.offset_to_point_data):
+        return None
+    return (start - int(header.offset_to_point_data)) // int(header.point_format.size)
+
+
 def _read_las(path: str) -> PointCloud:
     import laspy
+    notes = []
     try:
-        las = laspy.read(path)
+        las = None
+        with laspy.open(path) as reader:
+            header = reader.header
+            room = _records_before_evlrs(header)
+            if room is not None and int(header.point_count) > room:
+                # Reading the announced count would take the EVLRs' bytes for points.
+                announced = int(header.point_count)
+                evlr_at = int(header.start_of_first_evlr)
+                las = laspy.LasData(header=header, points=reader.read_points(room))
+                las.evlrs = reader.evlrs
+                las.update_header()
+                notes.append(f"{path}: the header announces {announced:,} points but the file holds "
+                             f"{room:,} point records before its extended VLRs (at byte "
+                             f"{evlr_at:,}); read those {room:,}, "
+                             f"{announced - room:,} missing (the header's count is wrong).")
+        if las is None:
+            las = laspy.read(path)
     except Exception as err:  # laspy raises many types for damaged files
         msg = str(err) or type(err).__name__
         if "signature" in msg.lower():
@@ -182,7 +211,7 @@ def _read_las(path: str) -> PointCloud:
     nr = np.asarray(las.number_of_returns, dtype=np.uint8)
     withheld = np.asarray(las.withheld).astype(bool)
     return PointCloud(
-        path=path, withheld=withheld if withheld.any() else None,
+        path=path, withheld=withheld if withheld.any() else None, notes=notes,
         x=np.asarray(las.x, dtype=np.float64), y=np.asarray(las.y, dtype=np.float64),
         z=np.asarray(las.z, dtype=np.float64),
         classification=np.asarray(las.classification, dtype=np.uint8),
