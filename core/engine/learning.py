@@ -41,6 +41,7 @@ class TrainRun:
     features: List[str]
     timings: dict
     grid: Optional[List[dict]] = None
+    warnings: List[str] = None  #: what the log and the report warn about (possible label leakage)
 
 
 def _labelled(cloud, classes, log):
@@ -55,6 +56,34 @@ def _labelled(cloud, classes, log):
     if len(classes) < 2:
         raise InputError(f"{cloud.path}: at least two classes are needed to train (got {list(classes)})")
     return np.isin(labels, classes), tuple(classes)
+
+
+#: Share of the training points one feature alone must get right to be named as a possible leak.
+LEAK_ACCURACY = 0.995
+
+
+def leaking_features(X: np.ndarray, y: np.ndarray, names, *, max_points: int = 50_000, seed: int = 0) -> list:
+    """Features that alone predict the labels almost perfectly (at least ``LEAK_ACCURACY`` of at
+    most ``max_points`` training points): ``[(name, accuracy), ...]``. Each feature is given a
+    shallow one-feature tree (at most 4 leaves a class), which finds a label copied into an
+    attribute (intensity equal to the class code) or any monotone code of it."""
+    from sklearn.tree import DecisionTreeClassifier
+    if len(y) == 0:
+        return []
+    if len(y) > max_points:
+        pick = np.random.default_rng(seed).choice(len(y), max_points, replace=False)
+        X, y = X[pick], y[pick]
+    n_classes = len(np.unique(y))
+    if n_classes < 2:
+        return []
+    found = []
+    for j, name in enumerate(names):
+        column = X[:, j:j + 1]
+        tree = DecisionTreeClassifier(max_leaf_nodes=4 * n_classes, random_state=seed).fit(column, y)
+        accuracy = float((tree.predict(column) == y).mean())
+        if accuracy >= LEAK_ACCURACY:
+            found.append((name, accuracy))
+    return found
 
 
 def train_file(input_path: str, model_path: str, report_path: Optional[str] = None,
@@ -110,6 +139,12 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
             raise InputError(f"{input_path}: the {label} set is empty; use smaller blocks "
                              f"(now {options.block_m:g} m) or give it as a file")
     log(", ".join(f"{label}: {len(v[0]):,} points" for label, v in sets.items()))
+    notes = []
+    for name, accuracy in leaking_features(*sets["train"], names, seed=options.params.seed):
+        notes.append(f"Warning: the feature '{name}' alone predicts {accuracy:.1%} of the training labels. "
+                     "Check that it does not carry the label itself (e.g. a converted reference cloud whose "
+                     "intensity is the class code): the scores below would then mean nothing.")
+        log(notes[-1])
     steps.report(0.35)
     meta = dict(groundsieve_trained_from=os.path.basename(input_path), preset_features=list(options.features))
     candidates = [options.params]
@@ -160,9 +195,9 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
                                if not (validation_path and test_path) else "separate files"))
         write_report(report_path, title="GroundSieve Random Forest training", evaluations=evaluations,
                      features=names, impurity=model.meta["impurity_importance"], permutation=perm,
-                     timings=timings, settings=settings, grid=grid_rows)
+                     timings=timings, settings=settings, grid=grid_rows, notes=notes)
     steps.report(1.0)
-    return TrainRun(model, evaluations, names, timings, grid_rows)
+    return TrainRun(model, evaluations, names, timings, grid_rows, notes)
 
 
 def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_path: Optional[str] = None,
