@@ -211,7 +211,8 @@ def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_pat
     whose grid spans only the other points."""
     from ..io import CLASS_GROUND, read_cloud
     from ..progress import Steps
-    from .workflow import DTMOptions, FilterOptions, check_outputs, make_dtm, processable, write_outputs
+    from .workflow import (DTMOptions, FilterOptions, check_dtm_memory, check_outputs, make_dtm, processable,
+                           write_outputs)
     steps = Steps(progress, is_cancelled)
     log = log or (lambda _msg: None)
     dtm = dtm or DTMOptions()
@@ -231,6 +232,8 @@ def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_pat
             f"{int((~may & ~cloud.withheld_mask).sum()):,} of an ignored class keep their class and are "
             "left out of the features, the prediction and the DTM.")
     part = cloud if n_may == len(cloud) else cloud.subset(may)
+    if dtm_path:  # a DTM too large for the memory is refused before the features' work
+        check_dtm_memory(part.x, part.y, dtm)
     names = resolve_features(model.meta.get("preset_features", model.features), part, log)
     if names != list(model.features):
         raise InputError(f"{input_path}: this cloud gives the features {names} but the model "

@@ -202,6 +202,13 @@ def _codes(codes) -> str:
 DTM_BYTES_PER_CELL = 40
 
 
+def check_dtm_memory(x, y, options: DTMOptions) -> GridSpec:
+    """The DTM grid over the points ``x, y`` (those that may enter it), its memory checked against
+    the budget: called before the filter runs, so that a DTM too large is refused before any work."""
+    with memory_budget(options.memory_budget_bytes):
+        return GridSpec.covering(x, y, options.cell_size_m, what="DTM", bytes_per_cell=DTM_BYTES_PER_CELL)
+
+
 def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions):
     """DTM grid covering the points ``x, y`` (give only those that may enter a DTM: neither
     withheld nor ignored), interpolated from the ground points among them. The grid's memory is
@@ -266,6 +273,9 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     steps.check()
     cloud = read_cloud(input_path)
     log(f"Read {len(cloud):,} points from {input_path}.")
+    if dtm_path:  # a DTM too large for the memory is refused before the filter's work
+        area = processable(cloud, options)
+        check_dtm_memory(cloud.x[area], cloud.y[area], dtm)
     steps.report(0.1)
     done = classify_cloud(cloud, algorithm, options, steps.sub(0.1, 0.75), log)
     cls, ground = done.classification, done.ground

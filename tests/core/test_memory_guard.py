@@ -127,3 +127,21 @@ def test_one_million_points_under_a_2gb_address_space_cap(tmp_path, stray):
     else:
         assert proc.returncode == 0, text
         assert "DONE" in text and out.exists() and dtm.exists()
+
+
+def test_a_dtm_too_large_is_refused_before_the_filter_runs(tmp_path):
+    from groundsieve.core.engine.workflow import run_ground_filter
+    from groundsieve.core.io import new_las, write_las
+    cloud = cloud_with_stray()
+    src = tmp_path / "in.las"
+    write_las(new_las(cloud.x, cloud.y, cloud.z, classification=cloud.classification), str(src))
+    calls = []
+
+    def filter_that_counts(xyz, steps=None):
+        calls.append(len(xyz))
+        return np.ones(len(xyz), dtype=bool)
+    with pytest.raises(MemoryBudgetError, match=r"^DTM: .* 1 point lies 19.9 km from the others"):
+        run_ground_filter(str(src), str(tmp_path / "o.las"), filter_that_counts, dtm_path=str(tmp_path / "d.tif"),
+                          dtm=DTMOptions(cell_size_m=0.5, memory_budget_bytes=50 << 20))
+    assert calls == []
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.las"]

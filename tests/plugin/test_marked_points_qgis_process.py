@@ -117,3 +117,22 @@ def test_two_outputs_on_one_file_are_refused_before_any_work(tmp_path):
             "(1 ground, 2 vegetation area, 3 vegetation boundary))") in text, text
     assert "Traceback" not in text
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.las"]
+
+
+def test_a_stray_point_far_away_is_refused_with_its_place_not_a_crash(tmp_path):
+    # 6,400 points on 40 x 40 m and one point 1000 km east: an SMRF grid of 40 x 1,000,041 cells, mostly
+    # holes to fill (about 90 GB). Refused before allocating, with the stray point's place.
+    src = tmp_path / "in.las"
+    write_scene(src, fmt=6, marked=False)
+    las = laspy.read(str(src))
+    x = np.asarray(las.x)
+    x[-1] = 512000.0 + 1_000_040.0
+    las.x = x
+    las.write(str(src))
+    out = tmp_path / "out.laz"
+    rc, text = _run("groundsieve:smrf", f"--INPUT={src}", f"--OUTPUT={out}", f"--DTM={tmp_path / 'dtm.tif'}")
+    assert rc == 1, text
+    assert "SMRF grid: 40 x 1,000,041 cells of 1 m" in text, text
+    assert "Likely cause: 1 point lies 1000.0 km from the others, at x 1512040.00" in text, text
+    assert "survey-scale tiler" in text and "Traceback" not in text
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.las"]
