@@ -27,9 +27,9 @@ MAX_CELLS = 400_000_000
 DEFAULT_MEMORY_FRACTION = 0.6
 
 #: Measured peak of the harmonic fill (core/grids/inpaint.py, sparse LU) per empty cell of a large
-#: hole: 2.1 GB for a 1000 x 1000 grid with no known cell, 5.0 GB for 1500 x 1500 (the fill-in
-#: grows slowly with the hole). Filters that fill their grid count this for every cell that no
-#: point can reach (cells - points, at least).
+#: hole (bench/fill_memory.py, docs/BENCHMARKS.md): 1.9 kB at 500 x 500, 2.2 kB at 1000 x 1000, 2.3 kB
+#: at 1500 x 1500 (the fill-in grows slowly with the hole). Filters that fill their grid count this
+#: for every cell that no point can reach (cells - points, a lower bound of the empty cells).
 FILL_BYTES_PER_EMPTY_CELL = 2300
 
 _BUDGET = contextvars.ContextVar("groundsieve_memory_budget", default=None)
