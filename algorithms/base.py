@@ -22,8 +22,9 @@ COMMON_HELP = """
 <p><b>Input point cloud</b>: LAS 1.2-1.4 or LAZ (point formats 0-10), or an ISPRS filter-test text
 file <code>x y z label</code> (.txt). The file is only read, never changed. Lengths given in metres
 are read in the unit of the cloud's CRS (a warning says so when that unit is not the metre).</p>
-<p><b>Classified point cloud</b>: LAS or LAZ (by extension) with every dimension, extra bytes, VLRs
-and the CRS of the input kept. Ground points get ASPRS class 2, the other filtered points class 1
+<p><b>Classified point cloud</b>: LAS or LAZ (by extension) with every dimension, extra bytes, VLRs,
+scales, offsets and the CRS of the input kept (an ISPRS text input gets a scale that keeps its
+decimals, 0.001 m for millimetres). Ground points get ASPRS class 2, the other filtered points class 1
 (with <i>Keep existing classes other than 0, 1, 2</i>, every point of another class, e.g. building 6,
 water 9, bridge deck 17 or a class of your own, keeps it exactly and is never made ground).</p>
 <p><b>Withheld points</b> (the LAS flag meaning, in the ASPRS LAS specification, "if set, this point should
