@@ -8,7 +8,8 @@ the DTM, report progress, honour cancellation.
 The rules on points the user (or a previous pass) has marked, applied per point here and so the
 same for a whole file and for each tile of a survey:
 
-- *withheld* (the LAS flag: "this point should not be included in processing"; bit 7 of the
+- *withheld* (the LAS flag: "if set, this point should not be included in processing (synonymous
+  with Deleted)", in the ASPRS LAS specification's words; bit 7 of the
   classification byte in point formats 0-5, a classification flag in 6-10): never given to the
   filter, never ground, never in the DTM; class and flags written back as read.
 - *ignored classes* (``FilterOptions.ignore_classes``, noise 7 and 18 by default, as PDAL's
@@ -33,11 +34,11 @@ from ..io import (CLASS_GROUND, CLASS_UNCLASSIFIED, NOISE_CLASSES, PointCloud, a
                  read_cloud, write_classified)
 from ..io.clouds import parse_classes
 from ..io.outputs import check_distinct_outputs
+from ..progress import Steps
 
 #: Classes a ground filter may rewrite when existing classes are kept: never classified,
 #: unclassified, ground.
 REWRITTEN_CLASSES = (0, CLASS_UNCLASSIFIED, CLASS_GROUND)
-from ..progress import Steps
 
 
 def _check_budget(value, what):
@@ -273,8 +274,8 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     steps.check()
     cloud = read_cloud(input_path)
     log(f"Read {len(cloud):,} points from {input_path}.")
-    if dtm_path:  # a DTM too large for the memory is refused before the filter's work
-        area = processable(cloud, options)
+    area = processable(cloud, options)
+    if dtm_path and area.any():  # a DTM too large for the memory is refused before the filter's work
         check_dtm_memory(cloud.x[area], cloud.y[area], dtm)
     steps.report(0.1)
     done = classify_cloud(cloud, algorithm, options, steps.sub(0.1, 0.75), log)
