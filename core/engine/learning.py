@@ -44,6 +44,18 @@ class TrainRun:
     warnings: List[str] = None  #: what the log and the report warn about (possible label leakage)
 
 
+def _without_withheld(cloud, log):
+    """The cloud without its withheld points ("not to be included in processing"): they are
+    neither learnt from, nor evaluated, nor in any point's neighbourhood."""
+    withheld = cloud.withheld_mask
+    if not withheld.any():
+        return cloud
+    log(f"{cloud.path}: {int(withheld.sum()):,} withheld points left out of training.")
+    if withheld.all():
+        raise InputError(f"{cloud.path}: every point is withheld: nothing to learn from")
+    return cloud.subset(~withheld)
+
+
 def _labelled(cloud, classes, log):
     labels = cloud.classification
     if classes is None:
@@ -105,7 +117,7 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
                           what="report")
     timings = {}
     t0 = time.perf_counter()
-    cloud = read_cloud(input_path)
+    cloud = _without_withheld(read_cloud(input_path), log)
     keep, classes = _labelled(cloud, options.classes, log)
     names = resolve_features(options.features, cloud, log)
     X = feature_matrix(cloud, names, steps.sub(0.0, 0.3))
@@ -117,7 +129,7 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
         for label, path in (("validation", validation_path), ("test", test_path)):
             if path:
                 t1 = time.perf_counter()
-                other = read_cloud(path)
+                other = _without_withheld(read_cloud(path), log)
                 other_keep = np.isin(other.classification, classes)
                 other_names = resolve_features(options.features, other, log)
                 if other_names != names:

@@ -45,3 +45,24 @@ def test_no_warning_when_no_feature_alone_gives_the_label(tmp_path):
                               log=messages.append)
     assert run.warnings == [] and not any(m.startswith("Warning") for m in messages)
     assert "alone predicts" not in (tmp_path / "r.html").read_text()
+
+
+def test_withheld_points_are_not_learnt_from(tmp_path):
+    src = tmp_path / "w.laz"
+    labelled(src, leak=False)
+    las = laspy.read(str(src))
+    n = len(las.points)
+    withheld = np.zeros(n, dtype=np.uint8)
+    withheld[: n // 4] = 1
+    las.withheld = withheld
+    las.write(str(src))
+    messages = []
+    run = learning.train_file(str(src), str(tmp_path / "m.npz"), None,
+                              learning.TrainOptions(features=("intensity", "return_number"),
+                                                    params=rf.ForestParams(n_trees=3)),
+                              log=messages.append)
+    assert f"{src}: {n // 4:,} withheld points left out of training." in messages
+    import re
+    sizes = next(m for m in messages if m.startswith("train: "))
+    counts = [int(c.replace(",", "")) for c in re.findall(r": ([\d,]+) points", sizes)]
+    assert len(counts) == 3 and sum(counts) == n - n // 4   # every labelled point but the withheld
