@@ -57,7 +57,7 @@ def test_withheld_points_are_not_learnt_from(tmp_path):
     las.withheld = withheld
     las.write(str(src))
     messages = []
-    run = learning.train_file(str(src), str(tmp_path / "m.npz"), None,
+    learning.train_file(str(src), str(tmp_path / "m.npz"), None,
                               learning.TrainOptions(features=("intensity", "return_number"),
                                                     params=rf.ForestParams(n_trees=3)),
                               log=messages.append)

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from groundsieve.core.errors import InvalidParameterError
-from groundsieve.core.engine.workflow import (DTMOptions, FilterOptions, classify_cloud, processable,
-                                              run_ground_filter, select_points)
+from groundsieve.core.engine.workflow import (FilterOptions, classify_cloud, processable, run_ground_filter,
+                                              select_points)
 from groundsieve.core.filters.smrf import SMRF
 from groundsieve.core.io import read_cloud
 from groundsieve.core.io.clouds import parse_classes
@@ -73,10 +73,6 @@ def read(path):
     las = laspy.read(str(path))
     return (np.asarray(las.classification), np.asarray(las.withheld).astype(bool),
             np.asarray(las.synthetic).astype(bool))
-
-
-def dtm_of(run):
-    return run.dtm_grid, run.dtm
 
 
 @pytest.mark.parametrize("fmt", [1, 6])

@@ -6,7 +6,6 @@ from pathlib import Path
 
 import laspy
 import numpy as np
-import pytest
 
 from groundsieve.tests.core.test_marked_points import write_scene
 
@@ -137,18 +136,3 @@ def test_a_stray_point_far_away_is_refused_with_its_place_not_a_crash(tmp_path):
     assert "survey-scale tiler" in text and "Traceback" not in text
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.las"]
 
-
-def test_isprs_text_with_millimetres_is_written_at_a_millimetre_scale(tmp_path):
-    rng = np.random.default_rng(3)
-    n = 3000
-    xyz = np.round(np.column_stack([512000 + rng.uniform(0, 40, n), 5403000 + rng.uniform(0, 40, n),
-                                    100 + rng.normal(0, 0.05, n)]), 3)
-    src = tmp_path / "in.txt"
-    np.savetxt(src, np.column_stack([xyz, np.zeros(n)]), fmt="%.3f %.3f %.3f %d")
-    out = tmp_path / "out.laz"
-    rc, text = _run("groundsieve:smrf", f"--INPUT={src}", f"--OUTPUT={out}")
-    assert rc == 0, text
-    las = laspy.read(str(out))
-    assert tuple(las.header.scales) == pytest.approx((0.001, 0.001, 0.001))
-    back = np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)])
-    np.testing.assert_allclose(back, xyz, rtol=0, atol=1e-5)
