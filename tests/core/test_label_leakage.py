@@ -58,9 +58,9 @@ def test_withheld_points_are_not_learnt_from(tmp_path):
     las.write(str(src))
     messages = []
     learning.train_file(str(src), str(tmp_path / "m.npz"), None,
-                              learning.TrainOptions(features=("intensity", "return_number"),
-                                                    params=rf.ForestParams(n_trees=3)),
-                              log=messages.append)
+                        learning.TrainOptions(features=("intensity", "return_number"),
+                                              params=rf.ForestParams(n_trees=3)),
+                        log=messages.append)
     assert f"{src}: {n // 4:,} withheld points left out of training." in messages
     import re
     sizes = next(m for m in messages if m.startswith("train: "))
