@@ -6,9 +6,11 @@ import re
 
 from qgis.core import (QgsCoordinateReferenceSystem, QgsFeature, QgsFeatureSink, QgsField, QgsFields,
                        QgsGeometry, QgsPoint, QgsProcessing, QgsProcessingAlgorithm, QgsProcessingException,
-                       QgsProcessingParameterBoolean, QgsProcessingParameterFeatureSink,
+                       QgsProcessingParameterBoolean, QgsProcessingParameterDefinition,
+                       QgsProcessingParameterFeatureSink,
                        QgsProcessingParameterFile, QgsProcessingParameterFileDestination,
-                       QgsProcessingParameterNumber, QgsProcessingParameterRasterDestination, QgsUnitTypes,
+                       QgsProcessingParameterNumber, QgsProcessingParameterRasterDestination,
+                       QgsProcessingParameterString, QgsUnitTypes,
                        QgsWkbTypes)
 from qgis.PyQt.QtCore import QVariant
 from qgis.PyQt.QtGui import QIcon
@@ -22,18 +24,30 @@ COMMON_HELP = """
 <p><b>Input point cloud</b>: LAS 1.2-1.4 or LAZ (point formats 0-10), or an ISPRS filter-test text
 file <code>x y z label</code> (.txt). The file is only read, never changed. Lengths given in metres
 are read in the unit of the cloud's CRS (a warning says so when that unit is not the metre).</p>
-<p><b>Classified point cloud</b>: LAS or LAZ (by extension) with every dimension, extra bytes, VLRs
-and the CRS of the input kept. Ground points get ASPRS class 2, the other filtered points class 1
-(or keep their class with <i>Keep existing non-ground classes</i>). Points already classified as
-noise (7, 18) are left out of the filter and keep their class unless you untick
-<i>Ignore noise</i>.</p>
+<p><b>Classified point cloud</b>: LAS or LAZ (by extension) with every dimension, extra bytes, VLRs,
+scales, offsets and the CRS of the input kept (an ISPRS text input gets a scale that keeps its
+decimals, 0.001 m for millimetres). Ground points get ASPRS class 2, the other filtered points class 1
+(with <i>Keep existing classes other than 0, 1, 2</i>, every point of another class, e.g. building 6,
+water 9, bridge deck 17 or a class of your own, keeps it exactly and is never made ground).</p>
+<p><b>Withheld points</b> (the LAS flag meaning, in the ASPRS LAS specification, "if set, this point should
+not be included in processing (synonymous with Deleted)"; bit 7 of the classification byte in point formats 0-5) are never
+given to the filter, never become ground, never enter the DTM, and keep their class and flags.</p>
+<p><b>Ignored classes</b> (default <code>7,18</code>: low and high noise; a list or ranges such as
+<code>7,18,20-25</code>, as PDAL's <code>ignore</code> and LAStools' <code>-ignore_class</code>;
+empty = none): points of these classes are treated as withheld: not filtered, not ground, not in
+the DTM (whose grid spans only the other points), their class kept.</p>
 <p><b>DTM</b> (optional): a GeoTIFF of the ground points interpolated linearly on their Delaunay
 triangulation, cell size <i>DTM cell size</i>, the cloud's CRS, nodata -9999 outside the hull of
 the ground points unless <i>Fill cells outside the ground hull</i> is ticked (nearest value).</p>
 <p><b>Ground points</b> (optional, off by default): the ground points as a PointZ layer with return
 number and intensity; meant for small clouds.</p>
-<p>Outputs are written under a temporary name and renamed when complete: a failed or cancelled run
-leaves nothing half-written.</p>
+<p>Outputs are written under a temporary name (<code>.NAME.gs&lt;process id&gt;-&lt;random&gt;.part</code> and the
+extension, hidden, beside the output) and renamed when complete: a failed or cancelled run leaves
+nothing half-written, and the next run to the same output deletes what a killed run left. Two
+outputs on one file are refused before any work.</p>
+<p><b>Memory</b>: before a grid (the filter's or the DTM's) is allocated, its peak memory is estimated
+and the run is refused above 60 % of the memory available, with the estimate, the extent and the
+likely cause (e.g. one point kilometres away from the others: class it as noise or remove it).</p>
 """
 
 
@@ -80,7 +94,8 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
     INPUT = "INPUT"
     OUTPUT = "OUTPUT"
     LAST_RETURNS = "LAST_RETURNS"
-    IGNORE_NOISE = "IGNORE_NOISE"
+    IGNORE_NOISE = "IGNORE_NOISE"  # before IGNORE_CLASSES; hidden, kept for saved models and scripts
+    IGNORE_CLASSES = "IGNORE_CLASSES"
     KEEP_CLASSES = "KEEP_CLASSES"
     DTM = "DTM"
     DTM_CELL = "DTM_CELL"
@@ -124,10 +139,15 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         self.initFilterParameters()
         self.addParameter(QgsProcessingParameterBoolean(
             self.LAST_RETURNS, "Filter only last returns (others become non-ground)", defaultValue=False))
+        self.addParameter(QgsProcessingParameterString(
+            self.IGNORE_CLASSES, "Ignored classes: not filtered, kept, out of the DTM (e.g. 7,18,20-25)",
+            defaultValue="7,18", optional=True))
+        ignore_noise = QgsProcessingParameterBoolean(
+            self.IGNORE_NOISE, "Ignore noise (7, 18) [replaced by Ignored classes]", defaultValue=True)
+        ignore_noise.setFlags(ignore_noise.flags() | QgsProcessingParameterDefinition.Flag.FlagHidden)
+        self.addParameter(ignore_noise)
         self.addParameter(QgsProcessingParameterBoolean(
-            self.IGNORE_NOISE, "Ignore points already classified as noise (7, 18)", defaultValue=True))
-        self.addParameter(QgsProcessingParameterBoolean(
-            self.KEEP_CLASSES, "Keep existing non-ground classes", defaultValue=False))
+            self.KEEP_CLASSES, "Keep existing classes other than 0, 1, 2 (never made ground)", defaultValue=False))
         self.addParameter(QgsProcessingParameterFileDestination(
             self.OUTPUT, "Classified point cloud", fileFilter="LAZ (*.laz);;LAS (*.las)"))
         self.addParameter(QgsProcessingParameterRasterDestination(
@@ -150,9 +170,11 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
             algorithm = self.buildFilter(parameters, context)
             rasters = {name: (path, make) for name, (path, make) in self.rasterOutputs(parameters, context).items()
                        if path}
+            self.checkDistinctOutputs([(self.OUTPUT, output_path), (self.DTM, dtm_path),
+                                       *((name, path) for name, (path, _make) in rasters.items())])
             options = workflow.FilterOptions(
                 last_returns_only=self.parameterAsBoolean(parameters, self.LAST_RETURNS, context),
-                ignore_noise=self.parameterAsBoolean(parameters, self.IGNORE_NOISE, context),
+                ignore_classes=self.ignoredClasses(parameters, context, errors),
                 keep_existing_classes=self.parameterAsBoolean(parameters, self.KEEP_CLASSES, context))
             dtm = workflow.DTMOptions(
                 cell_size_m=self.parameterAsDouble(parameters, self.DTM_CELL, context),
@@ -174,6 +196,20 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         if sink_id is not None:
             results[self.GROUND_POINTS] = sink_id
         return results
+
+    def checkDistinctOutputs(self, outputs):  # noqa: N802
+        """Refuse two outputs on one file before any work, naming them as the dialog does."""
+        from ..core.io.outputs import check_distinct_outputs
+        check_distinct_outputs([(self.parameterDefinition(name).description(), path) for name, path in outputs])
+
+    def ignoredClasses(self, parameters, context, errors):  # noqa: N802
+        """IGNORE_CLASSES as codes; IGNORE_NOISE=false (older models and scripts) drops 7 and 18."""
+        from ..core.io.clouds import NOISE_CLASSES, parse_classes
+        codes = parse_classes(self.parameterAsString(parameters, self.IGNORE_CLASSES, context) or "",
+                              what="Ignored classes")
+        if not self.parameterAsBoolean(parameters, self.IGNORE_NOISE, context):
+            codes = tuple(c for c in codes if c not in NOISE_CLASSES)
+        return codes
 
     def _write_ground_points(self, parameters, context, feedback, run):
         fields = QgsFields()

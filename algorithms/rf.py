@@ -183,6 +183,7 @@ class RFClassifyAlgorithm(_RFBase):
     DTM = "DTM"
     DTM_CELL = "DTM_CELL"
     DTM_FILL = "DTM_FILL"
+    IGNORE_CLASSES = "IGNORE_CLASSES"
 
     def name(self):
         return "rfclassify"
@@ -194,6 +195,11 @@ class RFClassifyAlgorithm(_RFBase):
         return dialog_help("""<p>Applies a model trained with <i>Train Random Forest classifier</i> to another cloud and
 writes it with the predicted ASPRS classes (every other dimension kept); optionally a DTM GeoTIFF
 from the points predicted as ground (class 2), as the ground filters make it.</p>
+<p><b>Withheld points</b> (the LAS flag: "if set, this point should not be included in processing (synonymous with
+Deleted)") and
+points of the <b>Ignored classes</b> (default <code>7,18</code>, noise; a list or ranges such as
+<code>7,18,20-25</code>; empty = none) keep their class and flags and are left out of the features'
+neighbourhoods, the prediction and the DTM, whose grid spans only the other points.</p>
 <p>The model is refused with a clear message when the file was changed or is not a GroundSieve
 model, or when the cloud cannot give the model's features (e.g. colour in one and not the other).
 Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
@@ -205,6 +211,9 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
         self.addParameter(QgsProcessingParameterFile(
             self.MODEL, "Model file", behavior=QgsProcessingParameterFile.Behavior.File,
             fileFilter="GroundSieve model (*.npz)"))
+        self.addParameter(QgsProcessingParameterString(
+            self.IGNORE_CLASSES, "Ignored classes: kept, not predicted, out of the DTM (e.g. 7,18,20-25)",
+            defaultValue="7,18", optional=True))
         self.addParameter(QgsProcessingParameterFileDestination(
             self.OUTPUT, "Classified point cloud", fileFilter="LAZ (*.laz);;LAS (*.las)"))
         self.addParameter(QgsProcessingParameterRasterDestination(
@@ -224,7 +233,9 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
                              fill_outside_hull=self.parameterAsBoolean(parameters, self.DTM_FILL, context))
             learning.classify_file(self.parameterAsFile(parameters, self.INPUT, context), output,
                                    self.parameterAsFile(parameters, self.MODEL, context), dtm_path=dtm_path,
-                                   dtm=dtm, **feedback_callables(feedback))
+                                   dtm=dtm, ignore_classes=self.parameterAsString(
+                                       parameters, self.IGNORE_CLASSES, context) or "",
+                                   **feedback_callables(feedback))
         except errors.GroundSieveError as err:
             raise QgsProcessingException(str(err)) from err
         results = {self.OUTPUT: output}

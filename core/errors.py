@@ -29,3 +29,7 @@ class OutputError(GroundSieveError):
 
 class Cancelled(GroundSieveError):
     """The caller asked to stop (``is_cancelled()`` returned True)."""
+
+
+class MemoryBudgetError(InvalidParameterError):
+    """A grid would need more memory than the run may use (refused before allocating it)."""

@@ -41,6 +41,19 @@ class TrainRun:
     features: List[str]
     timings: dict
     grid: Optional[List[dict]] = None
+    warnings: List[str] = None  #: what the log and the report warn about (possible label leakage)
+
+
+def _without_withheld(cloud, log):
+    """The cloud without its withheld points ("not to be included in processing"): they are
+    neither learnt from, nor evaluated, nor in any point's neighbourhood."""
+    withheld = cloud.withheld_mask
+    if not withheld.any():
+        return cloud
+    log(f"{cloud.path}: {int(withheld.sum()):,} withheld points left out of training.")
+    if withheld.all():
+        raise InputError(f"{cloud.path}: every point is withheld: nothing to learn from")
+    return cloud.subset(~withheld)
 
 
 def _labelled(cloud, classes, log):
@@ -55,6 +68,34 @@ def _labelled(cloud, classes, log):
     if len(classes) < 2:
         raise InputError(f"{cloud.path}: at least two classes are needed to train (got {list(classes)})")
     return np.isin(labels, classes), tuple(classes)
+
+
+#: Share of the training points one feature alone must get right to be named as a possible leak.
+LEAK_ACCURACY = 0.995
+
+
+def leaking_features(X: np.ndarray, y: np.ndarray, names, *, max_points: int = 50_000, seed: int = 0) -> list:
+    """Features that alone predict the labels almost perfectly (at least ``LEAK_ACCURACY`` of at
+    most ``max_points`` training points): ``[(name, accuracy), ...]``. Each feature is given a
+    shallow one-feature tree (at most 4 leaves a class), which finds a label copied into an
+    attribute (intensity equal to the class code) or any monotone code of it."""
+    from sklearn.tree import DecisionTreeClassifier
+    if len(y) == 0:
+        return []
+    if len(y) > max_points:
+        pick = np.random.default_rng(seed).choice(len(y), max_points, replace=False)
+        X, y = X[pick], y[pick]
+    n_classes = len(np.unique(y))
+    if n_classes < 2:
+        return []
+    found = []
+    for j, name in enumerate(names):
+        column = X[:, j:j + 1]
+        tree = DecisionTreeClassifier(max_leaf_nodes=4 * n_classes, random_state=seed).fit(column, y)
+        accuracy = float((tree.predict(column) == y).mean())
+        if accuracy >= LEAK_ACCURACY:
+            found.append((name, accuracy))
+    return found
 
 
 def train_file(input_path: str, model_path: str, report_path: Optional[str] = None,
@@ -76,7 +117,7 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
                           what="report")
     timings = {}
     t0 = time.perf_counter()
-    cloud = read_cloud(input_path)
+    cloud = _without_withheld(read_cloud(input_path), log)
     keep, classes = _labelled(cloud, options.classes, log)
     names = resolve_features(options.features, cloud, log)
     X = feature_matrix(cloud, names, steps.sub(0.0, 0.3))
@@ -88,7 +129,7 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
         for label, path in (("validation", validation_path), ("test", test_path)):
             if path:
                 t1 = time.perf_counter()
-                other = read_cloud(path)
+                other = _without_withheld(read_cloud(path), log)
                 other_keep = np.isin(other.classification, classes)
                 other_names = resolve_features(options.features, other, log)
                 if other_names != names:
@@ -110,6 +151,12 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
             raise InputError(f"{input_path}: the {label} set is empty; use smaller blocks "
                              f"(now {options.block_m:g} m) or give it as a file")
     log(", ".join(f"{label}: {len(v[0]):,} points" for label, v in sets.items()))
+    notes = []
+    for name, accuracy in leaking_features(*sets["train"], names, seed=options.params.seed):
+        notes.append(f"Warning: the feature '{name}' alone predicts {accuracy:.1%} of the training labels. "
+                     "Check that it does not carry the label itself (e.g. a converted reference cloud whose "
+                     "intensity is the class code): the scores below would then mean nothing.")
+        log(notes[-1])
     steps.report(0.35)
     meta = dict(groundsieve_trained_from=os.path.basename(input_path), preset_features=list(options.features))
     candidates = [options.params]
@@ -160,39 +207,62 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
                                if not (validation_path and test_path) else "separate files"))
         write_report(report_path, title="GroundSieve Random Forest training", evaluations=evaluations,
                      features=names, impurity=model.meta["impurity_importance"], permutation=perm,
-                     timings=timings, settings=settings, grid=grid_rows)
+                     timings=timings, settings=settings, grid=grid_rows, notes=notes)
     steps.report(1.0)
-    return TrainRun(model, evaluations, names, timings, grid_rows)
+    return TrainRun(model, evaluations, names, timings, grid_rows, notes)
 
 
 def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_path: Optional[str] = None,
-                  dtm=None, progress=None, is_cancelled=None, log=None):
+                  dtm=None, ignore_classes=(7, 18), progress=None, is_cancelled=None, log=None):
     """Apply a saved model to ``input_path``; write the classified cloud (the model's ASPRS codes)
-    and, optionally, a DTM from the points predicted as ground (class 2)."""
+    and, optionally, a DTM from the points predicted as ground (class 2).
+
+    The ground filters' rules on marked points hold here too: withheld points and points of
+    ``ignore_classes`` (noise 7 and 18 by default; a list or text such as "7,18,20-25") keep their
+    class and flags, and stay out of the features' neighbourhoods, the prediction and the DTM,
+    whose grid spans only the other points."""
     from ..io import CLASS_GROUND, read_cloud
     from ..progress import Steps
-    from .workflow import DTMOptions, check_outputs, make_dtm, write_outputs
+    from .workflow import (DTMOptions, FilterOptions, check_dtm_memory, check_outputs, make_dtm, processable,
+                           write_outputs)
     steps = Steps(progress, is_cancelled)
     log = log or (lambda _msg: None)
     dtm = dtm or DTMOptions()
+    options = FilterOptions(ignore_classes=ignore_classes if ignore_classes is not None else ())
     check_outputs(input_path, output_path, [dtm_path])
     model = load_model(model_path)
     cloud = read_cloud(input_path)
-    names = resolve_features(model.meta.get("preset_features", model.features), cloud, log)
+    for note in cloud.notes:
+        log(note)
+    may = processable(cloud, options)
+    n_may = int(may.sum())
+    if n_may == 0:
+        raise InputError(f"{input_path}: every point is withheld or of an ignored class "
+                         f"({', '.join(map(str, options.ignored)) or 'none'}): nothing to classify")
+    if n_may < len(cloud):
+        log(f"Classifying {n_may:,} of {len(cloud):,} points: {int(cloud.withheld_mask.sum()):,} withheld and "
+            f"{int((~may & ~cloud.withheld_mask).sum()):,} of an ignored class keep their class and are "
+            "left out of the features, the prediction and the DTM.")
+    part = cloud if n_may == len(cloud) else cloud.subset(may)
+    if dtm_path:  # a DTM too large for the memory is refused before the features' work
+        check_dtm_memory(part.x, part.y, dtm)
+    names = resolve_features(model.meta.get("preset_features", model.features), part, log)
     if names != list(model.features):
         raise InputError(f"{input_path}: this cloud gives the features {names} but the model "
                          f"{model_path} was trained on {list(model.features)} (e.g. colour present in one "
                          "and not the other)")
-    X = feature_matrix(cloud, names, steps.sub(0.0, 0.5))
-    predicted = model.predict(X).astype(np.uint8)
+    X = feature_matrix(part, names, steps.sub(0.0, 0.5))
+    predicted_part = model.predict(X).astype(np.uint8)
+    predicted = cloud.classification.astype(np.uint8)  # a copy: withheld and ignored points as read
+    predicted[may] = predicted_part
     steps.report(0.7)
-    log(", ".join(f"class {c}: {int((predicted == c).sum()):,}" for c in model.classes))
+    log(", ".join(f"class {c}: {int((predicted_part == c).sum()):,}" for c in model.classes))
     rasters = []
     if dtm_path:
-        ground = predicted == CLASS_GROUND
+        ground = predicted_part == CLASS_GROUND
         if not ground.any():
             raise InputError(f"{input_path}: no point was predicted as ground (class 2): no DTM can be made")
-        grid, values = make_dtm(cloud.x, cloud.y, cloud.z, ground, dtm)
+        grid, values = make_dtm(part.x, part.y, part.z, ground, dtm)
         rasters.append((dtm_path, values, grid))
     write_outputs(cloud, predicted, output_path, rasters, steps)
     steps.report(1.0)

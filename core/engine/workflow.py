@@ -2,9 +2,22 @@
 
 A filter (e.g. :class:`~groundsieve.core.filters.smrf.SMRF`) only maps the x, y, z of the
 points it is given to a ground mask. This module does the rest, the same for every
-filter: select the points to filter (drop noise, optionally keep only last returns),
-write ASPRS classes (2 ground, 1 other, or keep the other existing classes), write
-the classified cloud and the DTM, report progress, honour cancellation.
+filter: select the points to filter, write ASPRS classes, write the classified cloud and
+the DTM, report progress, honour cancellation.
+
+The rules on points the user (or a previous pass) has marked, applied per point here and so the
+same for a whole file and for each tile of a survey:
+
+- *withheld* (the LAS flag: "if set, this point should not be included in processing (synonymous
+  with Deleted)", in the ASPRS LAS specification's words; bit 7 of the
+  classification byte in point formats 0-5, a classification flag in 6-10): never given to the
+  filter, never ground, never in the DTM; class and flags written back as read.
+- *ignored classes* (``FilterOptions.ignore_classes``, noise 7 and 18 by default, as PDAL's
+  ``ignore`` and LAStools' ``-ignore_class``): the same.
+- *kept classes* (``keep_existing_classes``): every point whose class is not 0, 1 or 2 keeps it
+  exactly; it is still given to the filter (it shapes the surface) but never becomes ground.
+- every other point becomes 2 (ground) or 1 (unclassified); non-last returns too with
+  ``last_returns_only`` (they are not filtered, so they are 1).
 """
 from __future__ import annotations
 
@@ -16,18 +29,48 @@ from typing import Callable, Optional
 import numpy as np
 
 from ..errors import InvalidParameterError
-from ..grids.spec import GridSpec
+from ..grids.spec import GridSpec, memory_budget
 from ..io import (CLASS_GROUND, CLASS_UNCLASSIFIED, NOISE_CLASSES, PointCloud, atomic_path, check_output_path,
                  read_cloud, write_classified)
+from ..io.clouds import parse_classes
+from ..io.outputs import check_distinct_outputs
 from ..progress import Steps
+
+#: Classes a ground filter may rewrite when existing classes are kept: never classified,
+#: unclassified, ground.
+REWRITTEN_CLASSES = (0, CLASS_UNCLASSIFIED, CLASS_GROUND)
+
+
+def _check_budget(value, what):
+    if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value <= 0):
+        raise InvalidParameterError(f"{what} must be a whole number of bytes > 0, or None (got {value!r})")
 
 
 @dataclass(frozen=True)
 class FilterOptions:
-    """What the driver does around the filter."""
+    """What the driver does around the filter (see the module's rules on marked points)."""
     last_returns_only: bool = False
+    #: the former switch for noise: when ``ignore_classes`` is None, True ignores 7 and 18 and False
+    #: ignores nothing (an explicit ``ignore_classes`` wins)
     ignore_noise: bool = True
+    #: every class other than 0, 1 and 2 is left as it was (such points are never ground)
     keep_existing_classes: bool = False
+    #: ASPRS codes never filtered, kept, out of the DTM: "7, 18", "7 18", "20-25", (7, 18), ...
+    ignore_classes: Optional[object] = None
+    #: bytes the filter's grids may take (None: a share of the memory available)
+    memory_budget_bytes: Optional[int] = None
+
+    def __post_init__(self):
+        if self.ignore_classes is not None:
+            object.__setattr__(self, "ignore_classes", parse_classes(self.ignore_classes, what="ignored classes"))
+        _check_budget(self.memory_budget_bytes, "memory_budget_bytes")
+
+    @property
+    def ignored(self) -> tuple:
+        """The ASPRS codes left out (sorted)."""
+        if self.ignore_classes is not None:
+            return self.ignore_classes
+        return NOISE_CLASSES if self.ignore_noise else ()
 
 
 @dataclass(frozen=True)
@@ -36,8 +79,11 @@ class DTMOptions:
     fill_outside_hull: bool = False
     #: ground points triangulated per DTM cell at most (0 = all; see rasterize.tin_dtm)
     points_per_cell: int = 4
+    #: bytes the DTM grid may take (None: a share of the memory available)
+    memory_budget_bytes: Optional[int] = None
 
     def __post_init__(self):
+        _check_budget(self.memory_budget_bytes, "memory_budget_bytes")
         if not (math.isfinite(self.cell_size_m) and self.cell_size_m > 0):
             raise InvalidParameterError(f"DTM cell size must be > 0 m (got {self.cell_size_m})")
         if int(self.points_per_cell) != self.points_per_cell or self.points_per_cell < 0:
@@ -59,11 +105,19 @@ class FilterRun:
         return int(self.ground.sum())
 
 
+def processable(cloud: PointCloud, options: FilterOptions) -> np.ndarray:
+    """Boolean mask of the points that may be processed at all: not withheld, not of an ignored
+    class. Only these can be filtered, become ground or enter a DTM (and span its grid)."""
+    keep = ~cloud.withheld_mask
+    if options.ignored:
+        keep &= ~np.isin(cloud.classification, options.ignored)
+    return keep
+
+
 def select_points(cloud: PointCloud, options: FilterOptions) -> np.ndarray:
-    """Boolean mask of the points the filter sees."""
-    keep = np.ones(len(cloud), dtype=bool)
-    if options.ignore_noise:
-        keep &= ~np.isin(cloud.classification, NOISE_CLASSES)
+    """Boolean mask of the points the filter sees: the processable ones (optionally only the last
+    returns)."""
+    keep = processable(cloud, options)
     if options.last_returns_only and cloud.has_return_info:
         rn, nr = cloud.return_number, cloud.number_of_returns
         # A return is last when its number equals the count; files that leave both 0 count as single.
@@ -77,6 +131,7 @@ class Classified:
     ground: np.ndarray          #: bool per point
     filtered: np.ndarray        #: bool per point: given to the filter
     detail: object = None       #: what the filter's ``run`` returned (grids, ...), if it has one
+    processable: Optional[np.ndarray] = None  #: bool per point: neither withheld nor ignored (the DTM's area)
 
 
 def call_filter(algorithm, cloud: PointCloud, idx: np.ndarray, steps: Steps, log):
@@ -105,31 +160,63 @@ def classify_cloud(cloud: PointCloud, algorithm, options: FilterOptions = Filter
     """Run ``algorithm`` on the selected points and give every point its ASPRS class."""
     steps = steps or Steps()
     log = log or (lambda _msg: None)
+    for note in cloud.notes:
+        log(note)
+    may = processable(cloud, options)
     filtered = select_points(cloud, options)
     n_sel = int(filtered.sum())
+    withheld = cloud.withheld_mask
+    n_withheld = int(withheld.sum())
+    n_ignored = int((~may & ~withheld).sum())
     if n_sel == 0:
-        raise InvalidParameterError(f"{cloud.path}: no point is left to filter "
-                                    "(all are noise, or none is a last return)")
+        raise InvalidParameterError(
+            f"{cloud.path}: no point is left to filter ({n_withheld:,} withheld, {n_ignored:,} of an ignored "
+            f"class {_codes(options.ignored)}, {int(may.sum()):,} others"
+            + (", none of them a last return)" if options.last_returns_only else ")"))
     if n_sel < len(cloud):
-        log(f"Filtering {n_sel:,} of {len(cloud):,} points (noise or non-last returns left out).")
+        log(f"Filtering {n_sel:,} of {len(cloud):,} points ({n_withheld:,} withheld and {n_ignored:,} of an "
+            f"ignored class {_codes(options.ignored)} left out, keeping their class"
+            + (", non-last returns left out" if options.last_returns_only else "") + ").")
     idx = np.flatnonzero(filtered)
-    sub_ground, detail = call_filter(algorithm, cloud, idx, steps, log)
+    with memory_budget(options.memory_budget_bytes):
+        sub_ground, detail = call_filter(algorithm, cloud, idx, steps, log)
+    cls = cloud.classification.copy()
+    # Who gets a new class: every processable point (non-last returns too: they are not ground),
+    # or with kept classes only those of class 0, 1 or 2.
+    touched = may.copy()
+    if options.keep_existing_classes:
+        touched &= np.isin(cls, REWRITTEN_CLASSES)
     ground = np.zeros(len(cloud), dtype=bool)
     ground[idx[sub_ground]] = True
-    # Every point but ignored noise gets a new class: non-last returns are not ground either.
-    cls = cloud.classification.copy()
-    touched = ~np.isin(cls, NOISE_CLASSES) if options.ignore_noise else np.ones(len(cloud), dtype=bool)
-    if options.keep_existing_classes:
-        touched &= cls == CLASS_GROUND  # only a former ground class is taken away
+    ground &= touched
     cls[touched] = CLASS_UNCLASSIFIED
     cls[ground] = CLASS_GROUND
-    return Classified(cls.astype(np.uint8), ground, filtered, detail)
+    return Classified(cls.astype(np.uint8), ground, filtered, detail, may)
+
+
+def _codes(codes) -> str:
+    return "(" + (", ".join(map(str, codes)) if codes else "none") + ")"
+
+
+#: Peak bytes per DTM cell: the raster, and for the fill outside the hull the distance
+#: transform's indices, and the written copy (measured 30-33 bytes, bench/fill_memory.py --dtm).
+DTM_BYTES_PER_CELL = 40
+
+
+def check_dtm_memory(x, y, options: DTMOptions) -> GridSpec:
+    """The DTM grid over the points ``x, y`` (those that may enter it), its memory checked against
+    the budget: called before the filter runs, so that a DTM too large is refused before any work."""
+    with memory_budget(options.memory_budget_bytes):
+        return GridSpec.covering(x, y, options.cell_size_m, what="DTM", bytes_per_cell=DTM_BYTES_PER_CELL)
 
 
 def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions):
-    """DTM grid covering all the points, interpolated from the ground points."""
+    """DTM grid covering the points ``x, y`` (give only those that may enter a DTM: neither
+    withheld nor ignored), interpolated from the ground points among them. The grid's memory is
+    checked against the budget before it is allocated."""
     from ..grids.rasterize import tin_dtm
-    grid = GridSpec.covering(x, y, options.cell_size_m, what="DTM")
+    with memory_budget(options.memory_budget_bytes):
+        grid = GridSpec.covering(x, y, options.cell_size_m, what="DTM", bytes_per_cell=DTM_BYTES_PER_CELL)
     if not ground.any():
         raise InvalidParameterError("the filter found no ground point: no DTM can be made")
     dtm = tin_dtm(x[ground], y[ground], z[ground], grid, fill_outside=options.fill_outside_hull,
@@ -138,11 +225,15 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions):
 
 
 def check_outputs(input_path: str, output_path: Optional[str], raster_paths=()) -> None:
-    """Refuse bad output paths before any work: wrong extension, missing folder, the input itself."""
+    """Refuse bad output paths before any work: wrong extension, missing folder, the input itself,
+    two outputs on one file (``raster_paths`` may be paths or ``(label, path)`` pairs)."""
     from ..raster.geotiff import check_raster_path
+    labelled = [item if isinstance(item, tuple) else (f"raster {i + 1}" if i else "DTM", item)
+                for i, item in enumerate(raster_paths)]
+    check_distinct_outputs([("classified point cloud", output_path), *labelled])
     if output_path:
         check_output_path(output_path, inputs=[input_path])
-    for path in raster_paths:
+    for _label, path in labelled:
         if path:
             check_raster_path(path, inputs=[input_path, output_path])
 
@@ -183,14 +274,17 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     steps.check()
     cloud = read_cloud(input_path)
     log(f"Read {len(cloud):,} points from {input_path}.")
+    area = processable(cloud, options)
+    if dtm_path and area.any():  # a DTM too large for the memory is refused before the filter's work
+        check_dtm_memory(cloud.x[area], cloud.y[area], dtm)
     steps.report(0.1)
     done = classify_cloud(cloud, algorithm, options, steps.sub(0.1, 0.75), log)
     cls, ground = done.classification, done.ground
     log(f"Ground: {int(ground.sum()):,} of {int(done.filtered.sum()):,} filtered points.")
     run = FilterRun(cloud, cls, ground, done.filtered, detail=done.detail)
     if dtm_path:
-        # The DTM covers every point but ignored noise (which may lie far away).
-        area = ~np.isin(cloud.classification, NOISE_CLASSES) if options.ignore_noise else slice(None)
+        # The DTM spans only the points that may enter it: not withheld, not ignored (noise may lie far away).
+        area = done.processable
         run.dtm_grid, run.dtm = make_dtm(cloud.x[area], cloud.y[area], cloud.z[area], ground[area], dtm)
         steps.report(0.85)
     extra = [(path, *make(run)) for path, make in rasters.items()]

@@ -102,7 +102,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InvalidParameterError
-from ..grids.spec import MAX_CELLS, GridSpec
+from ..grids.spec import MAX_CELLS, GridSpec, check_memory
 from ..progress import Steps
 from ..validate import check_choice, check_number, validate_xyz
 
@@ -266,6 +266,9 @@ class CSF:
         _require(W * H <= MAX_CELLS,
                  f"cloth_resolution_m of {res:g} m over {xmax - xmin:.1f} x {ymax - ymin:.1f} m needs "
                  f"{W} x {H} = {W * H:,} particles (limit {MAX_CELLS:,}); use a larger cloth resolution")
+        # Per particle: the terrain height under it, its position, previous position, movable and
+        # quiet flags, and the neighbour sums of the cloth iteration (about eight 8-byte values).
+        check_memory(W * H * 64.0, what="CSF cloth", shape=(H, W), cell=res, x=xu, y=yu)
         hv = np.full(W * H, -np.inf)
         has = np.zeros(W * H, dtype=np.bool_)
         if self.intersection_height == "cell":

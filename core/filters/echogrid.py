@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InvalidParameterError
+from ..grids.spec import MAX_CELLS, check_memory
 from ..progress import Steps
 from ..validate import check_choice, check_number, validate_xyz
 
@@ -103,8 +104,10 @@ class EchoGrid:
                 "kernel holds every point, so the test is against the cloud's single lowest point.")
         nx = int(math.floor((float(x.max()) - x0) / size)) + 1
         ny = int(math.floor((float(y.max()) - y0) / size)) + 1
-        if nx * ny > 400_000_000:
+        if nx * ny > MAX_CELLS:
             raise InvalidParameterError(f"kernel_m {size:g} makes {nx * ny:,} kernels; use larger kernels")
+        # Per kernel: lowest and highest z, two flags, the reachable envelope, the reference (8-byte).
+        check_memory(nx * ny * 48.0, what="Echo grid", shape=(ny, nx), cell=size, x=x, y=y)
         zmin = np.empty(nx * ny)
         zmax = np.empty(nx * ny)
         only_first = np.empty(nx * ny, dtype=np.bool_)

@@ -118,8 +118,10 @@ class EVC:
             raise InvalidParameterError(
                 f"large_scale_m {self.large_scale_m:g} m is larger than the cloud itself "
                 f"({span:.2f} m across): the large-scale grid would be a single cell")
-        small = GridSpec.covering(x, y, self.small_scale_m, what="EVC small-scale grid")
-        large = GridSpec.covering(x, y, self.large_scale_m, what="EVC large-scale grid")
+        # Per small cell: the mean surface and its count, the difference, its windowed mean and
+        # standard deviation, the EVC and the classes (about eight 8-byte grids).
+        small = GridSpec.covering(x, y, self.small_scale_m, what="EVC small-scale grid", bytes_per_cell=64)
+        large = GridSpec.covering(x, y, self.large_scale_m, what="EVC large-scale grid", bytes_per_cell=16)
         small_mean, _ = cell_mean(x, y, z, small)
         large_mean, _ = cell_mean(x, y, z, large)
         steps.report(0.3)

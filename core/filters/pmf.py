@@ -252,7 +252,9 @@ class PMF:
         from ._pmf_kernels import _below_limit_kernel, _xyz_cell_min_kernel
         steps = steps or Steps()
         xyz = validate_xyz(xyz)
-        grid = GridSpec.covering(xyz[:, 0], xyz[:, 1], self.cell_size_m, what="PMF grid")
+        # Peak per cell: the minimum surface, its nearest fill (with the int32 indices of the distance
+        # transform), the openings and the flags: about twelve 8-byte grids.
+        grid = GridSpec.covering(xyz[:, 0], xyz[:, 1], self.cell_size_m, what="PMF grid", bytes_per_cell=96)
         zmin = np.empty(grid.shape, dtype=np.float64)
         _xyz_cell_min_kernel(xyz, grid.x0, grid.top, grid.cell, zmin)
         empty = np.isnan(zmin)

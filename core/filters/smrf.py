@@ -30,7 +30,7 @@ import numpy as np
 from ..grids.inpaint import inpaint_harmonic
 from ..grids.morphology import progressive_filter
 from ..grids.rasterize import cell_min
-from ..grids.spec import GridSpec
+from ..grids.spec import FILL_BYTES_PER_EMPTY_CELL, GridSpec
 from ..progress import Steps
 from ..validate import _require, check_number, validate_xyz
 
@@ -88,7 +88,10 @@ class SMRF:
         steps = steps or Steps()
         xyz = validate_xyz(xyz)
         x, y, z = (np.ascontiguousarray(xyz[:, i]) for i in range(3))
-        grid = GridSpec.covering(x, y, self.cell_size_m, what="SMRF grid")
+        # Peak per cell: about ten float64 grids at once (minimum surface, its fill, the openings,
+        # the gradient); every cell no point reaches costs the harmonic fill's sparse LU on top.
+        grid = GridSpec.covering(x, y, self.cell_size_m, what="SMRF grid", bytes_per_cell=96,
+                                 bytes_per_empty_cell=FILL_BYTES_PER_EMPTY_CELL)
         zmin = cell_min(x, y, z, grid)
         empty = np.isnan(zmin)
         zmin = inpaint_harmonic(zmin)

@@ -8,16 +8,151 @@ made with the same cell size from neighbouring tiles line up.
 """
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import math
+import os
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 
-from ..errors import InvalidParameterError
+from ..errors import InvalidParameterError, MemoryBudgetError
 
-#: Largest grid the core agrees to allocate (cells); a guard against a cell size
-#: that is far too small for the extent of the cloud.
+#: Largest grid the core agrees to allocate (cells) whatever the memory: index arithmetic and
+#: rasters beyond this are not meant for one piece.
 MAX_CELLS = 400_000_000
+
+#: Share of the memory available at the start of a grid that one run may use by default.
+DEFAULT_MEMORY_FRACTION = 0.6
+
+#: Measured peak of the harmonic fill (core/grids/inpaint.py, sparse LU) per empty cell of a large
+#: hole (bench/fill_memory.py, docs/BENCHMARKS.md): 1.9 kB at 500 x 500, 2.2 kB at 1000 x 1000, 2.3 kB
+#: at 1500 x 1500 (the fill-in grows slowly with the hole). Filters that fill their grid count this
+#: for every cell that no point can reach (cells - points, a lower bound of the empty cells).
+FILL_BYTES_PER_EMPTY_CELL = 2300
+
+_BUDGET = contextvars.ContextVar("groundsieve_memory_budget", default=None)
+
+
+def available_memory_bytes() -> int:
+    """Memory this process can still take: the kernel's MemAvailable, and below the address-space
+    limit (``ulimit -v``, ``resource.RLIMIT_AS``) when one is set, what is left of it."""
+    avail = None
+    with contextlib.suppress(OSError, ValueError):
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    avail = int(line.split()[1]) * 1024
+                    break
+    if avail is None:
+        with contextlib.suppress(ValueError, OSError, AttributeError):
+            avail = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    if avail is None:
+        avail = 8 << 30  # no way to know (not Linux): assume a modest machine
+    with contextlib.suppress(ImportError, OSError, ValueError):
+        import resource
+        soft, _hard = resource.getrlimit(resource.RLIMIT_AS)
+        if soft != resource.RLIM_INFINITY:
+            used = 0
+            with open("/proc/self/status") as f:
+                for line in f:
+                    if line.startswith("VmSize:"):
+                        used = int(line.split()[1]) * 1024
+                        break
+            avail = min(avail, max(0, soft - used))
+    return int(avail)
+
+
+def memory_budget_bytes() -> int:
+    """What one grid may take: the budget set with :func:`memory_budget`, otherwise
+    ``DEFAULT_MEMORY_FRACTION`` of :func:`available_memory_bytes`."""
+    explicit = _BUDGET.get()
+    if explicit is not None:
+        return int(explicit)
+    return int(DEFAULT_MEMORY_FRACTION * available_memory_bytes())
+
+
+@contextlib.contextmanager
+def memory_budget(nbytes: Optional[int]):
+    """Within the block, grids are refused above ``nbytes`` (None: the default budget)."""
+    if nbytes is not None and not (isinstance(nbytes, (int, np.integer)) and nbytes > 0):
+        raise InvalidParameterError(f"memory budget must be a whole number of bytes > 0 (got {nbytes!r})")
+    token = _BUDGET.set(None if nbytes is None else int(nbytes))
+    try:
+        yield
+    finally:
+        _BUDGET.reset(token)
+
+
+def _size(nbytes: float) -> str:
+    for unit, factor in (("GB", 1 << 30), ("MB", 1 << 20), ("kB", 1 << 10)):
+        if nbytes >= factor:
+            return f"{nbytes / factor:.1f} {unit}"
+    return f"{int(nbytes)} bytes"
+
+
+def _distance(metres: float) -> str:
+    return f"{metres / 1000:.1f} km" if metres >= 1000 else f"{metres:.0f} m"
+
+
+def isolated_points(x: np.ndarray, y: np.ndarray, *, max_share: float = 0.001):
+    """The few points far outside the extent of the others, found cheaply: the box of the
+    0.1-99.9 % quantiles of x and y (on a sample of at most 200,000 points), widened by half its
+    size; points outside it are isolated when they are at most ``max_share`` of the cloud.
+    Returns ``(indices, their distances to the quantile box in m, that box (xmin, xmax, ymin, ymax))``;
+    no indices when there are none."""
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    n = x.size
+    none = (np.empty(0, dtype=np.int64), np.empty(0), None)
+    if n < 10:
+        return none
+    sample = np.random.default_rng(0).choice(n, 200_000, replace=False) if n > 200_000 else slice(None)
+    qx = np.quantile(x[sample], [0.001, 0.999])
+    qy = np.quantile(y[sample], [0.001, 0.999])
+    margin = 0.5 * max(qx[1] - qx[0], qy[1] - qy[0], 1.0)
+    core = (float(qx[0]), float(qx[1]), float(qy[0]), float(qy[1]))
+    box = (qx[0] - margin, qx[1] + margin, qy[0] - margin, qy[1] + margin)
+    dx = np.maximum(np.maximum(box[0] - x, x - box[1]), 0.0)
+    dy = np.maximum(np.maximum(box[2] - y, y - box[3]), 0.0)
+    far = np.flatnonzero((dx > 0) | (dy > 0))
+    if far.size == 0 or far.size > max(1, max_share * n):
+        return none
+    fx, fy = x[far], y[far]
+    cx = np.maximum(np.maximum(core[0] - fx, fx - core[1]), 0.0)
+    cy = np.maximum(np.maximum(core[2] - fy, fy - core[3]), 0.0)
+    return far, np.hypot(cx, cy), core
+
+
+def check_memory(nbytes: float, *, what: str, shape: tuple, cell: float, x=None, y=None,
+                 budget: Optional[int] = None) -> None:
+    """Refuse, before allocating, a grid of ``shape`` cells whose estimated peak is ``nbytes``
+    when that is above the budget (:func:`memory_budget_bytes`). The message gives the estimate,
+    the extent and, when a few points lie far from the others (``x``, ``y``), where they are."""
+    budget = memory_budget_bytes() if budget is None else int(budget)
+    if nbytes <= budget:
+        return
+    nrows, ncols = (int(v) for v in shape)
+    message = (f"{what}: {nrows:,} x {ncols:,} cells of {cell:g} m (an extent of "
+               f"{ncols * cell:,.1f} x {nrows * cell:,.1f} m) need about {_size(nbytes)} at peak, more than the "
+               f"{_size(budget)} this run may use")
+    if _BUDGET.get() is None:
+        message += f" ({DEFAULT_MEMORY_FRACTION:.0%} of the memory available)"
+    if x is not None and y is not None:
+        far, dist, core = isolated_points(x, y)
+        if far.size:
+            worst = int(np.argmax(dist))
+            i = int(far[worst])
+            some = "1 point lies" if far.size == 1 else f"{far.size:,} points lie up to"
+            message += (f". Likely cause: {some} {_distance(float(dist[worst]))} from the others, at "
+                        f"x {float(x[i]):.2f}, y {float(y[i]):.2f} (the others span about "
+                        f"{core[1] - core[0]:,.0f} x {core[3] - core[2]:,.0f} m)")
+    message += (". Class such points as noise (7, which is ignored by default) or remove them, use a larger "
+                "cell size, or set a larger memory budget. A grid over the whole extent is what costs: the "
+                "survey-scale tiler, which grids only where points are, will avoid it once the run goes "
+                "through it.")
+    raise MemoryBudgetError(message)
 
 
 @dataclass(frozen=True)
@@ -29,8 +164,14 @@ class GridSpec:
     ncols: int
 
     @classmethod
-    def covering(cls, x: np.ndarray, y: np.ndarray, cell: float, *, what: str = "grid") -> "GridSpec":
-        """The smallest grid with edges on multiples of ``cell`` that holds every point."""
+    def covering(cls, x: np.ndarray, y: np.ndarray, cell: float, *, what: str = "grid",
+                 bytes_per_cell: float = 8.0, bytes_per_empty_cell: float = 0.0) -> "GridSpec":
+        """The smallest grid with edges on multiples of ``cell`` that holds every point.
+
+        Refused before anything is allocated when its estimated peak memory,
+        ``cells * bytes_per_cell + max(0, cells - points) * bytes_per_empty_cell`` (what the
+        caller's grids cost per cell, and per cell no point reaches, e.g. for filling holes),
+        is above the budget (:func:`check_memory`), or when it has more than ``MAX_CELLS``."""
         if not (cell > 0 and math.isfinite(cell)):
             raise InvalidParameterError(f"{what}: cell size must be a finite number > 0 (got {cell})")
         xmin, xmax = float(np.min(x)), float(np.max(x))
@@ -47,6 +188,8 @@ class GridSpec:
         if top - nrows * cell >= ymin:
             nrows += 1
         cells = nrows * ncols
+        estimate = cells * float(bytes_per_cell) + max(0, cells - int(np.size(x))) * float(bytes_per_empty_cell)
+        check_memory(estimate, what=what, shape=(nrows, ncols), cell=cell, x=x, y=y)
         if cells > MAX_CELLS:
             raise InvalidParameterError(
                 f"{what}: a cell size of {cell:g} m over an extent of {xmax - xmin:.1f} x {ymax - ymin:.1f} m "

@@ -7,13 +7,14 @@ nothing half-written. Input files are only ever opened for reading.
 from __future__ import annotations
 
 import os
+import re
 import warnings
 from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
 
-from ..errors import InputError, OutputError, UnsupportedFormatError
+from ..errors import InputError, InvalidParameterError, OutputError, UnsupportedFormatError
 from .outputs import LAS_EXTENSIONS, _ext, atomic_path, check_output_path
 
 
@@ -24,6 +25,60 @@ READ_EXTENSIONS = LAS_EXTENSIONS + TEXT_EXTENSIONS
 CLASS_UNCLASSIFIED = 1
 CLASS_GROUND = 2
 NOISE_CLASSES = (7, 18)
+
+
+def parse_classes(text, *, what: str = "classes") -> tuple:
+    """ASPRS class codes from ``"7, 18"``, ``"7 18"``, ``"2-5,9"`` or ``"[7:18]"`` (PDAL's
+    ``ignore`` range form) or from a sequence of ints; an empty text or ``None`` gives ``()``.
+    Codes are 0-255 (point formats 6-10; formats 0-5 store 0-31). Returns sorted unique codes."""
+    if text is None:
+        return ()
+    if isinstance(text, (int, np.integer)) and not isinstance(text, bool):
+        text = [int(text)]
+    if not isinstance(text, str):
+        codes = []
+        for value in text:
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                raise InvalidParameterError(f"{what}: class codes must be whole numbers (got {value!r})")
+            codes.append(int(value))
+    else:
+        codes = []
+        body = text.strip().strip("[]")
+        for part in (p for p in re.split(r"[,;\s]+", body) if p):
+            m = re.fullmatch(r"(\d+)(?:\s*[-:]\s*(\d+))?", part)
+            if not m:
+                raise InvalidParameterError(
+                    f"{what}: '{part}' is not a class code or a range such as 7 or 20-25 (got '{text}')")
+            lo = int(m.group(1))
+            hi = int(m.group(2)) if m.group(2) is not None else lo
+            if hi < lo:
+                raise InvalidParameterError(f"{what}: the range '{part}' ends before it starts")
+            codes.extend(range(lo, min(hi, 255) + 1) if lo <= 255 else [lo])
+    bad = [c for c in codes if not 0 <= c <= 255]
+    if bad:
+        raise InvalidParameterError(f"{what}: class codes are 0-255 (got {bad[0]})")
+    return tuple(sorted(set(codes)))
+
+
+def decimals_scale(*columns, coarsest: float = 0.01, finest: float = 1e-6) -> float:
+    """The coarsest LAS scale (a power of ten, at most ``coarsest``) that stores every value of
+    ``columns`` exactly as written with its decimals (0.001 for millimetre coordinates), but no
+    finer than the 32-bit integers of a LAS record allow over the columns' extent."""
+    exponent = round(np.log10(coarsest))
+    lowest = round(np.log10(finest))
+    for values in columns:
+        v = np.asarray(values, dtype=np.float64)
+        if v.size == 0:
+            continue
+        span = float(v.max() - v.min())
+        # LAS stores (value - offset) / scale in an int32: keep the span below 2e9 steps.
+        floor_exp = int(np.ceil(np.log10(span / 2e9))) if span > 0 else lowest
+        while exponent > max(lowest, floor_exp):
+            q = v / 10.0 ** exponent
+            if np.all(np.abs(q - np.round(q)) <= 1e-3 + 1e-13 * np.abs(q)):
+                break
+            exponent -= 1
+    return float(10.0 ** exponent)
 
 
 @dataclass
@@ -41,9 +96,35 @@ class PointCloud:
     has_return_info: bool = False       #: the file carries return numbers (LAS does, ISPRS text does not)
     las: object = field(default=None, repr=False)  #: the laspy LasData, kept to write every dimension back
     reference_label: Optional[np.ndarray] = None  #: ISPRS text: 0 = ground, 1 = object
+    #: bool per point: the LAS "withheld" flag ("this point should not be included in processing",
+    #: bit 7 of the classification byte in point formats 0-5, a classification flag in 6-10); None = none
+    withheld: Optional[np.ndarray] = None
+    scale: Optional[float] = None       #: text input: the LAS scale that keeps its decimals
+    notes: list = field(default_factory=list)  #: what the reader had to say about the file (to log)
 
     def __len__(self) -> int:
         return int(self.x.shape[0])
+
+    @property
+    def withheld_mask(self) -> np.ndarray:
+        """bool per point (all False when the file has no withheld flag set)."""
+        if self.withheld is None:
+            return np.zeros(len(self), dtype=bool)
+        return np.asarray(self.withheld, dtype=bool)
+
+    def subset(self, mask) -> "PointCloud":
+        """The points ``mask`` (bool or indices) as a cloud of their own (every dimension, the
+        LAS record too), e.g. to compute features on the points that may be processed."""
+        las = self.las[np.asarray(mask)] if self.las is not None else None
+
+        def pick(a):
+            return None if a is None else np.asarray(a)[mask]
+        return PointCloud(path=self.path, x=self.x[mask], y=self.y[mask], z=self.z[mask],
+                          classification=self.classification[mask], return_number=self.return_number[mask],
+                          number_of_returns=self.number_of_returns[mask], intensity=pick(self.intensity),
+                          crs_wkt=self.crs_wkt, has_return_info=self.has_return_info, las=las,
+                          reference_label=pick(self.reference_label), withheld=pick(self.withheld),
+                          scale=self.scale, notes=list(self.notes))
 
     @property
     def xyz(self) -> np.ndarray:
@@ -77,10 +158,38 @@ def read_cloud(path: str) -> PointCloud:
     return cloud
 
 
+def _records_before_evlrs(header) -> Optional[int]:
+    """How many point records fit between the point data's start and the first EVLR of an
+    uncompressed LAS 1.4 file (None when there is no such bound)."""
+    if header.are_points_compressed or header.version.minor < 4 or not header.number_of_evlrs:
+        return None
+    start = int(header.start_of_first_evlr or 0)
+    if start <= int(header.offset_to_point_data):
+        return None
+    return (start - int(header.offset_to_point_data)) // int(header.point_format.size)
+
+
 def _read_las(path: str) -> PointCloud:
     import laspy
+    notes = []
     try:
-        las = laspy.read(path)
+        las = None
+        with laspy.open(path) as reader:
+            header = reader.header
+            room = _records_before_evlrs(header)
+            if room is not None and int(header.point_count) > room:
+                # Reading the announced count would take the EVLRs' bytes for points.
+                announced = int(header.point_count)
+                evlr_at = int(header.start_of_first_evlr)
+                las = laspy.LasData(header=header, points=reader.read_points(room))
+                las.evlrs = reader.evlrs
+                las.update_header()
+                notes.append(f"{path}: the header announces {announced:,} points but the file holds "
+                             f"{room:,} point records before its extended VLRs (at byte "
+                             f"{evlr_at:,}); read those {room:,}, "
+                             f"{announced - room:,} missing (the header's count is wrong).")
+        if las is None:
+            las = laspy.read(path)
     except Exception as err:  # laspy raises many types for damaged files
         msg = str(err) or type(err).__name__
         if "signature" in msg.lower():
@@ -100,8 +209,9 @@ def _read_las(path: str) -> PointCloud:
             crs_wkt = None
     rn = np.asarray(las.return_number, dtype=np.uint8)
     nr = np.asarray(las.number_of_returns, dtype=np.uint8)
+    withheld = np.asarray(las.withheld).astype(bool)
     return PointCloud(
-        path=path,
+        path=path, withheld=withheld if withheld.any() else None, notes=notes,
         x=np.asarray(las.x, dtype=np.float64), y=np.asarray(las.y, dtype=np.float64),
         z=np.asarray(las.z, dtype=np.float64),
         classification=np.asarray(las.classification, dtype=np.uint8),
@@ -127,7 +237,7 @@ def _read_isprs_text(path: str) -> PointCloud:
     return PointCloud(path=path, x=data[:, 0].copy(), y=data[:, 1].copy(), z=data[:, 2].copy(),
                       classification=np.zeros(n, dtype=np.uint8), return_number=ones,
                       number_of_returns=ones.copy(), crs_wkt=None, has_return_info=False,
-                      reference_label=label)
+                      reference_label=label, scale=decimals_scale(data[:, 0], data[:, 1], data[:, 2]))
 
 
 def new_las(x, y, z, *, point_format: int = 1, version: str = "1.2", scale: float = 0.01,
@@ -191,5 +301,5 @@ def write_classified(cloud: PointCloud, classification: np.ndarray, path: str, *
     else:
         extra = {"reference_label": cloud.reference_label} if cloud.reference_label is not None else None
         las = new_las(cloud.x, cloud.y, cloud.z, point_format=0, crs_wkt=cloud.crs_wkt, extra=extra,
-                      classification=classification)
+                      scale=cloud.scale or 0.01, classification=classification)
         write_las(las, path, atomic=atomic)

@@ -1,11 +1,19 @@
 """Output paths: checked before any work starts, and written atomically (under a temporary name in
 the target folder, renamed over the target only when complete, deleted on any failure), so that
-a failed or cancelled run leaves nothing half-written."""
+a failed or cancelled run leaves nothing half-written.
+
+The temporary of an output ``NAME.EXT`` is the hidden file ``.NAME.EXT.gs<pid>-<random>.partEXT``
+beside it (``<pid>`` is the writing process). A run that is killed cannot delete it; the next run
+writing the same output removes every such temporary whose process is no longer running on this
+machine (and any of an unknown writer older than a day)."""
 from __future__ import annotations
 
 import contextlib
+import glob
 import os
+import re
 import tempfile
+import time
 
 from ..errors import OutputError
 
@@ -32,14 +40,66 @@ def check_output_path(path: str, *, inputs=(), extensions=LAS_EXTENSIONS, what: 
     return path
 
 
-@contextlib.contextmanager
-def atomic_path(path: str):
-    """Yield a temporary path beside ``path`` (same extension); rename it to ``path`` on success,
-    delete it on any failure."""
+def check_distinct_outputs(outputs) -> None:
+    """Refuse two outputs on one file (the last write would win): ``outputs`` is
+    ``{label: path}`` or ``[(label, path), ...]``, labels as the dialog names the outputs."""
+    seen = {}
+    items = outputs.items() if isinstance(outputs, dict) else outputs
+    for label, path in items:
+        if not path:
+            continue
+        real = os.path.realpath(os.fspath(path))
+        if real in seen:
+            raise OutputError(f"{path}: chosen for two outputs ({seen[real]} and {label}); "
+                              "give each output a file of its own")
+        seen[real] = label
+
+
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True  # exists (another user's) or cannot tell: keep its file
+    return True
+
+
+def remove_stale_temporaries(path: str, *, max_age_s: float = 86400.0) -> list:
+    """Delete the temporaries a killed run left for the output ``path`` (see the module's naming):
+    those of a process no longer running, and those of an unknown writer older than ``max_age_s``.
+    Returns the paths removed."""
     path = os.fspath(path)
     folder = os.path.dirname(os.path.abspath(path))
     base = os.path.basename(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{base}.", suffix=f".part{_ext(path)}", dir=folder)
+    ext = _ext(path)
+    pattern = os.path.join(glob.escape(folder), glob.escape(f".{base}.") + "*" + glob.escape(f".part{ext}"))
+    own = re.compile(re.escape(f".{base}.gs") + r"(\d+)-[^/]*" + re.escape(f".part{ext}") + "$")
+    removed = []
+    for tmp in glob.glob(pattern):
+        m = own.match(os.path.basename(tmp))
+        try:
+            if m:
+                stale = int(m.group(1)) != os.getpid() and not _process_alive(int(m.group(1)))
+            else:
+                stale = time.time() - os.path.getmtime(tmp) > max_age_s
+            if stale and os.path.isfile(tmp):
+                os.remove(tmp)
+                removed.append(tmp)
+        except OSError:
+            continue
+    return removed
+
+
+@contextlib.contextmanager
+def atomic_path(path: str):
+    """Yield a temporary path beside ``path`` (same extension); rename it to ``path`` on success,
+    delete it on any failure. Stale temporaries of ``path`` left by killed runs are removed first."""
+    path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    base = os.path.basename(path)
+    remove_stale_temporaries(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{base}.gs{os.getpid()}-", suffix=f".part{_ext(path)}", dir=folder)
     os.close(fd)
     try:
         yield tmp

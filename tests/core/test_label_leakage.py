@@ -1,0 +1,68 @@
+"""rftrain warns, in its log and its report, when one feature alone predicts the training labels
+almost perfectly (a converted reference cloud whose intensity is the class code), naming it."""
+from __future__ import annotations
+
+import laspy
+import numpy as np
+
+from groundsieve.core.engine import learning
+from groundsieve.core.learn import rf
+
+
+def labelled(path, *, leak):
+    from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+    scene = make_scene(SceneSpec(size_m=50.0, density_per_m2=4.0, seed=41))
+    scene.classification[:] = np.where(scene.classification == 2, 2, 1)
+    write_scene(scene, str(path))
+    las = laspy.read(str(path))
+    cls = np.asarray(las.classification)
+    rng = np.random.default_rng(0)
+    las.intensity = (cls * 100 + rng.integers(0, 5, len(cls)) if leak else rng.integers(0, 400, len(cls)))
+    las.write(str(path))
+
+
+def test_a_feature_that_carries_the_label_is_named_in_log_and_report(tmp_path):
+    src = tmp_path / "leak.laz"
+    labelled(src, leak=True)
+    messages = []
+    run = learning.train_file(str(src), str(tmp_path / "m.npz"), str(tmp_path / "r.html"),
+                              learning.TrainOptions(features=("intensity", "return_number"),
+                                                    params=rf.ForestParams(n_trees=5)),
+                              log=messages.append)
+    warned = [m for m in messages if m.startswith("Warning: the feature 'intensity' alone predicts 100.0%")]
+    assert len(warned) == 1 and run.warnings == warned
+    assert "Warning: the feature &#x27;intensity&#x27; alone predicts" in (tmp_path / "r.html").read_text()
+    assert not any("'return_number'" in m for m in run.warnings)
+
+
+def test_no_warning_when_no_feature_alone_gives_the_label(tmp_path):
+    src = tmp_path / "clean.laz"
+    labelled(src, leak=False)
+    messages = []
+    run = learning.train_file(str(src), str(tmp_path / "m.npz"), str(tmp_path / "r.html"),
+                              learning.TrainOptions(features=("intensity", "return_number"),
+                                                    params=rf.ForestParams(n_trees=5)),
+                              log=messages.append)
+    assert run.warnings == [] and not any(m.startswith("Warning") for m in messages)
+    assert "alone predicts" not in (tmp_path / "r.html").read_text()
+
+
+def test_withheld_points_are_not_learnt_from(tmp_path):
+    src = tmp_path / "w.laz"
+    labelled(src, leak=False)
+    las = laspy.read(str(src))
+    n = len(las.points)
+    withheld = np.zeros(n, dtype=np.uint8)
+    withheld[: n // 4] = 1
+    las.withheld = withheld
+    las.write(str(src))
+    messages = []
+    learning.train_file(str(src), str(tmp_path / "m.npz"), None,
+                        learning.TrainOptions(features=("intensity", "return_number"),
+                                              params=rf.ForestParams(n_trees=3)),
+                        log=messages.append)
+    assert f"{src}: {n // 4:,} withheld points left out of training." in messages
+    import re
+    sizes = next(m for m in messages if m.startswith("train: "))
+    counts = [int(c.replace(",", "")) for c in re.findall(r": ([\d,]+) points", sizes)]
+    assert len(counts) == 3 and sum(counts) == n - n // 4   # every labelled point but the withheld

@@ -1,0 +1,111 @@
+"""Outputs keep the input's precision, two outputs on one file are refused before any work, and
+stale temporaries of a killed run are removed by the next run to the same output (issue 16)."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import laspy
+import numpy as np
+import pytest
+
+from groundsieve.core.engine import learning
+from groundsieve.core.engine.workflow import run_ground_filter
+from groundsieve.core.errors import OutputError
+from groundsieve.core.filters.evc import EVC
+from groundsieve.core.filters.smrf import SMRF
+from groundsieve.core.io import atomic_path, read_cloud
+from groundsieve.core.io.clouds import decimals_scale
+from groundsieve.core.io.outputs import remove_stale_temporaries
+
+X0, Y0 = 512000.0, 5403000.0
+
+
+def plane_las(path, *, scale=0.00025, offset=(511987.125, 5402993.5, -3.75), n=4000, seed=0):
+    rng = np.random.default_rng(seed)
+    header = laspy.LasHeader(point_format=1, version="1.2")
+    header.scales = np.array([scale] * 3)
+    header.offsets = np.array(offset)
+    las = laspy.LasData(header)
+    las.x = X0 + rng.uniform(0, 40, n)
+    las.y = Y0 + rng.uniform(0, 40, n)
+    las.z = rng.normal(0, 0.05, n)
+    las.write(str(path))
+    return las
+
+
+def test_las_input_keeps_its_scales_offsets_and_integer_coordinates(tmp_path):
+    src, out = tmp_path / "in.las", tmp_path / "out.laz"
+    plane_las(src)
+    run_ground_filter(str(src), str(out), SMRF())
+    a, b = laspy.read(str(src)), laspy.read(str(out))
+    np.testing.assert_array_equal(b.header.scales, a.header.scales)
+    np.testing.assert_array_equal(b.header.offsets, a.header.offsets)
+    for dim in "XYZ":
+        np.testing.assert_array_equal(np.asarray(b[dim]), np.asarray(a[dim]))
+
+
+@pytest.mark.parametrize("decimals, scale", [(3, 0.001), (2, 0.01), (1, 0.01), (4, 0.0001)])
+def test_text_input_is_written_with_a_scale_fine_enough_for_its_decimals(tmp_path, decimals, scale):
+    rng = np.random.default_rng(decimals)
+    n = 3000
+    xyz = np.column_stack([X0 + rng.uniform(0, 40, n), Y0 + rng.uniform(0, 40, n), 100 + rng.normal(0, 0.05, n)])
+    xyz = np.round(xyz, decimals)
+    src = tmp_path / "in.txt"
+    np.savetxt(src, np.column_stack([xyz, np.zeros(n)]), fmt=f"%.{decimals}f %.{decimals}f %.{decimals}f %d")
+    assert read_cloud(str(src)).scale == pytest.approx(scale)
+    out = tmp_path / "out.las"
+    run_ground_filter(str(src), str(out), SMRF())
+    las = laspy.read(str(out))
+    assert las.header.scales[0] == pytest.approx(scale)
+    # Every coordinate comes back as written in the text, to the last decimal.
+    back = np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)])
+    np.testing.assert_allclose(back, xyz, rtol=0, atol=scale / 100)
+
+
+def test_decimals_scale_stays_within_the_32_bit_records():
+    # A 0.1 µm decimal over 5 km cannot be stored: the finest scale the span allows is kept.
+    assert decimals_scale(np.array([0.1234567, 5000.0])) == pytest.approx(1e-5)
+    assert decimals_scale(np.array([1.5, 2.0])) == pytest.approx(0.01)
+
+
+def test_two_outputs_on_one_file_are_refused_before_any_work(tmp_path):
+    src = tmp_path / "in.las"
+    plane_las(src)
+    same = tmp_path / "r.tif"
+    with pytest.raises(OutputError, match=r"r.tif: chosen for two outputs \(DTM and raster 2\)"):
+        run_ground_filter(str(src), str(tmp_path / "o.las"), EVC(), dtm_path=str(same),
+                          rasters={str(same): lambda run: None})
+    with pytest.raises(OutputError, match="chosen for two outputs"):
+        learning.classify_file(str(src), str(tmp_path / "o.las"), str(tmp_path / "no-model.npz"),
+                               dtm_path=str(tmp_path / "o.las"))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.las"]
+
+
+def test_a_later_run_removes_the_temporaries_of_a_killed_run(tmp_path):
+    out = tmp_path / "out.las"
+    # A run killed while writing: a child process that dies inside atomic_path.
+    code = ("import os, sys; sys.path.insert(0, %r)\n"
+            "from groundsieve.core.io import atomic_path\n"
+            "with atomic_path(%r) as tmp:\n"
+            "    open(tmp, 'wb').write(b'half')\n"
+            "    os._exit(9)\n") % (os.path.dirname(os.path.dirname(os.path.abspath(
+                __import__("groundsieve").__file__))), str(out))
+    assert subprocess.run([sys.executable, "-c", code]).returncode == 9
+    left = [p.name for p in tmp_path.iterdir()]
+    assert len(left) == 1 and left[0].startswith(".out.las.gs") and left[0].endswith(".part.las")
+    other = tmp_path / ".other.las.gs1-x.part.las"   # another output's: left alone
+    other.write_bytes(b"")
+    assert remove_stale_temporaries(str(out)) == [str(tmp_path / left[0])]
+    # The temporary of a live writer (this process) is left alone.
+    with atomic_path(str(out)) as mine:
+        open(mine, "wb").close()
+        assert remove_stale_temporaries(str(out)) == []
+        assert os.path.exists(mine)
+    src = tmp_path / "in.las"
+    plane_las(src)
+    # The next real run to the same output cleans up after a killed one.
+    assert subprocess.run([sys.executable, "-c", code]).returncode == 9
+    run_ground_filter(str(src), str(out), SMRF())
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([".other.las.gs1-x.part.las", "in.las", "out.las"])
