@@ -90,7 +90,10 @@ def load_model(path: str) -> Model:
         raise InputError(f"{path}: model format version {version!r} is not supported by "
                          f"this GroundSieve (it reads version {FORMAT_VERSION}); train the model again")
     missing = [name for name in _ARRAYS if name not in arrays]
-    if missing or _digest(arrays, header) != header.get("sha256"):
+    if missing:
+        raise InputError(f"{path}: not a complete GroundSieve model file (no {', '.join(missing)} "
+                         "array); it is refused")
+    if _digest(arrays, header) != header.get("sha256"):
         raise InputError(f"{path}: the model file has been changed or damaged (checksum mismatch); "
                          "it is refused")
     try:
