@@ -2,9 +2,10 @@
 
 The arrays come from a model file, which is untrusted input. ``model_file.load_model`` checks
 every array before a kernel sees it; the kernels are nevertheless safe on their own: every index
-is checked before it is used and every walk down a tree stops after as many steps as the forest
-has nodes, so a malformed forest (a root or child out of range, a cycle, a feature index out of
-range, a ``value`` array of the wrong width, no tree) is reported, never a crash or a hang."""
+is checked before it is used (once per forest, in :func:`_indices_ok`, not per point) and every
+walk down a tree stops after as many steps as the forest has nodes, so a malformed forest (a root
+or child out of range, a cycle, a feature index out of range, a ``value`` array of the wrong
+width, no tree) is reported, never a crash or a hang."""
 import numpy as np
 from numba import njit, prange
 
@@ -12,18 +13,16 @@ from numba import njit, prange
 @njit(cache=True, nogil=True)
 def _forest_block(X, lo, hi, roots, left, right, feature, threshold, missing_left, value, out):
     """Rows ``lo:hi``: tree by tree over the whole block, so that one tree's nodes stay in the
-    cache while the block's points walk down it. Returns True when the forest is malformed (the
+    cache while the block's points walk down it. Every root, child and feature index has been
+    checked by :func:`_indices_ok`; a walk longer than the node count (a cycle) returns True (the
     block's rows of ``out`` are then meaningless)."""
     n_classes = value.shape[1]
     n_nodes = left.shape[0]
-    n_features = X.shape[1]
     for i in range(lo, hi):
         for c in range(n_classes):
             out[i, c] = 0.0
     for t in range(roots.shape[0]):
         root = roots[t]
-        if root < 0 or root >= n_nodes:
-            return True
         for i in range(lo, hi):
             node = root
             steps = 0
@@ -34,17 +33,12 @@ def _forest_block(X, lo, hi, roots, left, right, feature, threshold, missing_lef
                 steps += 1
                 if steps > n_nodes:  # longer than any tree: a cycle
                     return True
-                f = feature[node]
-                if f < 0 or f >= n_features:
-                    return True
-                v = X[i, f]
+                v = X[i, feature[node]]
                 if np.isnan(v):
                     if not missing_left[node]:
                         child = right[node]
                 elif v > threshold[node]:
                     child = right[node]
-                if child < 0 or child >= n_nodes:
-                    return True
                 node = child
             for c in range(n_classes):
                 out[i, c] += value[node, c]
@@ -53,6 +47,24 @@ def _forest_block(X, lo, hi, roots, left, right, feature, threshold, missing_lef
         for c in range(n_classes):
             out[i, c] /= n_trees
     return False
+
+
+@njit(cache=True, nogil=True)
+def _indices_ok(roots, left, right, feature, n_features):
+    """One pass over the nodes (not per point): roots and children are node indices (-1 in both
+    children for a leaf), inner nodes' features are column indices of X."""
+    n_nodes = left.shape[0]
+    for t in range(roots.shape[0]):
+        if roots[t] < 0 or roots[t] >= n_nodes:
+            return False
+    for k in range(n_nodes):
+        a = left[k]
+        b = right[k]
+        if a == -1 and b == -1:
+            continue
+        if a < 0 or a >= n_nodes or b < 0 or b >= n_nodes or feature[k] < 0 or feature[k] >= n_features:
+            return False
+    return True
 
 
 @njit(cache=True, nogil=True, parallel=True)
@@ -68,6 +80,8 @@ def _forest_proba_kernel(X, roots, left, right, feature, threshold, missing_left
     if (roots.shape[0] == 0 or right.shape[0] != n_nodes or feature.shape[0] != n_nodes
             or threshold.shape[0] != n_nodes or missing_left.shape[0] != n_nodes
             or value.shape[0] != n_nodes or value.shape[1] != out.shape[1] or out.shape[0] != X.shape[0]):
+        return False
+    if not _indices_ok(roots, left, right, feature, X.shape[1]):
         return False
     n = X.shape[0]
     block = 2048
