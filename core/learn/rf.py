@@ -107,10 +107,30 @@ class Model:
         X = np.ascontiguousarray(self.scaler.transform(np.asarray(X, dtype=np.float32)), dtype=np.float32)
         if X.ndim != 2 or X.shape[1] != len(self.features):
             raise InputError(f"the model expects {len(self.features)} features, got an array of shape {X.shape}")
+        self._check_arrays()
         out = np.empty((X.shape[0], self.classes.size), dtype=np.float64)
-        _forest_proba_kernel(X, self.roots, self.left, self.right, self.feature, self.threshold,
-                             self.missing_left, self.value, out)
+        if not _forest_proba_kernel(X, self.roots, self.left, self.right, self.feature, self.threshold,
+                                    self.missing_left, self.value, out):
+            raise InputError("the model's trees are malformed (a node index or feature index out of "
+                             "range, a cycle, or class columns that do not match); train the model again")
         return out
+
+    def _check_arrays(self) -> None:
+        """The kinds and dimensions the kernel is compiled for (``model_file.load_model`` checks
+        the rest; the kernel checks every index again)."""
+        arrays = {"roots": self.roots, "left": self.left, "right": self.right, "feature": self.feature,
+                  "threshold": self.threshold, "missing_left": self.missing_left, "value": self.value,
+                  "classes": self.classes}
+        kinds = {"threshold": "f", "value": "f", "missing_left": "iub"}
+        for name, a in arrays.items():
+            ndim = 2 if name == "value" else 1
+            if (not isinstance(a, np.ndarray) or a.ndim != ndim or a.dtype.fields is not None
+                    or a.dtype.kind not in kinds.get(name, "iu")):
+                raise InputError(f"the model's array '{name}' is not a {ndim}-D array of "
+                                 f"{'numbers' if name in kinds else 'whole numbers'}")
+        if self.value.shape[1] != self.classes.size:
+            raise InputError(f"the model has {self.classes.size} classes but {self.value.shape[1]} "
+                             "probability columns")
 
     def predict(self, X: np.ndarray) -> np.ndarray:
         return self.classes[np.argmax(self.predict_proba(X), axis=1)]
