@@ -20,6 +20,7 @@ from ..grids.spec import GridSpec
 from ..io import (CLASS_GROUND, CLASS_UNCLASSIFIED, NOISE_CLASSES, PointCloud, atomic_path, check_output_path,
                  read_cloud, write_classified)
 from ..progress import Steps
+from .tiles import TileOptions
 
 
 @dataclass(frozen=True)
@@ -28,6 +29,8 @@ class FilterOptions:
     last_returns_only: bool = False
     ignore_noise: bool = True
     keep_existing_classes: bool = False
+    #: survey scale: tile size, buffer, memory budget, workers, working folder (engine/tiles.py)
+    tiling: TileOptions = TileOptions()
 
 
 @dataclass(frozen=True)
@@ -179,6 +182,14 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     steps = Steps(progress, is_cancelled)
     log = log or (lambda _msg: None)
     rasters = {path: fn for path, fn in (rasters or {}).items() if path}
+    from .tiles import needs_tiling, run_tiled
+    if needs_tiling(input_path, options.tiling):
+        # A folder, a .vpc, a set tile size or a cloud beyond the memory budget: buffered tiles.
+        if rasters:
+            raise InvalidParameterError("the filter's intermediate grids are written for a single cloud that fits "
+                                        "in memory only, not in a tiled run; leave those outputs empty")
+        return run_tiled(input_path, output_path, algorithm, options=options, dtm_path=dtm_path, dtm=dtm,
+                         steps=steps, log=log)
     check_outputs(input_path, output_path, [dtm_path, *rasters])
     steps.check()
     cloud = read_cloud(input_path)
