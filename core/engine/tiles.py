@@ -45,6 +45,9 @@ from ..progress import Steps
 #: Memory a point costs in a whole-cloud run with a DTM (measured: 321 bytes/point at 50 M points
 #: through qgis_process; docs/BENCHMARKS.md), used to size tiles.
 BYTES_PER_POINT = 330
+#: A header whose bounding box is larger than this (100 km²; a 1 m grid of 10^8 cells) is tiled
+#: whatever its point count.
+SPARSE_AREA_M2 = 1e8
 
 
 def machine_memory_bytes() -> int:
@@ -117,7 +120,9 @@ def needs_tiling(input_path: str, tiling: TileOptions) -> bool:
     if tiling.tile_size_m > 0:
         return True
     info = scan_header(input_path)
-    return info.count * BYTES_PER_POINT > tiling.budget_bytes
+    # Points beyond the budget; or a bounding box no 1 m grid could cover (two areas far apart, a
+    # stray point): tiles exist only where points are.
+    return info.count * BYTES_PER_POINT > tiling.budget_bytes or info.area_m2 > SPARSE_AREA_M2
 
 
 def sample_density(path: str, chunk_points: int = CHUNK_POINTS, cell_m: float = 10.0) -> float:
@@ -229,7 +234,9 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     if not any(i.count for i in infos):
         raise InputError(f"{input_path}: the input holds no points")
     outs = check_tiled_outputs(inputs, output_path, dtm_path)
-    buffer_m = filter_reach_m(algorithm) if tiling.buffer_m is None else float(tiling.buffer_m)
+    # The reach rounded up to whole metres: the buffer's edges then sit on whole metres, where the
+    # filters' grids (edges on multiples of their cell) put theirs without floating-point doubt.
+    buffer_m = math.ceil(filter_reach_m(algorithm)) if tiling.buffer_m is None else float(tiling.buffer_m)
     density = sample_density(next(i.path for i in infos if i.count))
     size = plan_tile_size(infos, tiling, buffer_m, density, multiple_of=dtm.cell_size_m if dtm_path else 1.0)
     grid = TileGrid(size, buffer_m)
