@@ -272,7 +272,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         done_points += info.count
         bin_steps.report(done_points / total)
     # a tile with buffer points only (its own area empty) is no tile
-    keys = sorted(tiles)
+    keys = sorted(k for k, parts in tiles.items() if sum(p.own_count for p in parts))
     log(f"Binned into {len(keys)} tile(s) in {time.perf_counter() - t_start:.1f} s.")
     classes = [np.lib.format.open_memmap(os.path.join(work, f"f{k:05d}.cls.npy"), mode="w+", dtype=np.uint8,
                                          shape=(max(info.count, 1),)) for k, info in enumerate(infos)]

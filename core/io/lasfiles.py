@@ -241,6 +241,7 @@ class TilePart:
     file_index: int
     las_path: str
     index_path: str
+    own_count: int = 0      #: points of the tile itself (the rest is buffer)
 
 
 def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk_points: int = CHUNK_POINTS,
@@ -308,6 +309,7 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
                                                    do_compress=False)
                         index_files[tkey] = open(part.index_path, "wb")
                     writers[tkey].write_points(chunk[sel])
+                    parts[tkey].own_count += int(own[lo:hi].sum())
                     gidx = start + sel
                     index_files[tkey].write(np.where(own[lo:hi], gidx, -1 - gidx).astype(np.int64).tobytes())
                 start += n
