@@ -150,8 +150,9 @@ def scale(millions, keep, work):
            f"--DTM={dtm}", "--DTM_CELL=1"]
     run_s, run_gb, log = timed(cmd)
     for line in log.splitlines():
-        if line.startswith(("Binned", "Filtered", "Done", "1 file")):
-            print("   ", line)
+        found = re.search(r"(Binned|Filtered|Done in|file\(s\),).*", line)
+        if found:
+            print("   ", found.group(0))
     print(f"| {n / 1e6:.1f} M | {floor_s:.0f} s, {floor_gb:.2f} GB | {run_s:.0f} s, {run_gb:.2f} GB | "
           f"{run_s / floor_s:.1f} | {n / run_s / 1e6:.2f} M/s |")
     for p in (out, dtm) + (() if keep else (src,)):
