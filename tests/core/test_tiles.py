@@ -227,3 +227,30 @@ def test_bcts_tiles_agree_at_the_seam_with_the_merged_cloud(tmp_path):
     near = np.abs(merged_cloud.y - 629400.0) <= 20.0
     assert near.sum() > 10_000
     assert agreement(got[near], merged[near]) >= 0.9995
+
+
+def test_overlapping_files_classify_each_copy_once(scene_laz, tmp_path):
+    """b.laz repeats 2000 points of a.laz: both files come out whole, each point classified once."""
+    las = laspy.read(scene_laz)
+    folder = tmp_path / "in"
+    folder.mkdir()
+    las.write(str(folder / "a.laz"))
+    dup = laspy.LasData(las.header)
+    dup.points = las.points[:2000]
+    dup.write(str(folder / "b.laz"))
+    out = tmp_path / "out.vpc"
+    run = run_ground_filter(str(folder), str(out), SMRF(), options=tiled())
+    a, b = (laspy.read(tmp_path / "out" / n).classification for n in ("a.laz", "b.laz"))
+    assert (len(a), len(b)) == (len(las.points), 2000)
+    assert run.point_count == len(las.points) + 2000
+    assert agreement(a, whole_classes(scene_laz, SMRF())) >= 0.999
+    assert agreement(b, a[:2000]) >= 0.999
+
+
+def test_a_full_working_disk_is_refused_before_work(scene_laz, tmp_path, monkeypatch):
+    import shutil as _shutil
+    from groundsieve.core.engine import tiles
+    monkeypatch.setattr(tiles.shutil, "disk_usage", lambda _p: _shutil._ntuple_diskusage(10**9, 10**9, 1000))
+    with pytest.raises(OutputError, match="working folder's disk has 0.0 GB free"):
+        run_ground_filter(scene_laz, str(tmp_path / "o.laz"), SMRF(), options=tiled(work_dir=str(tmp_path)))
+    assert os.listdir(tmp_path) == []
