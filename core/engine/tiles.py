@@ -18,18 +18,20 @@ buffer=)``):
 4. **write** each input once more, streamed, with the new classes (atomic), and for several
    inputs a ``.vpc`` referencing the classified files.
 
-Tiles run concurrently in threads (the numba kernels release the GIL); the working folder is
-removed at the end.
+Tiles run concurrently: in worker processes under ``qgis_process`` and plain Python, in threads
+inside the QGIS desktop (whose executable is QGIS itself: it cannot spawn Python workers; the numba
+kernels release the GIL). Each tile is a pure function of its job (``_tile_job``), writing its
+classes into per-file memmaps and returning its DTM block; the working folder is removed at the end.
 """
 from __future__ import annotations
 
 import math
 import os
 import shutil
+import sys
 import tempfile
-import threading
 import time
-from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from typing import Callable, Dict, List, Optional, Sequence
 
@@ -75,6 +77,9 @@ class TileOptions:
     workers: int = 0
     #: where the temporary tiles go (removed at the end); None = beside the output
     work_dir: Optional[str] = None
+    #: "auto" (worker processes under qgis_process and Python, threads in the QGIS desktop),
+    #: "threads" or "processes"
+    parallel: str = "auto"
 
     def __post_init__(self):
         for name in ("tile_size_m", "memory_budget_mb"):
@@ -83,6 +88,8 @@ class TileOptions:
                 raise InvalidParameterError(f"{name} must be a number >= 0 (0 = automatic; got {value!r})")
         if self.buffer_m is not None and not (math.isfinite(self.buffer_m) and self.buffer_m >= 0):
             raise InvalidParameterError(f"buffer_m must be >= 0 m (got {self.buffer_m})")
+        if self.parallel not in ("auto", "threads", "processes"):
+            raise InvalidParameterError(f"parallel must be auto, threads or processes (got {self.parallel!r})")
         if int(self.workers) != self.workers or self.workers < 0:
             raise InvalidParameterError(f"workers must be a whole number >= 0 (0 = every core; got {self.workers})")
 
@@ -287,92 +294,71 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         ys = np.array([v for i in infos if i.count for v in (i.mins[1], i.maxs[1])])
         dtm_grid = GridSpec.covering(xs, ys, dtm.cell_size_m, what="DTM")
         dtm_writer = BlockGeoTIFF(os.path.join(work, "dtm.tif"), dtm_grid, crs_wkt=crs_wkt)
-    lock = threading.Lock()
-    ground_total = [0]
     tile_log = []
+    ground_total = 0
     filter_steps = steps.sub(0.3, 0.85)
     t_tiles = time.perf_counter()
-    finished = [0]
+    class_paths = [os.path.join(work, f"f{k:05d}.cls.npy") for k in range(len(infos))]
+    for c in classes:
+        c.flush()
+    del classes  # the jobs open the memmaps themselves (in threads or in worker processes)
+    workers = max(1, min(tiling.worker_count, len(keys)))
+    mode = tiling.parallel if tiling.parallel != "auto" else _auto_parallel()
+    use_processes = workers > 1 and mode == "processes"
+    jobs = [dict(key=key, parts=tiles[key], bounds=grid.bounds(key), buffer=grid.buffer,
+                 names=sorted({os.path.basename(inputs[p.file_index]) for p in tiles[key]}),
+                 class_paths=class_paths, algorithm=algorithm, options=options, dtm=dtm if dtm_path else None,
+                 dtm_grid=dtm_writer.grid if dtm_writer is not None else None,
+                 is_cancelled=None if use_processes else steps.is_cancelled) for key in keys]
+    log(f"{len(keys)} tile(s) on {workers} worker(s) ({'processes' if use_processes else 'threads'}).")
 
-    def one(key):
-        steps.check()
-        parts = tiles[key]
-        x0, y0, x1, y1 = grid.bounds(key)
-        names = sorted({os.path.basename(inputs[p.file_index]) for p in parts})
-        try:
-            clouds, indices, files = [], [], []
-            for p in parts:
-                c, idx = read_part(p)
-                clouds.append(c)
-                indices.append(idx)
-                files.append(np.full(idx.size, p.file_index, dtype=np.int32))
-            index = np.concatenate(indices)
-            file_of = np.concatenate(files)
-            own = index >= 0
-            if not own.any():
-                return None
-            cloud = tile_cloud(clouds, path=f"tile {key}")
-            del clouds
-            if workflow.select_points(cloud, options).any():
-                done = workflow.classify_cloud(cloud, algorithm, options, Steps(is_cancelled=steps.is_cancelled))
-                cls, ground = done.classification, done.ground
-            else:  # nothing to filter here (all noise): the points keep their classes
-                cls, ground = cloud.classification, np.zeros(len(cloud), dtype=bool)
-            for k in np.unique(file_of[own]):
-                sel = own & (file_of == k)
-                classes[k][index[sel]] = cls[sel]
-                with lock:
-                    assigned[k] += int(sel.sum())
-            n_ground = int(ground[own].sum())
-            if dtm_writer is not None:
-                _dtm_block(cloud, ground, options, dtm, dtm_writer, (x0, y0, x1, y1), grid.buffer)
-            return int(own.sum()), n_ground, len(cloud)
-        except Cancelled:
-            raise
-        except GroundSieveError as err:
-            raise type(err)(f"tile {x0:.0f},{y0:.0f} - {x1:.0f},{y1:.0f} of {', '.join(names)}: {err}") from err
-        except Exception as err:  # an unexpected failure still names the tile
-            raise GroundSieveError(f"tile {x0:.0f},{y0:.0f} - {x1:.0f},{y1:.0f} of {', '.join(names)} failed: "
-                                   f"{type(err).__name__}: {err}") from err
-
-    def record(key, result):
+    def record(result):
+        nonlocal ground_total
         if result is None:
             return
-        n_own, n_ground, n_read = result
-        with lock:
-            ground_total[0] += n_ground
-            finished[0] += 1
-            tile_log.append(dict(key=key, points=n_own, read=n_read, ground=n_ground))
-            elapsed = time.perf_counter() - t_tiles
-            done_frac = finished[0] / len(keys)
-            left = elapsed / done_frac - elapsed
-            log(f"Tile {finished[0]}/{len(keys)} at {grid.bounds(key)[0]:.0f}, {grid.bounds(key)[1]:.0f}: "
-                f"{n_own:,} points (+{n_read - n_own:,} buffer), {n_ground:,} ground; about {left:.0f} s left.")
+        steps.check()
+        for k, count in result["assigned"].items():
+            assigned[k] += count
+        if result["block"] is not None:
+            dtm_writer.write_block(*result["block"])
+        ground_total += result["ground"]
+        tile_log.append(dict(key=result["key"], points=result["own"], read=result["read"], ground=result["ground"]))
+        elapsed = time.perf_counter() - t_tiles
+        done_frac = len(tile_log) / len(keys)
+        x0, y0 = grid.bounds(result["key"])[:2]
+        log(f"Tile {len(tile_log)}/{len(keys)} at {x0:.0f}, {y0:.0f}: {result['own']:,} points "
+            f"(+{result['read'] - result['own']:,} buffer), {result['ground']:,} ground; "
+            f"about {elapsed / done_frac - elapsed:.0f} s left.")
         filter_steps.report(done_frac)
 
-    workers = max(1, min(tiling.worker_count, len(keys)))
     if workers == 1:
-        for key in keys:
-            record(key, one(key))
+        for job in jobs:
+            steps.check()
+            record(_tile_job(job))
     else:
-        with ThreadPoolExecutor(max_workers=workers) as pool:
-            futures = {pool.submit(one, key): key for key in keys}
+        if use_processes:
+            import multiprocessing
+            ctx = multiprocessing.get_context("spawn")
+            exe = _python_executable()
+            if exe:
+                ctx.set_executable(exe)
+            pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+        else:
+            pool = ThreadPoolExecutor(max_workers=workers)
+        with pool:
+            futures = [pool.submit(_tile_job, job) for job in jobs]
             try:
-                pending = set(futures)
-                while pending:
-                    done_set, pending = wait(pending, return_when=FIRST_EXCEPTION)
-                    for fut in done_set:
-                        record(futures[fut], fut.result())
+                for fut in as_completed(futures):
+                    record(fut.result())
             except BaseException:
                 for fut in futures:
                     fut.cancel()
                 raise
+    classes = [np.load(path, mmap_mode="r") for path in class_paths]
     for k, info in enumerate(infos):
         if assigned[k] != info.count:
             raise InputError(f"{info.path}: {assigned[k]:,} of {info.count:,} points were classified; "
                              "the file's header and its points disagree")
-    for c in classes:
-        c.flush()
     log(f"Filtered {len(keys)} tile(s) in {time.perf_counter() - t_tiles:.1f} s.")
     # 3. write the outputs: every classified file to a temporary name first (atomic_path), then the vpc
     write_steps = steps.sub(0.85, 1.0)
@@ -387,16 +373,94 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         dtm_writer.finish(dtm_path)
     steps.report(1.0)
     log(f"Done in {time.perf_counter() - t_start:.1f} s.")
-    return TiledRun(inputs, [o for o in outs if o], sum(i.count for i in infos), ground_total[0], crs_wkt,
+    return TiledRun(inputs, [o for o in outs if o], sum(i.count for i in infos), ground_total, crs_wkt,
                     grid.size, grid.buffer, len(tile_log), dtm_path, tile_log=tile_log)
 
 
-def _dtm_block(cloud, ground, options, dtm, writer, bounds, buffer_m) -> None:
+def _tile_job(job) -> Optional[dict]:
+    """Filter one tile (a pure function of its job, so that it runs in a thread or a worker
+    process): read its parts, classify tile + buffer with the unchanged filter, write the own
+    points' classes into the per-file memmaps, and interpolate the tile's DTM block."""
+    from . import workflow
+    x0, y0, x1, y1 = job["bounds"]
+    where = f"tile {x0:.0f},{y0:.0f} - {x1:.0f},{y1:.0f} of {', '.join(job['names'])}"
+    options = job["options"]
+    try:
+        clouds, indices, files = [], [], []
+        for p in job["parts"]:
+            c, idx = read_part(p)
+            clouds.append(c)
+            indices.append(idx)
+            files.append(np.full(idx.size, p.file_index, dtype=np.int32))
+        index = np.concatenate(indices)
+        file_of = np.concatenate(files)
+        own = index >= 0
+        if not own.any():
+            return None
+        cloud = tile_cloud(clouds, path=where)
+        del clouds
+        if workflow.select_points(cloud, options).any():
+            done = workflow.classify_cloud(cloud, job["algorithm"], options, Steps(is_cancelled=job["is_cancelled"]))
+            cls, ground = done.classification, done.ground
+        else:  # nothing to filter here (all noise): the points keep their classes
+            cls, ground = cloud.classification, np.zeros(len(cloud), dtype=bool)
+        assigned = {}
+        for k in np.unique(file_of[own]):
+            sel = own & (file_of == k)
+            classes = np.load(job["class_paths"][k], mmap_mode="r+")
+            classes[index[sel]] = cls[sel]
+            classes.flush()
+            del classes
+            assigned[int(k)] = int(sel.sum())
+        block = None
+        if job["dtm"] is not None:
+            block = _dtm_block(cloud, ground, job["dtm"], job["dtm_grid"], job["bounds"], job["buffer"])
+        return dict(key=job["key"], own=int(own.sum()), read=len(cloud), ground=int(ground[own].sum()),
+                    assigned=assigned, block=block)
+    except Cancelled:
+        raise
+    except GroundSieveError as err:
+        raise type(err)(f"{where}: {err}") from err
+    except Exception as err:  # an unexpected failure still names the tile
+        raise GroundSieveError(f"{where} failed: {type(err).__name__}: {err}") from err
+
+
+def _auto_parallel() -> str:
+    """Worker processes where this process is a Python interpreter or qgis_process; threads inside
+    the QGIS desktop, whose executable is QGIS itself (it cannot spawn Python workers)."""
+    try:
+        exe = os.path.basename(os.path.realpath("/proc/self/exe")).lower()
+    except OSError:
+        exe = os.path.basename(sys.executable or "").lower()
+    if exe.startswith("python") or exe.startswith("qgis_process"):
+        return "processes" if _python_executable() else "threads"
+    return "threads"
+
+
+def _python_executable() -> Optional[str]:
+    """A Python interpreter for worker processes: this one, or (embedded in qgis_process) the
+    interpreter of the same installation."""
+    # Embedded (qgis_process), sys.executable is whatever "python3" PATH finds first (e.g. a pyenv
+    # shim of another installation); the standard library this process really runs (os.__file__,
+    # <prefix>/lib/pythonX.Y/os.py) names the right one.
+    prefix = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(os.__file__))))
+    exe = sys.executable or ""
+    if os.path.isfile(exe) and os.path.basename(exe).lower().startswith("python") and (
+            sys.prefix != sys.base_prefix or os.path.realpath(exe).startswith(prefix + os.sep)):
+        return exe  # a venv's interpreter, or one of this installation
+    v = sys.version_info
+    for name in (f"python{v.major}.{v.minor}", f"python{v.major}"):
+        cand = os.path.join(prefix, "bin", name)
+        if os.path.isfile(cand):
+            return cand
+    return None
+
+
+def _dtm_block(cloud, ground, dtm, full, bounds, buffer_m):
     """Interpolate the DTM cells whose centres lie in the tile from the ground of the tile and its
     buffer, on a grid aligned with the whole DTM's (so the thinning picks the same points)."""
     from ..grids.rasterize import tin_dtm
     from ..grids.spec import GridSpec
-    full = writer.grid
     c = full.cell
     x0, y0, x1, y1 = bounds
     # the tile's cells in the full grid (cell edges on multiples of c; tile edges on multiples of c)
@@ -405,11 +469,11 @@ def _dtm_block(cloud, ground, options, dtm, writer, bounds, buffer_m) -> None:
     row0 = max(0, int(round((full.top - y1) / c)))
     row1 = min(full.nrows, int(round((full.top - y0) / c)))
     if col1 <= col0 or row1 <= row0 or not ground.any():
-        return
+        return None
     pad = int(math.ceil(buffer_m / c))
     ext = GridSpec(full.x0 + (col0 - pad) * c, full.top - (row0 - pad) * c, c,
                    row1 - row0 + 2 * pad, col1 - col0 + 2 * pad)
     g = ground
     values = tin_dtm(cloud.x[g], cloud.y[g], cloud.z[g], ext, fill_outside=dtm.fill_outside_hull,
                      points_per_cell=dtm.points_per_cell)
-    writer.write_block(row0, col0, values[pad:pad + row1 - row0, pad:pad + col1 - col0])
+    return row0, col0, np.ascontiguousarray(values[pad:pad + row1 - row0, pad:pad + col1 - col0])

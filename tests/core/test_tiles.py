@@ -27,8 +27,8 @@ from groundsieve.tests.shared_data import shared_data_dir
 TILE = 80.0  # deliberately small tiles: a 240 m scene makes 9 (16 with the scene's offset)
 
 
-def tiled(tile=TILE, **kw):
-    return FilterOptions(tiling=TileOptions(tile_size_m=tile, workers=2, **kw))
+def tiled(tile=TILE, parallel="threads", **kw):
+    return FilterOptions(tiling=TileOptions(tile_size_m=tile, workers=2, parallel=parallel, **kw))
 
 
 @pytest.fixture(scope="module")
@@ -82,8 +82,10 @@ def test_buffer_is_what_removes_the_seams(scene_laz, tmp_path):
 
 
 def test_output_keeps_every_point_dimension_and_crs(scene_laz, tmp_path):
+    """(In worker processes, as under qgis_process: the same classes as in threads.)"""
     out = tmp_path / "tiled.las"
-    run_ground_filter(scene_laz, str(out), SMRF(), options=tiled())
+    run_ground_filter(scene_laz, str(out), SMRF(), options=tiled(parallel="processes"))
+    assert agreement(laspy.read(out).classification, whole_classes(scene_laz, SMRF())) >= 0.999
     a, b = laspy.read(scene_laz), laspy.read(out)
     assert len(a.points) == len(b.points) == b.header.point_count
     for name in a.point_format.dimension_names:
