@@ -25,11 +25,11 @@ classes into per-file memmaps and returning its DTM block; the working folder is
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import shutil
 import sys
-import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, field
@@ -254,35 +254,81 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     parent = tiling.work_dir or os.path.dirname(os.path.abspath(output_path or dtm_path or inputs[0]))
     if not os.path.isdir(parent):
         raise OutputError(f"{parent}: the working folder does not exist")
-    _check_disk(parent, infos, buffer_m, size)
-    work = tempfile.mkdtemp(prefix=".groundsieve-tiles-", dir=parent)
+    # The working folder is named after everything the tiles' results depend on: a run killed or
+    # crashed midway finds it again and skips the tiles already done.
+    work = os.path.join(parent, ".groundsieve-tiles-" + _fingerprint(infos, grid, algorithm, options,
+                                                                     dtm if dtm_path else None))
+    if os.path.isdir(work):
+        log(f"Resuming the interrupted run in {work}.")
+    else:
+        _check_disk(parent, infos, buffer_m, size)
+        os.makedirs(work)
     try:
-        return _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling,
-                    steps, log, workflow)
-    finally:
-        shutil.rmtree(work, ignore_errors=True)
+        run = _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling,
+                   steps, log, workflow)
+    except BaseException:
+        # Kept for a restart when the user chose the working folder; removed otherwise.
+        if not tiling.work_dir:
+            shutil.rmtree(work, ignore_errors=True)
+        else:
+            log(f"The tiles done so far are kept in {work}: run again to resume, or delete it.")
+        raise
+    shutil.rmtree(work, ignore_errors=True)
+    return run
+
+
+def _fingerprint(infos, grid, algorithm, options, dtm) -> str:
+    import hashlib
+    import json as _json
+    files = [(os.path.realpath(i.path), os.path.getsize(i.path), os.stat(i.path).st_mtime_ns) for i in infos]
+    text = _json.dumps([files, grid.size, grid.buffer, repr(algorithm), repr(options), repr(dtm)], default=str)
+    return hashlib.sha1(text.encode()).hexdigest()[:16]
+
+
+def _save_json(path, doc) -> None:
+    import json as _json
+    tmp = path + ".part"
+    with open(tmp, "w") as f:
+        _json.dump(doc, f)
+    os.replace(tmp, path)
 
 
 def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling, steps, log,
          workflow) -> TiledRun:
     t_start = time.perf_counter()
-    # 1. bin every file into tile parts
+    import json as _json
+    from ..io.lasfiles import TilePart
+    # 1. bin every file into tile parts (once: a resumed run finds them listed in binned.json)
     tiles: Dict[tuple, list] = {}
-    total = sum(i.count for i in infos)
-    done_points = 0
-    bin_steps = steps.sub(0.0, 0.3)
-    for k, info in enumerate(infos):
-        if info.count == 0:
-            continue
-        for key, part in bin_file(info.path, k, grid, work, check=steps.check).items():
-            tiles.setdefault(key, []).append(part)
-        done_points += info.count
-        bin_steps.report(done_points / total)
+    binned = os.path.join(work, "binned.json")
+    done_dir = os.path.join(work, "done")
+    if os.path.exists(binned):
+        with open(binned) as f:
+            for entry in _json.load(f):
+                tiles[tuple(entry["key"])] = [TilePart(**part) for part in entry["parts"]]
+    else:
+        for name in os.listdir(work):  # a run killed while binning left partial parts
+            os.remove(os.path.join(work, name))
+        total = sum(i.count for i in infos)
+        done_points = 0
+        bin_steps = steps.sub(0.0, 0.3)
+        for k, info in enumerate(infos):
+            if info.count == 0:
+                continue
+            for key, part in bin_file(info.path, k, grid, work, check=steps.check).items():
+                tiles.setdefault(key, []).append(part)
+            done_points += info.count
+            bin_steps.report(done_points / total)
+        classes = [np.lib.format.open_memmap(os.path.join(work, f"f{k:05d}.cls.npy"), mode="w+", dtype=np.uint8,
+                                             shape=(max(info.count, 1),)) for k, info in enumerate(infos)]
+        for c in classes:
+            c.flush()
+        del classes
+        os.makedirs(done_dir)
+        _save_json(binned, [dict(key=list(k), parts=[dataclasses.asdict(p) for p in v]) for k, v in tiles.items()])
     # a tile with buffer points only (its own area empty) is no tile
     keys = sorted(k for k, parts in tiles.items() if sum(p.own_count for p in parts))
     log(f"Binned into {len(keys)} tile(s) in {time.perf_counter() - t_start:.1f} s.")
-    classes = [np.lib.format.open_memmap(os.path.join(work, f"f{k:05d}.cls.npy"), mode="w+", dtype=np.uint8,
-                                         shape=(max(info.count, 1),)) for k, info in enumerate(infos)]
     assigned = [0] * len(infos)
     crs_wkt = infos[0].crs_wkt
     # 2. the DTM's grid, over every file's header bounds, and its block writer
@@ -299,17 +345,19 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     filter_steps = steps.sub(0.3, 0.85)
     t_tiles = time.perf_counter()
     class_paths = [os.path.join(work, f"f{k:05d}.cls.npy") for k in range(len(infos))]
-    for c in classes:
-        c.flush()
-    del classes  # the jobs open the memmaps themselves (in threads or in worker processes)
+    # the jobs open the memmaps themselves (in threads or in worker processes)
     workers = max(1, min(tiling.worker_count, len(keys)))
     mode = tiling.parallel if tiling.parallel != "auto" else _auto_parallel()
     use_processes = workers > 1 and mode == "processes"
-    jobs = [dict(key=key, parts=tiles[key], bounds=grid.bounds(key), buffer=grid.buffer,
+    done_before = [_load_done(done_dir, key) for key in keys]
+    if any(d is not None for d in done_before):
+        log(f"{sum(d is not None for d in done_before)} of {len(keys)} tile(s) were done before; skipping them.")
+    jobs = [dict(key=key, parts=tiles[key], bounds=grid.bounds(key), buffer=grid.buffer, done_dir=done_dir,
                  names=sorted({os.path.basename(inputs[p.file_index]) for p in tiles[key]}),
                  class_paths=class_paths, algorithm=algorithm, options=options, dtm=dtm if dtm_path else None,
                  dtm_grid=dtm_writer.grid if dtm_writer is not None else None,
-                 is_cancelled=None if use_processes else steps.is_cancelled) for key in keys]
+                 is_cancelled=None if use_processes else steps.is_cancelled)
+            for key, before in zip(keys, done_before) if before is None]
     log(f"{len(keys)} tile(s) on {workers} worker(s) ({'processes' if use_processes else 'threads'}).")
 
     def record(result):
@@ -318,19 +366,23 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             return
         steps.check()
         for k, count in result["assigned"].items():
-            assigned[k] += count
+            assigned[int(k)] += count
         if result["block"] is not None:
             dtm_writer.write_block(*result["block"])
         ground_total += result["ground"]
-        tile_log.append(dict(key=result["key"], points=result["own"], read=result["read"], ground=result["ground"]))
+        tile_log.append(dict(key=tuple(result["key"]), points=result["own"], read=result["read"],
+                             ground=result["ground"]))
         elapsed = time.perf_counter() - t_tiles
         done_frac = len(tile_log) / len(keys)
-        x0, y0 = grid.bounds(result["key"])[:2]
+        x0, y0 = grid.bounds(tuple(result["key"]))[:2]
         log(f"Tile {len(tile_log)}/{len(keys)} at {x0:.0f}, {y0:.0f}: {result['own']:,} points "
             f"(+{result['read'] - result['own']:,} buffer), {result['ground']:,} ground; "
             f"about {elapsed / done_frac - elapsed:.0f} s left.")
         filter_steps.report(done_frac)
 
+    for before in done_before:
+        if before is not None:
+            record(before)
     if workers == 1:
         for job in jobs:
             steps.check()
@@ -415,14 +467,45 @@ def _tile_job(job) -> Optional[dict]:
         block = None
         if job["dtm"] is not None:
             block = _dtm_block(cloud, ground, job["dtm"], job["dtm_grid"], job["bounds"], job["buffer"])
-        return dict(key=job["key"], own=int(own.sum()), read=len(cloud), ground=int(ground[own].sum()),
-                    assigned=assigned, block=block)
+        result = dict(key=list(job["key"]), own=int(own.sum()), read=len(cloud), ground=int(ground[own].sum()),
+                      assigned=assigned, block=block)
+        _save_done(job["done_dir"], result)
+        return result
     except Cancelled:
         raise
     except GroundSieveError as err:
         raise type(err)(f"{where}: {err}") from err
     except Exception as err:  # an unexpected failure still names the tile
         raise GroundSieveError(f"{where} failed: {type(err).__name__}: {err}") from err
+
+
+def _done_name(done_dir, key) -> str:
+    return os.path.join(done_dir, f"{key[0]}_{key[1]}")
+
+
+def _save_done(done_dir, result) -> None:
+    """Mark a tile done (its classes are in the memmaps already): its counts, and its DTM block."""
+    base = _done_name(done_dir, result["key"])
+    doc = {k: v for k, v in result.items() if k != "block"}
+    if result["block"] is not None:
+        row0, col0, values = result["block"]
+        np.save(base + ".npy", values)
+        doc["block"] = [int(row0), int(col0)]
+    _save_json(base + ".json", doc)
+
+
+def _load_done(done_dir, key) -> Optional[dict]:
+    import json as _json
+    base = _done_name(done_dir, key)
+    if not os.path.exists(base + ".json"):
+        return None
+    with open(base + ".json") as f:
+        doc = _json.load(f)
+    if doc.get("block") is not None:
+        doc["block"] = (*doc["block"], np.load(base + ".npy"))
+    else:
+        doc["block"] = None
+    return doc
 
 
 def _auto_parallel() -> str:

@@ -256,3 +256,44 @@ def test_a_full_working_disk_is_refused_before_work(scene_laz, tmp_path, monkeyp
     with pytest.raises(OutputError, match="working folder's disk has 0.0 GB free"):
         run_ground_filter(scene_laz, str(tmp_path / "o.laz"), SMRF(), options=tiled(work_dir=str(tmp_path)))
     assert os.listdir(tmp_path) == []
+
+
+class _Flaky:
+    """SMRF that fails after ``budget`` tiles while ``failing`` is set (same repr either way, so a
+    second run finds the first one's working folder)."""
+    reach_m = SMRF().reach_m
+    failing = True
+    budget = 3
+    calls = 0
+
+    def __repr__(self):
+        return "Flaky()"
+
+    def __call__(self, xyz, steps=None):
+        type(self).calls += 1
+        if type(self).failing and type(self).calls > type(self).budget:
+            raise RuntimeError("killed")
+        return SMRF()(xyz, steps)
+
+
+def test_an_interrupted_run_resumes_and_skips_the_tiles_done(scene_laz, tmp_path):
+    work = tmp_path / "work"
+    work.mkdir()
+    options = FilterOptions(tiling=TileOptions(tile_size_m=TILE, workers=1, work_dir=str(work)))
+    out, dtm = tmp_path / "out.laz", tmp_path / "dtm.tif"
+    with pytest.raises(GroundSieveError, match="killed"):
+        run_ground_filter(scene_laz, str(out), _Flaky(), options=options, dtm_path=str(dtm))
+    assert not out.exists() and not dtm.exists()
+    kept = os.listdir(work)
+    assert len(kept) == 1 and len(os.listdir(work / kept[0] / "done")) == 2 * 3  # json + DTM block each
+    _Flaky.failing, _Flaky.calls = False, 0
+    messages = []
+    run = run_ground_filter(scene_laz, str(out), _Flaky(), options=options, dtm_path=str(dtm), log=messages.append)
+    assert _Flaky.calls == run.tiles - 3
+    assert any("3 of" in m and "skipping" in m for m in messages)
+    assert os.listdir(work) == []
+    assert agreement(laspy.read(out).classification, whole_classes(scene_laz, SMRF())) >= 0.999
+    from osgeo import gdal
+    clean = tmp_path / "clean.tif"
+    run_ground_filter(scene_laz, None, SMRF(), options=tiled(), dtm_path=str(clean))
+    assert np.array_equal(gdal.Open(str(dtm)).ReadAsArray(), gdal.Open(str(clean)).ReadAsArray())
