@@ -16,7 +16,8 @@ disk, so no whole cloud is in memory):
 
 measures, in the same run, the floor (a plain streamed laspy decode + encode of the LAZ, laspy's
 default LAZ backend) and ``scripts/qgis-process run groundsieve:smrf`` with a 1 m DTM, each with
-``/usr/bin/time -v`` (wall time and peak RSS; tiles run in threads, so the one process is the tree).
+wall time and the peak RSS of the whole process tree (worker processes included), sampled from /proc
+every 0.2 s.
 """
 import argparse
 import os
@@ -122,14 +123,44 @@ with laspy.open(sys.argv[1]) as r, laspy.open(sys.argv[2], mode="w", header=r.he
 """
 
 
+def _tree_rss_kib(root):
+    """Sum of the resident sets of ``root`` and all its descendants (from /proc)."""
+    children, rss = {}, {}
+    for pid in os.listdir("/proc"):
+        if not pid.isdigit():
+            continue
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                ppid = int(f.read().rsplit(")", 1)[1].split()[1])
+            with open(f"/proc/{pid}/status") as f:
+                rss[int(pid)] = next((int(line.split()[1]) for line in f if line.startswith("VmRSS:")), 0)
+            children.setdefault(ppid, []).append(int(pid))
+        except (OSError, ValueError, IndexError):
+            continue
+    total, todo = 0, [root]
+    while todo:
+        pid = todo.pop()
+        total += rss.get(pid, 0)
+        todo.extend(children.get(pid, []))
+    return total
+
+
 def timed(cmd):
+    """Wall time and peak RSS of the whole process tree (sampled every 0.2 s; worker processes
+    included), and the command's stdout."""
     t = time.perf_counter()
-    proc = subprocess.run(["/usr/bin/time", "-v", *cmd], capture_output=True, text=True)
+    out = tempfile.TemporaryFile(mode="w+")
+    proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, text=True)
+    peak = 0
+    while proc.poll() is None:
+        peak = max(peak, _tree_rss_kib(proc.pid))
+        time.sleep(0.2)
     wall = time.perf_counter() - t
+    out.seek(0)
+    text = out.read()
     if proc.returncode:
-        sys.exit(f"{' '.join(cmd)} failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
-    rss = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", proc.stderr).group(1))
-    return wall, rss / 1024 / 1024, proc.stdout
+        sys.exit(f"{' '.join(cmd)} failed:\n{text[-3000:]}")
+    return wall, peak / 1024 / 1024, text
 
 
 def scale(millions, keep, work):

@@ -190,13 +190,12 @@ def tile_cloud(parts: Sequence[PointCloud], *, path: Optional[str] = None) -> Po
     values = {}
     for f in dataclasses.fields(PointCloud):
         values[f.name] = getattr(first, f.name)
-    per_point = dict(_per_point(first))
-    for name in per_point:
-        arrays = [getattr(p, name) for p in parts]
-        if any(a is None for a in arrays):
-            values[name] = None
-        else:
-            values[name] = np.concatenate(arrays) if len(arrays) > 1 else arrays[0]
+    names = {name: array for p in parts for name, array in _per_point(p)}
+    for name, example in names.items():
+        # A part without the field (None, e.g. no withheld flag set in that file) gets zeros.
+        arrays = [getattr(p, name) if getattr(p, name) is not None else
+                  np.zeros((len(p),) + example.shape[1:], dtype=example.dtype) for p in parts]
+        values[name] = np.concatenate(arrays) if len(arrays) > 1 else arrays[0]
     values["las"] = None
     if path is not None:
         values["path"] = path
