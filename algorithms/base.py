@@ -22,7 +22,9 @@ _ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
 COMMON_HELP = """
 <h3>Input and outputs</h3>
 <p><b>Input point cloud</b>: LAS 1.2-1.4 or LAZ (point formats 0-10), or an ISPRS filter-test text
-file <code>x y z label</code> (.txt). The file is only read, never changed. Lengths given in metres
+file <code>x y z label</code> (.txt); or, for a survey, a folder of LAS/LAZ files (type or paste its
+path) or a QGIS virtual point cloud (.vpc, as "Build virtual point cloud" writes it). The files are
+only read, never changed. Lengths given in metres
 are read in the unit of the cloud's CRS (a warning says so when that unit is not the metre).</p>
 <p><b>Classified point cloud</b>: LAS or LAZ (by extension) with every dimension, extra bytes, VLRs,
 scales, offsets and the CRS of the input kept (an ISPRS text input gets a scale that keeps its
@@ -48,7 +50,24 @@ outputs on one file are refused before any work.</p>
 <p><b>Memory</b>: before a grid (the filter's or the DTM's) is allocated, its peak memory is estimated
 and the run is refused above 60 % of the memory available, with the estimate, the extent and the
 likely cause (e.g. one point kilometres away from the others: class it as noise or remove it).</p>
+<h3>Surveys: buffered tiles</h3>
+<p>A folder, a .vpc, a set <i>Tile size</i>, or a cloud larger than the <i>Memory budget</i> runs in
+square tiles, each read with a buffer around it (the filter's own reach unless <i>Tile buffer</i> is set)
+so that no seam shows at tile or file edges: only the tile's own points keep their class. Tiles exist
+only where points are; they run <i>Tiles at the same time</i> at once (worker processes under
+qgis_process, threads in the desktop); their temporary files go to the <i>Working folder</i> and are
+removed at the end. A run killed or failed midway resumes when started again with the same inputs and
+parameters, skipping the tiles done (after a failure only when you chose the working folder). With several input files the output names a .vpc and
+the classified files (same names as the inputs) go into a folder of the same name beside it. The DTM is
+one seamless cloud-optimised GeoTIFF over the whole survey. The ground points layer and the filter's
+intermediate grids are not written in a tiled run.</p>
 """
+
+
+#: "All files (*)" last: it lets a folder through (QGIS checks a File parameter's value against the
+#: filter's extensions unless one pattern is a bare *), so one INPUT takes a file, a folder or a .vpc.
+INPUT_FILTER = ("Point clouds (*.las *.laz *.vpc *.LAS *.LAZ *.VPC);;ISPRS text (*.txt);;"
+                "All files and folders (*)")
 
 
 def dialog_help(html):
@@ -133,9 +152,8 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.addParameter(QgsProcessingParameterFile(
-            self.INPUT, "Input point cloud (LAS/LAZ, or ISPRS .txt)",
-            behavior=QgsProcessingParameterFile.Behavior.File,
-            fileFilter="Point clouds (*.las *.laz *.LAS *.LAZ);;ISPRS text (*.txt);;All files (*.*)"))
+            self.INPUT, "Input point cloud (LAS/LAZ, a folder of them, a .vpc, or ISPRS .txt)",
+            behavior=QgsProcessingParameterFile.Behavior.File, fileFilter=INPUT_FILTER))
         self.initFilterParameters()
         self.addParameter(QgsProcessingParameterBoolean(
             self.LAST_RETURNS, "Filter only last returns (others become non-ground)", defaultValue=False))
@@ -149,7 +167,8 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         self.addParameter(QgsProcessingParameterBoolean(
             self.KEEP_CLASSES, "Keep existing classes other than 0, 1, 2 (never made ground)", defaultValue=False))
         self.addParameter(QgsProcessingParameterFileDestination(
-            self.OUTPUT, "Classified point cloud", fileFilter="LAZ (*.laz);;LAS (*.las)"))
+            self.OUTPUT, "Classified point cloud (a .vpc for several input files)",
+            fileFilter="LAZ (*.laz);;LAS (*.las);;Virtual point cloud (*.vpc)"))
         self.addParameter(QgsProcessingParameterRasterDestination(
             self.DTM, "DTM (ground surface)", optional=True, createByDefault=False))
         self.addParameter(QgsProcessingParameterNumber(
@@ -160,6 +179,7 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         self.addParameter(QgsProcessingParameterFeatureSink(
             self.GROUND_POINTS, "Ground points", type=QgsProcessing.SourceType.TypeVectorPoint,
             optional=True, createByDefault=False))
+        self.addTileParameters()
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         errors, workflow = core_modules()
@@ -175,7 +195,8 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
             options = workflow.FilterOptions(
                 last_returns_only=self.parameterAsBoolean(parameters, self.LAST_RETURNS, context),
                 ignore_classes=self.ignoredClasses(parameters, context, errors),
-                keep_existing_classes=self.parameterAsBoolean(parameters, self.KEEP_CLASSES, context))
+                keep_existing_classes=self.parameterAsBoolean(parameters, self.KEEP_CLASSES, context),
+                tiling=self.tileOptions(parameters, context))
             dtm = workflow.DTMOptions(
                 cell_size_m=self.parameterAsDouble(parameters, self.DTM_CELL, context),
                 fill_outside_hull=self.parameterAsBoolean(parameters, self.DTM_FILL, context))
@@ -184,15 +205,19 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
                 rasters={path: make for path, make in rasters.values()}, **feedback_callables(feedback))
         except errors.GroundSieveError as err:
             raise QgsProcessingException(str(err)) from err
-        warn_about_crs(feedback, input_path, run.cloud.crs_wkt,
+        tiled = run.cloud is None  # a tiled run (survey scale) holds no cloud in memory
+        warn_about_crs(feedback, input_path, run.crs_wkt if tiled else run.cloud.crs_wkt,
                        "every length parameter (cell sizes, windows, thresholds)")
         results = {self.OUTPUT: output_path, self.GROUND_COUNT: run.ground_count,
-                   self.POINT_COUNT: len(run.cloud)}
+                   self.POINT_COUNT: run.point_count if tiled else len(run.cloud)}
         if dtm_path:
             results[self.DTM] = dtm_path
         for name, (path, _make) in rasters.items():
             results[name] = path
-        sink_id = self._write_ground_points(parameters, context, feedback, run)
+        sink_id = None if tiled else self._write_ground_points(parameters, context, feedback, run)
+        if tiled and parameters.get(self.GROUND_POINTS):
+            feedback.pushWarning("Ground points layer: not written in a tiled run (survey scale); "
+                                 "use the classified point cloud.")
         if sink_id is not None:
             results[self.GROUND_POINTS] = sink_id
         return results
@@ -210,6 +235,43 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         if not self.parameterAsBoolean(parameters, self.IGNORE_NOISE, context):
             codes = tuple(c for c in codes if c not in NOISE_CLASSES)
         return codes
+
+    # -- survey scale: tiles ----------------------------------------------------------------
+    TILE_SIZE = "TILE_SIZE"
+    TILE_BUFFER = "TILE_BUFFER"
+    MEMORY_BUDGET = "MEMORY_BUDGET"
+    WORKERS = "WORKERS"
+    WORK_FOLDER = "WORK_FOLDER"
+
+    def addTileParameters(self):  # noqa: N802
+        """Advanced parameters of tiled runs (folders, .vpc, clouds beyond the memory budget)."""
+        advanced = [
+            QgsProcessingParameterNumber(self.TILE_SIZE, "Tile size (m; 0 = from the memory budget)",
+                                         type=QgsProcessingParameterNumber.Type.Double, defaultValue=0.0,
+                                         minValue=0.0),
+            QgsProcessingParameterNumber(self.TILE_BUFFER, "Tile buffer (m; -1 = the filter's own reach)",
+                                         type=QgsProcessingParameterNumber.Type.Double, defaultValue=-1.0,
+                                         minValue=-1.0),
+            QgsProcessingParameterNumber(self.MEMORY_BUDGET, "Memory budget (MB; 0 = a quarter of the RAM, "
+                                         "at most 2048)", type=QgsProcessingParameterNumber.Type.Integer,
+                                         defaultValue=0, minValue=0),
+            QgsProcessingParameterNumber(self.WORKERS, "Tiles at the same time (0 = every core)",
+                                         type=QgsProcessingParameterNumber.Type.Integer, defaultValue=0, minValue=0),
+            QgsProcessingParameterFile(self.WORK_FOLDER, "Working folder for temporary tiles (default: beside "
+                                       "the output)", behavior=QgsProcessingParameterFile.Behavior.Folder,
+                                       optional=True)]
+        for param in advanced:
+            param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
+            self.addParameter(param)
+
+    def tileOptions(self, parameters, context):  # noqa: N802
+        from ..core.engine.tiles import TileOptions
+        buffer = self.parameterAsDouble(parameters, self.TILE_BUFFER, context)
+        return TileOptions(tile_size_m=self.parameterAsDouble(parameters, self.TILE_SIZE, context),
+                           buffer_m=None if buffer < 0 else buffer,
+                           memory_budget_mb=self.parameterAsInt(parameters, self.MEMORY_BUDGET, context),
+                           workers=self.parameterAsInt(parameters, self.WORKERS, context),
+                           work_dir=self.parameterAsFile(parameters, self.WORK_FOLDER, context) or None)
 
     def _write_ground_points(self, parameters, context, feedback, run):
         fields = QgsFields()

@@ -35,6 +35,7 @@ from ..io import (CLASS_GROUND, CLASS_UNCLASSIFIED, NOISE_CLASSES, PointCloud, a
 from ..io.clouds import parse_classes
 from ..io.outputs import check_distinct_outputs
 from ..progress import Steps
+from .tiles import TileOptions
 
 #: Classes a ground filter may rewrite when existing classes are kept: never classified,
 #: unclassified, ground.
@@ -59,6 +60,8 @@ class FilterOptions:
     ignore_classes: Optional[object] = None
     #: bytes the filter's grids may take (None: a share of the memory available)
     memory_budget_bytes: Optional[int] = None
+    #: survey scale: tile size, buffer, memory budget, workers, working folder (engine/tiles.py)
+    tiling: TileOptions = TileOptions()
 
     def __post_init__(self):
         if self.ignore_classes is not None:
@@ -270,6 +273,14 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     steps = Steps(progress, is_cancelled)
     log = log or (lambda _msg: None)
     rasters = {path: fn for path, fn in (rasters or {}).items() if path}
+    from .tiles import needs_tiling, run_tiled
+    if needs_tiling(input_path, options.tiling):
+        # A folder, a .vpc, a set tile size or a cloud beyond the memory budget: buffered tiles.
+        if rasters:
+            raise InvalidParameterError("the filter's intermediate grids are written for a single cloud that fits "
+                                        "in memory only, not in a tiled run; leave those outputs empty")
+        return run_tiled(input_path, output_path, algorithm, options=options, dtm_path=dtm_path, dtm=dtm,
+                         steps=steps, log=log)
     check_outputs(input_path, output_path, [dtm_path, *rasters])
     steps.check()
     cloud = read_cloud(input_path)

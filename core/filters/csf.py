@@ -232,6 +232,16 @@ class CSF:
         """Displacement added by gravity at each iteration (the reference's 0.2 * dt**4)."""
         return GRAVITY * self.time_step ** 4
 
+    @property
+    def reach_m(self) -> float:
+        """How far (m) points influence a point's class. The cloth is one elastic sheet: in
+        principle every particle pulls on every other; in practice a particle's height is set
+        by the points under it and by its neighbours through the springs, whose influence fades
+        over a few tens of particles (more with a stiffer cloth: rigidness 3 moves a particle
+        towards its neighbours in 3 sub-steps per iteration). 30 m or 10 particles per unit of
+        rigidness, whichever is larger; a measured, not a proven, reach (see docs/BENCHMARKS.md)."""
+        return max(30.0, 10.0 * self.rigidness * self.cloth_resolution_m)
+
     def __call__(self, xyz: np.ndarray, steps: Steps | None = None) -> np.ndarray:
         """Boolean ground mask of the points ``xyz`` (n, 3)."""
         return self.run(xyz, steps).ground

@@ -1,7 +1,9 @@
 """The return-number ("echo") grid filter of Matrone et al. (2024), their Method 2.
 
 Faithful rule (the paper's MATLAB listing): square kernels of ``kernel_m`` tiled from the
-cloud's lowest x and y; in each kernel the lowest z; a point more than ``dz_m`` above it is
+cloud's lowest x and y (here by default from the multiples of ``kernel_m`` below them, so that a
+tile of a survey and the whole survey share their kernels; ``kernel_origin="cloud"`` is the
+listing's origin); in each kernel the lowest z; a point more than ``dz_m`` above it is
 non-ground; a kernel in which every point has return number 1 is taken as ground whole,
 without the height test (bare terrain mostly gives single returns). The paper loops over
 every point for every kernel; here one pass gathers the kernel statistics and one classifies,
@@ -58,6 +60,9 @@ class EchoGrid:
     mode: str = "faithful"
     neighbourhood_m: float = 5.0    #: evidence mode only
     slope: float = 0.15             #: evidence mode only (rise/run)
+    #: "grid": kernels on multiples of kernel_m (tiles agree with the whole); "cloud": from the
+    #: cloud's lowest x, y (the paper's listing)
+    kernel_origin: str = "grid"
 
     name = "echogrid"
     point_fields = ("return_number", "number_of_returns")
@@ -75,6 +80,14 @@ class EchoGrid:
         if not (math.isfinite(self.dz_m) and self.dz_m >= 0):
             raise InvalidParameterError(f"dz_m must be >= 0 (got {self.dz_m})")
         check_choice(self, "mode", MODES)
+        check_choice(self, "kernel_origin", ("grid", "cloud"))
+
+    @property
+    def reach_m(self) -> float:
+        """How far (m) points influence a point's class: its own kernel (kernels sit on
+        multiples of ``kernel_m``), and in evidence mode the kernels within ``neighbourhood_m``."""
+        extra = self.neighbourhood_m if self.mode == "evidence" else 0.0
+        return self.kernel_m + extra + self.kernel_m
 
     def __call__(self, xyz, steps=None, **fields) -> np.ndarray:
         return self.run(xyz, steps, **fields).ground
@@ -96,8 +109,12 @@ class EchoGrid:
             log("Echo grid: the cloud has no return information (every point is 1 of 1: photogrammetry, "
                 "or a file without returns); the single-return bypass is off and every kernel gets the "
                 "height test.")
-        x0, y0 = float(x.min()), float(y.min())
         size = float(self.kernel_m)
+        # Kernels sit on multiples of kernel_m (as GridSpec cells do), not on the cloud's lowest
+        # corner: a tile of a survey and the whole survey then share their kernels.
+        x0, y0 = float(x.min()), float(y.min())
+        if self.kernel_origin == "grid":
+            x0, y0 = math.floor(x0 / size) * size, math.floor(y0 / size) * size
         span = max(float(x.max()) - x0, float(y.max()) - y0)
         if size > span:
             log(f"Echo grid: the kernel ({size:g} m) is larger than the cloud ({span:.2f} m across): one "

@@ -102,6 +102,15 @@ class EVC:
             raise InvalidParameterError(f"ground_offset_m must be >= 0 (got {self.ground_offset_m})")
         check_choice(self, "difference", DIFFERENCES)
 
+    @property
+    def reach_m(self) -> float:
+        """How far (m) points influence a point's class: the large-scale cell holding its small
+        cell (and the nearest filled large cell when that one is empty), and the focal window of
+        up to ``max_radius`` small cells on the difference grid. Not the natural-breaks
+        threshold (``auto_threshold``), which looks at the whole cloud: a tiled run picks one
+        per tile."""
+        return 3.0 * self.large_scale_m + (self.max_radius + 1) * self.small_scale_m
+
     def __call__(self, xyz, steps=None, **_fields) -> np.ndarray:
         return self.run(xyz, steps).ground
 

@@ -243,6 +243,13 @@ class PMF:
             out.append(float(min(dh, self.max_distance_m)))
         return tuple(out)
 
+    @property
+    def reach_m(self) -> float:
+        """How far (m) points influence a point's class: the largest square opening (erosion
+        then dilation) reads cells up to one window width away (two half-widths), plus the
+        nearest-cell fill of empty cells next to the border."""
+        return (self.windows[-1] + 1) * self.cell_size_m
+
     # -- the filter ------------------------------------------------------------------------
     def __call__(self, xyz: np.ndarray, steps: Optional[Steps] = None, **_fields) -> np.ndarray:
         """Boolean ground mask of the points ``xyz`` (n, 3)."""

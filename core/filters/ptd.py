@@ -155,6 +155,15 @@ class PTD:
             value = getattr(self, name)
             _require(isinstance(value, (bool, np.bool_)), f"{name} must be True or False (got {value!r})")
 
+    @property
+    def reach_m(self) -> float:
+        """How far (m) points influence a point's class: the seeds are the lowest points of
+        ``seed_cell_m`` cells, and a point is tested against the TIN triangle above it, whose
+        corners are seeds or accepted points up to about a seed cell away (or ``max_edge_m``);
+        two seed cells (or the edge limit, when larger) cover the triangle and the seed cells
+        that make it."""
+        return max(2.0 * self.seed_cell_m, self.max_edge_m)
+
     def __call__(self, xyz: np.ndarray, steps: Steps | None = None) -> np.ndarray:
         """Boolean ground mask of the points ``xyz`` (n, 3)."""
         return self.run(xyz, steps).ground

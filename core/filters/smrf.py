@@ -79,6 +79,15 @@ class SMRF:
         """Window radii in cells: 1, 2, ..., window_m / cell_size_m."""
         return range(1, max(1, int(round(self.window_m / self.cell_size_m))) + 1)
 
+    @property
+    def reach_m(self) -> float:
+        """How far (m) points influence a point's class: the largest opening (erosion then
+        dilation by a disk of ``window_m``) reads cells up to two window radii away, plus a cell
+        for the cubic interpolation of the surface and its slope. The harmonic inpainting of
+        object cells reaches further in principle, but inside a building's footprint, whose
+        radius the window is. A tiled run reads this much around each tile."""
+        return 2.0 * self.window_m + 2.0 * self.cell_size_m
+
     def __call__(self, xyz: np.ndarray, steps: Steps | None = None) -> np.ndarray:
         """Boolean ground mask of the points ``xyz`` (n, 3)."""
         return self.run(xyz, steps).ground

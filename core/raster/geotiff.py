@@ -49,3 +49,50 @@ def write_geotiff(path: str, values: np.ndarray, grid: GridSpec, *, crs_wkt: Opt
         raise OutputError(f"{path}: cannot write the GeoTIFF ({err})") from err
     if not os.path.exists(path):
         raise OutputError(f"{path}: the GeoTIFF was not written")
+
+
+class BlockGeoTIFF:
+    """One raster written block by block (each tile its cells), never whole in memory: a tiled,
+    compressed GeoTIFF at ``work_path``, then :meth:`finish` makes the cloud-optimised GeoTIFF
+    (internal tiles, DEFLATE, overviews) at the output path, atomically. Blocks never written stay
+    nodata. ``write_block`` may be called from several threads."""
+
+    def __init__(self, work_path: str, grid: GridSpec, *, crs_wkt: Optional[str] = None, nodata: float = NODATA):
+        import threading
+
+        from osgeo import gdal
+        gdal.UseExceptions()
+        self.grid, self.nodata, self.work_path = grid, nodata, work_path
+        self._lock = threading.Lock()
+        try:
+            self._ds = gdal.GetDriverByName("GTiff").Create(
+                work_path, grid.ncols, grid.nrows, 1, gdal.GDT_Float32,
+                options=["COMPRESS=DEFLATE", "TILED=YES", "BIGTIFF=IF_SAFER", "SPARSE_OK=TRUE"])
+            self._ds.SetGeoTransform(grid.geotransform)
+            if crs_wkt:
+                self._ds.SetProjection(crs_wkt)
+            self._band = self._ds.GetRasterBand(1)
+            self._band.SetNoDataValue(nodata)
+        except RuntimeError as err:
+            raise OutputError(f"{work_path}: cannot create the temporary raster ({err})") from err
+
+    def write_block(self, row0: int, col0: int, values: np.ndarray) -> None:
+        """Write ``values`` (row 0 north, NaN = no data) with its north-west cell at (row0, col0)."""
+        data = np.where(np.isnan(values), self.nodata, values).astype(np.float32)
+        with self._lock:
+            self._band.WriteArray(data, xoff=int(col0), yoff=int(row0))
+
+    def finish(self, path: str) -> None:
+        """Close the work raster and write the COG to ``path`` (atomically)."""
+        from osgeo import gdal
+        path = check_raster_path(path)
+        with self._lock:
+            self._band.FlushCache()
+            self._band = None
+            self._ds = None
+        try:
+            with atomic_path(path) as tmp:
+                gdal.Translate(tmp, self.work_path, format="COG",
+                               creationOptions=["COMPRESS=DEFLATE", "BIGTIFF=IF_SAFER", "OVERVIEWS=AUTO"])
+        except RuntimeError as err:
+            raise OutputError(f"{path}: cannot write the DTM ({err})") from err

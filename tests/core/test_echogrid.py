@@ -23,9 +23,10 @@ X0, Y0 = 512000.0, 5403000.0  # UTM-sized coordinates, as real data
 # --- numpy oracles ----------------------------------------------------------------------------
 
 def _kernels(xyz, kernel):
-    """Column, row and flat index of the kernel of every point, kernels tiled from min x / min y."""
+    """Column, row and flat index of the kernel of every point, kernels on multiples of the kernel
+    size (the first holding min x / min y)."""
     x, y = xyz[:, 0], xyz[:, 1]
-    x0, y0 = x.min(), y.min()
+    x0, y0 = np.floor(x.min() / kernel) * kernel, np.floor(y.min() / kernel) * kernel
     col = np.floor((x - x0) / kernel).astype(np.int64)
     row = np.floor((y - y0) / kernel).astype(np.int64)
     nx, ny = int(col.max()) + 1, int(row.max()) + 1

@@ -1,0 +1,562 @@
+"""Survey scale: a cloud too big for memory, or many files, in buffered tiles.
+
+The engine owns the tiles, the filter owns a tile (lidR's LAScatalog, lasR's ``exec(chunk=,
+buffer=)``):
+
+1. **plan** from the headers (bounds, point counts) and one sample chunk (the density where the
+   points are): square tiles on multiples of the tile size, each read with a buffer of the
+   filter's own reach (``algorithm.reach_m``, overridable); the tile size follows the memory
+   budget, or the user's;
+2. **bin**: one streamed pass over each file (laspy chunks) writes, into a working folder, the
+   points each tile needs (its own and its buffer's) as uncompressed LAS parts with their indices
+   in the input; tiles exist only where points are (a stray point far away makes a tiny tile);
+3. **filter** each tile: its parts become one ``PointCloud`` (``io.lasfiles.tile_cloud``, every
+   field ``read_cloud`` gives), the unchanged filter runs through ``workflow.classify_cloud``,
+   and only the tile's own points keep their class, written into a per-file ``uint8`` memmap;
+   with a DTM, the tile's cells are interpolated from the ground of the tile and its buffer and
+   written as one block of one GeoTIFF;
+4. **write** each input once more, streamed, with the new classes (atomic), and for several
+   inputs a ``.vpc`` referencing the classified files.
+
+Tiles run concurrently: in worker processes under ``qgis_process`` and plain Python, in threads
+inside the QGIS desktop (whose executable is QGIS itself: it cannot spawn Python workers; the numba
+kernels release the GIL). Each tile is a pure function of its job (``_tile_job``), writing its
+classes into per-file memmaps and returning its DTM block; the working folder is removed at the end.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import shutil
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from typing import Callable, Dict, List, Optional, Sequence
+
+import numpy as np
+
+from ..errors import Cancelled, GroundSieveError, InputError, InvalidParameterError, OutputError
+from ..io.lasfiles import (CHUNK_POINTS, VPC_EXTENSION, LasInfo, TileGrid, bin_file, check_survey,
+                           expand_inputs, iter_chunks, read_part, scan_header, tile_cloud, write_classified_stream,
+                           write_vpc)
+from ..io.outputs import LAS_EXTENSIONS, _ext, check_output_path
+from ..progress import Steps
+
+#: Memory a point costs in a whole-cloud run with a DTM (measured: 321 bytes/point at 50 M points
+#: through qgis_process; docs/BENCHMARKS.md), used to size tiles.
+BYTES_PER_POINT = 330
+#: A header whose bounding box is larger than this (100 km²; a 1 m grid of 10^8 cells) is tiled
+#: whatever its point count.
+SPARSE_AREA_M2 = 1e8
+
+
+def machine_memory_bytes() -> int:
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return 8 << 30
+
+
+def default_memory_budget_mb() -> float:
+    """A quarter of the machine's RAM, at most 2 GB: room for QGIS and for the other programs."""
+    return float(min(machine_memory_bytes() // 4, 2 << 30) // (1 << 20))
+
+
+@dataclass(frozen=True)
+class TileOptions:
+    """How a run is cut into tiles (all optional: the defaults decide from the input)."""
+    #: tile side (m); 0 = from the memory budget. Setting it tiles even a cloud that fits.
+    tile_size_m: float = 0.0
+    #: buffer around each tile (m); None = the filter's reach (``reach_m``)
+    buffer_m: Optional[float] = None
+    #: memory the tiles of all workers together may use (MB); 0 = a quarter of the RAM, at most 2 GB
+    memory_budget_mb: float = 0.0
+    #: tiles run at the same time; 0 = every core
+    workers: int = 0
+    #: where the temporary tiles go (removed at the end); None = beside the output
+    work_dir: Optional[str] = None
+    #: "auto" (worker processes under qgis_process and Python, threads in the QGIS desktop),
+    #: "threads" or "processes"
+    parallel: str = "auto"
+
+    def __post_init__(self):
+        for name in ("tile_size_m", "memory_budget_mb"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise InvalidParameterError(f"{name} must be a number >= 0 (0 = automatic; got {value!r})")
+        if self.buffer_m is not None and not (math.isfinite(self.buffer_m) and self.buffer_m >= 0):
+            raise InvalidParameterError(f"buffer_m must be >= 0 m (got {self.buffer_m})")
+        if self.parallel not in ("auto", "threads", "processes"):
+            raise InvalidParameterError(f"parallel must be auto, threads or processes (got {self.parallel!r})")
+        if int(self.workers) != self.workers or self.workers < 0:
+            raise InvalidParameterError(f"workers must be a whole number >= 0 (0 = every core; got {self.workers})")
+
+    @property
+    def budget_bytes(self) -> int:
+        mb = self.memory_budget_mb or default_memory_budget_mb()
+        return int(mb * (1 << 20))
+
+    @property
+    def worker_count(self) -> int:
+        return int(self.workers) or (os.cpu_count() or 1)
+
+
+def filter_reach_m(algorithm) -> float:
+    """The buffer a filter needs around a tile: its ``reach_m`` (a property or a method)."""
+    reach = getattr(algorithm, "reach_m", None)
+    if callable(reach):
+        reach = reach()
+    if reach is None:
+        raise InvalidParameterError(f"{type(algorithm).__name__} does not state its reach (reach_m); "
+                                    "give the tile buffer explicitly")
+    return float(reach)
+
+
+def is_survey_input(path: str) -> bool:
+    return os.path.isdir(path) or _ext(path) == VPC_EXTENSION
+
+
+def needs_tiling(input_path: str, tiling: TileOptions) -> bool:
+    """A folder, a .vpc, a set tile size, or a LAS/LAZ whose points exceed the memory budget."""
+    if is_survey_input(input_path):
+        return True
+    if _ext(input_path) not in LAS_EXTENSIONS or not os.path.isfile(input_path):
+        return False
+    if tiling.tile_size_m > 0:
+        return True
+    info = scan_header(input_path)
+    # Points beyond the budget; or a bounding box no 1 m grid could cover (two areas far apart, a
+    # stray point): tiles exist only where points are.
+    return info.count * BYTES_PER_POINT > tiling.budget_bytes or info.area_m2 > SPARSE_AREA_M2
+
+
+def sample_density(path: str, chunk_points: int = CHUNK_POINTS, cell_m: float = 10.0) -> float:
+    """Points per m² where the points are: the first chunk over the 10 m cells it occupies (a stray
+    point far away does not dilute it, as the header's bounding box would)."""
+    for chunk in iter_chunks(path, chunk_points):
+        x, y = np.asarray(chunk.x), np.asarray(chunk.y)
+        if x.size == 0:
+            break
+        cells = np.unique(np.floor(x / cell_m).astype(np.int64) * (1 << 32) + np.floor(y / cell_m).astype(np.int64))
+        return x.size / (cells.size * cell_m * cell_m)
+    return 1.0
+
+
+def plan_tile_size(infos: Sequence[LasInfo], tiling: TileOptions, buffer_m: float, density: float,
+                   multiple_of: float = 1.0) -> float:
+    """The tile side: the user's, or the largest square whose points and buffer fit one worker's
+    share of the budget; a multiple of ``multiple_of`` (e.g. the DTM cell) and of 10 m."""
+    if tiling.tile_size_m > 0:
+        size = float(tiling.tile_size_m)
+    else:
+        per_worker = tiling.budget_bytes / tiling.worker_count
+        points = per_worker / BYTES_PER_POINT
+        side = math.sqrt(points / max(density, 1e-6))  # tile plus buffer
+        size = max(side - 2 * buffer_m, buffer_m, 50.0)
+        size = max(10.0, math.floor(size / 10.0) * 10.0)
+    if multiple_of > 0:
+        size = math.ceil(size / multiple_of - 1e-9) * multiple_of
+    return size
+
+
+@dataclass
+class TiledRun:
+    """What a tiled run reports (the cloud itself is never whole in memory)."""
+    inputs: List[str]
+    outputs: List[str]
+    point_count: int
+    ground_count: int
+    crs_wkt: Optional[str]
+    tile_size_m: float
+    buffer_m: float
+    tiles: int
+    dtm_path: Optional[str] = None
+    cloud: None = None  #: no cloud in memory (FilterRun has one)
+    tile_log: List[dict] = field(default_factory=list)
+
+
+def output_files(inputs: Sequence[str], output_path: Optional[str]) -> List[Optional[str]]:
+    """Where each input's classified copy goes: the output itself for one input; for several, a
+    folder beside the ``.vpc`` named after it, one file per input with the input's name."""
+    if not output_path:
+        return [None] * len(inputs)
+    if len(inputs) == 1 and _ext(output_path) != VPC_EXTENSION:
+        return [output_path]
+    if _ext(output_path) != VPC_EXTENSION:
+        raise OutputError(f"{output_path}: several input files give several classified files; the output must "
+                          "name a .vpc (e.g. out/classified.vpc), beside which a folder of the same name holds them")
+    folder = os.path.splitext(os.path.abspath(output_path))[0]
+    names = [os.path.basename(p) for p in inputs]
+    if len(set(names)) != len(names):
+        raise InputError("two input files have the same name; the classified files would overwrite each other")
+    return [os.path.join(folder, n) for n in names]
+
+
+def check_tiled_outputs(inputs: Sequence[str], output_path: Optional[str], dtm_path: Optional[str]) -> List:
+    outs = output_files(inputs, output_path)
+    real_inputs = {os.path.realpath(p) for p in inputs}
+    in_folders = {os.path.dirname(p) for p in real_inputs}
+    if output_path and _ext(output_path) == VPC_EXTENSION:
+        check_output_path(output_path, extensions=(VPC_EXTENSION,), what="virtual point cloud output")
+        folder = os.path.dirname(os.path.realpath(outs[0]))
+        if folder in in_folders:
+            raise OutputError(f"{output_path}: the classified files would go into {folder}, which holds input "
+                              "files; choose another output name or folder")
+    for out in outs:
+        if out and os.path.realpath(out) in real_inputs:
+            raise OutputError(f"{out}: the output must not be an input file; choose another name")
+        if out and _ext(out) not in LAS_EXTENSIONS:
+            raise OutputError(f"{out}: the output must end in .las or .laz")
+    if dtm_path:
+        from ..raster.geotiff import check_raster_path
+        check_raster_path(dtm_path, inputs=list(inputs) + [output_path])
+    return outs
+
+
+def _check_disk(work_dir: str, infos: Sequence[LasInfo], buffer_m: float, size: float) -> None:
+    """Refuse before work when the working folder's disk cannot hold the temporary tiles."""
+    record = {0: 20, 1: 28, 2: 26, 3: 34, 4: 57, 5: 63, 6: 30, 7: 36, 8: 38, 9: 59, 10: 67}
+    overlap = ((size + 2 * buffer_m) / size) ** 2
+    need = sum(i.count * (record.get(i.point_format, 40) * overlap + 8 * overlap + 1) for i in infos)
+    free = shutil.disk_usage(work_dir).free
+    if free < need:
+        raise OutputError(f"{work_dir}: the working folder's disk has {free / 1e9:.1f} GB free, the temporary "
+                          f"tiles need about {need / 1e9:.1f} GB; set the working folder to a bigger disk")
+
+
+def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options, dtm_path: Optional[str] = None,
+              dtm=None, steps: Optional[Steps] = None, log: Optional[Callable[[str], None]] = None) -> TiledRun:
+    """Classify ``input_path`` (a LAS/LAZ, a folder or a .vpc) tile by tile; see the module's docstring.
+    ``options`` is a ``workflow.FilterOptions`` (its ``tiling`` field a :class:`TileOptions`), ``dtm``
+    a ``workflow.DTMOptions``."""
+    from . import workflow
+    steps = steps or Steps()
+    log = log or (lambda _msg: None)
+    tiling: TileOptions = getattr(options, "tiling", None) or TileOptions()
+    inputs = expand_inputs(input_path)
+    infos = [scan_header(p) for p in inputs]
+    check_survey(infos)
+    if not any(i.count for i in infos):
+        raise InputError(f"{input_path}: the input holds no points")
+    outs = check_tiled_outputs(inputs, output_path, dtm_path)
+    # The reach rounded up to whole metres: the buffer's edges then sit on whole metres, where the
+    # filters' grids (edges on multiples of their cell) put theirs without floating-point doubt.
+    buffer_m = math.ceil(filter_reach_m(algorithm)) if tiling.buffer_m is None else float(tiling.buffer_m)
+    density = sample_density(next(i.path for i in infos if i.count))
+    size = plan_tile_size(infos, tiling, buffer_m, density, multiple_of=dtm.cell_size_m if dtm_path else 1.0)
+    grid = TileGrid(size, buffer_m)
+    total = sum(i.count for i in infos)
+    log(f"{len(inputs)} file(s), {total:,} points; tiles of {size:g} m with a buffer of {buffer_m:g} m "
+        f"({'set' if tiling.buffer_m is not None else 'the filter reach'}); {tiling.worker_count} worker(s).")
+    steps.check()
+    parent = tiling.work_dir or os.path.dirname(os.path.abspath(output_path or dtm_path or inputs[0]))
+    if not os.path.isdir(parent):
+        raise OutputError(f"{parent}: the working folder does not exist")
+    # The working folder is named after everything the tiles' results depend on: a run killed or
+    # crashed midway finds it again and skips the tiles already done.
+    work = os.path.join(parent, ".groundsieve-tiles-" + _fingerprint(infos, grid, algorithm, options,
+                                                                     dtm if dtm_path else None))
+    if os.path.isdir(work):
+        log(f"Resuming the interrupted run in {work}.")
+    else:
+        _check_disk(parent, infos, buffer_m, size)
+        os.makedirs(work)
+    try:
+        run = _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling,
+                   steps, log, workflow)
+    except BaseException:
+        # Kept for a restart when the user chose the working folder; removed otherwise.
+        if not tiling.work_dir:
+            shutil.rmtree(work, ignore_errors=True)
+        else:
+            log(f"The tiles done so far are kept in {work}: run again to resume, or delete it.")
+        raise
+    shutil.rmtree(work, ignore_errors=True)
+    return run
+
+
+def _fingerprint(infos, grid, algorithm, options, dtm) -> str:
+    import hashlib
+    import json as _json
+    files = [(os.path.realpath(i.path), os.path.getsize(i.path), os.stat(i.path).st_mtime_ns) for i in infos]
+    text = _json.dumps([files, grid.size, grid.buffer, repr(algorithm), repr(options), repr(dtm)], default=str)
+    return hashlib.sha1(text.encode()).hexdigest()[:16]
+
+
+def _save_json(path, doc) -> None:
+    import json as _json
+    tmp = path + ".part"
+    with open(tmp, "w") as f:
+        _json.dump(doc, f)
+    os.replace(tmp, path)
+
+
+def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling, steps, log,
+         workflow) -> TiledRun:
+    t_start = time.perf_counter()
+    import json as _json
+    from ..io.lasfiles import TilePart
+    # 1. bin every file into tile parts (once: a resumed run finds them listed in binned.json)
+    tiles: Dict[tuple, list] = {}
+    binned = os.path.join(work, "binned.json")
+    done_dir = os.path.join(work, "done")
+    if os.path.exists(binned):
+        with open(binned) as f:
+            for entry in _json.load(f):
+                tiles[tuple(entry["key"])] = [TilePart(**part) for part in entry["parts"]]
+    else:
+        for name in os.listdir(work):  # a run killed while binning left partial parts
+            os.remove(os.path.join(work, name))
+        total = sum(i.count for i in infos)
+        done_points = 0
+        bin_steps = steps.sub(0.0, 0.3)
+        for k, info in enumerate(infos):
+            if info.count == 0:
+                continue
+            for key, part in bin_file(info.path, k, grid, work, check=steps.check).items():
+                tiles.setdefault(key, []).append(part)
+            done_points += info.count
+            bin_steps.report(done_points / total)
+        classes = [np.lib.format.open_memmap(os.path.join(work, f"f{k:05d}.cls.npy"), mode="w+", dtype=np.uint8,
+                                             shape=(max(info.count, 1),)) for k, info in enumerate(infos)]
+        for c in classes:
+            c.flush()
+        del classes
+        os.makedirs(done_dir)
+        _save_json(binned, [dict(key=list(k), parts=[dataclasses.asdict(p) for p in v]) for k, v in tiles.items()])
+    # a tile with buffer points only (its own area empty) is no tile
+    keys = sorted(k for k, parts in tiles.items() if sum(p.own_count for p in parts))
+    log(f"Binned into {len(keys)} tile(s) in {time.perf_counter() - t_start:.1f} s.")
+    assigned = [0] * len(infos)
+    crs_wkt = infos[0].crs_wkt
+    # 2. the DTM's grid, over every file's header bounds, and its block writer
+    dtm_writer = None
+    if dtm_path:
+        from ..grids.spec import GridSpec
+        from ..raster.geotiff import BlockGeoTIFF
+        xs = np.array([v for i in infos if i.count for v in (i.mins[0], i.maxs[0])])
+        ys = np.array([v for i in infos if i.count for v in (i.mins[1], i.maxs[1])])
+        dtm_grid = GridSpec.covering(xs, ys, dtm.cell_size_m, what="DTM")
+        dtm_writer = BlockGeoTIFF(os.path.join(work, "dtm.tif"), dtm_grid, crs_wkt=crs_wkt)
+    tile_log = []
+    ground_total = 0
+    filter_steps = steps.sub(0.3, 0.85)
+    t_tiles = time.perf_counter()
+    class_paths = [os.path.join(work, f"f{k:05d}.cls.npy") for k in range(len(infos))]
+    # the jobs open the memmaps themselves (in threads or in worker processes)
+    workers = max(1, min(tiling.worker_count, len(keys)))
+    mode = tiling.parallel if tiling.parallel != "auto" else _auto_parallel()
+    use_processes = workers > 1 and mode == "processes"
+    done_before = [_load_done(done_dir, key) for key in keys]
+    if any(d is not None for d in done_before):
+        log(f"{sum(d is not None for d in done_before)} of {len(keys)} tile(s) were done before; skipping them.")
+    jobs = [dict(key=key, parts=tiles[key], bounds=grid.bounds(key), buffer=grid.buffer, done_dir=done_dir,
+                 names=sorted({os.path.basename(inputs[p.file_index]) for p in tiles[key]}),
+                 class_paths=class_paths, algorithm=algorithm, options=options, dtm=dtm if dtm_path else None,
+                 dtm_grid=dtm_writer.grid if dtm_writer is not None else None,
+                 is_cancelled=None if use_processes else steps.is_cancelled)
+            for key, before in zip(keys, done_before) if before is None]
+    log(f"{len(keys)} tile(s) on {workers} worker(s) ({'processes' if use_processes else 'threads'}).")
+
+    def record(result):
+        nonlocal ground_total
+        if result is None:
+            return
+        steps.check()
+        for k, count in result["assigned"].items():
+            assigned[int(k)] += count
+        if result["block"] is not None:
+            dtm_writer.write_block(*result["block"])
+        ground_total += result["ground"]
+        tile_log.append(dict(key=tuple(result["key"]), points=result["own"], read=result["read"],
+                             ground=result["ground"]))
+        elapsed = time.perf_counter() - t_tiles
+        done_frac = len(tile_log) / len(keys)
+        x0, y0 = grid.bounds(tuple(result["key"]))[:2]
+        log(f"Tile {len(tile_log)}/{len(keys)} at {x0:.0f}, {y0:.0f}: {result['own']:,} points "
+            f"(+{result['read'] - result['own']:,} buffer), {result['ground']:,} ground; "
+            f"about {elapsed / done_frac - elapsed:.0f} s left.")
+        filter_steps.report(done_frac)
+
+    for before in done_before:
+        if before is not None:
+            record(before)
+    if workers == 1:
+        for job in jobs:
+            steps.check()
+            record(_tile_job(job))
+    else:
+        if use_processes:
+            import multiprocessing
+            ctx = multiprocessing.get_context("spawn")
+            exe = _python_executable()
+            if exe:
+                ctx.set_executable(exe)
+            pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+        else:
+            pool = ThreadPoolExecutor(max_workers=workers)
+        with pool:
+            futures = [pool.submit(_tile_job, job) for job in jobs]
+            try:
+                for fut in as_completed(futures):
+                    record(fut.result())
+            except BaseException:
+                for fut in futures:
+                    fut.cancel()
+                raise
+    classes = [np.load(path, mmap_mode="r") for path in class_paths]
+    for k, info in enumerate(infos):
+        if assigned[k] != info.count:
+            raise InputError(f"{info.path}: {assigned[k]:,} of {info.count:,} points were classified; "
+                             "the file's header and its points disagree")
+    log(f"Filtered {len(keys)} tile(s) in {time.perf_counter() - t_tiles:.1f} s.")
+    # 3. write the outputs: every classified file to a temporary name first (atomic_path), then the vpc
+    write_steps = steps.sub(0.85, 1.0)
+    for k, (info, out) in enumerate(zip(infos, outs)):
+        if out:
+            os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
+            write_classified_stream(info.path, out, classes[k][:info.count], check=steps.check)
+        write_steps.report((k + 1) / (len(infos) + 1))
+    if output_path and _ext(output_path) == VPC_EXTENSION:
+        write_vpc(output_path, [scan_header(o) for o in outs], outs)
+    if dtm_writer is not None:
+        dtm_writer.finish(dtm_path)
+    steps.report(1.0)
+    log(f"Done in {time.perf_counter() - t_start:.1f} s.")
+    return TiledRun(inputs, [o for o in outs if o], sum(i.count for i in infos), ground_total, crs_wkt,
+                    grid.size, grid.buffer, len(tile_log), dtm_path, tile_log=tile_log)
+
+
+def _tile_job(job) -> Optional[dict]:
+    """Filter one tile (a pure function of its job, so that it runs in a thread or a worker
+    process): read its parts, classify tile + buffer with the unchanged filter, write the own
+    points' classes into the per-file memmaps, and interpolate the tile's DTM block."""
+    from . import workflow
+    x0, y0, x1, y1 = job["bounds"]
+    where = f"tile {x0:.0f},{y0:.0f} - {x1:.0f},{y1:.0f} of {', '.join(job['names'])}"
+    options = job["options"]
+    try:
+        clouds, indices, files = [], [], []
+        for p in job["parts"]:
+            c, idx = read_part(p)
+            clouds.append(c)
+            indices.append(idx)
+            files.append(np.full(idx.size, p.file_index, dtype=np.int32))
+        index = np.concatenate(indices)
+        file_of = np.concatenate(files)
+        own = index >= 0
+        if not own.any():
+            return None
+        cloud = tile_cloud(clouds, path=where)
+        del clouds
+        if workflow.select_points(cloud, options).any():
+            done = workflow.classify_cloud(cloud, job["algorithm"], options, Steps(is_cancelled=job["is_cancelled"]))
+            cls, ground = done.classification, done.ground
+        else:  # nothing to filter here (all noise): the points keep their classes
+            cls, ground = cloud.classification, np.zeros(len(cloud), dtype=bool)
+        assigned = {}
+        for k in np.unique(file_of[own]):
+            sel = own & (file_of == k)
+            classes = np.load(job["class_paths"][k], mmap_mode="r+")
+            classes[index[sel]] = cls[sel]
+            classes.flush()
+            del classes
+            assigned[int(k)] = int(sel.sum())
+        block = None
+        if job["dtm"] is not None:
+            block = _dtm_block(cloud, ground, job["dtm"], job["dtm_grid"], job["bounds"], job["buffer"])
+        result = dict(key=list(job["key"]), own=int(own.sum()), read=len(cloud), ground=int(ground[own].sum()),
+                      assigned=assigned, block=block)
+        _save_done(job["done_dir"], result)
+        return result
+    except Cancelled:
+        raise
+    except GroundSieveError as err:
+        raise type(err)(f"{where}: {err}") from err
+    except Exception as err:  # an unexpected failure still names the tile
+        raise GroundSieveError(f"{where} failed: {type(err).__name__}: {err}") from err
+
+
+def _done_name(done_dir, key) -> str:
+    return os.path.join(done_dir, f"{key[0]}_{key[1]}")
+
+
+def _save_done(done_dir, result) -> None:
+    """Mark a tile done (its classes are in the memmaps already): its counts, and its DTM block."""
+    base = _done_name(done_dir, result["key"])
+    doc = {k: v for k, v in result.items() if k != "block"}
+    if result["block"] is not None:
+        row0, col0, values = result["block"]
+        np.save(base + ".npy", values)
+        doc["block"] = [int(row0), int(col0)]
+    _save_json(base + ".json", doc)
+
+
+def _load_done(done_dir, key) -> Optional[dict]:
+    import json as _json
+    base = _done_name(done_dir, key)
+    if not os.path.exists(base + ".json"):
+        return None
+    with open(base + ".json") as f:
+        doc = _json.load(f)
+    if doc.get("block") is not None:
+        doc["block"] = (*doc["block"], np.load(base + ".npy"))
+    else:
+        doc["block"] = None
+    return doc
+
+
+def _auto_parallel() -> str:
+    """Worker processes where this process is a Python interpreter or qgis_process; threads inside
+    the QGIS desktop, whose executable is QGIS itself (it cannot spawn Python workers)."""
+    try:
+        exe = os.path.basename(os.path.realpath("/proc/self/exe")).lower()
+    except OSError:
+        exe = os.path.basename(sys.executable or "").lower()
+    if exe.startswith("python") or exe.startswith("qgis_process"):
+        return "processes" if _python_executable() else "threads"
+    return "threads"
+
+
+def _python_executable() -> Optional[str]:
+    """A Python interpreter for worker processes: this one, or (embedded in qgis_process) the
+    interpreter of the same installation."""
+    # Embedded (qgis_process), sys.executable is whatever "python3" PATH finds first (e.g. a pyenv
+    # shim of another installation); the standard library this process really runs (os.__file__,
+    # <prefix>/lib/pythonX.Y/os.py) names the right one.
+    prefix = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(os.__file__))))
+    exe = sys.executable or ""
+    if os.path.isfile(exe) and os.path.basename(exe).lower().startswith("python") and (
+            sys.prefix != sys.base_prefix or os.path.realpath(exe).startswith(prefix + os.sep)):
+        return exe  # a venv's interpreter, or one of this installation
+    v = sys.version_info
+    for name in (f"python{v.major}.{v.minor}", f"python{v.major}"):
+        cand = os.path.join(prefix, "bin", name)
+        if os.path.isfile(cand):
+            return cand
+    return None
+
+
+def _dtm_block(cloud, ground, dtm, full, bounds, buffer_m):
+    """Interpolate the DTM cells whose centres lie in the tile from the ground of the tile and its
+    buffer, on a grid aligned with the whole DTM's (so the thinning picks the same points)."""
+    from ..grids.rasterize import tin_dtm
+    from ..grids.spec import GridSpec
+    c = full.cell
+    x0, y0, x1, y1 = bounds
+    # the tile's cells in the full grid (cell edges on multiples of c; tile edges on multiples of c)
+    col0 = max(0, int(round((x0 - full.x0) / c)))
+    col1 = min(full.ncols, int(round((x1 - full.x0) / c)))
+    row0 = max(0, int(round((full.top - y1) / c)))
+    row1 = min(full.nrows, int(round((full.top - y0) / c)))
+    if col1 <= col0 or row1 <= row0 or not ground.any():
+        return None
+    pad = int(math.ceil(buffer_m / c))
+    ext = GridSpec(full.x0 + (col0 - pad) * c, full.top - (row0 - pad) * c, c,
+                   row1 - row0 + 2 * pad, col1 - col0 + 2 * pad)
+    g = ground
+    values = tin_dtm(cloud.x[g], cloud.y[g], cloud.z[g], ext, fill_outside=dtm.fill_outside_hull,
+                     points_per_cell=dtm.points_per_cell)
+    return row0, col0, np.ascontiguousarray(values[pad:pad + row1 - row0, pad:pad + col1 - col0])

@@ -1,0 +1,379 @@
+"""Survey-scale reading and writing of LAS/LAZ: headers without points, inputs given as a file, a
+folder or a QGIS virtual point cloud (``.vpc``), streaming a file's points into tile parts, tile
+clouds built from those parts, and a classified copy written in one streamed pass.
+
+Nothing here holds a whole file's points: every pass goes through laspy's chunk iterator.
+"""
+from __future__ import annotations
+
+import copy
+import dataclasses
+import json
+import math
+import os
+import warnings
+from dataclasses import dataclass
+from typing import Dict, Iterable, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from ..errors import InputError, OutputError, UnsupportedFormatError
+from .clouds import PointCloud, read_cloud
+from .outputs import LAS_EXTENSIONS, _ext, atomic_path
+
+VPC_EXTENSION = ".vpc"
+#: points per chunk of the streamed passes (about 100 MB of laspy records for the largest formats)
+CHUNK_POINTS = 1_000_000
+
+
+@dataclass(frozen=True)
+class LasInfo:
+    """What the header of one LAS/LAZ file says, read without its points."""
+    path: str
+    count: int
+    mins: Tuple[float, float, float]
+    maxs: Tuple[float, float, float]
+    point_format: int
+    version: str
+    crs_wkt: Optional[str]
+
+    @property
+    def area_m2(self) -> float:
+        return max(self.maxs[0] - self.mins[0], 0.0) * max(self.maxs[1] - self.mins[1], 0.0)
+
+
+def scan_header(path: str) -> LasInfo:
+    """The header of ``path``: point count, bounds, point format, version, CRS."""
+    import laspy
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise InputError(f"{path}: no such file")
+    if _ext(path) not in LAS_EXTENSIONS:
+        raise UnsupportedFormatError(f"{path}: expected a .las or .laz file (got '{_ext(path) or '(none)'}')")
+    try:
+        with laspy.open(path) as reader:
+            h = reader.header
+            crs_wkt = None
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                try:
+                    crs = h.parse_crs()
+                    crs_wkt = crs.to_wkt() if crs is not None else None
+                except Exception:
+                    crs_wkt = None
+            return LasInfo(path, int(h.point_count), tuple(float(v) for v in h.mins),
+                           tuple(float(v) for v in h.maxs), int(h.point_format.id), str(h.version), crs_wkt)
+    except (InputError, UnsupportedFormatError):
+        raise
+    except Exception as err:  # laspy raises many types for damaged files
+        raise InputError(f"{path}: cannot read its LAS header ({err})") from err
+
+
+# -- inputs: a file, a folder, a .vpc --------------------------------------------------------------
+
+def read_vpc(path: str) -> List[str]:
+    """The data files a QGIS virtual point cloud (STAC ItemCollection, ``.vpc``) references,
+    resolved against the ``.vpc``'s folder when relative."""
+    try:
+        with open(path, encoding="utf-8") as f:
+            doc = json.load(f)
+    except (OSError, ValueError) as err:
+        raise InputError(f"{path}: not a readable virtual point cloud ({err})") from err
+    features = doc.get("features") if isinstance(doc, dict) else None
+    if not isinstance(features, list) or not features:
+        raise InputError(f"{path}: a virtual point cloud needs a 'features' list of STAC items; none found")
+    folder = os.path.dirname(os.path.abspath(path))
+    files = []
+    for item in features:
+        href = ((item or {}).get("assets") or {}).get("data", {}).get("href")
+        if not href:
+            raise InputError(f"{path}: item '{(item or {}).get('id', '?')}' has no assets.data.href")
+        if href.startswith(("http://", "https://", "s3://", "/vsi")):
+            raise InputError(f"{path}: remote data ({href}) is not supported; download the files first")
+        full = href if os.path.isabs(href) else os.path.normpath(os.path.join(folder, href))
+        if not os.path.isfile(full):
+            raise InputError(f"{path}: references {href}, which does not exist ({full})")
+        files.append(full)
+    return files
+
+
+def expand_inputs(path: str) -> List[str]:
+    """The point-cloud files behind an input: itself, the LAS/LAZ files of a folder (sorted), or
+    the files a ``.vpc`` references."""
+    path = os.fspath(path)
+    if os.path.isdir(path):
+        files = sorted(os.path.join(path, n) for n in os.listdir(path)
+                       if _ext(n) in LAS_EXTENSIONS and os.path.isfile(os.path.join(path, n)))
+        if not files:
+            raise InputError(f"{path}: the folder holds no .las or .laz file")
+        return files
+    if not os.path.exists(path):
+        raise InputError(f"{path}: no such file or folder")
+    if _ext(path) == VPC_EXTENSION:
+        return read_vpc(path)
+    return [path]
+
+
+def check_survey(infos: Sequence[LasInfo]) -> None:
+    """Refuse inputs that cannot be one survey: different CRS or point formats, duplicates."""
+    seen = {}
+    for info in infos:
+        real = os.path.realpath(info.path)
+        if real in seen:
+            raise InputError(f"{info.path}: given twice (also as {seen[real]})")
+        seen[real] = info.path
+    formats = {i.point_format for i in infos}
+    if len(formats) > 1:
+        listing = ", ".join(f"{os.path.basename(i.path)}: {i.point_format}" for i in infos)
+        raise InputError(f"the input files have different point formats ({listing}); convert them to one first")
+    crss = {i.crs_wkt for i in infos}
+    if len(crss) > 1:
+        import collections
+        by = collections.defaultdict(list)
+        for i in infos:
+            by["no CRS" if i.crs_wkt is None else i.crs_wkt.split('"')[1] if '"' in i.crs_wkt else "a CRS"].append(
+                os.path.basename(i.path))
+        listing = "; ".join(f"{k}: {', '.join(v[:3])}{' ...' if len(v) > 3 else ''}" for k, v in by.items())
+        raise InputError(f"the input files have different CRS ({listing}); reproject them to one first")
+
+
+def write_vpc(path: str, infos: Sequence[LasInfo], files: Sequence[str]) -> None:
+    """Write a virtual point cloud (STAC ItemCollection as QGIS's "Build virtual point cloud"
+    writes it) referencing ``files`` (relative to the .vpc when below its folder), atomically."""
+    folder = os.path.dirname(os.path.abspath(path))
+    features = []
+    for info, file in zip(infos, files):
+        rel = os.path.relpath(os.path.abspath(file), folder)
+        href = "./" + rel.replace(os.sep, "/") if not rel.startswith("..") else os.path.abspath(file)
+        (x0, y0, z0), (x1, y1, z1) = info.mins, info.maxs
+        props = {"datetime": "0001-01-01T00:00:00Z", "pc:count": info.count, "pc:type": "lidar",
+                 "pc:encoding": "?", "pc:schemas": [], "proj:bbox": [x0, y0, z0, x1, y1, z1]}
+        if info.crs_wkt:
+            props["proj:wkt2"] = info.crs_wkt
+        ring = [[x0, y0, z0], [x1, y0, z0], [x1, y1, z0], [x0, y1, z0], [x0, y0, z0]]
+        features.append({
+            "type": "Feature", "stac_version": "1.0.0",
+            "stac_extensions": ["https://stac-extensions.github.io/pointcloud/v1.0.0/schema.json",
+                                "https://stac-extensions.github.io/projection/v1.1.0/schema.json"],
+            "id": os.path.splitext(os.path.basename(file))[0],
+            # GeoJSON wants WGS 84 here; without PROJ in the core the native box is given in proj:bbox
+            # (which QGIS reads first) and the geometry repeats it.
+            "geometry": {"type": "Polygon", "coordinates": [ring]},
+            "bbox": [x0, y0, z0, x1, y1, z1], "properties": props, "links": [],
+            "assets": {"data": {"href": href, "roles": ["data"]}}})
+    doc = {"type": "FeatureCollection", "features": features}
+    try:
+        with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as f:
+            json.dump(doc, f, indent=2)
+    except OSError as err:
+        raise OutputError(f"{path}: cannot be written ({err})") from err
+
+
+# -- tile clouds -------------------------------------------------------------------------------
+
+def _per_point(cloud: PointCloud):
+    n = len(cloud)
+    for f in dataclasses.fields(PointCloud):
+        value = getattr(cloud, f.name)
+        if isinstance(value, np.ndarray) and value.ndim >= 1 and value.shape[0] == n:
+            yield f.name, value
+
+
+def tile_cloud(parts: Sequence[PointCloud], *, path: Optional[str] = None) -> PointCloud:
+    """One ``PointCloud`` of the points of ``parts`` (in their order), carrying every per-point
+    field a ``PointCloud`` has (whatever ``read_cloud`` fills in, present and future) and the
+    other fields of the first part; ``las`` is dropped (a tile is never written back as such).
+    This is the one place tile clouds are made."""
+    if not parts:
+        raise InputError("a tile needs at least one part")
+    first = parts[0]
+    values = {}
+    for f in dataclasses.fields(PointCloud):
+        values[f.name] = getattr(first, f.name)
+    names = {name: array for p in parts for name, array in _per_point(p)}
+    for name, example in names.items():
+        # A part without the field (None, e.g. no withheld flag set in that file) gets zeros.
+        arrays = [getattr(p, name) if getattr(p, name) is not None else
+                  np.zeros((len(p),) + example.shape[1:], dtype=example.dtype) for p in parts]
+        values[name] = np.concatenate(arrays) if len(arrays) > 1 else arrays[0]
+    values["las"] = None
+    if path is not None:
+        values["path"] = path
+    return PointCloud(**values)
+
+
+def subset_cloud(cloud: PointCloud, idx) -> PointCloud:
+    """The points ``idx`` (indices or boolean mask) of ``cloud``, every per-point field kept."""
+    values = {f.name: getattr(cloud, f.name) for f in dataclasses.fields(PointCloud)}
+    for name, array in _per_point(cloud):
+        values[name] = array[idx]
+    values["las"] = None
+    return PointCloud(**values)
+
+
+# -- streaming a file into tile parts ------------------------------------------------------------
+
+@dataclass(frozen=True)
+class TileGrid:
+    """Square tiles of ``size`` m on multiples of ``size`` (tile (i, j) covers
+    ``[i*size, (i+1)*size) x [j*size, (j+1)*size)``), each read with ``buffer`` m around it."""
+    size: float
+    buffer: float
+
+    def key_of(self, x: np.ndarray, y: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        return (np.floor(x / self.size).astype(np.int64), np.floor(y / self.size).astype(np.int64))
+
+    def bounds(self, key) -> Tuple[float, float, float, float]:
+        i, j = key
+        return (i * self.size, j * self.size, (i + 1) * self.size, (j + 1) * self.size)
+
+
+def _part_header(header):
+    return copy.deepcopy(header)
+
+
+@dataclass
+class TilePart:
+    """The points of one input file that one tile (with its buffer) needs: an uncompressed LAS
+    file of the records as they are in the input, and beside it their indices in the input
+    (``>= 0``: the tile's own point; ``-1 - index``: a buffer point)."""
+    file_index: int
+    las_path: str
+    index_path: str
+    own_count: int = 0      #: points of the tile itself (the rest is buffer)
+
+
+def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk_points: int = CHUNK_POINTS,
+             check=None) -> Dict[tuple, TilePart]:
+    """Stream ``path`` once (laspy chunks) and write, for every tile its points or buffer touch,
+    the part of the file that tile needs into ``work_dir``. Tiles exist only where points are."""
+    import laspy
+    parts: Dict[tuple, TilePart] = {}
+    writers = {}
+    index_files = {}
+    m = int(math.ceil(grid.buffer / grid.size)) if grid.buffer > 0 else 0
+    stem = f"f{file_index:05d}"
+    try:
+        with laspy.open(path) as reader:
+            start = 0
+            for chunk in reader.chunk_iterator(chunk_points):
+                if check is not None:
+                    check()
+                n = len(chunk)
+                x = np.asarray(chunk.x, dtype=np.float64)
+                y = np.asarray(chunk.y, dtype=np.float64)
+                kx, ky = grid.key_of(x, y)
+                fx = x - kx * grid.size  # position inside the own tile, [0, size)
+                fy = y - ky * grid.size
+                targets_k, targets_p, targets_own = [], [], []
+                local = np.arange(n, dtype=np.int64)
+                for dx in range(-m, m + 1):
+                    # distance from the point to the tile kx+dx along x (0 inside it)
+                    if dx < 0:
+                        inx = fx + (-dx - 1) * grid.size < grid.buffer
+                    elif dx > 0:
+                        inx = (grid.size - fx) + (dx - 1) * grid.size <= grid.buffer
+                    else:
+                        inx = np.ones(n, dtype=bool)
+                    for dy in range(-m, m + 1):
+                        if dy < 0:
+                            iny = fy + (-dy - 1) * grid.size < grid.buffer
+                        elif dy > 0:
+                            iny = (grid.size - fy) + (dy - 1) * grid.size <= grid.buffer
+                        else:
+                            iny = np.ones(n, dtype=bool)
+                        sel = local[inx & iny]
+                        if sel.size == 0:
+                            continue
+                        key = (kx[sel] + dx) * np.int64(1 << 31) + (ky[sel] + dy)
+                        targets_k.append(key)
+                        targets_p.append(sel)
+                        targets_own.append(np.full(sel.size, dx == 0 and dy == 0))
+                keys = np.concatenate(targets_k)
+                pts = np.concatenate(targets_p)
+                own = np.concatenate(targets_own)
+                order = np.argsort(keys, kind="stable")
+                keys, pts, own = keys[order], pts[order], own[order]
+                cuts = np.flatnonzero(np.diff(keys)) + 1
+                for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, keys.size]):
+                    k = int(keys[lo])
+                    tkey = _split_key(k)
+                    sel = pts[lo:hi]
+                    if tkey not in writers:
+                        name = f"{stem}_{tkey[0]}_{tkey[1]}"
+                        part = TilePart(file_index, os.path.join(work_dir, name + ".las"),
+                                        os.path.join(work_dir, name + ".idx"))
+                        parts[tkey] = part
+                        writers[tkey] = laspy.open(part.las_path, mode="w", header=_part_header(reader.header),
+                                                   do_compress=False)
+                        index_files[tkey] = open(part.index_path, "wb")
+                    writers[tkey].write_points(chunk[sel])
+                    parts[tkey].own_count += int(own[lo:hi].sum())
+                    gidx = start + sel
+                    index_files[tkey].write(np.where(own[lo:hi], gidx, -1 - gidx).astype(np.int64).tobytes())
+                start += n
+    except OSError as err:
+        raise OutputError(f"{work_dir}: cannot write the temporary tiles of {path} ({err}); "
+                          "point the working folder at a disk with more room") from err
+    finally:
+        for w in writers.values():
+            w.close()
+        for f in index_files.values():
+            f.close()
+    return parts
+
+
+def _split_key(k: int) -> tuple:
+    i, j = divmod(k, 1 << 31)
+    if j >= 1 << 30:  # negative j borrowed one from i
+        i, j = i + 1, j - (1 << 31)
+    return (int(i), int(j))
+
+
+def read_part(part: TilePart) -> Tuple[PointCloud, np.ndarray]:
+    """The cloud of one tile part (every field ``read_cloud`` gives) and its index array."""
+    cloud = read_cloud(part.las_path)
+    index = np.fromfile(part.index_path, dtype=np.int64)
+    if index.shape[0] != len(cloud):
+        raise InputError(f"{part.las_path}: {len(cloud)} points but {index.shape[0]} indices; "
+                         "the working folder was changed during the run")
+    cloud.las = None
+    return cloud, index
+
+
+# -- the classified copy --------------------------------------------------------------------------
+
+def write_classified_stream(src: str, dst: str, classification: np.ndarray, *,
+                            chunk_points: int = CHUNK_POINTS, check=None) -> None:
+    """Copy ``src`` to ``dst`` (LAZ when it ends in .laz) with ``classification`` (one uint8 per
+    point, in file order; a memmap is fine) in one streamed pass, every other dimension, the VLRs
+    and the CRS kept. Atomic: ``dst`` appears only when complete."""
+    import laspy
+    classification = np.asarray(classification)
+    try:
+        with laspy.open(src) as reader:
+            n_total = int(reader.header.point_count)
+            if classification.shape[0] != n_total:
+                raise OutputError(f"{dst}: {classification.shape[0]} classes for {n_total} points of {src}")
+            if reader.header.point_format.id < 6 and n_total and int(classification.max()) > 31:
+                raise OutputError(f"{dst}: point format {reader.header.point_format.id} stores classes 0-31 only")
+            with atomic_path(dst) as tmp:
+                with laspy.open(tmp, mode="w", header=copy.deepcopy(reader.header),
+                                do_compress=_ext(dst) == ".laz") as writer:
+                    start = 0
+                    for chunk in reader.chunk_iterator(chunk_points):
+                        if check is not None:
+                            check()
+                        n = len(chunk)
+                        chunk.classification = classification[start:start + n]
+                        writer.write_points(chunk)
+                        start += n
+    except OSError as err:
+        raise OutputError(f"{dst}: cannot be written ({err})") from err
+
+
+def iter_chunks(path: str, chunk_points: int = CHUNK_POINTS) -> Iterable:
+    """laspy point records of ``path``, ``chunk_points`` at a time."""
+    import laspy
+    with laspy.open(path) as reader:
+        yield from reader.chunk_iterator(chunk_points)

@@ -1,0 +1,66 @@
+"""A folder and a .vpc as INPUT, a .vpc as OUTPUT, through processing.run (toolbox, batch,
+modeler) and qgis_process: the INPUT parameter's type lets all three through on QGIS 3.22."""
+import json
+import os
+import subprocess
+from pathlib import Path
+
+import numpy as np
+
+from .conftest import classes_of
+
+WRAPPER = Path(__file__).resolve().parents[2] / "scripts" / "qgis-process"
+
+
+def _split(src, folder):
+    """The scene as two files, west and east of its middle."""
+    import laspy
+    las = laspy.read(str(src))
+    folder.mkdir()
+    mid = float(np.median(las.x))
+    for name, keep in (("west.laz", las.x < mid), ("east.laz", las.x >= mid)):
+        part = laspy.LasData(las.header)
+        part.points = las.points[np.asarray(keep)]
+        part.write(str(folder / name))
+    return [str(folder / "west.laz"), str(folder / "east.laz")]
+
+
+def test_input_parameter_accepts_a_file_a_folder_and_a_vpc(groundsieve_provider, tmp_path):
+    from qgis.core import QgsApplication
+    alg = QgsApplication.processingRegistry().algorithmById("groundsieve:smrf")
+    param = alg.parameterDefinition("INPUT")
+    for value in ("/data/a.laz", str(tmp_path), "/data/survey.vpc"):
+        assert param.checkValueIsAcceptable(value), value
+
+
+def test_folder_in_vpc_out_through_processing(groundsieve_provider, scene_laz, tmp_path):
+    import processing
+    src, _scene = scene_laz
+    _split(src, tmp_path / "in")
+    out = tmp_path / "out" / "classified.vpc"
+    out.parent.mkdir()
+    result = processing.run("groundsieve:smrf", {"INPUT": str(tmp_path / "in"), "OUTPUT": str(out),
+                                                 "TILE_SIZE": 50.0, "DTM": str(tmp_path / "dtm.tif")})
+    doc = json.loads(out.read_text())
+    hrefs = sorted(f["assets"]["data"]["href"] for f in doc["features"])
+    assert hrefs == ["./classified/east.laz", "./classified/west.laz"]
+    total = sum(len(classes_of(tmp_path / "out" / "classified" / n)) for n in ("east.laz", "west.laz"))
+    assert result["POINT_COUNT"] == total == len(classes_of(src))
+    assert result["GROUND_COUNT"] == sum(int((classes_of(tmp_path / "out" / "classified" / n) == 2).sum())
+                                         for n in ("east.laz", "west.laz"))
+    assert os.path.exists(tmp_path / "dtm.tif")
+
+
+def test_vpc_through_qgis_process(scene_laz, tmp_path):
+    from groundsieve.core.io.lasfiles import scan_header, write_vpc
+    src, _scene = scene_laz
+    files = _split(src, tmp_path / "in")
+    vpc = tmp_path / "in" / "survey.vpc"
+    write_vpc(str(vpc), [scan_header(f) for f in files], files)
+    out = tmp_path / "classified.vpc"
+    proc = subprocess.run([str(WRAPPER), "--json", "run", "groundsieve:smrf", f"--INPUT={vpc}", f"--OUTPUT={out}",
+                           "--TILE_SIZE=50", "--WORKERS=2"], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    results = json.loads(proc.stdout)["results"]
+    assert results["POINT_COUNT"] == len(classes_of(src))
+    assert sorted(os.listdir(tmp_path / "classified")) == ["east.laz", "west.laz"]
