@@ -208,3 +208,37 @@ def test_rfclassify_keeps_marked_points_out_of_features_prediction_and_dtm(tmp_p
     _, predicted_all = learning.classify_file(str(src), str(tmp_path / "all.las"), str(model), ignore_classes="")
     assert np.isin(predicted_all[np.isin(kind, ["noise7", "noise18"])], [1, 2]).all()
     np.testing.assert_array_equal(predicted_all[kind == "withheld"], cls_in[kind == "withheld"])
+
+
+@pytest.mark.parametrize("fmt", [1, 6])
+def test_marked_points_stay_as_marked_in_a_tiled_run(tmp_path, fmt):
+    """The survey-scale path (buffered tiles, streamed output) applies the same rules: withheld,
+    ignored and kept classes as in the whole-cloud run, point by point, and the same DTM."""
+    from osgeo import gdal
+
+    from groundsieve.core.engine.tiles import TileOptions
+    src = tmp_path / "in.las"
+    kind, cls_in = write_scene(src, fmt=fmt)
+    _, wh_in, syn_in = read(src)
+    whole_opts = FilterOptions(keep_existing_classes=True)
+    tiled_opts = FilterOptions(keep_existing_classes=True,
+                               tiling=TileOptions(tile_size_m=15.0, workers=1, parallel="threads"))
+    run_ground_filter(str(src), str(tmp_path / "whole.las"), SMRF(), options=whole_opts,
+                      dtm_path=str(tmp_path / "whole.tif"))
+    logged = []
+    run = run_ground_filter(str(src), str(tmp_path / "tiled.las"), SMRF(), options=tiled_opts,
+                            dtm_path=str(tmp_path / "tiled.tif"), log=logged.append)
+    assert run.cloud is None and any("tile" in line.lower() for line in logged)  # really tiled
+    cls_w, _, _ = read(tmp_path / "whole.las")
+    cls_t, wh_t, syn_t = read(tmp_path / "tiled.las")
+    marked = np.isin(kind, ["withheld", "noise7", "noise18", "water"])
+    np.testing.assert_array_equal(cls_t[marked], cls_in[marked])
+    np.testing.assert_array_equal(wh_t, wh_in)
+    np.testing.assert_array_equal(syn_t, syn_in)
+    assert (cls_t == cls_w).mean() > 0.999
+    whole = gdal.Open(str(tmp_path / "whole.tif")).ReadAsArray()
+    tiled = gdal.Open(str(tmp_path / "tiled.tif")).ReadAsArray()
+    assert whole.shape == tiled.shape
+    inside = (whole != -9999) & (tiled != -9999)
+    assert inside.mean() > 0.8 and np.nanmin(tiled[inside]) > -0.06
+    assert np.abs(whole[inside] - tiled[inside]).max() < 0.001
