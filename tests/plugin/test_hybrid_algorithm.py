@@ -70,3 +70,14 @@ def test_qgis_process_runs_hybrid_with_only_input_and_output(scene_laz, tmp_path
     assert len(cls) == len(scene.x)
     truth = scene.classification == 2
     assert ((cls == 2) == truth).mean() > 0.95
+
+
+def test_the_plugin_zip_ships_the_default_model(tmp_path):
+    """`make zip` (git archive) must carry the shipped model, or groundsieve:hybrid fails out of the box."""
+    import zipfile
+    from groundsieve.core.learn.hybrid import DEFAULT_MODEL
+    archive = tmp_path / "groundsieve.zip"
+    subprocess.run(["git", "archive", "--format=zip", "--prefix=groundsieve/", "-o", str(archive), "HEAD"],
+                   cwd=REPO, check=True)
+    relative = Path(DEFAULT_MODEL).relative_to(REPO).as_posix()
+    assert "groundsieve/" + relative in zipfile.ZipFile(archive).namelist()
