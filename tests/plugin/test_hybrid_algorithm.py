@@ -79,5 +79,5 @@ def test_the_plugin_zip_ships_the_default_model(tmp_path):
     archive = tmp_path / "groundsieve.zip"
     subprocess.run(["git", "archive", "--format=zip", "--prefix=groundsieve/", "-o", str(archive), "HEAD"],
                    cwd=REPO, check=True)
-    relative = Path(DEFAULT_MODEL).relative_to(REPO).as_posix()
+    relative = Path(DEFAULT_MODEL).resolve().relative_to(REPO).as_posix()
     assert "groundsieve/" + relative in zipfile.ZipFile(archive).namelist()
