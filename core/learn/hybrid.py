@@ -151,7 +151,7 @@ def hybrid_features(xyz: np.ndarray, names: Sequence[str], *, cell_size_m: float
     if not surfaces:  # the kernel wants at least one grid
         add("", zmin_raw, False)
     zmax_raw = -cell_min(x, y, -z, grid)
-    out = np.empty((x.shape[0], len(surfaces) + 3), dtype=np.float64)
+    out = np.empty((x.shape[0], len(surfaces) + 3), dtype=np.float32)
     _point_features_kernel(x, y, z, np.stack(surfaces), np.asarray(modes, dtype=np.int64), zmin_raw, zmax_raw,
                            grid.x0, grid.top, grid.cell, out)
     k = len(surfaces)
