@@ -2,8 +2,8 @@
 within the range it is given, grows and ends at its top; a cancellation request stops the run
 through ``run`` and through ``__call__``; concurrent runs in threads agree with single runs; bad
 arrays (empty, wrong shape, NaN or infinite coordinates) raise InputError; and the terrain
-filters (SMRF, PMF, CSF, PTD and the learned hybrid) call every point ground on degenerate but valid input (one point,
-identical points, one height, points on a line or a grid). Filter-specific progress counts,
+filters (SMRF, PMF, CSF, PTD and the learned hybrid) call every point ground on degenerate but
+valid input (one point, identical points, one height, points on a line or a grid). Filter-specific progress counts,
 mid-run cancellation and inputs are tested in each filter's own module."""
 import numpy as np
 import pytest
