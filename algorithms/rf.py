@@ -14,7 +14,7 @@ from .base import core_modules, dialog_help, feedback_callables
 _ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
 Double = QgsProcessingParameterNumber.Type.Double
 Integer = QgsProcessingParameterNumber.Type.Integer
-PRESET_NAMES = ("C5H", "C1", "C2", "C3", "C4", "C5", "custom")
+PRESET_NAMES = ("C5H", "C1", "C2", "C3", "C4", "C5", "custom", "HYBRID")
 CRITERIA = ("gini", "entropy")
 SCALERS = ("none", "standard", "robust")
 CLOUD_FILTER = "Point clouds (*.las *.laz *.LAS *.LAZ)"
@@ -102,7 +102,9 @@ importances, timings) with the same figures in a CSV beside it.</p>""")
                 "C2: RGB + return number", "C3: RGB + return number, scan angle, GPS time",
                 "C4: C3 + verticality, planarity, eigenentropy, surface variation",
                 "C5: RGB + return number + the four geometric features (paper's best)",
-                "custom list"], defaultValue=0))
+                "custom list",
+                "HYBRID: heights above SMRF's surface and 2, 6, 18 m openings (x, y, z only; "
+                "the model also runs in Ground filter (learned hybrid))"], defaultValue=0))
         self.addParameter(QgsProcessingParameterString(
             self.CUSTOM_FEATURES, "Custom feature list (with 'custom list')", defaultValue="", optional=True))
         self.addParameter(QgsProcessingParameterEnum(self.CRITERION, "Splitting criterion", options=list(CRITERIA),

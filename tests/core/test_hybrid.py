@@ -163,3 +163,19 @@ def test_hybrid_beats_a_trivial_baseline_and_stays_near_smrf(scenes, kind):
     assert hybrid.total < baseline.total, (hybrid, baseline)
     assert hybrid.total <= smrf.total + 0.01, (hybrid, smrf)
     assert hybrid.kappa > 0.8
+
+
+def test_rf_feature_matrix_computes_the_hybrid_features(tmp_path):
+    """rftrain/rfclassify's feature_matrix gives the hybrid features (the HYBRID preset), mixed with
+    file attributes, equal to hybrid_features: a model trained on them runs in the hybrid filter."""
+    from groundsieve.core.io import PointCloud
+    from groundsieve.core.learn.rf import PRESETS, feature_matrix
+    assert PRESETS["HYBRID"] == DEFAULT_FEATURES
+    xyz, truth = plane_scene(seed=4, size=40.0, density=2.0, box=(10, 25, 10, 25))
+    n = len(xyz)
+    cloud = PointCloud("mem", xyz[:, 0].copy(), xyz[:, 1].copy(), xyz[:, 2].copy(), np.zeros(n, np.uint8),
+                       np.ones(n, np.uint8), np.ones(n, np.uint8), has_return_info=True)
+    names = list(PRESETS["HYBRID"]) + ["return_number"]
+    X = feature_matrix(cloud, names)
+    np.testing.assert_array_equal(X[:, :-1], hybrid_features(xyz, PRESETS["HYBRID"]))
+    assert (X[:, -1] == 1).all()
