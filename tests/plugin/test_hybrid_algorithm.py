@@ -81,3 +81,20 @@ def test_the_plugin_zip_ships_the_default_model(tmp_path):
                    cwd=REPO, check=True)
     relative = Path(DEFAULT_MODEL).resolve().relative_to(REPO).as_posix()
     assert "groundsieve/" + relative in zipfile.ZipFile(archive).namelist()
+
+
+def test_an_rftrain_model_on_the_hybrid_preset_runs_in_hybrid(groundsieve_provider, scene_laz, tmp_path):
+    """Train on the user's labelled cloud with rftrain's HYBRID preset (ground 2 against the rest),
+    then filter with that model: the issue's promise that rftrain models work in groundsieve:hybrid."""
+    import processing
+    from groundsieve.core.metrics import ground_accuracy
+    src, scene = scene_laz
+    model = tmp_path / "mine.npz"
+    result = processing.run("groundsieve:rftrain", {"INPUT": str(src), "MODEL": str(model), "PRESET": 7,
+                                                     "REPORT": str(tmp_path / "report.html"),
+                                                     "TREES": 8, "CLASSES": "2,3,5,6"})
+    assert result["TEST_ACCURACY"] > 0.9
+    out = tmp_path / "filtered.laz"
+    processing.run("groundsieve:hybrid", {"INPUT": str(src), "OUTPUT": str(out), "MODEL": str(model)})
+    acc = ground_accuracy(classes_of(out) == 2, scene.classification == 2)
+    assert acc.total < 0.05, acc
