@@ -76,7 +76,10 @@ GPS time; C4 + verticality (0.6 m), planarity (0.6 m), eigenentropy (0.4 m), sur
 intensity in place of RGB. <b>C5H</b> (default, ours) adds the height above the lowest point within
 2.5 m and the local point density, which carry the ground contrast on sparse airborne clouds where the
 paper's small spheres hold few points. <i>custom</i>: a comma-separated list such as
-<code>intensity,return_number,number_of_returns,planarity_r0p6,height_above_min_r2p5</code>. Geometric
+<code>intensity,return_number,number_of_returns,planarity_r0p6,height_above_min_r2p5</code>. <b>HYBRID</b>: the features of
+<i>Ground filter (learned hybrid)</i> (heights above SMRF's provisional surface and above the minimum
+surface opened with 2, 6 and 18 m windows, that surface's slope and curvature; x, y, z only): train
+ground (2) against other classes on your own data and use the model there or here. Geometric
 features already in the file (from <i>Compute point features</i>) are used as they are.</p>
 <p><b>Split</b>: training / validation / test sets are square blocks of <i>Block size</i> drawn at
 random (60/20/20 %), so neighbouring points do not leak between sets; or give validation and test
