@@ -15,7 +15,7 @@ from .discovery import Discoverable
 _ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
 Double = QgsProcessingParameterNumber.Type.Double
 Integer = QgsProcessingParameterNumber.Type.Integer
-PRESET_NAMES = ("C5H", "C1", "C2", "C3", "C4", "C5", "custom")
+PRESET_NAMES = ("C5H", "C1", "C2", "C3", "C4", "C5", "custom", "HYBRID")
 CRITERIA = ("gini", "entropy")
 SCALERS = ("none", "standard", "robust")
 CLOUD_FILTER = "Point clouds (*.las *.laz *.LAS *.LAZ)"
@@ -77,7 +77,10 @@ GPS time; C4 + verticality (0.6 m), planarity (0.6 m), eigenentropy (0.4 m), sur
 intensity in place of RGB. <b>C5H</b> (default, ours) adds the height above the lowest point within
 2.5 m and the local point density, which carry the ground contrast on sparse airborne clouds where the
 paper's small spheres hold few points. <i>custom</i>: a comma-separated list such as
-<code>intensity,return_number,number_of_returns,planarity_r0p6,height_above_min_r2p5</code>. Geometric
+<code>intensity,return_number,number_of_returns,planarity_r0p6,height_above_min_r2p5</code>. <b>HYBRID</b>: the features of
+<i>Ground filter (learned hybrid)</i> (heights above SMRF's provisional surface and above the minimum
+surface opened with 2, 6 and 18 m windows, that surface's slope and curvature; x, y, z only): train
+ground (2) against other classes on your own data and use the model there or here. Geometric
 features already in the file (from <i>Compute point features</i>) are used as they are.</p>
 <p><b>Split</b>: training / validation / test sets are square blocks of <i>Block size</i> drawn at
 random (60/20/20 %), so neighbouring points do not leak between sets; or give validation and test
@@ -103,7 +106,9 @@ importances, timings) with the same figures in a CSV beside it.</p>""")
                 "C2: RGB + return number", "C3: RGB + return number, scan angle, GPS time",
                 "C4: C3 + verticality, planarity, eigenentropy, surface variation",
                 "C5: RGB + return number + the four geometric features (paper's best)",
-                "custom list"], defaultValue=0))
+                "custom list",
+                "HYBRID: heights above SMRF's surface and 2, 6, 18 m openings (x, y, z only; "
+                "the model also runs in Ground filter (learned hybrid))"], defaultValue=0))
         self.addParameter(QgsProcessingParameterString(
             self.CUSTOM_FEATURES, "Custom feature list (with 'custom list')", defaultValue="", optional=True))
         self.addParameter(QgsProcessingParameterEnum(self.CRITERION, "Splitting criterion", options=list(CRITERIA),

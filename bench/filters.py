@@ -69,6 +69,14 @@ def make_ptd(row: ParamsRow, **fixed):
     return PTD(**fixed)
 
 
+def make_hybrid(row: ParamsRow, **fixed):
+    """The learned hybrid filter with the shipped model unless fixed; ``row`` is ignored (the model
+    was trained on the shared ISPRS samples: scores on them are not an estimate of its error, see
+    bench/hybrid_train.py for the leave-one-sample-out figures)."""
+    from groundsieve.core.learn.hybrid import Hybrid
+    return Hybrid(**fixed)
+
+
 FILTERS: Dict[str, Callable[[ParamsRow], Callable]] = {
     "smrf": make_smrf,
     # As Pingel's Python code runs by default: low-outlier cells are not refilled before the opening.
@@ -96,6 +104,7 @@ FILTERS: Dict[str, Callable[[ParamsRow], Callable]] = {
     "ptd-mirror": lambda row: make_ptd(row, mirror=True),
     "ptd-nooffset": lambda row: make_ptd(row, offset_m=0.0),
     "ptd-terrascan": lambda row: make_ptd(row, seed_cell_m=60.0, max_angle_deg=6.0),
+    "hybrid": make_hybrid,
 }
 
 

@@ -9,13 +9,14 @@ from ..algorithms.csf import CSFAlgorithm
 from ..algorithms.echogrid import EchoGridAlgorithm
 from ..algorithms.evc import EVCAlgorithm, EVCRastersAlgorithm
 from ..algorithms.features import FeaturesAlgorithm
+from ..algorithms.hybrid import HybridAlgorithm
 from ..algorithms.pmf import PMFAlgorithm
 from ..algorithms.ptd import PTDAlgorithm
 from ..algorithms.rf import RFClassifyAlgorithm, RFTrainAlgorithm
 from ..algorithms.smrf import SMRFAlgorithm
 
 ALGORITHMS = (SMRFAlgorithm, EchoGridAlgorithm, EVCAlgorithm, EVCRastersAlgorithm, PMFAlgorithm, CSFAlgorithm,
-              PTDAlgorithm, FeaturesAlgorithm, RFTrainAlgorithm, RFClassifyAlgorithm)
+              PTDAlgorithm, HybridAlgorithm, FeaturesAlgorithm, RFTrainAlgorithm, RFClassifyAlgorithm)
 
 _ROOT = os.path.dirname(os.path.dirname(__file__))
 

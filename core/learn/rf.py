@@ -241,6 +241,10 @@ PRESETS = {
     # Ours: C5 plus the height above the lowest point within 2.5 m and the local density, which
     # carry the ground/non-ground contrast on sparse ALS where 0.4-0.6 m spheres hold few points.
     "C5H": (RADIOMETRY, "return_number") + GEOMETRIC + ("height_above_min_r2p5", "density_r1"),
+    # The learned hybrid ground filter's features (core/learn/hybrid.py): heights above SMRF's surface
+    # and multiscale openings; x, y, z only. Its models also run in groundsieve:hybrid.
+    "HYBRID": ("above_smrf", "smrf_slope", "smrf_curvature", "above_opening_r2", "above_opening_r6",
+               "above_opening_r18"),
 }
 DEFAULT_PRESET = "C5H"
 
@@ -292,11 +296,18 @@ def feature_matrix(cloud, names: Sequence[str], steps=None) -> np.ndarray:
     present (e.g. written by groundsieve:features) and computed otherwise."""
     from ..progress import Steps
     from .features import FeatureSpec, compute_features, parse_feature_name
+    from .hybrid import GRID_FEATURES, hybrid_features, opening_radius
     steps = steps or Steps()
     columns: Dict[str, np.ndarray] = {}
     dims = set(cloud.las.point_format.dimension_names) if cloud.las is not None else set()
     to_compute = []
+    grid_names = [n for n in names if n in GRID_FEATURES or opening_radius(n) is not None]
+    if grid_names:  # the hybrid filter's features (1 m grid, as its shipped model)
+        grid_values = hybrid_features(cloud.xyz, grid_names, steps=steps.sub(0.0, 0.5))
+        columns.update({n: grid_values[:, j] for j, n in enumerate(grid_names)})
     for name in names:
+        if name in columns:
+            continue
         if name in ATTRIBUTE_FEATURES or name in ("scan_angle",):
             columns[name] = _attribute(cloud, name)
         elif name in dims:

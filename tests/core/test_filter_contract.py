@@ -2,8 +2,8 @@
 within the range it is given, grows and ends at its top; a cancellation request stops the run
 through ``run`` and through ``__call__``; concurrent runs in threads agree with single runs; bad
 arrays (empty, wrong shape, NaN or infinite coordinates) raise InputError; and the terrain
-filters (SMRF, PMF, CSF, PTD) call every point ground on degenerate but valid input (one point,
-identical points, one height, points on a line or a grid). Filter-specific progress counts,
+filters (SMRF, PMF, CSF, PTD and the learned hybrid) call every point ground on degenerate but
+valid input (one point, identical points, one height, points on a line or a grid). Filter-specific progress counts,
 mid-run cancellation and inputs are tested in each filter's own module."""
 import numpy as np
 import pytest
@@ -16,8 +16,9 @@ from groundsieve.core.filters.pmf import PMF
 from groundsieve.core.progress import Steps
 from groundsieve.core.filters.ptd import PTD
 from groundsieve.core.filters.smrf import SMRF
+from groundsieve.core.learn.hybrid import Hybrid
 
-FILTERS = [SMRF(), PMF(), CSF(), PTD(), EchoGrid(), EVC()]
+FILTERS = [SMRF(), PMF(), CSF(), PTD(), EchoGrid(), EVC(), Hybrid()]
 
 
 def plane(size=20.0, density=4.0, seed=0):
@@ -82,7 +83,7 @@ def test_concurrent_runs_in_threads_give_the_same_results():
 
 X0, Y0 = 512000.0, 5403000.0
 #: The filters of a terrain surface: on degenerate but finite input every point is ground.
-TERRAIN_FILTERS = [SMRF(), PMF(), CSF(), PTD()]
+TERRAIN_FILTERS = [SMRF(), PMF(), CSF(), PTD(), Hybrid()]
 
 
 def _bad_arrays():

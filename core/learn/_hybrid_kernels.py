@@ -1,0 +1,49 @@
+"""numba kernels of the hybrid filter's features (private; see core/learn/hybrid.py)."""
+import math
+
+import numpy as np
+from numba import njit, prange
+
+
+@njit(cache=True, nogil=True)
+def _bilinear(grid, fx, fy):
+    """Bilinear value of ``grid`` at fractional (col, row) ``fx, fy`` of cell centres, clamped."""
+    nrows, ncols = grid.shape
+    fx = min(max(fx, 0.0), ncols - 1.0)
+    fy = min(max(fy, 0.0), nrows - 1.0)
+    c0 = min(int(math.floor(fx)), max(ncols - 2, 0))
+    r0 = min(int(math.floor(fy)), max(nrows - 2, 0))
+    c1 = min(c0 + 1, ncols - 1)
+    r1 = min(r0 + 1, nrows - 1)
+    tx = fx - c0
+    ty = fy - r0
+    top = grid[r0, c0] * (1.0 - tx) + grid[r0, c1] * tx
+    bottom = grid[r1, c0] * (1.0 - tx) + grid[r1, c1] * tx
+    return top * (1.0 - ty) + bottom * ty
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _point_features_kernel(x, y, z, surfaces, surface_mode, zmin_raw, zmax_raw, x0, top, cell, out):
+    """One row of ``out`` (n, n_surfaces + 3) per point.
+
+    Column j < n_surfaces: the grid ``surfaces[j]`` interpolated bilinearly at the point (cell
+    centres as nodes); ``surface_mode[j]`` 1 = height of the point above it (z - value), 0 = the
+    value itself. Then three column features from the raw per-cell minimum and maximum of the
+    point's own cell: z - min, max - min, and the rank (z - min) / (max - min) (0 when max = min).
+    """
+    n = x.shape[0]
+    k = surfaces.shape[0]
+    nrows, ncols = zmin_raw.shape
+    for i in prange(n):
+        fx = (x[i] - x0) / cell - 0.5
+        fy = (top - y[i]) / cell - 0.5
+        for j in range(k):
+            v = _bilinear(surfaces[j], fx, fy)
+            out[i, j] = z[i] - v if surface_mode[j] == 1 else v
+        c = min(max(int(math.floor((x[i] - x0) / cell)), 0), ncols - 1)
+        r = min(max(int(math.floor((top - y[i]) / cell)), 0), nrows - 1)
+        lo = zmin_raw[r, c]
+        hi = zmax_raw[r, c]
+        out[i, k] = z[i] - lo
+        out[i, k + 1] = hi - lo
+        out[i, k + 2] = (z[i] - lo) / (hi - lo) if hi > lo else 0.0

@@ -1,0 +1,257 @@
+"""The learned hybrid ground filter: features that know where the ground roughly is, and a
+Random Forest trained on labelled clouds that turns them into a ground mask.
+
+Per-point eigen features (matrone2024 Method 3) cannot tell a flat roof from the ground: they do
+not know where the ground is. The features here do. On a grid of ``cell_size_m`` (1 m by
+default, as SMRF), from the lowest point of each cell:
+
+==========================  ==================================================================
+feature                     value at the point
+==========================  ==================================================================
+``above_smrf``              z minus SMRF's provisional ground surface (Pingel et al. 2013,
+                            its single-set defaults), bilinear at the point
+``smrf_slope``              gradient magnitude (rise/run) of that surface
+``smrf_curvature``          its Laplacian (1/m): negative on ridges, positive in hollows
+``above_opening_r<R>``      z minus the minimum surface (low outliers removed as SMRF does,
+                            empty cells inpainted) opened with a disk of radius R m: the height
+                            above the ground as seen by a window of that size; several R give
+                            the size of the object the point sits on
+``above_cell_min``          z minus the lowest z of the point's own cell
+``cell_range``              highest minus lowest z of the point's own cell
+``column_rank``             (z - lowest) / (highest - lowest) in the cell (0 when flat)
+==========================  ==================================================================
+
+Every length is in metres, not in points, so the features mean the same on a 3 m-spacing
+airborne survey and on a 3 cm UAV cloud. Names made by ``core/learn/features.py``
+(``height_above_min_r2p5``, ``planarity_r0p6``, ...) are accepted too and computed there.
+
+The classifier is the project's Random Forest (``core/learn/rf.py``), stored in the safe model
+file of ``core/learn/model_file.py``; the shipped model (:data:`DEFAULT_MODEL`) is trained by
+``bench/hybrid_train.py`` on the 8 shared ISPRS samples (its leave-one-sample-out figures are in
+docs/BENCHMARKS.md). A model trained on other features is refused with the file's name.
+"""
+from __future__ import annotations
+
+import math
+import os
+import re
+from dataclasses import dataclass, field
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from ..errors import InputError, InvalidParameterError
+from ..progress import Steps
+from ..validate import _require, check_number, validate_xyz
+
+#: The shipped model (trained by bench/hybrid_train.py; see docs/BENCHMARKS.md).
+DEFAULT_MODEL = os.path.join(os.path.dirname(os.path.abspath(__file__)), "models", "hybrid_isprs.npz")
+
+#: ASPRS class of the ground, the class whose probability the filter thresholds.
+GROUND_CLASS = 2
+
+#: Model metadata key holding the grid cell (m) the features were computed with.
+CELL_KEY = "hybrid_cell_size_m"
+
+#: Features computed from grids here (the opening radii are part of their names).
+GRID_FEATURES = ("above_smrf", "smrf_slope", "smrf_curvature", "above_cell_min", "cell_range", "column_rank")
+_OPENING_RE = re.compile(r"^above_opening_r(?P<int>[0-9]+)(?:p(?P<frac>[0-9]+))?$")
+
+#: The default feature set: heights above ground surfaces and their shape only, nothing that
+#: depends on the point density (the column features added nothing on the ISPRS samples and would
+#: not transfer to 100x denser UAV clouds; see docs/BENCHMARKS.md "Learned hybrid filter").
+DEFAULT_FEATURES = ("above_smrf", "smrf_slope", "smrf_curvature", "above_opening_r2", "above_opening_r6",
+                    "above_opening_r18")
+
+
+def opening_radius(name: str) -> Optional[float]:
+    """Radius (m) of an ``above_opening_r<R>`` name, else None."""
+    match = _OPENING_RE.match(name)
+    if not match:
+        return None
+    return float(match.group("int") + "." + (match.group("frac") or "0"))
+
+
+def unknown_features(names: Sequence[str]) -> List[str]:
+    """The names that neither this module nor core/learn/features.py computes."""
+    from .features import parse_feature_name
+    bad = []
+    for name in names:
+        if name in GRID_FEATURES or opening_radius(name) is not None:
+            continue
+        try:
+            parse_feature_name(name)
+        except InvalidParameterError:
+            bad.append(name)
+    return bad
+
+
+def _slope(surface: np.ndarray, cell: float) -> Tuple[np.ndarray, np.ndarray]:
+    """Gradient magnitude and Laplacian of a grid of cell ``cell``."""
+    if min(surface.shape) < 2:
+        zero = np.zeros_like(surface)
+        return zero, zero
+    gy, gx = np.gradient(surface, cell)
+    gyy = np.gradient(gy, cell, axis=0)
+    gxx = np.gradient(gx, cell, axis=1)
+    return np.sqrt(gx * gx + gy * gy), gxx + gyy
+
+
+def hybrid_features(xyz: np.ndarray, names: Sequence[str], *, cell_size_m: float = 1.0,
+                    steps: Optional[Steps] = None) -> np.ndarray:
+    """(n, len(names)) float32 matrix of the named features of the points ``xyz`` (n, 3)."""
+    from ..filters.smrf import SMRF
+    from ..grids.inpaint import inpaint_harmonic
+    from ..grids.morphology import opening, progressive_filter
+    from ..grids.rasterize import cell_min
+    from ..grids.spec import GridSpec
+    from ._hybrid_kernels import _point_features_kernel
+    steps = steps or Steps()
+    names = list(names)
+    bad = unknown_features(names)
+    if bad:
+        raise InvalidParameterError(f"unknown feature(s) {', '.join(bad)}: the hybrid filter computes "
+                                    f"{', '.join(GRID_FEATURES)}, above_opening_r<R> and the point "
+                                    "features of groundsieve:features")
+    if not (isinstance(cell_size_m, (int, float)) and math.isfinite(cell_size_m) and cell_size_m > 0):
+        raise InvalidParameterError(f"cell_size_m must be > 0 (got {cell_size_m!r})")
+    xyz = validate_xyz(xyz)
+    x, y, z = (np.ascontiguousarray(xyz[:, i]) for i in range(3))
+    cell = float(cell_size_m)
+    grid = GridSpec.covering(x, y, cell, what="hybrid feature grid")
+    zmin_raw = cell_min(x, y, z, grid)
+    surfaces: List[np.ndarray] = []
+    modes: List[int] = []
+    column: Dict[str, int] = {}
+
+    def add(name, surface, above):
+        column[name] = len(surfaces)
+        surfaces.append(np.ascontiguousarray(surface, dtype=np.float64))
+        modes.append(1 if above else 0)
+
+    if any(n in ("above_smrf", "smrf_slope", "smrf_curvature") for n in names):
+        zpro = SMRF(cell_size_m=cell).run(xyz, steps.sub(0.0, 0.4)).provisional_surface
+        slope, curvature = _slope(zpro, cell)
+        add("above_smrf", zpro, True)
+        add("smrf_slope", slope, False)
+        add("smrf_curvature", curvature, False)
+    steps.report(0.4)
+    radii = sorted({opening_radius(n) for n in names if opening_radius(n) is not None})
+    if radii:
+        # The minimum surface as SMRF cleans it: empty cells inpainted, low outliers removed.
+        zmin = inpaint_harmonic(zmin_raw)
+        low = progressive_filter(-zmin, [1], cell, 5.0)
+        if low.any():
+            zmin[low] = np.nan
+            zmin = inpaint_harmonic(zmin)
+        for k, radius_m in enumerate(radii):
+            opened = opening(zmin, max(1, int(round(radius_m / cell))))
+            add(next(n for n in names if opening_radius(n) == radius_m), opened, True)
+            steps.report(0.4 + 0.3 * (k + 1) / len(radii))
+    if not surfaces:  # the kernel wants at least one grid
+        add("", zmin_raw, False)
+    zmax_raw = -cell_min(x, y, -z, grid)
+    out = np.empty((x.shape[0], len(surfaces) + 3), dtype=np.float32)
+    _point_features_kernel(x, y, z, np.stack(surfaces), np.asarray(modes, dtype=np.int64), zmin_raw, zmax_raw,
+                           grid.x0, grid.top, grid.cell, out)
+    k = len(surfaces)
+    column.update(above_cell_min=k, cell_range=k + 1, column_rank=k + 2)
+    steps.report(0.8)
+    result = np.empty((x.shape[0], len(names)), dtype=np.float32)
+    point_names = [n for n in names if n not in column]
+    for j, name in enumerate(names):
+        if name in column:
+            result[:, j] = out[:, column[name]]
+    if point_names:
+        from .features import FeatureSpec, compute_features
+        computed = compute_features(xyz, FeatureSpec.from_names(point_names), steps=steps.sub(0.8, 1.0))
+        for j, name in enumerate(names):
+            if name in computed:
+                result[:, j] = computed[name]
+    steps.report(1.0)
+    return result
+
+
+# -- the model ------------------------------------------------------------------------------------
+
+_MODELS: Dict[Tuple[str, float, int], object] = {}
+
+
+def load_hybrid_model(path: Optional[str] = None):
+    """The model file at ``path`` (the shipped model when empty), checked for the hybrid filter:
+    features it can compute and a ground class (2). Cached per path, modification time and size."""
+    from .model_file import load_model
+    path = os.fspath(path) if path else DEFAULT_MODEL
+    if not os.path.isfile(path):
+        if path == DEFAULT_MODEL:
+            raise InputError(f"{path}: the shipped hybrid model is missing from this installation; "
+                             "reinstall the plugin or give a model file")
+        raise InputError(f"{path}: no such model file")
+    stat = os.stat(path)
+    key = (os.path.abspath(path), stat.st_mtime, stat.st_size)
+    if key in _MODELS:
+        return _MODELS[key]
+    model = load_model(path)
+    bad = unknown_features(model.features)
+    if bad:
+        raise InputError(f"{path}: this model was trained on features the hybrid filter does not compute "
+                         f"({', '.join(bad)}); use it with groundsieve:rfclassify, or train a model on the "
+                         f"hybrid features")
+    if GROUND_CLASS not in [int(c) for c in model.classes]:
+        raise InputError(f"{path}: this model has no ground class (2) (its classes: "
+                         f"{', '.join(str(int(c)) for c in model.classes)}); the hybrid filter needs one")
+    cell = model.meta.get(CELL_KEY, 1.0)
+    if not (isinstance(cell, (int, float)) and math.isfinite(cell) and cell > 0):
+        raise InputError(f"{path}: the model's feature cell size {cell!r} is not a number > 0")
+    _MODELS.clear()  # keep one model in memory
+    _MODELS[key] = model
+    return model
+
+
+@dataclass(frozen=True)
+class HybridResult:
+    ground: np.ndarray          #: bool per point
+    probability: np.ndarray     #: float32 probability of ground per point
+
+
+@dataclass(frozen=True)
+class Hybrid:
+    """The learned hybrid ground filter. ``model_path`` empty = the shipped model; a point is
+    ground when the model gives it a ground probability of at least ``ground_probability``."""
+    model_path: str = ""
+    ground_probability: float = 0.5
+    _model: object = field(default=None, init=False, repr=False, compare=False)
+
+    name = "hybrid"
+
+    def __post_init__(self):
+        check_number(self, "ground_probability")
+        _require(0.0 < self.ground_probability < 1.0,
+                 f"ground_probability must be between 0 and 1 (got {self.ground_probability})")
+        if not isinstance(self.model_path, (str, os.PathLike)):
+            raise InvalidParameterError(f"model_path must be a file path or empty (got {self.model_path!r})")
+        object.__setattr__(self, "_model", load_hybrid_model(self.model_path))
+
+    @property
+    def model(self):
+        return self._model
+
+    @property
+    def features(self) -> List[str]:
+        return list(self._model.features)
+
+    @property
+    def cell_size_m(self) -> float:
+        return float(self._model.meta.get(CELL_KEY, 1.0))
+
+    def __call__(self, xyz: np.ndarray, steps: Steps | None = None) -> np.ndarray:
+        """Boolean ground mask of the points ``xyz`` (n, 3)."""
+        return self.run(xyz, steps).ground
+
+    def run(self, xyz: np.ndarray, steps: Steps | None = None) -> HybridResult:
+        steps = steps or Steps()
+        X = hybrid_features(xyz, self.features, cell_size_m=self.cell_size_m, steps=steps.sub(0.0, 0.6))
+        column = [int(c) for c in self._model.classes].index(GROUND_CLASS)
+        proba = self._model.predict_proba(X)[:, column].astype(np.float32)
+        steps.report(1.0)
+        return HybridResult(proba >= self.ground_probability, proba)

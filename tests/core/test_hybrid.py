@@ -1,0 +1,181 @@
+"""The learned hybrid ground filter (core/learn/hybrid.py): its features on scenes with known
+geometry, the shipped model, refused models, deterministic training, and its accuracy on generated
+scenes against a trivial baseline and against SMRF."""
+import os
+
+import numpy as np
+import pytest
+
+from groundsieve.core.errors import InputError, InvalidParameterError
+from groundsieve.core.learn.hybrid import (CELL_KEY, DEFAULT_FEATURES, DEFAULT_MODEL, Hybrid, hybrid_features,
+                                           load_hybrid_model, unknown_features)
+from groundsieve.core.learn.model_file import save_model
+from groundsieve.core.learn.rf import ForestParams, train_forest
+from groundsieve.core.metrics import ground_accuracy
+from groundsieve.tests.core.scenes import BOX, plane_scene
+
+
+# -- features ------------------------------------------------------------------------------------
+
+def test_features_on_a_plane_with_a_building():
+    """On a tilted plane with one 15 x 15 m box 10 m high: ground points sit on every ground
+    surface (heights near 0), roof points 10 m above the large-scale ones but not above the
+    smallest opening (2 m is smaller than the roof), and the slope is the plane's."""
+    xyz, truth = plane_scene(seed=1, density=4.0, box=BOX, box_height=10.0, tilt=(0.05, 0.0))
+    names = list(DEFAULT_FEATURES) + ["above_cell_min", "cell_range", "column_rank"]
+    X = hybrid_features(xyz, names)
+    assert X.shape == (len(xyz), len(names)) and X.dtype == np.float32
+    f = {name: X[:, j] for j, name in enumerate(names)}
+    interior = truth & (np.abs(xyz[:, 0] - xyz[:, 0].mean()) < 25) & (np.abs(xyz[:, 1] - xyz[:, 1].mean()) < 25)
+    for name in ("above_smrf", "above_opening_r6", "above_opening_r18"):
+        assert np.median(np.abs(f[name][interior])) < 0.1, name
+    roof = ~truth
+    assert np.median(f["above_smrf"][roof]) == pytest.approx(10.0, abs=0.5)
+    assert np.median(f["above_opening_r18"][roof]) == pytest.approx(10.0, abs=0.5)
+    assert np.median(np.abs(f["above_opening_r2"][roof])) < 0.5      # the roof survives a 2 m opening
+    assert np.median(f["smrf_slope"][interior]) == pytest.approx(0.05, abs=0.01)
+    assert (f["column_rank"] >= 0).all() and (f["column_rank"] <= 1).all()
+    assert (f["above_cell_min"] >= 0).all() and (f["cell_range"] >= f["above_cell_min"] - 1e-6).all()
+
+
+def test_column_features_against_numpy():
+    """above_cell_min, cell_range and column_rank against a plain numpy computation per cell."""
+    rng = np.random.default_rng(3)
+    xyz = np.column_stack([rng.uniform(0, 10, 500) + 500000, rng.uniform(0, 10, 500) + 5400000,
+                           rng.uniform(100, 105, 500)])
+    X = hybrid_features(xyz, ["above_cell_min", "cell_range", "column_rank"], cell_size_m=2.0)
+    col = np.floor(xyz[:, 0] / 2.0)
+    row = np.floor(xyz[:, 1] / 2.0)
+    key = col * 100000 + row
+    for k in np.unique(key)[:20]:
+        m = key == k
+        lo, hi = xyz[m, 2].min(), xyz[m, 2].max()
+        np.testing.assert_allclose(X[m, 0], xyz[m, 2] - lo, atol=1e-4)
+        np.testing.assert_allclose(X[m, 1], hi - lo, atol=1e-4)
+        expect = (xyz[m, 2] - lo) / (hi - lo) if hi > lo else np.zeros(m.sum())
+        np.testing.assert_allclose(X[m, 2], expect, atol=1e-4)
+
+
+def test_unknown_feature_names_are_refused():
+    assert unknown_features(["above_smrf", "above_opening_r2p5", "planarity_r0p6"]) == []
+    assert unknown_features(["intensity", "above_opening_rx"]) == ["intensity", "above_opening_rx"]
+    xyz, _ = plane_scene(seed=0, size=20.0)
+    with pytest.raises(InvalidParameterError, match="intensity"):
+        hybrid_features(xyz, ["above_smrf", "intensity"])
+
+
+def test_input_is_not_modified():
+    xyz, _ = plane_scene(seed=2, size=30.0, box=(5, 15, 5, 15))
+    before = xyz.copy()
+    Hybrid()(xyz)
+    np.testing.assert_array_equal(xyz, before)
+
+
+# -- the model -------------------------------------------------------------------------------------
+
+def test_shipped_model_loads_with_the_default_features():
+    assert os.path.isfile(DEFAULT_MODEL)
+    assert os.path.getsize(DEFAULT_MODEL) < 3_000_000  # small enough to ship
+    model = load_hybrid_model("")
+    assert model.features == list(DEFAULT_FEATURES)
+    assert model.meta[CELL_KEY] == 1.0
+    assert 2 in [int(c) for c in model.classes]
+    h = Hybrid()
+    assert h.features == list(DEFAULT_FEATURES) and h.cell_size_m == 1.0
+
+
+def _small_training_set(names, n=4000, seed=0):
+    xyz, truth = plane_scene(seed=seed, size=50.0, density=2.0, boxes=[(5, 20, 5, 20), (30, 45, 25, 40)])
+    X = hybrid_features(xyz, names)
+    y = np.where(truth, 2, 1).astype(np.uint8)
+    return X[:n], y[:n]
+
+
+def test_a_model_for_other_features_is_refused(tmp_path):
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(200, 2)).astype(np.float32)
+    y = np.where(X[:, 0] > 0, 2, 1)
+    model = train_forest(X, y, ["intensity", "return_number"], ForestParams(n_trees=2), n_jobs=1)
+    path = tmp_path / "rf_model.npz"
+    save_model(model, str(path))
+    with pytest.raises(InputError, match=r"rf_model\.npz.*features the hybrid filter does not compute.*intensity"):
+        Hybrid(model_path=str(path))
+
+
+def test_a_model_without_ground_is_refused(tmp_path):
+    X = np.random.default_rng(1).normal(size=(100, 1)).astype(np.float32)
+    y = np.where(X[:, 0] > 0, 6, 5)
+    model = train_forest(X, y, ["above_smrf"], ForestParams(n_trees=2), n_jobs=1)
+    path = tmp_path / "no_ground.npz"
+    save_model(model, str(path))
+    with pytest.raises(InputError, match=r"no_ground\.npz.*no ground class"):
+        Hybrid(model_path=str(path))
+
+
+def test_missing_model_and_bad_threshold():
+    with pytest.raises(InputError, match="nowhere.npz: no such model file"):
+        Hybrid(model_path="/nowhere.npz")
+    with pytest.raises(InvalidParameterError, match="ground_probability"):
+        Hybrid(ground_probability=1.0)
+
+
+def test_training_is_deterministic_and_the_model_is_usable(tmp_path):
+    """The same data and parameters give the same forest twice (one job, fixed seed); the saved
+    model runs in the filter."""
+    names = ["above_smrf", "above_opening_r6", "column_rank"]
+    X, y = _small_training_set(names)
+    params = ForestParams(n_trees=4, max_depth=8, max_samples=None, min_samples_leaf=5, seed=0)
+    a = train_forest(X, y, names, params, n_jobs=1, meta={CELL_KEY: 1.0})
+    b = train_forest(X, y, names, params, n_jobs=1, meta={CELL_KEY: 1.0})
+    for field in ("roots", "left", "right", "feature", "threshold", "value"):
+        np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
+    path = tmp_path / "mine.npz"
+    save_model(a, str(path))
+    xyz, truth = plane_scene(seed=9, size=50.0, density=2.0, boxes=[(10, 25, 10, 25)])
+    acc = ground_accuracy(Hybrid(model_path=str(path))(xyz), truth)
+    assert acc.total < 0.05, acc
+
+
+# -- accuracy on generated scenes ------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def scenes():
+    from groundsieve.core.synthetic import SceneSpec, make_scene
+    return {"default": make_scene(SceneSpec(size_m=120.0, density_per_m2=5.0, seed=11)),
+            # A kind the model never saw: dense forest on steep hills, no buildings.
+            "steep forest": make_scene(SceneSpec(size_m=120.0, density_per_m2=5.0, seed=12, relief_m=30.0,
+                                                 slope_pct=15.0, trees_per_ha=60.0, shrub_fraction=0.15,
+                                                 buildings_per_ha=0.0))}
+
+
+@pytest.mark.parametrize("kind", ["default", "steep forest"])
+def test_hybrid_beats_a_trivial_baseline_and_stays_near_smrf(scenes, kind):
+    """Against "lowest point of each 1 m cell is ground" (a trivial baseline) and SMRF's defaults:
+    better than the baseline, and at most 1 point of total error worse than SMRF (measured on these
+    scenes: see docs/BENCHMARKS.md "Learned hybrid filter")."""
+    from groundsieve.core.filters.smrf import SMRF
+    scene = scenes[kind]
+    xyz, truth = scene.xyz, scene.ground
+    hybrid = ground_accuracy(Hybrid()(xyz), truth)
+    X = hybrid_features(xyz, ["above_cell_min"])
+    baseline = ground_accuracy(X[:, 0] <= 0.0, truth)
+    smrf = ground_accuracy(SMRF()(xyz), truth)
+    assert hybrid.total < baseline.total, (hybrid, baseline)
+    assert hybrid.total <= smrf.total + 0.01, (hybrid, smrf)
+    assert hybrid.kappa > 0.8
+
+
+def test_rf_feature_matrix_computes_the_hybrid_features(tmp_path):
+    """rftrain/rfclassify's feature_matrix gives the hybrid features (the HYBRID preset), mixed with
+    file attributes, equal to hybrid_features: a model trained on them runs in the hybrid filter."""
+    from groundsieve.core.io import PointCloud
+    from groundsieve.core.learn.rf import PRESETS, feature_matrix
+    assert PRESETS["HYBRID"] == DEFAULT_FEATURES
+    xyz, truth = plane_scene(seed=4, size=40.0, density=2.0, box=(10, 25, 10, 25))
+    n = len(xyz)
+    cloud = PointCloud("mem", xyz[:, 0].copy(), xyz[:, 1].copy(), xyz[:, 2].copy(), np.zeros(n, np.uint8),
+                       np.ones(n, np.uint8), np.ones(n, np.uint8), has_return_info=True)
+    names = list(PRESETS["HYBRID"]) + ["return_number"]
+    X = feature_matrix(cloud, names)
+    np.testing.assert_array_equal(X[:, :-1], hybrid_features(xyz, PRESETS["HYBRID"]))
+    assert (X[:, -1] == 1).all()
