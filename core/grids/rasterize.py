@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, InvalidParameterError
 from .spec import GridSpec
 
 
@@ -51,7 +51,8 @@ def thin_for_grid(x, y, z, grid: GridSpec, points_per_cell: int):
     return order[first]
 
 
-def tin_dtm(x, y, z, grid: GridSpec, *, fill_outside: bool = False, points_per_cell: int = 4) -> np.ndarray:
+def tin_dtm(x, y, z, grid: GridSpec, *, fill_outside: bool = False, points_per_cell: int = 4,
+            triangulator: str = "sweep") -> np.ndarray:
     """DTM of ``grid`` by linear interpolation on the Delaunay triangulation of the
     points (normally the ground points). Cells whose centre is outside the convex
     hull are NaN, or with ``fill_outside`` take the value of the nearest filled cell.
@@ -62,11 +63,18 @@ def tin_dtm(x, y, z, grid: GridSpec, *, fill_outside: bool = False, points_per_c
     quarter cell of it, as with all points, at a fraction of the triangulation's cost (qhull
     takes about 10 µs a point). ``points_per_cell=0`` triangulates every point.
     Points with the same x, y are reduced to the lowest one before triangulating.
+
+    ``triangulator`` is ``"sweep"`` (the numba sweep-hull Delaunay of :mod:`.triangulate`,
+    several times faster) or ``"qhull"`` (scipy's). Both give the Delaunay triangulation, so
+    the same surface wherever it is unique; where four or more points are cocircular (regular
+    grids) a square may be split along the other diagonal.
     """
     from scipy.ndimage import distance_transform_edt
-    from scipy.spatial import Delaunay, QhullError
 
     from ._kernels import _rasterize_tin_kernel
+    from .triangulate import TRIANGULATORS, delaunay
+    if triangulator not in TRIANGULATORS:
+        raise InvalidParameterError(f"triangulator must be one of {', '.join(TRIANGULATORS)} (got {triangulator!r})")
     x, y, z = _xyz(x, y, z)
     if x.size == 0:
         raise InputError("no ground points to make a DTM from")
@@ -81,15 +89,10 @@ def tin_dtm(x, y, z, grid: GridSpec, *, fill_outside: bool = False, points_per_c
         keep = np.ones(xs.size, dtype=bool)
         keep[1:] = (xs[1:] != xs[:-1]) | (ys[1:] != ys[:-1])
         xs, ys, zs = xs[keep], ys[keep], zs[keep]
-    # Relative coordinates for qhull's precision.
+    # Relative coordinates for precision.
     ox, oy = float(xs.min()), float(ys.min())
-    triangles = None
-    if xs.size >= 3:
-        try:
-            triangles = Delaunay(np.column_stack([xs - ox, ys - oy])).simplices.astype(np.int64)
-        except QhullError:
-            triangles = None  # collinear points: no triangle
-    if triangles is not None and triangles.size:
+    triangles = delaunay(xs, ys, method=triangulator)  # (0, 3) when collinear
+    if triangles.size:
         _rasterize_tin_kernel(xs - ox, ys - oy, zs, np.ascontiguousarray(triangles),
                               grid.x0 - ox, grid.top - oy, grid.cell, out)
     else:
