@@ -51,6 +51,17 @@ def thin_for_grid(x, y, z, grid: GridSpec, points_per_cell: int):
     return order[first]
 
 
+def rasterize_tin(x, y, z, triangles, grid: GridSpec, out: np.ndarray) -> np.ndarray:
+    """Write into ``out`` (of ``grid.shape``) the plane of the triangle of ``triangles`` (rows of
+    point indices) holding each cell centre; cells in no triangle keep their value."""
+    from ._kernels import _rasterize_tin_kernel
+    x, y, z = _xyz(x, y, z)
+    ox, oy = float(x.min()), float(y.min())  # relative coordinates for precision
+    _rasterize_tin_kernel(x - ox, y - oy, z, np.ascontiguousarray(triangles, dtype=np.int64),
+                          grid.x0 - ox, grid.top - oy, grid.cell, out)
+    return out
+
+
 def tin_dtm(x, y, z, grid: GridSpec, *, fill_outside: bool = False, points_per_cell: int = 4,
             triangulator: str = "sweep") -> np.ndarray:
     """DTM of ``grid`` by linear interpolation on the Delaunay triangulation of the
@@ -71,7 +82,6 @@ def tin_dtm(x, y, z, grid: GridSpec, *, fill_outside: bool = False, points_per_c
     """
     from scipy.ndimage import distance_transform_edt
 
-    from ._kernels import _rasterize_tin_kernel
     from .triangulate import TRIANGULATORS, delaunay
     if triangulator not in TRIANGULATORS:
         raise InvalidParameterError(f"triangulator must be one of {', '.join(TRIANGULATORS)} (got {triangulator!r})")
@@ -89,12 +99,9 @@ def tin_dtm(x, y, z, grid: GridSpec, *, fill_outside: bool = False, points_per_c
         keep = np.ones(xs.size, dtype=bool)
         keep[1:] = (xs[1:] != xs[:-1]) | (ys[1:] != ys[:-1])
         xs, ys, zs = xs[keep], ys[keep], zs[keep]
-    # Relative coordinates for precision.
-    ox, oy = float(xs.min()), float(ys.min())
     triangles = delaunay(xs, ys, method=triangulator)  # (0, 3) when collinear
     if triangles.size:
-        _rasterize_tin_kernel(xs - ox, ys - oy, zs, np.ascontiguousarray(triangles),
-                              grid.x0 - ox, grid.top - oy, grid.cell, out)
+        rasterize_tin(xs, ys, zs, triangles, grid, out)
     else:
         # Fewer than three distinct positions, or all on a line: the cells holding them.
         out[grid.row_of(ys), grid.col_of(xs)] = zs
