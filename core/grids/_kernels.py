@@ -181,3 +181,42 @@ def _cell_lookup_kernel(x, y, grid, x0, top, cell, out):
     for k in range(x.shape[0]):
         r, c = _cell_of(x[k], y[k], x0, top, cell, nrows, ncols)
         out[k] = grid[r, c]
+
+
+@njit(cache=True, nogil=True)
+def _thin_dense_kernel(x, y, z, x0, top, sub, nrows_sub, ncols_sub, best):
+    """For each sub-cell (row-major in ``best``, -1 = empty), the index of the point nearest
+    its centre, the lowest on a tie, then the first. False when a point falls off the grid
+    (``best`` then incomplete)."""
+    for i in range(x.shape[0]):
+        col = math.floor((x[i] - x0) / sub)
+        row = math.floor((top - y[i]) / sub)
+        if row < 0 or col < 0 or row >= nrows_sub or col >= ncols_sub:
+            return False
+        key = int(row) * ncols_sub + int(col)
+        j = best[key]
+        if j == -1:
+            best[key] = i
+            continue
+        cx = x0 + (col + 0.5) * sub
+        cy = top - (row + 0.5) * sub
+        di = (x[i] - cx) ** 2 + (cy - y[i]) ** 2
+        dj = (x[j] - cx) ** 2 + (cy - y[j]) ** 2
+        if di < dj or (di == dj and (z[i] < z[j] or (z[i] == z[j] and i < j))):
+            best[key] = i
+    return True
+
+
+@njit(cache=True, nogil=True)
+def _compact_kernel(best):
+    n = 0
+    for k in range(best.shape[0]):
+        if best[k] != -1:
+            n += 1
+    out = np.empty(n, dtype=np.int64)
+    n = 0
+    for k in range(best.shape[0]):
+        if best[k] != -1:
+            out[n] = best[k]
+            n += 1
+    return out

@@ -37,8 +37,22 @@ def thin_for_grid(x, y, z, grid: GridSpec, points_per_cell: int):
     """Indices of at most ``points_per_cell`` points per cell of ``grid`` (a square number is
     used: 1, 4, 9, ...): each cell is split into sub-cells and the point nearest each sub-cell
     centre is kept (the lowest on a tie). The result is ordered sub-cell by sub-cell, row-major,
-    which also speeds up the triangulation."""
+    which also speeds up the triangulation.
+
+    When the sub-cells are not many more than the points, one pass of a numba kernel over a
+    sub-cell array does it (:func:`_thin_sorted` otherwise, a sort: same result)."""
+    from ._kernels import _compact_kernel, _thin_dense_kernel
     k = max(1, int(np.floor(np.sqrt(points_per_cell))))
+    x, y, z = _xyz(x, y, z)
+    nrows_sub, ncols_sub = grid.nrows * k, grid.ncols * k
+    if nrows_sub * ncols_sub <= 4 * x.size + 1_000_000:
+        best = np.full(nrows_sub * ncols_sub, -1, dtype=np.int64)
+        if _thin_dense_kernel(x, y, z, grid.x0, grid.top, grid.cell / k, nrows_sub, ncols_sub, best):
+            return _compact_kernel(best)
+    return _thin_sorted(x, y, z, grid, k)
+
+
+def _thin_sorted(x, y, z, grid: GridSpec, k: int):
     sub = grid.cell / k
     col = np.floor((x - grid.x0) / sub)
     row = np.floor((grid.top - y) / sub)

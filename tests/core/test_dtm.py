@@ -170,3 +170,20 @@ def test_cell_min_and_mean():
     mean, count = cell_mean(x, y, z, g)
     np.testing.assert_array_equal(mean, [[2.0, np.nan], [np.nan, 8.0]])
     np.testing.assert_array_equal(count, [[2, 0], [0, 2]])
+
+
+@pytest.mark.parametrize("ppc", [1, 4, 9])
+def test_thinning_kernel_equals_the_sort(ppc):
+    """The one-pass kernel of thin_for_grid keeps the same points in the same order as the
+    sort it replaces, ties included (repeated positions with other heights, points on sub-cell
+    edges and at equal distances from a centre)."""
+    from groundsieve.core.grids.rasterize import _thin_sorted, thin_for_grid
+    rng = np.random.default_rng(ppc)
+    x = X0 + np.r_[rng.uniform(0, 60, 3000), np.repeat(rng.uniform(0, 60, 200), 3), np.arange(0, 60, 0.25)]
+    y = Y0 + np.r_[rng.uniform(0, 40, 3000), np.repeat(rng.uniform(0, 40, 200), 3), np.full(240, 20.0)]
+    z = np.r_[rng.normal(250, 1, 3000), rng.choice([250.0, 251.0], 600), np.full(240, 250.0)]
+    grid = GridSpec.covering(x, y, 0.5)
+    k = int(np.sqrt(ppc))
+    kept = thin_for_grid(x, y, z, grid, ppc)
+    np.testing.assert_array_equal(kept, _thin_sorted(x, y, z, grid, k))
+    assert kept.size < x.size
