@@ -202,15 +202,29 @@ def delaunay_kernel(px, py):
     for i in range(n):
         dist[i] = (px[i] - cx) ** 2 + (py[i] - cy) ** 2
     order = np.argsort(dist)
+    # Work on the points renumbered in insertion order: each new point, and the triangles
+    # made just before, are then next to each other in memory.
+    rank = np.empty(n, dtype=np.int64)
+    sx = np.empty(n, dtype=np.float64)
+    sy = np.empty(n, dtype=np.float64)
+    for k in range(n):
+        rank[order[k]] = k
+        sx[k] = px[order[k]]
+        sy[k] = py[order[k]]
+    px = sx
+    py = sy
+    i0 = rank[i0]
+    i1 = rank[i1]
+    i2 = rank[i2]
 
     hash_size = max(1, int(math.ceil(math.sqrt(n))))
-    hull_next = np.empty(n, dtype=np.int64)
-    hull_prev = np.empty(n, dtype=np.int64)
-    hull_tri = np.empty(n, dtype=np.int64)
+    hull_next = np.empty(n, dtype=np.int32)
+    hull_prev = np.empty(n, dtype=np.int32)
+    hull_tri = np.empty(n, dtype=np.int32)
     hull_hash = np.full(hash_size, -1, dtype=np.int64)
     max_t = max(2 * n - 5, 1)
-    tri = np.empty(3 * max_t, dtype=np.int64)
-    twin = np.full(3 * max_t, -1, dtype=np.int64)
+    tri = np.empty(3 * max_t, dtype=np.int32)
+    twin = np.full(3 * max_t, -1, dtype=np.int32)
     stack = np.empty(1024, dtype=np.int64)
 
     hull_next[i0] = i1
@@ -230,8 +244,7 @@ def delaunay_kernel(px, py):
 
     xp = np.nan
     yp = np.nan
-    for k in range(n):
-        i = order[k]
+    for i in range(n):
         x = px[i]
         y = py[i]
         if x == xp and y == yp:
@@ -296,7 +309,7 @@ def delaunay_kernel(px, py):
 
     out = np.empty((nt, 3), dtype=np.int64)
     for t in range(nt):
-        out[t, 0] = tri[3 * t]
-        out[t, 1] = tri[3 * t + 1]
-        out[t, 2] = tri[3 * t + 2]
+        out[t, 0] = order[tri[3 * t]]
+        out[t, 1] = order[tri[3 * t + 1]]
+        out[t, 2] = order[tri[3 * t + 2]]
     return out

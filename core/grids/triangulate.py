@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import InvalidParameterError
+from ..errors import InputError, InvalidParameterError
 
 TRIANGULATORS = ("sweep", "qhull")
+#: the sweep kernel numbers half-edges (6 per point) in int32
+MAX_SWEEP_POINTS = (2 ** 31 - 1) // 6 - 1
 
 
 def delaunay(x, y, *, method: str = "sweep") -> np.ndarray:
@@ -38,5 +40,8 @@ def delaunay(x, y, *, method: str = "sweep") -> np.ndarray:
         cw = area2 < 0
         tri[cw] = tri[cw][:, [0, 2, 1]]
         return np.ascontiguousarray(tri)
+    if x.size > MAX_SWEEP_POINTS:
+        raise InputError(f"{x.size:,} points are too many to triangulate at once (at most "
+                         f"{MAX_SWEEP_POINTS:,}): use tiles or fewer points per cell")
     from ._delaunay import delaunay_kernel
     return delaunay_kernel(rx, ry)
