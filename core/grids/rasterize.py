@@ -65,14 +65,21 @@ def _thin_sorted(x, y, z, grid: GridSpec, k: int):
     return order[first]
 
 
-def rasterize_tin(x, y, z, triangles, grid: GridSpec, out: np.ndarray) -> np.ndarray:
+def rasterize_tin(x, y, z, triangles, grid: GridSpec, out: np.ndarray, *, parallel: bool = True,
+                  band_rows: int = 64) -> np.ndarray:
     """Write into ``out`` (of ``grid.shape``) the plane of the triangle of ``triangles`` (rows of
-    point indices) holding each cell centre; cells in no triangle keep their value."""
-    from ._kernels import _rasterize_tin_kernel
+    point indices) holding each cell centre; cells in no triangle keep their value (a centre on
+    a shared edge takes the last triangle's). ``parallel`` spreads bands of ``band_rows`` rows
+    over numba's threads, with the same result as the serial kernel."""
+    from ._kernels import _rasterize_tin_bands_kernel, _rasterize_tin_kernel
     x, y, z = _xyz(x, y, z)
     ox, oy = float(x.min()), float(y.min())  # relative coordinates for precision
-    _rasterize_tin_kernel(x - ox, y - oy, z, np.ascontiguousarray(triangles, dtype=np.int64),
-                          grid.x0 - ox, grid.top - oy, grid.cell, out)
+    tri = np.ascontiguousarray(triangles, dtype=np.int64)
+    if parallel:
+        _rasterize_tin_bands_kernel(x - ox, y - oy, z, tri, grid.x0 - ox, grid.top - oy, grid.cell, out,
+                                    max(1, int(band_rows)))
+    else:
+        _rasterize_tin_kernel(x - ox, y - oy, z, tri, grid.x0 - ox, grid.top - oy, grid.cell, out)
     return out
 
 

@@ -187,3 +187,23 @@ def test_thinning_kernel_equals_the_sort(ppc):
     kept = thin_for_grid(x, y, z, grid, ppc)
     np.testing.assert_array_equal(kept, _thin_sorted(x, y, z, grid, k))
     assert kept.size < x.size
+
+
+@pytest.mark.parametrize("band", [1, 7, 64])
+def test_parallel_rasterization_equals_serial(band):
+    """Bands of rows in parallel give bit for bit the serial raster, shared edges included
+    (cell centres on a regular point grid's edges)."""
+    from groundsieve.core.grids.rasterize import rasterize_tin
+    from groundsieve.core.grids.triangulate import delaunay
+    rng = np.random.default_rng(band)
+    x = np.r_[rng.uniform(0, 80, 2000), np.repeat(np.arange(0, 20.0, 1.0), 20)] + X0
+    y = np.r_[rng.uniform(0, 60, 2000), np.tile(np.arange(0, 20.0, 1.0), 20)] + Y0
+    xy = np.unique(np.column_stack([x, y]), axis=0)
+    x, y = xy[:, 0], xy[:, 1]
+    z = np.sin(x / 3) + np.cos(y / 4) + 250
+    grid = GridSpec.covering(x, y, 0.5)
+    tri = delaunay(x, y)
+    serial = rasterize_tin(x, y, z, tri, grid, np.full(grid.shape, np.nan), parallel=False)
+    banded = rasterize_tin(x, y, z, tri, grid, np.full(grid.shape, np.nan), band_rows=band)
+    assert np.isfinite(serial).mean() > 0.9
+    np.testing.assert_array_equal(banded, serial)
