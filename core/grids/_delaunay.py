@@ -142,6 +142,55 @@ def _add_triangle(tri, twin, t, i0, i1, i2, a, b, c):
 
 
 @njit(cache=True, nogil=True)
+def _sort_by_distance(dist):
+    """Indices ordering ``dist`` ascending (ties by index): a counting sort into n buckets
+    of equal width, then an insertion sort inside each. Squared distances from a point inside
+    the data are close to uniform (area grows with r²), so buckets hold one or two points and
+    this is O(n) where a comparison sort took a sixth of the triangulation's time at 5 M.
+    A crowded bucket is merge-sorted instead, so a skewed input costs O(n log n), not O(n²)."""
+    n = dist.shape[0]
+    dmax = dist.max()
+    order = np.empty(n, dtype=np.int64)
+    if not dmax > 0.0:
+        for i in range(n):
+            order[i] = i
+        return order
+    scale = n / dmax
+    start = np.zeros(n + 1, dtype=np.int64)
+    bucket = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        b = min(int(dist[i] * scale), n - 1)
+        bucket[i] = b
+        start[b + 1] += 1
+    for b in range(n):
+        start[b + 1] += start[b]
+    for i in range(n):  # ascending i: stable, so ties stay by index
+        b = bucket[i]
+        order[start[b]] = i
+        start[b] += 1
+    lo = 0
+    for b in range(n):
+        hi = start[b]  # start[b] is now the end of bucket b
+        if hi - lo > 32:  # a crowded bucket (e.g. one far outlier squeezes the rest): merge sort
+            idx = order[lo:hi].copy()
+            sub = np.argsort(dist[idx], kind="mergesort")
+            for k in range(hi - lo):
+                order[lo + k] = idx[sub[k]]
+            lo = hi
+            continue
+        for k in range(lo + 1, hi):
+            v = order[k]
+            dv = dist[v]
+            j = k - 1
+            while j >= lo and dist[order[j]] > dv:
+                order[j + 1] = order[j]
+                j -= 1
+            order[j + 1] = v
+        lo = hi
+    return order
+
+
+@njit(cache=True, nogil=True)
 def delaunay_kernel(px, py):
     """(m, 3) counter-clockwise triangles of the Delaunay triangulation of distinct points
     ``px, py`` (best relative to the data's corner); (0, 3) when they are all on a line."""
@@ -201,7 +250,7 @@ def delaunay_kernel(px, py):
     dist = np.empty(n, dtype=np.float64)
     for i in range(n):
         dist[i] = (px[i] - cx) ** 2 + (py[i] - cy) ** 2
-    order = np.argsort(dist)
+    order = _sort_by_distance(dist)
     # Work on the points renumbered in insertion order: each new point, and the triangles
     # made just before, are then next to each other in memory.
     rank = np.empty(n, dtype=np.int64)

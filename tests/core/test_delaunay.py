@@ -196,3 +196,14 @@ def test_tin_dtm_unknown_triangulator_is_refused():
     grid = GridSpec.covering(x, y, 1.0)
     with pytest.raises(InvalidParameterError, match="triangulator"):
         tin_dtm(x, y, surface(x, y), grid, triangulator="delaunator")
+
+
+@pytest.mark.parametrize("kind", ["random", "ties", "skewed", "outlier"])
+def test_bucket_sort_orders_like_a_stable_sort(kind):
+    from groundsieve.core.grids._delaunay import _sort_by_distance
+    rng = np.random.default_rng(7)
+    d = {"random": rng.uniform(0, 50, 5000),
+         "ties": rng.integers(0, 30, 5000).astype(float),   # many equal keys, and zeros
+         "skewed": rng.exponential(1.0, 5000) ** 4,            # most in the first buckets
+         "outlier": np.r_[rng.uniform(0, 1, 4999), 1e9]}[kind]  # all but one in bucket 0
+    np.testing.assert_array_equal(_sort_by_distance(d), np.argsort(d, kind="stable"))
