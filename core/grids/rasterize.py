@@ -65,12 +65,15 @@ def _thin_sorted(x, y, z, grid: GridSpec, k: int):
     return order[first]
 
 
-def rasterize_tin(x, y, z, triangles, grid: GridSpec, out: np.ndarray, *, parallel: bool = True,
+def rasterize_tin(x, y, z, triangles, grid: GridSpec, out: np.ndarray, *, parallel: bool = False,
                   band_rows: int = 64) -> np.ndarray:
     """Write into ``out`` (of ``grid.shape``) the plane of the triangle of ``triangles`` (rows of
     point indices) holding each cell centre; cells in no triangle keep their value (a centre on
     a shared edge takes the last triangle's). ``parallel`` spreads bands of ``band_rows`` rows
-    over numba's threads, with the same result as the serial kernel."""
+    over numba's threads, with the same result as the serial kernel. Off by default: on this
+    2-core machine shared with other jobs the banded kernel measured 0.78 s against 0.38 s
+    serial for a 0.5 m DTM of 2.5 M points (its serial bucketing of the triangles costs more than
+    the second core gives back); see docs/BENCHMARKS.md "Fast DTM"."""
     from ._kernels import _rasterize_tin_bands_kernel, _rasterize_tin_kernel
     x, y, z = _xyz(x, y, z)
     ox, oy = float(x.min()), float(y.min())  # relative coordinates for precision

@@ -204,6 +204,6 @@ def test_parallel_rasterization_equals_serial(band):
     grid = GridSpec.covering(x, y, 0.5)
     tri = delaunay(x, y)
     serial = rasterize_tin(x, y, z, tri, grid, np.full(grid.shape, np.nan), parallel=False)
-    banded = rasterize_tin(x, y, z, tri, grid, np.full(grid.shape, np.nan), band_rows=band)
+    banded = rasterize_tin(x, y, z, tri, grid, np.full(grid.shape, np.nan), parallel=True, band_rows=band)
     assert np.isfinite(serial).mean() > 0.9
     np.testing.assert_array_equal(banded, serial)
