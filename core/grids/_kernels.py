@@ -181,3 +181,112 @@ def _cell_lookup_kernel(x, y, grid, x0, top, cell, out):
     for k in range(x.shape[0]):
         r, c = _cell_of(x[k], y[k], x0, top, cell, nrows, ncols)
         out[k] = grid[r, c]
+
+
+@njit(cache=True, nogil=True)
+def _thin_dense_kernel(x, y, z, x0, top, sub, nrows_sub, ncols_sub, best):
+    """For each sub-cell (row-major in ``best``, -1 = empty), the index of the point nearest
+    its centre, the lowest on a tie, then the first. False when a point falls off the grid
+    (``best`` then incomplete)."""
+    for i in range(x.shape[0]):
+        col = math.floor((x[i] - x0) / sub)
+        row = math.floor((top - y[i]) / sub)
+        if row < 0 or col < 0 or row >= nrows_sub or col >= ncols_sub:
+            return False
+        key = int(row) * ncols_sub + int(col)
+        j = best[key]
+        if j == -1:
+            best[key] = i
+            continue
+        cx = x0 + (col + 0.5) * sub
+        cy = top - (row + 0.5) * sub
+        di = (x[i] - cx) ** 2 + (cy - y[i]) ** 2
+        dj = (x[j] - cx) ** 2 + (cy - y[j]) ** 2
+        if di < dj or (di == dj and (z[i] < z[j] or (z[i] == z[j] and i < j))):
+            best[key] = i
+    return True
+
+
+@njit(cache=True, nogil=True)
+def _compact_kernel(best):
+    n = 0
+    for k in range(best.shape[0]):
+        if best[k] != -1:
+            n += 1
+    out = np.empty(n, dtype=np.int64)
+    n = 0
+    for k in range(best.shape[0]):
+        if best[k] != -1:
+            out[n] = best[k]
+            n += 1
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _triangle_rows(px, py, simplices, top, cell, nrows):
+    """First and last grid row whose cell centres a triangle's box spans (first > last: none)."""
+    m = simplices.shape[0]
+    r_lo = np.empty(m, dtype=np.int64)
+    r_hi = np.empty(m, dtype=np.int64)
+    for t in range(m):
+        ya = py[simplices[t, 0]]
+        yb = py[simplices[t, 1]]
+        yc = py[simplices[t, 2]]
+        ymin = min(ya, min(yb, yc))
+        ymax = max(ya, max(yb, yc))
+        r_lo[t] = max(int(math.ceil((top - ymax) / cell - 0.5)), 0)
+        r_hi[t] = min(int(math.floor((top - ymin) / cell - 0.5)), nrows - 1)
+    return r_lo, r_hi
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _rasterize_tin_bands_kernel(px, py, pz, simplices, x0, top, cell, out, band):
+    """:func:`_rasterize_tin_kernel` in parallel over bands of ``band`` rows: each band takes
+    the triangles reaching it in the serial order, so every cell gets the same value as the
+    serial kernel (the last triangle holding its centre)."""
+    nrows, ncols = out.shape
+    m = simplices.shape[0]
+    r_lo, r_hi = _triangle_rows(px, py, simplices, top, cell, nrows)
+    nb = (nrows + band - 1) // band
+    start = np.zeros(nb + 1, dtype=np.int64)
+    for t in range(m):
+        if r_lo[t] <= r_hi[t]:
+            for b in range(r_lo[t] // band, r_hi[t] // band + 1):
+                start[b + 1] += 1
+    for b in range(nb):
+        start[b + 1] += start[b]
+    fill = start[:-1].copy()
+    members = np.empty(start[nb], dtype=np.int64)
+    for t in range(m):
+        if r_lo[t] <= r_hi[t]:
+            for b in range(r_lo[t] // band, r_hi[t] // band + 1):
+                members[fill[b]] = t
+                fill[b] += 1
+    for b in prange(nb):
+        row0 = b * band
+        row1 = min(row0 + band, nrows) - 1
+        for k in range(start[b], start[b + 1]):
+            t = members[k]
+            i0 = simplices[t, 0]
+            i1 = simplices[t, 1]
+            i2 = simplices[t, 2]
+            xa, ya, za = px[i0], py[i0], pz[i0]
+            xb, yb, zb = px[i1], py[i1], pz[i1]
+            xc, yc, zc = px[i2], py[i2], pz[i2]
+            det = (yb - yc) * (xa - xc) + (xc - xb) * (ya - yc)
+            if det == 0.0:
+                continue
+            xmin = min(xa, min(xb, xc))
+            xmax = max(xa, max(xb, xc))
+            c_lo = max(int(math.ceil((xmin - x0) / cell - 0.5)), 0)
+            c_hi = min(int(math.floor((xmax - x0) / cell - 0.5)), ncols - 1)
+            eps = -1e-9
+            for r in range(max(r_lo[t], row0), min(r_hi[t], row1) + 1):
+                yy = top - (r + 0.5) * cell
+                for c in range(c_lo, c_hi + 1):
+                    xx = x0 + (c + 0.5) * cell
+                    l1 = ((yb - yc) * (xx - xc) + (xc - xb) * (yy - yc)) / det
+                    l2 = ((yc - ya) * (xx - xc) + (xa - xc) * (yy - yc)) / det
+                    l3 = 1.0 - l1 - l2
+                    if l1 >= eps and l2 >= eps and l3 >= eps:
+                        out[r, c] = l1 * za + l2 * zb + l3 * zc

@@ -170,3 +170,40 @@ def test_cell_min_and_mean():
     mean, count = cell_mean(x, y, z, g)
     np.testing.assert_array_equal(mean, [[2.0, np.nan], [np.nan, 8.0]])
     np.testing.assert_array_equal(count, [[2, 0], [0, 2]])
+
+
+@pytest.mark.parametrize("ppc", [1, 4, 9])
+def test_thinning_kernel_equals_the_sort(ppc):
+    """The one-pass kernel of thin_for_grid keeps the same points in the same order as the
+    sort it replaces, ties included (repeated positions with other heights, points on sub-cell
+    edges and at equal distances from a centre)."""
+    from groundsieve.core.grids.rasterize import _thin_sorted, thin_for_grid
+    rng = np.random.default_rng(ppc)
+    x = X0 + np.r_[rng.uniform(0, 60, 3000), np.repeat(rng.uniform(0, 60, 200), 3), np.arange(0, 60, 0.25)]
+    y = Y0 + np.r_[rng.uniform(0, 40, 3000), np.repeat(rng.uniform(0, 40, 200), 3), np.full(240, 20.0)]
+    z = np.r_[rng.normal(250, 1, 3000), rng.choice([250.0, 251.0], 600), np.full(240, 250.0)]
+    grid = GridSpec.covering(x, y, 0.5)
+    k = int(np.sqrt(ppc))
+    kept = thin_for_grid(x, y, z, grid, ppc)
+    np.testing.assert_array_equal(kept, _thin_sorted(x, y, z, grid, k))
+    assert kept.size < x.size
+
+
+@pytest.mark.parametrize("band", [1, 7, 64])
+def test_parallel_rasterization_equals_serial(band):
+    """Bands of rows in parallel give bit for bit the serial raster, shared edges included
+    (cell centres on a regular point grid's edges)."""
+    from groundsieve.core.grids.rasterize import rasterize_tin
+    from groundsieve.core.grids.triangulate import delaunay
+    rng = np.random.default_rng(band)
+    x = np.r_[rng.uniform(0, 80, 2000), np.repeat(np.arange(0, 20.0, 1.0), 20)] + X0
+    y = np.r_[rng.uniform(0, 60, 2000), np.tile(np.arange(0, 20.0, 1.0), 20)] + Y0
+    xy = np.unique(np.column_stack([x, y]), axis=0)
+    x, y = xy[:, 0], xy[:, 1]
+    z = np.sin(x / 3) + np.cos(y / 4) + 250
+    grid = GridSpec.covering(x, y, 0.5)
+    tri = delaunay(x, y)
+    serial = rasterize_tin(x, y, z, tri, grid, np.full(grid.shape, np.nan), parallel=False)
+    banded = rasterize_tin(x, y, z, tri, grid, np.full(grid.shape, np.nan), parallel=True, band_rows=band)
+    assert np.isfinite(serial).mean() > 0.9
+    np.testing.assert_array_equal(banded, serial)
