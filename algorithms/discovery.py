@@ -22,6 +22,7 @@ TAGS = {
     "evc": FILTER_TAGS + ("evc", "photogrammetry", "low vegetation", "coefficient of variation", "fan"),
     "evcrasters": FILTER_TAGS + ("evc", "photogrammetry", "low vegetation", "raster", "coefficient of variation",
                                  "fan"),
+    "hybrid": FILTER_TAGS + ("hybrid", "learned", "machine learning", "random forest"),
     "features": ("features", "eigen", "geometric features", "verticality", "planarity", "eigenentropy",
                  "classification", "machine learning"),
     "rftrain": ("random forest", "train", "training", "machine learning", "classification", "classify",
@@ -43,6 +44,8 @@ SHORT = {
            "coefficient of variation (Fan et al. 2023).",
     "evcrasters": "The multiscale EVC filter with its intermediate rasters (mean elevations, difference, EVC, "
                   "classes) as GeoTIFFs.",
+    "hybrid": "Learned ground filter: a Random Forest on heights above morphological ground "
+              "surfaces; works on x, y, z alone with the shipped model.",
     "features": "Adds per-point geometric features (verticality, planarity, eigenentropy, ...) to a LAS/LAZ "
                 "as extra dimensions.",
     "rftrain": "Trains a Random Forest point classifier on a labelled LAS/LAZ; writes the model and an "

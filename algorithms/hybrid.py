@@ -26,7 +26,7 @@ clouds.</p>
 <h3>Parameters</h3>
 <p><b>Model file</b> (optional): a model trained on the hybrid features (.npz); empty = the model
 shipped with the plugin, trained on the ISPRS filter-test samples 11, 21, 23, 31, 41, 51, 52 and 54
-(its leave-one-sample-out errors are in docs/BENCHMARKS.md). A model trained on other features is
+(its leave-one-sample-out errors are in <a href="https://github.com/groundsieve/groundsieve/blob/main/docs/BENCHMARKS.md">the benchmarks</a>). A model trained on other features is
 refused.
 <b>Ground probability threshold</b>: a point is ground when the forest gives it at least this
 probability of being ground (0.5); raise it for fewer non-ground points in the ground, lower it for
