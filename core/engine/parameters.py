@@ -8,8 +8,11 @@ settings: the command line offers them too (``--low-outlier-slope``), the toolbo
 """
 from __future__ import annotations
 
+import ast
 import dataclasses
+import functools
 import importlib
+import os
 from dataclasses import dataclass
 from typing import Dict, List, Optional, Sequence, Tuple
 
@@ -154,3 +157,19 @@ def field_type(name: str, field: str):
     """bool, int, float or str, from the field's default."""
     value = default(name, field)
     return type(value) if isinstance(value, (bool, int, float, str)) else str
+
+
+@functools.lru_cache(maxsize=None)
+def source_defaults(name: str) -> Dict[str, object]:
+    """The filter dataclass's defaults read from its source (``field: type = value`` lines of its
+    class), without importing it: the Processing dialog is built where numpy or numba may be
+    missing (the plugin then loads and says what to install). tests check them against the class."""
+    module, cls, _params = FILTERS[name]
+    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "filters", module + ".py")
+    with open(path, encoding="utf-8") as f:
+        tree = ast.parse(f.read())
+    for node in tree.body:
+        if isinstance(node, ast.ClassDef) and node.name == cls:
+            return {stmt.target.id: ast.literal_eval(stmt.value) for stmt in node.body
+                    if isinstance(stmt, ast.AnnAssign) and isinstance(stmt.target, ast.Name) and stmt.value is not None}
+    raise KeyError(f"no class {cls} in {path}")

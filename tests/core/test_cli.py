@@ -88,3 +88,11 @@ def test_python_m_groundsieve_runs_without_qgis_and_without_dask(scene, tmp_path
                           cwd=PLUGINS, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert "IMPORTED []" in done.stdout and "ground." in done.stderr
+
+
+@pytest.mark.parametrize("name", list(P.FILTERS))
+def test_defaults_read_without_importing_the_filter_are_the_filter_s(name):
+    """The dialog reads the defaults from the filter's source (no numpy needed to list the
+    algorithms); they must be the dataclass's."""
+    assert P.source_defaults(name) == {f.name: f.default for f in P.filter_fields(name)}
+    assert {p.field for p in P.params(name)} <= set(P.source_defaults(name))
