@@ -110,6 +110,7 @@ def test_a_killed_worker_changes_nothing(survey, tmp_path):
             cl.run_jobs = real_run_jobs
         killer.join()
     assert killed, "no worker was killed: the test did not test a failure"
+    assert killed[0][2] < ref.tiles, "the worker was killed after the last tile: not mid-run"
     assert run.tiles == ref.tiles and run.ground_count == ref.ground_count
     assert np.array_equal(laspy.read(tmp_path / "dask.laz").classification,
                           laspy.read(tmp_path / "ref.laz").classification)
@@ -134,6 +135,15 @@ def test_a_worker_that_cannot_see_the_path_is_named(tmp_path):
         with pytest.raises(ClusterError, match=r"Dask worker tcp://.* cannot see /nowhere/survey\.laz"):
             check_workers(c.client, [str(tmp_path), "/nowhere/survey.laz"])
         assert check_workers(c.client, [str(tmp_path)]) == 1
+
+
+@needs_dask
+def test_a_worker_with_another_groundsieve_version_is_refused(tmp_path, monkeypatch):
+    from groundsieve.core.engine import cluster as cl
+    with cl.Cluster("local:1") as c:
+        monkeypatch.setattr(cl, "package_version", lambda: "9.9.9")
+        with pytest.raises(cl.ClusterError, match=r"Dask worker tcp://.* runs GroundSieve .*, this client 9\.9\.9"):
+            cl.check_workers(c.client, [str(tmp_path)])
 
 
 def test_scheduler_addresses_are_checked_without_dask():
