@@ -45,7 +45,9 @@ qgis_process, threads in the desktop); their temporary files go to the <i>Workin
 removed at the end. A run killed or failed midway resumes when started again with the same inputs and
 parameters, skipping the tiles done (after a failure only when you chose the working folder). With several input files the output names a .vpc and
 the classified files (same names as the inputs) go into a folder of the same name beside it. The DTM is
-one seamless cloud-optimised GeoTIFF over the whole survey. The ground points layer and the filter's
+one seamless cloud-optimised GeoTIFF over the whole survey. <i>Dask scheduler address</i> (advanced; needs the Python
+package dask[distributed]): the tiles run on a Dask cluster (tcp://host:port) or on N local worker processes
+(local:N); the workers must see the input and the working folder at the same paths (a shared file system). The ground points layer and the filter's
 intermediate grids are not written in a tiled run.</p>
 """
 
