@@ -365,7 +365,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                  is_cancelled=None if use_processes or tiling.scheduler else steps.is_cancelled,
                  own_classes=bool(tiling.scheduler))
             for key, before in zip(keys, done_before) if before is None]
-    log(f"{len(keys)} tile(s) on {workers} worker(s) ({'processes' if use_processes else 'threads'}).")
+    if not tiling.scheduler:  # (a cluster run says where its tiles go)
+        log(f"{len(keys)} tile(s) on {workers} worker(s) ({'processes' if use_processes else 'threads'}).")
 
     def record(result):
         nonlocal ground_total
