@@ -154,3 +154,18 @@ def test_scheduler_addresses_are_checked_without_dask():
     for bad in ("local:0", "10.0.0.5", "local:x", "tcp://a b"):
         with pytest.raises(InvalidParameterError):
             TileOptions(scheduler=bad)
+
+
+@needs_dask
+def test_cancel_stops_the_cluster_run_and_leaves_nothing(survey, tmp_path):
+    from groundsieve.core.errors import Cancelled
+    tiles_logged = []
+
+    def log(line):
+        if line.startswith("Tile "):
+            tiles_logged.append(line)
+    with pytest.raises(Cancelled):
+        run_ground_filter(survey, str(tmp_path / "c.laz"), SMRF(), options=options("local:2"),
+                          is_cancelled=lambda: len(tiles_logged) >= 3, log=log)
+    assert 3 <= len(tiles_logged) < 60
+    assert sorted(os.listdir(tmp_path)) == []  # no output, no working folder
