@@ -7,7 +7,7 @@ import re
 from qgis.core import (QgsCoordinateReferenceSystem, QgsFeature, QgsFeatureSink, QgsField, QgsFields,
                        QgsGeometry, QgsPoint, QgsProcessing, QgsProcessingAlgorithm, QgsProcessingException,
                        QgsProcessingParameterBoolean, QgsProcessingParameterDefinition,
-                       QgsProcessingParameterFeatureSink,
+                       QgsProcessingParameterEnum, QgsProcessingParameterFeatureSink,
                        QgsProcessingParameterFile, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterDestination,
                        QgsProcessingParameterString, QgsUnitTypes,
@@ -59,7 +59,9 @@ qgis_process, threads in the desktop); their temporary files go to the <i>Workin
 removed at the end. A run killed or failed midway resumes when started again with the same inputs and
 parameters, skipping the tiles done (after a failure only when you chose the working folder). With several input files the output names a .vpc and
 the classified files (same names as the inputs) go into a folder of the same name beside it. The DTM is
-one seamless cloud-optimised GeoTIFF over the whole survey. The ground points layer and the filter's
+one seamless cloud-optimised GeoTIFF over the whole survey. <i>Dask scheduler address</i> (advanced; needs the Python
+package dask[distributed]): the tiles run on a Dask cluster (tcp://host:port) or on N local worker processes
+(local:N); the workers must see the input and the working folder at the same paths (a shared file system). The ground points layer and the filter's
 intermediate grids are not written in a tiled run.</p>
 """
 
@@ -123,12 +125,52 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
     GROUND_COUNT = "GROUND_COUNT"
     POINT_COUNT = "POINT_COUNT"
 
-    # -- to override ---------------------------------------------------------------
+    #: the filter's name in core/engine/parameters.py (its parameters, labels, units; defaults
+    #: from the filter dataclass): the dialog and `python -m groundsieve` share that one definition
+    FILTER = None
+
+    # -- to override (or set FILTER) ------------------------------------------------------
     def initFilterParameters(self):  # noqa: N802
-        raise NotImplementedError
+        """The filter's parameters from the one table (core/engine/parameters.py)."""
+        from ..core.engine import parameters as table
+        defaults = table.source_defaults(self.FILTER)
+        for p in table.params(self.FILTER):
+            value = defaults[p.field]
+            if p.choices:
+                param = QgsProcessingParameterEnum(p.name, p.title(), options=list(p.choice_labels),
+                                                   defaultValue=list(p.choices).index(value))
+            elif isinstance(value, bool):
+                param = QgsProcessingParameterBoolean(p.name, p.title(), defaultValue=value)
+            else:
+                kind = QgsProcessingParameterNumber.Type.Integer if isinstance(value, int) else \
+                    QgsProcessingParameterNumber.Type.Double
+                extra = {} if p.maximum is None else dict(maxValue=p.maximum)
+                param = QgsProcessingParameterNumber(p.name, p.title(), type=kind, defaultValue=value,
+                                                     minValue=p.minimum, **extra)
+            if p.advanced:
+                param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
+            self.addParameter(param)
+
+    def filterArguments(self, parameters, context):  # noqa: N802
+        """The filter dataclass's keyword arguments from the dialog's values (the one table)."""
+        from ..core.engine import parameters as table
+        defaults = table.source_defaults(self.FILTER)
+        kwargs = {}
+        for p in table.params(self.FILTER):
+            value = defaults[p.field]
+            if p.choices:
+                kwargs[p.field] = p.choices[self.parameterAsEnum(parameters, p.name, context)]
+            elif isinstance(value, bool):
+                kwargs[p.field] = self.parameterAsBoolean(parameters, p.name, context)
+            elif isinstance(value, int):
+                kwargs[p.field] = self.parameterAsInt(parameters, p.name, context)
+            else:
+                kwargs[p.field] = self.parameterAsDouble(parameters, p.name, context)
+        return kwargs
 
     def buildFilter(self, parameters, context):  # noqa: N802
-        raise NotImplementedError
+        from ..core.engine import parameters as table
+        return table.filter_class(self.FILTER)(**self.filterArguments(parameters, context))
 
     def rasterOutputs(self, parameters, context):  # noqa: N802
         """More GeoTIFF outputs: {output name: (path, f(run) -> (values, grid))}; none by default."""
@@ -242,6 +284,7 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
     MEMORY_BUDGET = "MEMORY_BUDGET"
     WORKERS = "WORKERS"
     WORK_FOLDER = "WORK_FOLDER"
+    SCHEDULER = "SCHEDULER"
 
     def addTileParameters(self):  # noqa: N802
         """Advanced parameters of tiled runs (folders, .vpc, clouds beyond the memory budget)."""
@@ -259,7 +302,10 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
                                          type=QgsProcessingParameterNumber.Type.Integer, defaultValue=0, minValue=0),
             QgsProcessingParameterFile(self.WORK_FOLDER, "Working folder for temporary tiles (default: beside "
                                        "the output)", behavior=QgsProcessingParameterFile.Behavior.Folder,
-                                       optional=True)]
+                                       optional=True),
+            QgsProcessingParameterString(self.SCHEDULER, "Dask scheduler address (empty = this machine; "
+                                         "tcp://host:port, or local:N for N local worker processes)",
+                                         defaultValue="", optional=True)]
         for param in advanced:
             param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
             self.addParameter(param)
@@ -271,7 +317,8 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
                            buffer_m=None if buffer < 0 else buffer,
                            memory_budget_mb=self.parameterAsInt(parameters, self.MEMORY_BUDGET, context),
                            workers=self.parameterAsInt(parameters, self.WORKERS, context),
-                           work_dir=self.parameterAsFile(parameters, self.WORK_FOLDER, context) or None)
+                           work_dir=self.parameterAsFile(parameters, self.WORK_FOLDER, context) or None,
+                           scheduler=(self.parameterAsString(parameters, self.SCHEDULER, context) or "").strip())
 
     def _write_ground_points(self, parameters, context, feedback, run):
         fields = QgsFields()

@@ -1,23 +1,13 @@
 """groundsieve:csf — Ground filter (CSF, cloth simulation, Zhang et al. 2016)."""
-from qgis.core import (QgsProcessingParameterBoolean, QgsProcessingParameterDefinition,
-                       QgsProcessingParameterEnum, QgsProcessingParameterNumber)
 
 from .base import COMMON_HELP, GroundFilterAlgorithm, dialog_help
 
-Double = QgsProcessingParameterNumber.Type.Double
-Integer = QgsProcessingParameterNumber.Type.Integer
 
 #: Rigidness options as the reference implementation's tools present them: option i is rigidness i + 1.
-RIGIDNESS_OPTIONS = ["1: steep slope", "2: relief", "3: flat"]
-HEIGHT_OPTIONS = ["nearest point (paper)", "points of the particle's cell, scan-line fill (reference library)"]
-HEIGHT_VALUES = ["nearest", "cell"]
-SCHEME_OPTIONS = ["reference library 1.1.7", "authors' 2016 code (the paper's ISPRS figures; orientation-dependent)"]
-SCHEME_VALUES = ["library", "2016"]
-SWEEP_OPTIONS = ["rotating: 8 orders in turn (less orientation-dependent)", "fixed: the reference library's"]
-SWEEP_VALUES = ["rotating", "fixed"]
 
 
 class CSFAlgorithm(GroundFilterAlgorithm):
+    FILTER = "csf"  # parameters: core/engine/parameters.py
     RESOLUTION = "RESOLUTION"
     RIGIDNESS = "RIGIDNESS"
     TIME_STEP = "TIME_STEP"
@@ -78,43 +68,3 @@ library scheme 5.6 %, 6.1 % in its fixed order), but turned by 90, 180 or 270 de
 samples give 7.0 to 7.6 %.</p>
 <p>The run time grows with the area / resolution<sup>2</sup> more than with the number of points.</p>
 """ + COMMON_HELP)
-
-    def initFilterParameters(self):  # noqa: N802
-        self.addParameter(QgsProcessingParameterNumber(
-            self.RESOLUTION, "Cloth resolution (m)", type=Double, defaultValue=1.0, minValue=0.01))
-        self.addParameter(QgsProcessingParameterEnum(
-            self.RIGIDNESS, "Rigidness (scene)", options=RIGIDNESS_OPTIONS, defaultValue=2))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.TIME_STEP, "Time step", type=Double, defaultValue=0.65, minValue=0.01))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.CLASS_THRESHOLD, "Class threshold (m)", type=Double, defaultValue=0.5, minValue=0.001))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.ITERATIONS, "Maximum iterations", type=Integer, defaultValue=500, minValue=1))
-        self.addParameter(QgsProcessingParameterBoolean(
-            self.SLOPE_SMOOTH, "Slope post-processing (for steep slopes)", defaultValue=True))
-        for param in (
-                QgsProcessingParameterNumber(self.LOW_OUTLIER, "Low-outlier threshold (m, 0 = off)",
-                                             type=Double, defaultValue=5.0, minValue=0.0),
-                QgsProcessingParameterEnum(self.INTERSECTION_HEIGHT, "Particle heights from",
-                                           options=HEIGHT_OPTIONS, defaultValue=0),
-                QgsProcessingParameterEnum(self.SWEEP_ORDER, "Sweep order", options=SWEEP_OPTIONS,
-                                           defaultValue=0),
-                QgsProcessingParameterEnum(self.CONSTRAINT_SCHEME, "Cloth constraints",
-                                           options=SCHEME_OPTIONS, defaultValue=0)):
-            param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
-            self.addParameter(param)
-
-    def buildFilter(self, parameters, context):  # noqa: N802
-        from ..core.filters.csf import CSF
-        return CSF(cloth_resolution_m=self.parameterAsDouble(parameters, self.RESOLUTION, context),
-                   rigidness=self.parameterAsEnum(parameters, self.RIGIDNESS, context) + 1,
-                   time_step=self.parameterAsDouble(parameters, self.TIME_STEP, context),
-                   class_threshold_m=self.parameterAsDouble(parameters, self.CLASS_THRESHOLD, context),
-                   iterations=self.parameterAsInt(parameters, self.ITERATIONS, context),
-                   slope_smooth=self.parameterAsBoolean(parameters, self.SLOPE_SMOOTH, context),
-                   low_outlier_m=self.parameterAsDouble(parameters, self.LOW_OUTLIER, context),
-                   intersection_height=HEIGHT_VALUES[
-                       self.parameterAsEnum(parameters, self.INTERSECTION_HEIGHT, context)],
-                   constraint_scheme=SCHEME_VALUES[
-                       self.parameterAsEnum(parameters, self.CONSTRAINT_SCHEME, context)],
-                   sweep_order=SWEEP_VALUES[self.parameterAsEnum(parameters, self.SWEEP_ORDER, context)])

@@ -1,14 +1,10 @@
 """groundsieve:echogrid — Ground filter (return-number grid), Matrone et al. 2024, Method 2."""
-from qgis.core import (QgsProcessingParameterDefinition, QgsProcessingParameterEnum,
-                       QgsProcessingParameterNumber)
 
 from .base import COMMON_HELP, GroundFilterAlgorithm, dialog_help
 
-Double = QgsProcessingParameterNumber.Type.Double
-MODES = ("faithful", "evidence")
-
 
 class EchoGridAlgorithm(GroundFilterAlgorithm):
+    FILTER = "echogrid"  # parameters: core/engine/parameters.py
     KERNEL = "KERNEL"
     DZ = "DZ"
     MODE = "MODE"
@@ -41,27 +37,3 @@ more than the threshold above the lowest points within <i>neighbourhood</i>, eac
 building's width also finds the middle of wide roofs, at a cost on steep terrain. Both modes are
 measured in <a href="https://github.com/groundsieve/groundsieve/blob/main/docs/BENCHMARKS.md">the benchmarks</a>.</p>
 """ + COMMON_HELP)
-
-    def initFilterParameters(self):  # noqa: N802
-        self.addParameter(QgsProcessingParameterNumber(
-            self.KERNEL, "Kernel size (m)", type=Double, defaultValue=5.0, minValue=0.01))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.DZ, "Height above the kernel's lowest point (m)", type=Double, defaultValue=2.0, minValue=0.0))
-        self.addParameter(QgsProcessingParameterEnum(
-            self.MODE, "Mode", options=["faithful (paper: single-return kernels are ground)",
-                                        "evidence (echoes as evidence, not as a bypass)"], defaultValue=0))
-        for param in (
-                QgsProcessingParameterNumber(self.NEIGHBOURHOOD, "Evidence mode: neighbourhood for raised kernels (m)",
-                                             type=Double, defaultValue=5.0, minValue=0.0),
-                QgsProcessingParameterNumber(self.SLOPE, "Evidence mode: terrain slope between kernels (rise/run)",
-                                             type=Double, defaultValue=0.15, minValue=0.0)):
-            param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
-            self.addParameter(param)
-
-    def buildFilter(self, parameters, context):  # noqa: N802
-        from ..core.filters.echogrid import EchoGrid
-        return EchoGrid(kernel_m=self.parameterAsDouble(parameters, self.KERNEL, context),
-                        dz_m=self.parameterAsDouble(parameters, self.DZ, context),
-                        mode=MODES[self.parameterAsEnum(parameters, self.MODE, context)],
-                        neighbourhood_m=self.parameterAsDouble(parameters, self.NEIGHBOURHOOD, context),
-                        slope=self.parameterAsDouble(parameters, self.SLOPE, context))

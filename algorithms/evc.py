@@ -1,14 +1,9 @@
 """groundsieve:evc — Ground filter (multiscale EVC), Fan et al. 2023; and
 groundsieve:evcrasters — the same with its intermediate rasters."""
-from qgis.core import (QgsProcessingParameterBoolean, QgsProcessingParameterDefinition,
-                       QgsProcessingParameterEnum, QgsProcessingParameterNumber,
-                       QgsProcessingParameterRasterDestination)
+from qgis.core import QgsProcessingParameterRasterDestination
 
 from .base import COMMON_HELP, GroundFilterAlgorithm, dialog_help
 
-Double = QgsProcessingParameterNumber.Type.Double
-Integer = QgsProcessingParameterNumber.Type.Integer
-DIFFERENCES = ("large_minus_small", "small_minus_large")
 
 EVC_HELP = """<p>The multiscale elevation-variation-coefficient filter of Fan et al. (2023), made for
 UAV photogrammetry over low vegetation: virtual grids of mean elevation at a small and a large scale;
@@ -27,6 +22,7 @@ unstable on open ground far from vegetation (see <a href="https://github.com/gro
 
 
 class EVCAlgorithm(GroundFilterAlgorithm):
+    FILTER = "evc"  # parameters: core/engine/parameters.py
     SMALL_SCALE = "SMALL_SCALE"
     LARGE_SCALE = "LARGE_SCALE"
     RADIUS = "RADIUS"
@@ -49,45 +45,12 @@ class EVCAlgorithm(GroundFilterAlgorithm):
     def shortHelpString(self):  # noqa: N802
         return dialog_help(EVC_HELP + COMMON_HELP)
 
-    def initFilterParameters(self):  # noqa: N802
-        self.addParameter(QgsProcessingParameterNumber(
-            self.SMALL_SCALE, "Small-scale grid (m)", type=Double, defaultValue=0.2, minValue=0.01))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.LARGE_SCALE, "Large-scale grid (m)", type=Double, defaultValue=2.0, minValue=0.01))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.RADIUS, "Neighbourhood radius (cells)", type=Integer, defaultValue=1, minValue=1))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.THRESHOLD, "Threshold (EVC)", type=Double, defaultValue=1.5, minValue=0.001))
-        self.addParameter(QgsProcessingParameterBoolean(
-            self.AUTO_THRESHOLD, "Threshold by natural breaks (Jenks)", defaultValue=False))
-        advanced = [
-            QgsProcessingParameterEnum(self.DIFFERENCE, "Difference",
-                                       options=["large minus small (paper's sign)", "small minus large"],
-                                       defaultValue=0),
-            QgsProcessingParameterNumber(self.GROUND_OFFSET, "Ground offset added to the mean difference (m)",
-                                         type=Double, defaultValue=0.0, minValue=0.0),
-            QgsProcessingParameterNumber(self.MIN_CELLS, "Minimum non-empty cells in a window",
-                                         type=Integer, defaultValue=3, minValue=2),
-            QgsProcessingParameterNumber(self.MAX_RADIUS, "Maximum radius when growing a window (cells)",
-                                         type=Integer, defaultValue=5, minValue=1),
-        ]
-        for param in advanced:
-            param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
-            self.addParameter(param)
 
     def buildFilter(self, parameters, context):  # noqa: N802
         from ..core.filters.evc import EVC
-        radius = self.parameterAsInt(parameters, self.RADIUS, context)
-        return EVC(small_scale_m=self.parameterAsDouble(parameters, self.SMALL_SCALE, context),
-                   large_scale_m=self.parameterAsDouble(parameters, self.LARGE_SCALE, context),
-                   radius=radius,
-                   threshold=self.parameterAsDouble(parameters, self.THRESHOLD, context),
-                   auto_threshold=self.parameterAsBoolean(parameters, self.AUTO_THRESHOLD, context),
-                   difference=DIFFERENCES[self.parameterAsEnum(parameters, self.DIFFERENCE, context)],
-                   ground_offset_m=self.parameterAsDouble(parameters, self.GROUND_OFFSET, context),
-                   min_cells=self.parameterAsInt(parameters, self.MIN_CELLS, context),
-                   max_radius=max(radius, self.parameterAsInt(parameters, self.MAX_RADIUS, context)))
-
+        kwargs = self.filterArguments(parameters, context)
+        kwargs["max_radius"] = max(kwargs["radius"], kwargs["max_radius"])  # a window grows from the radius
+        return EVC(**kwargs)
 
 class EVCRastersAlgorithm(EVCAlgorithm):
     SMALL_MEAN = "SMALL_MEAN"

@@ -1,12 +1,10 @@
 """groundsieve:pmf — Ground filter (PMF, Zhang et al. 2003)."""
-from qgis.core import QgsProcessingParameterBoolean, QgsProcessingParameterNumber
 
 from .base import COMMON_HELP, GroundFilterAlgorithm, dialog_help
 
-Double = QgsProcessingParameterNumber.Type.Double
-
 
 class PMFAlgorithm(GroundFilterAlgorithm):
+    FILTER = "pmf"  # parameters: core/engine/parameters.py
     CELL = "CELL"
     MAX_WINDOW = "MAX_WINDOW"
     SLOPE = "SLOPE"
@@ -46,28 +44,3 @@ which follows gradual terrain better at more cost. The defaults are those of PDA
 <code>filters.pmf</code>; unlike it, every point is filtered unless <i>Filter only last returns</i> is
 ticked.</p>
 """ + COMMON_HELP)
-
-    def initFilterParameters(self):  # noqa: N802
-        self.addParameter(QgsProcessingParameterNumber(
-            self.CELL, "Cell size (m)", type=Double, defaultValue=1.0, minValue=0.01))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.MAX_WINDOW, "Maximum window size (m)", type=Double, defaultValue=33.0, minValue=0.01))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.SLOPE, "Slope (rise/run)", type=Double, defaultValue=1.0, minValue=0.0))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.INITIAL_DISTANCE, "Initial distance (elevation threshold of the first window, m)",
-            type=Double, defaultValue=0.15, minValue=0.0))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.MAX_DISTANCE, "Maximum distance (largest elevation threshold, m)", type=Double,
-            defaultValue=2.5, minValue=0.001))
-        self.addParameter(QgsProcessingParameterBoolean(
-            self.EXPONENTIAL, "Exponential window growth (off: linear)", defaultValue=True))
-
-    def buildFilter(self, parameters, context):  # noqa: N802
-        from ..core.filters.pmf import PMF
-        return PMF(cell_size_m=self.parameterAsDouble(parameters, self.CELL, context),
-                   max_window_m=self.parameterAsDouble(parameters, self.MAX_WINDOW, context),
-                   slope=self.parameterAsDouble(parameters, self.SLOPE, context),
-                   initial_distance_m=self.parameterAsDouble(parameters, self.INITIAL_DISTANCE, context),
-                   max_distance_m=self.parameterAsDouble(parameters, self.MAX_DISTANCE, context),
-                   exponential=self.parameterAsBoolean(parameters, self.EXPONENTIAL, context))

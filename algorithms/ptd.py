@@ -1,13 +1,10 @@
 """groundsieve:ptd — Ground filter (progressive TIN densification, Axelsson 2000)."""
-from qgis.core import (QgsProcessingParameterBoolean, QgsProcessingParameterDefinition,
-                       QgsProcessingParameterNumber)
 
 from .base import COMMON_HELP, GroundFilterAlgorithm, dialog_help
 
-Double = QgsProcessingParameterNumber.Type.Double
-
 
 class PTDAlgorithm(GroundFilterAlgorithm):
+    FILTER = "ptd"  # parameters: core/engine/parameters.py
     SEED_CELL = "SEED_CELL"
     MAX_ANGLE = "MAX_ANGLE"
     MAX_DISTANCE = "MAX_DISTANCE"
@@ -60,39 +57,3 @@ steep slopes but also lets it climb onto objects joined to sloping ground (off).
 <p>The defaults and what each choice does on the ISPRS filter-test samples are in
 <a href="https://github.com/groundsieve/groundsieve/blob/main/docs/BENCHMARKS.md">the benchmarks</a>.</p>
 """ + COMMON_HELP)
-
-    def initFilterParameters(self):  # noqa: N802
-        self.addParameter(QgsProcessingParameterNumber(
-            self.SEED_CELL, "Seed cell size: largest building size (m)", type=Double, defaultValue=30.0,
-            minValue=0.01))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.MAX_ANGLE, "Iteration angle (degrees)", type=Double, defaultValue=30.0, minValue=0.1,
-            maxValue=89.9))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.MAX_DISTANCE, "Iteration distance (m)", type=Double, defaultValue=1.4, minValue=0.001))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.MAX_EDGE, "Maximum edge length of an accepting triangle (m, 0 = off)", type=Double,
-            defaultValue=0.0, minValue=0.0))
-        for param in (
-                QgsProcessingParameterNumber(self.MIN_EDGE, "Minimum edge length: stop densifying below (m, 0 = off)",
-                                             type=Double, defaultValue=0.0, minValue=0.0),
-                QgsProcessingParameterNumber(self.TERRAIN_ANGLE, "Maximum terrain angle (degrees)", type=Double,
-                                             defaultValue=75.0, minValue=0.1, maxValue=90.0),
-                QgsProcessingParameterNumber(self.OFFSET, "Offset: points this close to the final TIN are ground "
-                                             "(m, 0 = off)", type=Double, defaultValue=0.2, minValue=0.0),
-                QgsProcessingParameterBoolean(self.MIRROR, "Mirror points (Axelsson)", defaultValue=False),
-                QgsProcessingParameterBoolean(self.LOW_OUTLIERS, "Reject low outliers as seeds", defaultValue=True)):
-            param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
-            self.addParameter(param)
-
-    def buildFilter(self, parameters, context):  # noqa: N802
-        from ..core.filters.ptd import PTD
-        return PTD(seed_cell_m=self.parameterAsDouble(parameters, self.SEED_CELL, context),
-                   max_angle_deg=self.parameterAsDouble(parameters, self.MAX_ANGLE, context),
-                   max_distance_m=self.parameterAsDouble(parameters, self.MAX_DISTANCE, context),
-                   max_edge_m=self.parameterAsDouble(parameters, self.MAX_EDGE, context),
-                   min_edge_m=self.parameterAsDouble(parameters, self.MIN_EDGE, context),
-                   max_terrain_angle_deg=self.parameterAsDouble(parameters, self.TERRAIN_ANGLE, context),
-                   offset_m=self.parameterAsDouble(parameters, self.OFFSET, context),
-                   mirror=self.parameterAsBoolean(parameters, self.MIRROR, context),
-                   low_outlier_check=self.parameterAsBoolean(parameters, self.LOW_OUTLIERS, context))

@@ -1,12 +1,10 @@
 """groundsieve:smrf — Ground filter (SMRF, Pingel, Clarke & McBride 2013)."""
-from qgis.core import QgsProcessingParameterBoolean, QgsProcessingParameterNumber
 
 from .base import COMMON_HELP, GroundFilterAlgorithm, dialog_help
 
-Double = QgsProcessingParameterNumber.Type.Double
-
 
 class SMRFAlgorithm(GroundFilterAlgorithm):
+    FILTER = "smrf"  # parameters: core/engine/parameters.py
     CELL = "CELL"
     SLOPE = "SLOPE"
     WINDOW = "WINDOW"
@@ -40,26 +38,3 @@ surface interpolated over the object cells; finally each point is ground when it
 neighbours before the progressive opening (on by default; Pingel's Python code leaves it off;
 it lowers the mean ISPRS total error with the single parameter set, see <a href="https://github.com/groundsieve/groundsieve/blob/main/docs/BENCHMARKS.md">the benchmarks</a>).</p>
 """ + COMMON_HELP)
-
-    def initFilterParameters(self):  # noqa: N802
-        self.addParameter(QgsProcessingParameterNumber(
-            self.CELL, "Cell size (m)", type=Double, defaultValue=1.0, minValue=0.01))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.SLOPE, "Slope (rise/run)", type=Double, defaultValue=0.15, minValue=0.0))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.WINDOW, "Maximum window radius (m)", type=Double, defaultValue=18.0, minValue=0.01))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.THRESHOLD, "Elevation threshold (m)", type=Double, defaultValue=0.5, minValue=0.0))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.SCALAR, "Elevation scalar (m per unit slope)", type=Double, defaultValue=1.25, minValue=0.0))
-        self.addParameter(QgsProcessingParameterBoolean(
-            self.LOW_OUTLIER_FILL, "Remove low outliers before the opening", defaultValue=True))
-
-    def buildFilter(self, parameters, context):  # noqa: N802
-        from ..core.filters.smrf import SMRF
-        return SMRF(cell_size_m=self.parameterAsDouble(parameters, self.CELL, context),
-                    slope=self.parameterAsDouble(parameters, self.SLOPE, context),
-                    window_m=self.parameterAsDouble(parameters, self.WINDOW, context),
-                    elevation_threshold_m=self.parameterAsDouble(parameters, self.THRESHOLD, context),
-                    elevation_scalar=self.parameterAsDouble(parameters, self.SCALAR, context),
-                    low_outlier_fill=self.parameterAsBoolean(parameters, self.LOW_OUTLIER_FILL, context))

@@ -80,8 +80,14 @@ class TileOptions:
     #: "auto" (worker processes under qgis_process and Python, threads in the QGIS desktop),
     #: "threads" or "processes"
     parallel: str = "auto"
+    #: Dask scheduler: "" = this machine (the above), "local:N" = a LocalCluster of N worker
+    #: processes, "tcp://host:port" = a running scheduler (engine/cluster.py). Not part of the
+    #: working folder's name (repr=False): a run may resume on another cluster.
+    scheduler: str = field(default="", repr=False)
 
     def __post_init__(self):
+        from .cluster import parse_scheduler
+        parse_scheduler(self.scheduler)
         for name in ("tile_size_m", "memory_budget_mb"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
@@ -356,15 +362,19 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                  names=sorted({os.path.basename(inputs[p.file_index]) for p in tiles[key]}),
                  class_paths=class_paths, algorithm=algorithm, options=options, dtm=dtm if dtm_path else None,
                  dtm_grid=dtm_writer.grid if dtm_writer is not None else None,
-                 is_cancelled=None if use_processes else steps.is_cancelled)
+                 is_cancelled=None if use_processes or tiling.scheduler else steps.is_cancelled,
+                 own_classes=bool(tiling.scheduler))
             for key, before in zip(keys, done_before) if before is None]
-    log(f"{len(keys)} tile(s) on {workers} worker(s) ({'processes' if use_processes else 'threads'}).")
+    if not tiling.scheduler:  # (a cluster run says where its tiles go)
+        log(f"{len(keys)} tile(s) on {workers} worker(s) ({'processes' if use_processes else 'threads'}).")
 
     def record(result):
         nonlocal ground_total
         if result is None:
             return
         steps.check()
+        if result.get("classes_file"):  # a cluster worker's tile: the client applies its classes
+            _apply_classes(result["classes_file"], class_paths)
         for k, count in result["assigned"].items():
             assigned[int(k)] += count
         if result["block"] is not None:
@@ -383,7 +393,12 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     for before in done_before:
         if before is not None:
             record(before)
-    if workers == 1:
+    if tiling.scheduler:
+        from .cluster import run_jobs
+        run_jobs(tiling.scheduler, _tile_job, jobs, record, is_cancelled=steps.is_cancelled,
+                 paths=[info.path for info in infos] + [work], writable=[done_dir], log=log,
+                 names=lambda job: job_name(job["bounds"], job["names"]))
+    elif workers == 1:
         for job in jobs:
             steps.check()
             record(_tile_job(job))
@@ -434,8 +449,7 @@ def _tile_job(job) -> Optional[dict]:
     process): read its parts, classify tile + buffer with the unchanged filter, write the own
     points' classes into the per-file memmaps, and interpolate the tile's DTM block."""
     from . import workflow
-    x0, y0, x1, y1 = job["bounds"]
-    where = f"tile {x0:.0f},{y0:.0f} - {x1:.0f},{y1:.0f} of {', '.join(job['names'])}"
+    where = job_name(job["bounds"], job["names"])
     options = job["options"]
     try:
         clouds, indices, files = [], [], []
@@ -456,8 +470,12 @@ def _tile_job(job) -> Optional[dict]:
             cls, ground = done.classification, done.ground
         else:  # nothing to filter here (all noise): the points keep their classes
             cls, ground = cloud.classification, np.zeros(len(cloud), dtype=bool)
-        assigned = {}
-        for k in np.unique(file_of[own]):
+        assigned, classes_file = {}, None
+        if job.get("own_classes"):  # on a cluster: only this tile's own file; the client applies it
+            classes_file = _done_name(job["done_dir"], job["key"]) + ".cls.npz"
+            _save_classes(classes_file, file_of[own], index[own], cls[own])
+            assigned = {int(k): int(c) for k, c in zip(*np.unique(file_of[own], return_counts=True))}
+        for k in ([] if classes_file else np.unique(file_of[own])):
             sel = own & (file_of == k)
             classes = np.load(job["class_paths"][k], mmap_mode="r+")
             classes[index[sel]] = cls[sel]
@@ -468,7 +486,7 @@ def _tile_job(job) -> Optional[dict]:
         if job["dtm"] is not None:
             block = _dtm_block(cloud, ground, job["dtm"], job["dtm_grid"], job["bounds"], job["buffer"])
         result = dict(key=list(job["key"]), own=int(own.sum()), read=len(cloud), ground=int(ground[own].sum()),
-                      assigned=assigned, block=block)
+                      assigned=assigned, block=block, classes_file=classes_file)
         _save_done(job["done_dir"], result)
         return result
     except Cancelled:
@@ -477,6 +495,31 @@ def _tile_job(job) -> Optional[dict]:
         raise type(err)(f"{where}: {err}") from err
     except Exception as err:  # an unexpected failure still names the tile
         raise GroundSieveError(f"{where} failed: {type(err).__name__}: {err}") from err
+
+
+def job_name(bounds, names) -> str:
+    x0, y0, x1, y1 = bounds
+    return f"tile {x0:.0f},{y0:.0f} - {x1:.0f},{y1:.0f} of {', '.join(names)}"
+
+
+def _save_classes(path, file_of, index, cls) -> None:
+    """A tile's own points' classes (file, index in the file, class), written atomically: a worker
+    killed mid-write leaves no file, and a retried tile writes the same bytes."""
+    tmp = f"{path}.{os.getpid()}.part"
+    with open(tmp, "wb") as f:
+        np.savez(f, file_index=file_of.astype(np.int32), index=index.astype(np.int64), cls=cls.astype(np.uint8))
+    os.replace(tmp, path)
+
+
+def _apply_classes(path, class_paths) -> None:
+    with np.load(path) as saved:
+        file_of, index, cls = saved["file_index"], saved["index"], saved["cls"]
+    for k in np.unique(file_of):
+        sel = file_of == k
+        classes = np.load(class_paths[k], mmap_mode="r+")
+        classes[index[sel]] = cls[sel]
+        classes.flush()
+        del classes
 
 
 def _done_name(done_dir, key) -> str:

@@ -1,0 +1,120 @@
+"""The tiles of a survey on a Dask LocalCluster (core/engine/cluster.py): scaling from 1 to 2
+workers and the scheduler's cost per tile, all measured in the same run.
+
+    .venv/bin/python bench/cluster.py [--millions 2] [--files 64] [--tile 50] [--filter smrf]
+
+A generated scene of about N million points is cut into a grid of ``--files`` LAZ files (a survey);
+then SMRF with a 1 m DTM runs over the folder four ways: in this process one tile after the other
+(no Dask: the reference), on a LocalCluster of 1 worker process, of 2 worker processes, and with
+local worker processes (no Dask, 2 workers). From the "Filtered N tile(s) in X s" log line (the
+tile phase alone; binning and writing run on the client either way):
+
+* scheduler cost per tile = (Dask 1 worker - in process) / tiles;
+* scaling efficiency = (Dask 1 worker / Dask 2 workers) / 2.
+
+Outputs are checked identical between the runs. The bench needs dask[distributed].
+"""
+import argparse
+import os
+import re
+import shutil
+import sys
+import tempfile
+import time
+
+from _checkout import REPO  # noqa: F401,E402 (puts this checkout's groundsieve on sys.path)
+
+
+def make_survey(folder, millions, files):
+    import laspy
+    import numpy as np
+    from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+    density = 10.0
+    side = (millions * 1e6 / (density * 1.25)) ** 0.5  # ~1.25 points per pulse
+    whole = os.path.join(folder, "whole.laz")
+    write_scene(make_scene(SceneSpec(size_m=round(side), density_per_m2=density, seed=1)), whole)
+    las = laspy.read(whole)
+    k = int(round(files ** 0.5))
+    x0, y0 = las.header.mins[:2]
+    ix = np.minimum(((las.x - x0) / (side / k)).astype(int), k - 1)
+    iy = np.minimum(((las.y - y0) / (side / k)).astype(int), k - 1)
+    survey = os.path.join(folder, "survey")
+    os.makedirs(survey)
+    for i in range(k):
+        for j in range(k):
+            sel = (ix == i) & (iy == j)
+            if sel.any():
+                out = laspy.LasData(las.header)
+                out.points = las.points[sel]
+                out.write(os.path.join(survey, f"f{i:02d}_{j:02d}.laz"))
+    os.remove(whole)
+    return survey, len(las.points), k * k
+
+
+def run(survey, out, scheduler, workers, tile, algorithm):
+    from groundsieve.core.engine.tiles import TileOptions
+    from groundsieve.core.engine.workflow import DTMOptions, FilterOptions, run_ground_filter
+    lines = []
+    t0 = time.perf_counter()
+    done = run_ground_filter(survey, os.path.join(out, "c.vpc"), algorithm,
+                             options=FilterOptions(tiling=TileOptions(tile_size_m=tile, workers=workers,
+                                                                      parallel="processes", scheduler=scheduler)),
+                             dtm_path=os.path.join(out, "dtm.tif"), dtm=DTMOptions(cell_size_m=1.0), log=lines.append)
+    wall = time.perf_counter() - t0
+    filtered = next(float(m.group(1)) for line in lines for m in [re.match(r"Filtered \d+ tile\(s\) in ([\d.]+) s", line)]
+                    if m)
+    return done, wall, filtered
+
+
+def digest(out):
+    import hashlib
+    import numpy as np
+    import laspy
+    from osgeo import gdal
+    h = hashlib.sha1()
+    folder = os.path.join(out, "c")
+    for name in sorted(os.listdir(folder)):
+        h.update(np.asarray(laspy.read(os.path.join(folder, name)).classification).tobytes())
+    h.update(gdal.Open(os.path.join(out, "dtm.tif")).ReadAsArray().tobytes())
+    return h.hexdigest()
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--millions", type=float, default=2.0)
+    ap.add_argument("--files", type=int, default=64)
+    ap.add_argument("--tile", type=float, default=50.0)
+    ap.add_argument("--filter", default="smrf")
+    ap.add_argument("--dir", default=None, help="working folder (default: a temporary one)")
+    args = ap.parse_args()
+    from groundsieve.core.engine import parameters
+    algorithm = parameters.filter_class(args.filter)()
+    base = tempfile.mkdtemp(prefix="gs-cluster-", dir=args.dir)
+    try:
+        t0 = time.perf_counter()
+        survey, points, files = make_survey(base, args.millions, args.files)
+        print(f"survey: {points:,} points in {files} files ({time.perf_counter() - t0:.0f} s to make)", flush=True)
+        rows = []
+        for label, scheduler, workers in (("in process, 1 tile at a time", "", 1),
+                                          ("Dask LocalCluster, 1 worker", "local:1", 1),
+                                          ("Dask LocalCluster, 2 workers", "local:2", 2),
+                                          ("local processes, 2 workers (no Dask)", "", 2)):
+            out = os.path.join(base, f"out{len(rows)}")
+            os.makedirs(out)
+            done, wall, filtered = run(survey, out, scheduler, workers, args.tile, algorithm)
+            rows.append((label, done.tiles, wall, filtered, digest(out)))
+            print(f"{label:40s} tiles {done.tiles:4d}  tile phase {filtered:7.1f} s  whole run {wall:7.1f} s",
+                  flush=True)
+        tiles = rows[0][1]
+        print(f"identical outputs: {len({r[4] for r in rows}) == 1}")
+        print(f"scheduler cost per tile: ({rows[1][3]:.1f} - {rows[0][3]:.1f}) s / {tiles} = "
+              f"{(rows[1][3] - rows[0][3]) / tiles * 1000:.0f} ms")
+        print(f"scaling efficiency 1 -> 2 Dask workers: ({rows[1][3]:.1f} / {rows[2][3]:.1f}) / 2 = "
+              f"{rows[1][3] / rows[2][3] / 2:.2f}")
+        print(f"per tile, 1 worker: {rows[1][3] / tiles:.2f} s ({points / tiles:,.0f} points a tile)")
+    finally:
+        shutil.rmtree(base, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

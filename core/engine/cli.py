@@ -1,0 +1,149 @@
+"""The headless command: ``python -m groundsieve <filter> --input X --output Y [options]``.
+
+No QGIS: the core alone, for servers and cluster jobs. The options are the Processing
+algorithms' parameters under the same names (``DTM_CELL`` -> ``--dtm-cell``), defaults and
+units, made from one definition (``parameters.py`` and the core's option dataclasses); the
+filters' finer settings the dialog does not show are offered too. ``--scheduler`` sends the
+tiles to a Dask cluster (``local:N`` or ``tcp://host:port``; engine/cluster.py).
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import time
+from typing import List, Optional
+
+from ..errors import Cancelled, GroundSieveError
+from . import parameters as P
+from .tiles import TileOptions
+from .workflow import DTMOptions, FilterOptions
+
+
+def _defaults(cls):
+    return {f.name: f.default for f in dataclasses.fields(cls)}
+
+
+def _number(kind):
+    return {int: int, float: float}.get(kind, str)
+
+
+def _add_common(parser: argparse.ArgumentParser) -> None:
+    fo, dt, to = _defaults(FilterOptions), _defaults(DTMOptions), _defaults(TileOptions)
+    io = parser.add_argument_group("input and outputs")
+    io.add_argument("--input", required=True, metavar="PATH",
+                    help="LAS/LAZ (1.2-1.4, point formats 0-10), a folder of them, a .vpc, or an ISPRS .txt")
+    io.add_argument("--output", metavar="PATH", help="classified LAS/LAZ (a .vpc for several input files)")
+    io.add_argument("--dtm", metavar="PATH", help="DTM GeoTIFF (optional)")
+    io.add_argument("--dtm-cell", type=float, default=dt["cell_size_m"], metavar="M",
+                    help="DTM cell size (m; default %(default)s)")
+    io.add_argument("--dtm-fill", action=argparse.BooleanOptionalAction, default=dt["fill_outside_hull"],
+                    help="fill DTM cells outside the ground hull (nearest value; default %(default)s)")
+    io.add_argument("--last-returns", action=argparse.BooleanOptionalAction, default=fo["last_returns_only"],
+                    help="filter only last returns (others become non-ground; default %(default)s)")
+    io.add_argument("--ignore-noise", action=argparse.BooleanOptionalAction, default=fo["ignore_noise"],
+                    help="ignore points already classified as noise (7, 18; default %(default)s)")
+    io.add_argument("--keep-classes", action=argparse.BooleanOptionalAction, default=fo["keep_existing_classes"],
+                    help="keep existing non-ground classes (default %(default)s)")
+    tiles = parser.add_argument_group("survey scale: tiles")
+    tiles.add_argument("--tile-size", type=float, default=to["tile_size_m"], metavar="M",
+                       help="tile size (m; 0 = from the memory budget; default %(default)s)")
+    tiles.add_argument("--tile-buffer", type=float, default=-1.0, metavar="M",
+                       help="tile buffer (m; -1 = the filter's own reach; default %(default)s)")
+    tiles.add_argument("--memory-budget", type=float, default=to["memory_budget_mb"], metavar="MB",
+                       help="memory budget (MB; 0 = a quarter of the RAM, at most 2048; default %(default)s)")
+    tiles.add_argument("--workers", type=int, default=to["workers"], metavar="N",
+                       help="tiles at the same time on this machine (0 = every core; default %(default)s)")
+    tiles.add_argument("--work-folder", metavar="PATH",
+                       help="working folder for temporary tiles (default: beside the output); with a Dask "
+                            "scheduler, on a file system every worker sees at the same path")
+    tiles.add_argument("--scheduler", default=to["scheduler"], metavar="ADDRESS",
+                       help="Dask scheduler: empty = this machine, local:N = a local Dask cluster of N worker "
+                            "processes, tcp://host:port = a running scheduler (needs dask[distributed]; the "
+                            "workers must see the input and working folder at the same paths)")
+
+
+def _add_filter(sub, name: str) -> None:
+    summary = P.SUMMARY[name]
+    parser = sub.add_parser(name, help=summary, description=f"{summary}. Lengths in the unit of the cloud's CRS.")
+    _add_common(parser)
+    group = parser.add_argument_group(f"{name} parameters (as in the Processing dialog)")
+    for p in P.params(name):
+        _add_param(group, name, p.field, p.option, p.title() + (
+            " (" + " | ".join(f"{v} = {label}" for v, label in zip(p.choices, p.choice_labels)) + ")"
+            if p.choices else ""), p.choices)
+    extra = P.core_only_fields(name)
+    if extra:
+        group = parser.add_argument_group(f"{name}: finer settings (core only, not in the dialog)")
+        for f in extra:
+            _add_param(group, name, f.name, "--" + f.name.replace("_", "-"), f.name.replace("_", " "), ())
+    parser.set_defaults(filter=name)
+
+
+def _add_param(group, name, field, option, title, choices) -> None:
+    value = P.default(name, field)
+    kind = P.field_type(name, field)
+    if kind is bool:
+        group.add_argument(option, dest="f_" + field, action=argparse.BooleanOptionalAction, default=value,
+                           help=f"{title}; default {'on' if value else 'off'}")
+    else:
+        group.add_argument(option, dest="f_" + field, type=_number(kind), default=value,
+                           choices=list(choices) or None, metavar=None if choices else "X",
+                           help=f"{title}; default {value}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m groundsieve",
+        description="Ground filtering of point clouds (LAS/LAZ, folders, .vpc) without QGIS: classified "
+                    "LAS/LAZ (ground = 2, other = 1) and an optional DTM GeoTIFF. Lengths in the unit of "
+                    "the cloud's CRS (metres for a metric CRS). `python -m groundsieve FILTER --help` lists "
+                    "a filter's parameters.")
+    sub = parser.add_subparsers(title="filters", metavar="FILTER", required=True)
+    for name in P.FILTERS:
+        _add_filter(sub, name)
+    return parser
+
+
+def options_from(args):
+    """(algorithm, FilterOptions, DTMOptions) from parsed arguments."""
+    algorithm = P.filter_class(args.filter)(**{k[2:]: v for k, v in vars(args).items() if k.startswith("f_")})
+    tiling = TileOptions(tile_size_m=args.tile_size, buffer_m=None if args.tile_buffer < 0 else args.tile_buffer,
+                         memory_budget_mb=args.memory_budget, workers=args.workers,
+                         work_dir=args.work_folder or None, scheduler=args.scheduler or "")
+    options = FilterOptions(last_returns_only=args.last_returns, ignore_noise=args.ignore_noise,
+                            keep_existing_classes=args.keep_classes, tiling=tiling)
+    return algorithm, options, DTMOptions(cell_size_m=args.dtm_cell, fill_outside_hull=args.dtm_fill)
+
+
+def main(argv: Optional[List[str]] = None, out=None) -> int:
+    """Run the command; 0 = done, 1 = refused or failed (the message, no traceback), 2 = bad usage."""
+    from .workflow import run_ground_filter
+    out = out or sys.stderr
+    args = build_parser().parse_args(argv)
+    if not args.output and not args.dtm:
+        print("groundsieve: give --output and/or --dtm", file=out)
+        return 2
+    last = [0.0]
+
+    def progress(fraction):
+        now = time.monotonic()
+        if now - last[0] > 5 or fraction >= 1:
+            last[0] = now
+            print(f"{100 * fraction:5.1f} %", file=out, flush=True)
+    try:
+        algorithm, options, dtm = options_from(args)
+        run = run_ground_filter(args.input, args.output, algorithm, options=options, dtm_path=args.dtm, dtm=dtm,
+                                progress=progress, log=lambda msg: print(msg, file=out, flush=True))
+    except KeyboardInterrupt:
+        print("groundsieve: interrupted", file=out)
+        return 1
+    except Cancelled as err:
+        print(f"groundsieve: {err}", file=out)
+        return 1
+    except GroundSieveError as err:
+        print(f"groundsieve: {err}", file=out)
+        return 1
+    points = run.point_count if run.cloud is None else len(run.cloud)
+    print(f"{points:,} points, {run.ground_count:,} ground.", file=out)
+    return 0

@@ -1,0 +1,242 @@
+"""The tiles of a survey on a Dask cluster (``TileOptions.scheduler``).
+
+The tile engine (``tiles.py``) makes every tile a pure job (``tiles._tile_job``): same job, same
+result. Here those jobs go to Dask distributed instead of a local pool:
+
+* ``""`` (the default): not used at all; the engine runs its local processes or threads and this
+  module's only import of ``distributed`` never happens (the plugin does not need it);
+* ``local:N``: a ``LocalCluster`` of N worker processes, one thread each, on this machine;
+* ``tcp://host:port`` (or ``tls://``, ``ws://``...): an existing scheduler.
+
+On a cluster each job writes only its own tile's files (its classes and done marker in the
+working folder) and returns its DTM block; the client applies the classes to the per-file arrays
+and writes the blocks into the one GeoTIFF. A worker that dies mid-tile loses nothing shared: the
+scheduler gives the tile to another worker (Dask's ``allowed-failures``), and a tile that raised an
+unexpected error is retried (``retries``); the outputs are those of a run without the failure.
+
+Workers must see the inputs and the working folder at the same paths as the client (a shared
+file system: NFS, Lustre, GPFS, CephFS...): checked on every worker before any tile is sent, along
+with the packages the core needs and the GroundSieve version.
+"""
+from __future__ import annotations
+
+import os
+import re
+from typing import Callable, List, Optional, Sequence, Tuple
+
+from ..errors import Cancelled, GroundSieveError, InvalidParameterError
+
+PIP_HINT = 'python -m pip install "dask[distributed]"'
+#: how long a scheduler address may take to answer
+CONNECT_TIMEOUT_S = 10
+#: a tile that raised an unexpected error is tried this many times more
+RETRIES = 2
+
+
+class ClusterError(GroundSieveError):
+    """The Dask cluster cannot run the tiles (absent package, unreachable scheduler, unfit worker)."""
+
+
+def parse_scheduler(text: str) -> Tuple[str, object]:
+    """``""`` -> ("", None); ``local:N`` -> ("local", N); ``tcp://host:port`` -> ("address", text)."""
+    text = (text or "").strip()
+    if not text:
+        return "", None
+    m = re.fullmatch(r"local(?::(\d+))?", text)
+    if m:
+        n = int(m.group(1) or (os.cpu_count() or 1))
+        if n < 1:
+            raise InvalidParameterError(f"Dask scheduler {text!r}: local:N needs N >= 1 workers")
+        return "local", n
+    if re.fullmatch(r"[a-z+]+://[^\s/]+(:\d+)?/?", text):
+        return "address", text
+    raise InvalidParameterError(f"Dask scheduler address {text!r}: give tcp://host:port (e.g. tcp://10.0.0.5:8786), "
+                                "local:N for N worker processes on this machine, or leave it empty")
+
+
+def import_distributed():
+    try:
+        import distributed
+    except ImportError as err:
+        raise ClusterError(f"A Dask scheduler was given but the Python package dask[distributed] is not installed "
+                           f"here ({err}); install it with: {PIP_HINT} (on the client and on every worker)") from err
+    return distributed
+
+
+def package_version() -> str:
+    """This GroundSieve's version (metadata.txt of the package)."""
+    return _version_of(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+
+
+def _version_of(root: str) -> str:
+    try:
+        with open(os.path.join(root, "metadata.txt"), encoding="utf-8") as f:
+            m = re.search(r"^version\s*=\s*(\S+)", f.read(), re.M)
+        return m.group(1) if m else "unknown"
+    except OSError:
+        return "unknown"
+
+
+# The probe runs on every worker before any tile. It is pickled by value (defined outside any
+# importable module), so that it runs even where GroundSieve itself does not import.
+_PROBE_SOURCE = '''
+def probe(paths, writable):
+    import os, socket, sys
+    out = dict(host=socket.gethostname(), python="%d.%d" % sys.version_info[:2], missing=[], version=None,
+               import_error=None, unseen=[], unwritable=[])
+    for name in ("numpy", "scipy", "laspy", "lazrs", "numba"):
+        try:
+            __import__(name)
+        except Exception:
+            out["missing"].append(name)
+    try:
+        import groundsieve.core.engine.tiles as tiles
+        root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(tiles.__file__))))
+        import re
+        with open(os.path.join(root, "metadata.txt"), encoding="utf-8") as f:
+            m = re.search(r"^version\\s*=\\s*(\\S+)", f.read(), re.M)
+        out["version"] = m.group(1) if m else "unknown"
+    except Exception as err:
+        out["import_error"] = "%s: %s" % (type(err).__name__, err)
+    out["unseen"] = [p for p in paths if not os.path.exists(p)]
+    out["unwritable"] = [p for p in writable if os.path.isdir(p) and not os.access(p, os.W_OK)]
+    return out
+'''
+
+
+def _probe_function():
+    namespace = {"__name__": "groundsieve_cluster_probe"}
+    exec(compile(_PROBE_SOURCE, "<groundsieve worker probe>", "exec"), namespace)
+    return namespace["probe"]
+
+
+def check_workers(client, paths: Sequence[str], writable: Sequence[str] = ()) -> int:
+    """Refuse, naming the worker, one that lacks the core's packages, runs another GroundSieve, or
+    cannot see a path (input or working folder). Returns the number of workers."""
+    import sys
+    reports = client.run(_probe_function(), list(paths), list(writable))
+    if not reports:
+        raise ClusterError(f"The Dask scheduler {client.scheduler.address} has no worker; start some "
+                           "(dask worker <scheduler address>) and run again")
+    mine = package_version()
+    here = "%d.%d" % sys.version_info[:2]
+    for worker, r in sorted(reports.items()):
+        who = f"Dask worker {worker} (host {r['host']})"
+        if r["missing"]:
+            raise ClusterError(f"{who} lacks the Python package(s) {', '.join(r['missing'])} that GroundSieve "
+                               "needs; install them there (pip install -r requirements.txt)")
+        if r["import_error"]:
+            raise ClusterError(f"{who} cannot import GroundSieve ({r['import_error']}); install the same "
+                               "groundsieve folder there (e.g. on the shared file system, on its PYTHONPATH)")
+        if r["version"] != mine:
+            raise ClusterError(f"{who} runs GroundSieve {r['version']}, this client {mine}; every worker must "
+                               "run the same version")
+        if r["python"] != here:
+            raise ClusterError(f"{who} runs Python {r['python']}, this client {here}; use the same Python "
+                               "on the client and the workers")
+        if r["unseen"]:
+            raise ClusterError(f"{who} cannot see {r['unseen'][0]}: the workers read the inputs and the "
+                               "working folder at the same paths as this client; put them on a file system "
+                               "every worker mounts at the same place (and set the working folder there)")
+        if r["unwritable"]:
+            raise ClusterError(f"{who} cannot write into {r['unwritable'][0]} (the working folder); the "
+                               "workers write their tiles' results there")
+    return len(reports)
+
+
+class Cluster:
+    """A client on the scheduler (and the LocalCluster it started, if any); a context manager."""
+
+    def __init__(self, scheduler: str, log: Callable[[str], None] = lambda _m: None):
+        kind, value = parse_scheduler(scheduler)
+        if not kind:
+            raise InvalidParameterError("no Dask scheduler given")
+        distributed = import_distributed()
+        self.local = None
+        try:
+            if kind == "local":
+                _set_spawn_executable()
+                self.local = distributed.LocalCluster(n_workers=value, threads_per_worker=1, processes=True,
+                                                      dashboard_address=None, silence_logs=40)
+                self.client = distributed.Client(self.local, timeout=f"{CONNECT_TIMEOUT_S}s")
+                log(f"Started a local Dask cluster of {value} worker process(es).")
+            else:
+                self.client = distributed.Client(value, timeout=f"{CONNECT_TIMEOUT_S}s")
+                log(f"Connected to the Dask scheduler {value}.")
+        except (OSError, TimeoutError) as err:
+            self.close()
+            raise ClusterError(f"The Dask scheduler {scheduler} did not answer within {CONNECT_TIMEOUT_S} s "
+                               f"({type(err).__name__}: {err}); check the address and that `dask scheduler` "
+                               "runs there and its port is open") from err
+
+    def close(self):
+        client = getattr(self, "client", None)
+        if client is not None:
+            client.close()
+        if self.local is not None:
+            self.local.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def _set_spawn_executable():
+    """Embedded in qgis_process, the worker processes must be spawned with this installation's
+    Python, not qgis_process (tiles._python_executable)."""
+    import multiprocessing
+    import sys
+    from .tiles import _python_executable
+    exe = _python_executable()
+    if exe and os.path.realpath(exe) != os.path.realpath(sys.executable or ""):
+        multiprocessing.set_executable(exe)
+
+
+def run_jobs(scheduler: str, function, jobs: List[dict], record: Callable[[object], None], *,
+             is_cancelled: Callable[[], bool], paths: Sequence[str], writable: Sequence[str],
+             names: Callable[[dict], str], log: Callable[[str], None] = lambda _m: None,
+             cluster: Optional[Cluster] = None) -> None:
+    """Run ``function(job)`` for every job on the cluster and ``record`` each result as it comes
+    (in completion order). Cancellation cancels the futures not yet done."""
+    own = cluster is None
+    cluster = cluster or Cluster(scheduler, log)
+    try:
+        distributed = import_distributed()
+        client = cluster.client
+        n = check_workers(client, paths, writable)
+        log(f"{len(jobs)} tile(s) on the Dask cluster's {n} worker(s) ({client.scheduler.address}).")
+        futures = {}
+        for job in jobs:
+            fut = client.submit(function, job, retries=RETRIES, pure=False,
+                                key=f"groundsieve-tile-{job['key'][0]}_{job['key'][1]}-{os.urandom(4).hex()}")
+            futures[fut] = job
+        pending = set(futures)
+        try:
+            while pending:
+                if is_cancelled():
+                    raise Cancelled("cancelled by the user")
+                try:
+                    done = distributed.wait(pending, timeout=0.5, return_when="FIRST_COMPLETED").done
+                except (TimeoutError, distributed.TimeoutError):
+                    continue
+                for fut in done:
+                    pending.discard(fut)
+                    try:
+                        result = fut.result()
+                    except GroundSieveError:
+                        raise
+                    except distributed.KilledWorker as err:
+                        raise ClusterError(f"{names(futures[fut])}: the Dask workers running it died "
+                                           f"repeatedly ({err}); too little memory per worker?") from err
+                    except Exception as err:
+                        raise ClusterError(f"{names(futures[fut])} failed on the Dask cluster: "
+                                           f"{type(err).__name__}: {err}") from err
+                    record(result)
+        except BaseException:
+            client.cancel(list(pending))
+            raise
+    finally:
+        if own:
+            cluster.close()

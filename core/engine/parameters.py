@@ -1,0 +1,175 @@
+"""One definition of every ground filter's user-facing parameters, for the Processing algorithms
+and the command line (``python -m groundsieve``).
+
+The defaults are the filter dataclasses' own (never repeated here); this table adds what a user
+sees: the Processing name (``CELL``; on the command line ``--cell``), the label, the unit, and for
+a choice the values with their labels. Fields of a filter not listed are the core's finer
+settings: the command line offers them too (``--low-outlier-slope``), the toolbox does not.
+"""
+from __future__ import annotations
+
+import ast
+import dataclasses
+import functools
+import importlib
+import os
+from dataclasses import dataclass
+from typing import Dict, List, Optional, Sequence, Tuple
+
+
+@dataclass(frozen=True)
+class Param:
+    field: str                      #: the filter dataclass's field
+    name: str                       #: Processing parameter name (command line: --name-in-lower-case)
+    label: str                      #: what the dialog shows (without the unit)
+    unit: str = ""                  #: "m", "rise/run", "degrees", "cells", ... ("" = none)
+    choices: Tuple = ()             #: allowed values of the field, for a choice
+    choice_labels: Tuple[str, ...] = ()
+    advanced: bool = False
+    minimum: Optional[float] = 0.0
+    maximum: Optional[float] = None
+
+    @property
+    def option(self) -> str:
+        return "--" + self.name.lower().replace("_", "-")
+
+    def title(self) -> str:
+        return f"{self.label} ({self.unit})" if self.unit else self.label
+
+
+#: filter name -> (module under core.filters, class name, parameters in dialog order)
+FILTERS: Dict[str, Tuple[str, str, Sequence[Param]]] = {
+    "smrf": ("smrf", "SMRF", (
+        Param("cell_size_m", "CELL", "Cell size", "m", minimum=0.01),
+        Param("slope", "SLOPE", "Slope", "rise/run"),
+        Param("window_m", "WINDOW", "Maximum window radius", "m", minimum=0.01),
+        Param("elevation_threshold_m", "THRESHOLD", "Elevation threshold", "m"),
+        Param("elevation_scalar", "SCALAR", "Elevation scalar", "m per unit slope"),
+        Param("low_outlier_fill", "LOW_OUTLIER_FILL", "Remove low outliers before the opening"),
+    )),
+    "pmf": ("pmf", "PMF", (
+        Param("cell_size_m", "CELL", "Cell size", "m", minimum=0.01),
+        Param("max_window_m", "MAX_WINDOW", "Maximum window size", "m", minimum=0.01),
+        Param("slope", "SLOPE", "Slope", "rise/run"),
+        Param("initial_distance_m", "INITIAL_DISTANCE", "Initial distance (elevation threshold of the first window)",
+              "m"),
+        Param("max_distance_m", "MAX_DISTANCE", "Maximum distance (largest elevation threshold)", "m", minimum=0.001),
+        Param("exponential", "EXPONENTIAL", "Exponential window growth (off: linear)"),
+    )),
+    "ptd": ("ptd", "PTD", (
+        Param("seed_cell_m", "SEED_CELL", "Seed cell size: largest building size", "m", minimum=0.01),
+        Param("max_angle_deg", "MAX_ANGLE", "Iteration angle", "degrees", maximum=89.9, minimum=0.1),
+        Param("max_distance_m", "MAX_DISTANCE", "Iteration distance", "m", minimum=0.001),
+        Param("max_edge_m", "MAX_EDGE", "Maximum edge length of an accepting triangle", "m, 0 = off"),
+        Param("min_edge_m", "MIN_EDGE", "Minimum edge length: stop densifying below", "m, 0 = off", advanced=True),
+        Param("max_terrain_angle_deg", "TERRAIN_ANGLE", "Maximum terrain angle", "degrees", advanced=True,
+              maximum=90.0, minimum=0.1),
+        Param("offset_m", "OFFSET", "Offset: points this close to the final TIN are ground", "m, 0 = off",
+              advanced=True),
+        Param("mirror", "MIRROR", "Mirror points (Axelsson)", advanced=True),
+        Param("low_outlier_check", "LOW_OUTLIERS", "Reject low outliers as seeds", advanced=True),
+    )),
+    "csf": ("csf", "CSF", (
+        Param("cloth_resolution_m", "RESOLUTION", "Cloth resolution", "m", minimum=0.01),
+        Param("rigidness", "RIGIDNESS", "Rigidness (scene)", choices=(1, 2, 3),
+              choice_labels=("1: steep slope", "2: relief", "3: flat")),
+        Param("time_step", "TIME_STEP", "Time step", minimum=0.01),
+        Param("class_threshold_m", "CLASS_THRESHOLD", "Class threshold", "m", minimum=0.001),
+        Param("iterations", "ITERATIONS", "Maximum iterations", minimum=1),
+        Param("slope_smooth", "SLOPE_SMOOTH", "Slope post-processing (for steep slopes)"),
+        Param("low_outlier_m", "LOW_OUTLIER", "Low-outlier threshold", "m, 0 = off", advanced=True),
+        Param("intersection_height", "INTERSECTION_HEIGHT", "Particle heights from", choices=("nearest", "cell"),
+              choice_labels=("nearest point (paper)",
+                             "points of the particle's cell, scan-line fill (reference library)"), advanced=True),
+        Param("sweep_order", "SWEEP_ORDER", "Sweep order", choices=("rotating", "fixed"),
+              choice_labels=("rotating: 8 orders in turn (less orientation-dependent)",
+                             "fixed: the reference library's"), advanced=True),
+        Param("constraint_scheme", "CONSTRAINT_SCHEME", "Cloth constraints", choices=("library", "2016"),
+              choice_labels=("reference library 1.1.7",
+                             "authors' 2016 code (the paper's ISPRS figures; orientation-dependent)"), advanced=True),
+    )),
+    "echogrid": ("echogrid", "EchoGrid", (
+        Param("kernel_m", "KERNEL", "Kernel size", "m", minimum=0.01),
+        Param("dz_m", "DZ", "Height above the kernel's lowest point", "m"),
+        Param("mode", "MODE", "Mode", choices=("faithful", "evidence"),
+              choice_labels=("faithful (paper: single-return kernels are ground)",
+                             "evidence (echoes as evidence, not as a bypass)")),
+        Param("neighbourhood_m", "NEIGHBOURHOOD", "Evidence mode: neighbourhood for raised kernels", "m",
+              advanced=True),
+        Param("slope", "SLOPE", "Evidence mode: terrain slope between kernels", "rise/run", advanced=True),
+    )),
+    "evc": ("evc", "EVC", (
+        Param("small_scale_m", "SMALL_SCALE", "Small-scale grid", "m", minimum=0.01),
+        Param("large_scale_m", "LARGE_SCALE", "Large-scale grid", "m", minimum=0.01),
+        Param("radius", "RADIUS", "Neighbourhood radius", "cells", minimum=1),
+        Param("threshold", "THRESHOLD", "Threshold (EVC)", minimum=0.001),
+        Param("auto_threshold", "AUTO_THRESHOLD", "Threshold by natural breaks (Jenks)"),
+        Param("difference", "DIFFERENCE", "Difference", choices=("large_minus_small", "small_minus_large"),
+              choice_labels=("large minus small (paper's sign)", "small minus large"), advanced=True),
+        Param("ground_offset_m", "GROUND_OFFSET", "Ground offset added to the mean difference", "m", advanced=True),
+        Param("min_cells", "MIN_CELLS", "Minimum non-empty cells in a window", minimum=2, advanced=True),
+        Param("max_radius", "MAX_RADIUS", "Maximum radius when growing a window", "cells", minimum=1,
+              advanced=True),
+    )),
+}
+
+
+#: one line per filter (the README's table)
+SUMMARY = {
+    "smrf": "Simple Morphological Filter (Pingel, Clarke & McBride 2013)",
+    "pmf": "progressive morphological filter (Zhang et al. 2003; PDAL's defaults)",
+    "ptd": "progressive TIN densification (Axelsson 2000)",
+    "csf": "cloth simulation (Zhang et al. 2016; the reference implementation's parameters)",
+    "echogrid": "return-number grid (Matrone et al. 2024, Method 2)",
+    "evc": "multiscale elevation variation coefficient (Fan et al. 2023; UAV photogrammetry)",
+}
+
+
+def filter_class(name: str):
+    module, cls, _params = FILTERS[name]
+    return getattr(importlib.import_module(f"..filters.{module}", __package__), cls)
+
+
+def filter_fields(name: str) -> List[dataclasses.Field]:
+    """The filter dataclass's init fields, in their order."""
+    return [f for f in dataclasses.fields(filter_class(name)) if f.init]
+
+
+def params(name: str) -> Sequence[Param]:
+    return FILTERS[name][2]
+
+
+def default(name: str, field: str):
+    """The filter dataclass's default of ``field`` (the one definition of it)."""
+    for f in filter_fields(name):
+        if f.name == field:
+            return f.default
+    raise KeyError(f"{name} has no field {field}")
+
+
+def core_only_fields(name: str) -> List[dataclasses.Field]:
+    """Fields of the filter the Processing dialog does not show (the command line does)."""
+    shown = {p.field for p in params(name)}
+    return [f for f in filter_fields(name) if f.name not in shown]
+
+
+def field_type(name: str, field: str):
+    """bool, int, float or str, from the field's default."""
+    value = default(name, field)
+    return type(value) if isinstance(value, (bool, int, float, str)) else str
+
+
+@functools.lru_cache(maxsize=None)
+def source_defaults(name: str) -> Dict[str, object]:
+    """The filter dataclass's defaults read from its source (``field: type = value`` lines of its
+    class), without importing it: the Processing dialog is built where numpy or numba may be
+    missing (the plugin then loads and says what to install). tests check them against the class."""
+    module, cls, _params = FILTERS[name]
+    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "filters", module + ".py")
+    with open(path, encoding="utf-8") as f:
+        tree = ast.parse(f.read())
+    for node in tree.body:
+        if isinstance(node, ast.ClassDef) and node.name == cls:
+            return {stmt.target.id: ast.literal_eval(stmt.value) for stmt in node.body
+                    if isinstance(stmt, ast.AnnAssign) and isinstance(stmt.target, ast.Name) and stmt.value is not None}
+    raise KeyError(f"no class {cls} in {path}")

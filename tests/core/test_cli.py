@@ -1,0 +1,98 @@
+"""The headless command (python -m groundsieve, core/engine/cli.py): the Processing parameters
+under the same names, defaults and units, from one definition (core/engine/parameters.py)."""
+from __future__ import annotations
+
+import dataclasses
+import io
+import os
+import subprocess
+import sys
+
+import laspy
+import numpy as np
+import pytest
+
+from groundsieve.core.engine import parameters as P
+from groundsieve.core.engine.cli import build_parser, main, options_from
+from groundsieve.core.engine.workflow import FilterOptions, run_ground_filter
+from groundsieve.core.filters.smrf import SMRF
+from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+
+PLUGINS = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), ".build",
+                       "plugins")
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    path = tmp_path_factory.mktemp("cli") / "scene.laz"
+    write_scene(make_scene(SceneSpec(size_m=60.0, density_per_m2=2.0, seed=3)), path)
+    return str(path)
+
+
+def help_of(name):
+    out = io.StringIO()
+    sub = [a for a in build_parser()._actions if a.dest == "==SUPPRESS==" or a.choices][-1].choices[name]
+    sub.print_help(out)
+    return " ".join(out.getvalue().split())
+
+
+@pytest.mark.parametrize("name", list(P.FILTERS))
+def test_every_field_of_every_filter_is_an_option_with_its_default_and_unit(name):
+    text = help_of(name)
+    for p in P.params(name):
+        assert p.option in text and p.title() in text
+    for f in P.filter_fields(name):
+        args = build_parser().parse_args([name, "--input", "x.laz", "--output", "y.laz"])
+        assert getattr(args, "f_" + f.name) == f.default
+    assert "--scheduler" in text and "--dtm-cell M DTM cell size (m" in text
+    # the defaults build the filter's own defaults
+    algorithm, _options, _dtm = options_from(build_parser().parse_args([name, "--input", "x", "--output", "y"]))
+    assert algorithm == P.filter_class(name)()
+
+
+def test_options_reach_the_filter_and_the_tiles():
+    args = build_parser().parse_args(["smrf", "--input", "a", "--output", "b", "--cell", "0.5", "--no-low-outlier-fill",
+                                      "--tile-size", "100", "--tile-buffer", "20", "--scheduler", "local:2"])
+    algorithm, options, dtm = options_from(args)
+    assert algorithm == SMRF(cell_size_m=0.5, low_outlier_fill=False)
+    assert options.tiling.tile_size_m == 100 and options.tiling.buffer_m == 20
+    assert options.tiling.scheduler == "local:2" and dtm.cell_size_m == 1.0
+
+
+def test_the_command_classifies_as_the_core(scene, tmp_path):
+    out = io.StringIO()
+    code = main(["smrf", "--input", scene, "--output", str(tmp_path / "c.laz"), "--dtm", str(tmp_path / "d.tif"),
+                 "--slope", "0.2"], out=out)
+    assert code == 0, out.getvalue()
+    ref = run_ground_filter(scene, str(tmp_path / "ref.laz"), SMRF(slope=0.2))
+    assert np.array_equal(laspy.read(tmp_path / "c.laz").classification, laspy.read(tmp_path / "ref.laz").classification)
+    assert f"{ref.ground_count:,} ground" in out.getvalue() and (tmp_path / "d.tif").exists()
+
+
+def test_errors_are_one_line_without_traceback(tmp_path):
+    out = io.StringIO()
+    assert main(["pmf", "--input", str(tmp_path / "missing.laz"), "--output", str(tmp_path / "o.laz")], out=out) == 1
+    assert "missing.laz" in out.getvalue() and "Traceback" not in out.getvalue()
+    out = io.StringIO()
+    assert main(["smrf", "--input", "a.laz", "--output", "o.laz", "--scheduler", "nowhere"], out=out) == 1
+    assert "tcp://host:port" in out.getvalue()
+
+
+def test_python_m_groundsieve_runs_without_qgis_and_without_dask(scene, tmp_path):
+    probe = ("import runpy, sys; sys.argv = ['groundsieve'] + sys.argv[1:]\n"
+             "try:\n    runpy.run_module('groundsieve', run_name='__main__')\n"
+             "except SystemExit as e:\n"
+             "    bad = [m for m in sys.modules if m.split('.')[0] in ('qgis', 'PyQt5', 'distributed')]\n"
+             "    print('IMPORTED', bad); raise\n")
+    done = subprocess.run([sys.executable, "-c", probe, "pmf", "--input", scene, "--output", str(tmp_path / "p.laz")],
+                          cwd=PLUGINS, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert "IMPORTED []" in done.stdout and "ground." in done.stderr
+
+
+@pytest.mark.parametrize("name", list(P.FILTERS))
+def test_defaults_read_without_importing_the_filter_are_the_filter_s(name):
+    """The dialog reads the defaults from the filter's source (no numpy needed to list the
+    algorithms); they must be the dataclass's."""
+    assert P.source_defaults(name) == {f.name: f.default for f in P.filter_fields(name)}
+    assert {p.field for p in P.params(name)} <= set(P.source_defaults(name))

@@ -1,0 +1,171 @@
+"""The tiles of a survey on a Dask cluster (core/engine/cluster.py): a LocalCluster of 2 worker
+processes, one of them killed while tiles run, gives the classes and DTM of a single-process run,
+byte for byte; bad schedulers and unfit workers are refused with a clear message."""
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+
+import laspy
+import numpy as np
+import pytest
+
+from groundsieve.core.engine.tiles import TileOptions
+from groundsieve.core.engine.workflow import DTMOptions, FilterOptions, run_ground_filter
+from groundsieve.core.errors import GroundSieveError, InvalidParameterError
+from groundsieve.core.filters.smrf import SMRF
+from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+from groundsieve.tests.shared_data import on_ci
+
+
+def _unshadow_dask():
+    """A checkout in a folder named ``dask`` is a package pytest imports as ``dask`` (its parent put
+    first on sys.path, the repository root having an ``__init__.py``): it then shadows the real
+    dask, here and in the spawned workers. Drop that import and that path entry."""
+    import sys
+    repo = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    if os.path.basename(repo) != "dask":
+        return
+    parent = os.path.dirname(repo)
+    sys.path[:] = [p for p in sys.path if os.path.abspath(p or ".") != parent]
+    for name in [n for n in sys.modules if n == "dask" or n.startswith("dask.")]:
+        where = os.path.abspath(getattr(sys.modules[name], "__file__", None) or "")
+        if where.startswith(repo + os.sep) and "site-packages" not in where:
+            del sys.modules[name]
+
+
+_unshadow_dask()
+try:
+    import distributed
+except ImportError:  # pragma: no cover - the optional dependency
+    distributed = None
+    if on_ci():
+        raise
+needs_dask = pytest.mark.skipif(distributed is None, reason='dask[distributed] is not installed '
+                                '(pip install "dask[distributed]"); it is optional')
+
+
+
+@pytest.fixture(autouse=True)
+def _real_dask_in_workers():
+    _unshadow_dask()  # again: pytest puts the path back when it imports a test module
+
+
+TILE = 20.0  # 8 x 8 = 64 small tiles over a 160 m scene
+
+
+@pytest.fixture(scope="module")
+def survey(tmp_path_factory):
+    path = tmp_path_factory.mktemp("dask") / "scene.laz"
+    write_scene(make_scene(SceneSpec(size_m=160.0, density_per_m2=1.0, seed=11)), path)
+    return str(path)
+
+
+def options(scheduler="", workers=1):
+    return FilterOptions(tiling=TileOptions(tile_size_m=TILE, buffer_m=10.0, workers=workers,
+                                            parallel="threads", scheduler=scheduler))
+
+
+def read_tif(path):
+    from osgeo import gdal
+    ds = gdal.Open(str(path))
+    return ds.GetGeoTransform(), ds.GetRasterBand(1).ReadAsArray()
+
+
+@needs_dask
+def test_a_killed_worker_changes_nothing(survey, tmp_path):
+    ref = run_ground_filter(survey, str(tmp_path / "ref.laz"), SMRF(), options=options(),
+                            dtm_path=str(tmp_path / "ref.tif"), dtm=DTMOptions(cell_size_m=1.0))
+    assert ref.tiles >= 50
+    from groundsieve.core.engine import cluster as cl
+    killed = []
+    with cl.Cluster("local:2") as c:
+        pids = c.client.run(os.getpid)
+
+        def kill_one_once_tiles_are_done():
+            deadline = time.time() + 60
+            while time.time() < deadline and not killed:
+                done = [k for k in c.client.who_has() if str(k).startswith("groundsieve-tile-")]
+                if len(done) >= 5:
+                    addr, pid = sorted(pids.items())[0]
+                    os.kill(pid, signal.SIGKILL)
+                    killed.append((addr, pid, len(done)))
+                time.sleep(0.02)
+
+        killer = threading.Thread(target=kill_one_once_tiles_are_done, daemon=True)
+        killer.start()
+        real_run_jobs = cl.run_jobs
+
+        def on_this_cluster(*args, **kw):
+            return real_run_jobs(*args, cluster=c, **kw)
+        try:
+            cl.run_jobs = on_this_cluster
+            logs = []
+            run = run_ground_filter(survey, str(tmp_path / "dask.laz"), SMRF(), options=options("local:2"),
+                                    dtm_path=str(tmp_path / "dask.tif"), dtm=DTMOptions(cell_size_m=1.0),
+                                    log=logs.append)
+        finally:
+            cl.run_jobs = real_run_jobs
+        killer.join()
+    assert killed, "no worker was killed: the test did not test a failure"
+    assert killed[0][2] < ref.tiles, "the worker was killed after the last tile: not mid-run"
+    assert run.tiles == ref.tiles and run.ground_count == ref.ground_count
+    assert np.array_equal(laspy.read(tmp_path / "dask.laz").classification,
+                          laspy.read(tmp_path / "ref.laz").classification)
+    (gt_a, a), (gt_b, b) = read_tif(tmp_path / "dask.tif"), read_tif(tmp_path / "ref.tif")
+    assert gt_a == gt_b and a.tobytes() == b.tobytes()
+    assert any("Dask cluster" in line for line in logs)
+
+
+@needs_dask
+def test_an_unreachable_scheduler_is_a_clear_error_within_seconds(survey, tmp_path):
+    t0 = time.perf_counter()
+    with pytest.raises(GroundSieveError, match="did not answer"):
+        run_ground_filter(survey, str(tmp_path / "x.laz"), SMRF(), options=options("tcp://127.0.0.1:9"))
+    assert time.perf_counter() - t0 < 30
+    assert not (tmp_path / "x.laz").exists()
+
+
+@needs_dask
+def test_a_worker_that_cannot_see_the_path_is_named(tmp_path):
+    from groundsieve.core.engine.cluster import Cluster, ClusterError, check_workers
+    with Cluster("local:1") as c:
+        with pytest.raises(ClusterError, match=r"Dask worker tcp://.* cannot see /nowhere/survey\.laz"):
+            check_workers(c.client, [str(tmp_path), "/nowhere/survey.laz"])
+        assert check_workers(c.client, [str(tmp_path)]) == 1
+
+
+@needs_dask
+def test_a_worker_with_another_groundsieve_version_is_refused(tmp_path, monkeypatch):
+    from groundsieve.core.engine import cluster as cl
+    with cl.Cluster("local:1") as c:
+        monkeypatch.setattr(cl, "package_version", lambda: "9.9.9")
+        with pytest.raises(cl.ClusterError, match=r"Dask worker tcp://.* runs GroundSieve .*, this client 9\.9\.9"):
+            cl.check_workers(c.client, [str(tmp_path)])
+
+
+def test_scheduler_addresses_are_checked_without_dask():
+    from groundsieve.core.engine.cluster import parse_scheduler
+    assert parse_scheduler("") == ("", None)
+    assert parse_scheduler("local:3") == ("local", 3)
+    assert parse_scheduler("tcp://10.0.0.5:8786") == ("address", "tcp://10.0.0.5:8786")
+    for bad in ("local:0", "10.0.0.5", "local:x", "tcp://a b"):
+        with pytest.raises(InvalidParameterError):
+            TileOptions(scheduler=bad)
+
+
+@needs_dask
+def test_cancel_stops_the_cluster_run_and_leaves_nothing(survey, tmp_path):
+    from groundsieve.core.errors import Cancelled
+    tiles_logged = []
+
+    def log(line):
+        if line.startswith("Tile "):
+            tiles_logged.append(line)
+    with pytest.raises(Cancelled):
+        run_ground_filter(survey, str(tmp_path / "c.laz"), SMRF(), options=options("local:2"),
+                          is_cancelled=lambda: len(tiles_logged) >= 3, log=log)
+    assert 3 <= len(tiles_logged) < 60
+    assert sorted(os.listdir(tmp_path)) == []  # no output, no working folder
