@@ -29,7 +29,7 @@ from typing import Callable, Optional
 import numpy as np
 
 from ..errors import InvalidParameterError
-from ..grids.spec import GridSpec, memory_budget
+from ..grids.spec import MAX_CELL_M, GridSpec, memory_budget
 from ..io import (CLASS_GROUND, CLASS_UNCLASSIFIED, NOISE_CLASSES, PointCloud, atomic_path, check_output_path,
                  read_cloud, write_classified)
 from ..io.clouds import parse_classes
@@ -86,6 +86,9 @@ class DTMOptions:
         _check_budget(self.memory_budget_bytes, "memory_budget_bytes")
         if not (math.isfinite(self.cell_size_m) and self.cell_size_m > 0):
             raise InvalidParameterError(f"DTM cell size must be > 0 m (got {self.cell_size_m})")
+        if self.cell_size_m > MAX_CELL_M:
+            raise InvalidParameterError(f"DTM cell size: {self.cell_size_m:g} m is larger than any map "
+                                        f"(at most {MAX_CELL_M:g} m)")
         if int(self.points_per_cell) != self.points_per_cell or self.points_per_cell < 0:
             raise InvalidParameterError(f"points_per_cell must be a whole number >= 0 (got {self.points_per_cell})")
 

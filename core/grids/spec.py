@@ -22,6 +22,9 @@ from ..errors import InvalidParameterError, MemoryBudgetError
 #: Largest grid the core agrees to allocate (cells) whatever the memory: index arithmetic and
 #: rasters beyond this are not meant for one piece.
 MAX_CELLS = 400_000_000
+#: The largest cell accepted, in metres (1000 km: a cell wider than a country is a typing error;
+#: much larger ones, 1e300, overflow the grid's coordinates).
+MAX_CELL_M = 1e6
 
 #: Share of the memory available at the start of a grid that one run may use by default.
 DEFAULT_MEMORY_FRACTION = 0.6
@@ -174,6 +177,9 @@ class GridSpec:
         is above the budget (:func:`check_memory`), or when it has more than ``MAX_CELLS``."""
         if not (cell > 0 and math.isfinite(cell)):
             raise InvalidParameterError(f"{what}: cell size must be a finite number > 0 (got {cell})")
+        if cell > MAX_CELL_M:
+            raise InvalidParameterError(f"{what}: a cell size of {cell:g} m is larger than any map "
+                                        f"(at most {MAX_CELL_M:g} m); give the cell size in metres")
         xmin, xmax = float(np.min(x)), float(np.max(x))
         ymin, ymax = float(np.min(y)), float(np.max(y))
         x0 = math.floor(xmin / cell) * cell
