@@ -151,7 +151,8 @@ def check_memory(nbytes: float, *, what: str, shape: tuple, cell: float, x=None,
             message += (f". Likely cause: {some} {_distance(float(dist[worst]))} from the others, at "
                         f"x {float(x[i]):.2f}, y {float(y[i]):.2f} (the others span about "
                         f"{core[1] - core[0]:,.0f} x {core[3] - core[2]:,.0f} m)")
-    message += (". Class such points as noise (7, which is ignored by default) or remove them, use a larger "
+    message += (". Class such points as noise (7, which is ignored by default) or remove them; if the file holds "
+                "separate survey areas, split it into one file per area; or use a larger "
                 "cell size, or set a larger memory budget. A grid over the whole extent is what costs: the "
                 "survey-scale tiler, which grids only where points are, will avoid it once the run goes "
                 "through it.")
