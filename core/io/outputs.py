@@ -43,10 +43,11 @@ def check_output_path(path: str, *, inputs=(), extensions=LAS_EXTENSIONS, what: 
 
 def check_folder_writable(path: str, folder: str) -> None:
     """Refuse ``path`` when its folder cannot take a new file (read-only folder or file system, no
-    permission), found by creating and deleting a probe: permissions alone do not tell (an
+    permission), found by creating and deleting a probe named as a temporary (so that a run killed
+    in between leaves a file the next run removes): permissions alone do not tell (an
     administrator ignores them; a read-only mount does not show in them)."""
     try:
-        fd, probe = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.gs{os.getpid()}-", suffix=".probe",
+        fd, probe = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.gs{os.getpid()}-", suffix=f".part{_ext(path)}",
                                      dir=folder)
     except OSError as err:
         raise OutputError(f"{path}: the folder {folder} cannot be written to ({_reason(err)}); "
