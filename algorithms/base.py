@@ -274,7 +274,8 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
             results[self.DTM] = dtm_path
         for name, (path, _make) in rasters.items():
             results[name] = path
-        sink_id = self._write_ground_points(parameters, context, feedback, run)
+        sink_id = self.writeGroundPointsOrUndo(parameters, context, feedback, run,
+                                               [output_path, dtm_path, *(p for p, _m in rasters.values())])
         if sink_id is not None:
             results[self.GROUND_POINTS] = sink_id
         return results
@@ -312,6 +313,19 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         if not self.parameterAsBoolean(parameters, self.IGNORE_NOISE, context):
             codes = tuple(c for c in codes if c not in NOISE_CLASSES)
         return codes
+
+    def writeGroundPointsOrUndo(self, parameters, context, feedback, run, written):  # noqa: N802
+        """The ground-point layer, written by QGIS after the core has committed the other outputs:
+        should it fail all the same (its folder was checked before the work), the outputs this run
+        wrote (``written``) are removed, so that the run leaves all its outputs or none."""
+        try:
+            return self._write_ground_points(parameters, context, feedback, run)
+        except Exception as err:
+            for path in written:
+                if path and os.path.isfile(path):
+                    os.remove(path)
+            raise QgsProcessingException(f"{err}; the ground points could not be written, so the run's other "
+                                         "outputs were removed") from err
 
     def _write_ground_points(self, parameters, context, feedback, run):
         fields = QgsFields()

@@ -129,3 +129,26 @@ def test_qgis_process_dtm_cell_of_minus_one(cloud, tmp_path):
                                f"--DTM={tmp_path / 'd.tif'}", "--DTM_CELL=-1")
     assert code != 0 and "DTM cell size (m) must be > 0 (got -1)" in text, text
     assert "Traceback" not in text and everything_in(tmp_path) == []
+
+
+def test_ground_points_failing_after_the_core_run_remove_the_other_outputs(groundsieve_provider, cloud, tmp_path,
+                                                                          monkeypatch):
+    """Should writing the ground-point layer fail after its folder was checked (a full disk), the
+    classified cloud and the DTM this run committed are removed: all or nothing."""
+    import processing
+    from qgis.core import QgsProcessingException
+
+    from groundsieve.algorithms.base import GroundFilterAlgorithm
+    path, _text = cloud
+
+    def full(*_args):
+        raise QgsProcessingException("Could not create layer g.gpkg: No space left on device")
+
+    monkeypatch.setattr(GroundFilterAlgorithm, "_write_ground_points", full)
+    out = tmp_path / "out"
+    out.mkdir()
+    with pytest.raises(QgsProcessingException, match="No space left on device; the ground points could not be "
+                                                     "written, so the run's other outputs were removed"):
+        processing.run("groundsieve:smrf", {"INPUT": str(path), "OUTPUT": str(out / "c.laz"),
+                                            "DTM": str(out / "d.tif"), "GROUND_POINTS": str(out / "g.gpkg")})
+    assert everything_in(out) == []
