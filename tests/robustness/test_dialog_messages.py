@@ -14,11 +14,26 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from groundsieve.tests.plugin.conftest import groundsieve_plugin, groundsieve_provider  # noqa: F401 (fixtures)
-
 from .folders import everything_in, read_only_folder, sha256
 
 WRAPPER = Path(__file__).resolve().parents[2] / "scripts" / "qgis-process"
+
+
+@pytest.fixture(scope="module")
+def groundsieve_provider(qgis_app, qgis_processing):
+    """GroundSieve's provider: the one tests/plugin's session fixture registered when those tests ran
+    first in this session, else the plugin loaded here for this module and unloaded after it."""
+    from qgis.core import QgsApplication
+
+    import groundsieve
+    registered = QgsApplication.processingRegistry().providerById("groundsieve")
+    if registered is not None:
+        yield registered
+        return
+    plugin = groundsieve.classFactory(None)
+    plugin.initProcessing()
+    yield plugin.provider
+    plugin.unload()
 
 
 @pytest.fixture(scope="module")
