@@ -119,8 +119,8 @@ def explain_parameter(param, value, strictly_positive=(), largest=None):
         if extensions and ext not in extensions:
             text = f"{label}: {value} is not a {' or '.join(sorted(extensions))} file (it ends in '{ext or '(none)'}')"
             if ext == ".txt" and ".las" in extensions:
-                text += ("; ISPRS text files are read by the ground filters only: classify it with one first, "
-                         "which writes it as LAS/LAZ")
+                text += ("; ISPRS text files are read by the ground filters only: convert it to LAS/LAZ with "
+                         "its label as the class (ground 2, object 1), e.g. with PDAL or LAStools' txt2las")
             return text
     return None
 
