@@ -1,6 +1,7 @@
 """What every ground-filter algorithm shares: the INPUT/OUTPUT/DTM/GROUND_POINTS
 parameters, the adaptation of QGIS feedback to the core's plain callables, and the
 translation of core errors into QgsProcessingException."""
+import math
 import os
 import re
 
@@ -95,6 +96,86 @@ def feedback_callables(feedback):
     """The core's plain callables for a Processing feedback: progress, is_cancelled, log."""
     return dict(progress=lambda f: feedback.setProgress(100.0 * f), is_cancelled=feedback.isCanceled,
                 log=feedback.pushInfo)
+
+
+def _file_extensions(file_filter):
+    """The extensions a file parameter's filter names ("Point clouds (*.las *.laz)" -> {".las",
+    ".laz"}); None when it takes any file."""
+    found = {m.lower() for m in re.findall(r"\*(\.[A-Za-z0-9]+)", file_filter or "")}
+    return None if not found or re.search(r"\*\.\*", file_filter or "") else found
+
+
+def explain_parameter(param, value, strictly_positive=(), largest=None):
+    """What is wrong with ``value`` for ``param``, in the dialog's words (its label), or None.
+    QGIS's own check only says "An error was encountered while checking parameter values"."""
+    label = param.description()
+    if value is None or (isinstance(value, str) and value == ""):
+        return None
+    if isinstance(param, QgsProcessingParameterNumber):
+        if not isinstance(value, (int, float, str)) or isinstance(value, bool):
+            return None  # an expression or a property: QGIS evaluates it
+        try:
+            number = float(value)
+        except ValueError:
+            return f"{label}: '{value}' is not a number"
+        if not math.isfinite(number):
+            return f"{label} must be a finite number (got {value})"
+        name = param.name()
+        if name in strictly_positive and number <= 0:
+            return f"{label} must be > 0 (got {number:g})"
+        if number < param.minimum():
+            return f"{label} must be at least {param.minimum():g} (got {number:g})"
+        if number > param.maximum():
+            return f"{label} must be at most {param.maximum():g} (got {number:g})"
+        if largest and name in largest and number > largest[name]:
+            return f"{label}: {number:g} is larger than any map (at most {largest[name]:g})"
+        return None
+    if isinstance(param, QgsProcessingParameterFile) and isinstance(value, str):
+        if param.behavior() != QgsProcessingParameterFile.Behavior.File:
+            return None
+        if not os.path.isfile(value):
+            return f"{label}: {value} does not exist or is not a file"
+        extensions = _file_extensions(param.fileFilter())
+        ext = os.path.splitext(value)[1].lower()
+        if extensions and ext not in extensions:
+            text = f"{label}: {value} is not a {' or '.join(sorted(extensions))} file (it ends in '{ext or '(none)'}')"
+            if ext == ".txt" and ".las" in extensions:
+                text += ("; ISPRS text files are read by the ground filters only: convert it to LAS/LAZ with "
+                         "its label as the class (ground 2, object 1), e.g. with PDAL or LAStools' txt2las")
+            return text
+    return None
+
+
+def check_parameter_values(algorithm, parameters, context, ok, message, *, strictly_positive=(), largest=None):
+    """``checkParameterValues`` with QGIS's verdict ``ok, message`` made specific: the first
+    parameter whose value is wrong, named by its label, and why."""
+    for param in algorithm.parameterDefinitions():
+        if param.isDestination():
+            continue
+        why = explain_parameter(param, parameters.get(param.name()), strictly_positive, largest)
+        if why:
+            return False, why
+    return ok, message
+
+
+def destination_folder_problem(label, destination):
+    """Why the file destination ``destination`` of the output ``label`` cannot be written (missing or
+    read-only folder), or None; data sources that are not plain files (memory:, databases) pass."""
+    if not destination or not isinstance(destination, str):
+        return None
+    path = destination.split("|")[0]
+    if path.startswith(("memory:", "ogr:", "postgres:", "spatialite:")) or "://" in path or "dbname=" in path:
+        return None
+    from ..core.errors import OutputError
+    from ..core.io.outputs import check_folder_writable
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        return f"{path}: the folder {folder} of the output '{label}' does not exist"
+    try:
+        check_folder_writable(path, folder)
+    except OutputError as err:
+        return str(err)
+    return None
 
 
 def warn_about_crs(feedback, input_path, crs_wkt, lengths="every length parameter"):
@@ -225,6 +306,7 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         errors, workflow = core_modules()
+        self.checkGroundPointsDestination(parameters, context)
         input_path = self.parameterAsFile(parameters, self.INPUT, context)
         output_path = self.parameterAsFileOutput(parameters, self.OUTPUT, context)
         dtm_path = self.parameterAsOutputLayer(parameters, self.DTM, context) or None
@@ -256,10 +338,13 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
             results[self.DTM] = dtm_path
         for name, (path, _make) in rasters.items():
             results[name] = path
-        sink_id = None if tiled else self._write_ground_points(parameters, context, feedback, run)
+        sink_id = None
         if tiled and parameters.get(self.GROUND_POINTS):
             feedback.pushWarning("Ground points layer: not written in a tiled run (survey scale); "
                                  "use the classified point cloud.")
+        elif not tiled:
+            sink_id = self.writeGroundPointsOrUndo(parameters, context, feedback, run,
+                                                   [output_path, dtm_path, *(p for p, _m in rasters.values())])
         if sink_id is not None:
             results[self.GROUND_POINTS] = sink_id
         return results
@@ -268,6 +353,26 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         """Refuse two outputs on one file before any work, naming them as the dialog does."""
         from ..core.io.outputs import check_distinct_outputs
         check_distinct_outputs([(self.parameterDefinition(name).description(), path) for name, path in outputs])
+
+    #: Number parameters that must be > 0 although their minimum is 0 (and the largest values accepted)
+    STRICTLY_POSITIVE = ("DTM_CELL",)
+
+    def checkParameterValues(self, parameters, context):  # noqa: N802
+        """QGIS's check, with what is wrong said in the dialog's words (a cell size of -1, inf or text)."""
+        from ..core.grids.spec import MAX_CELL_M
+        ok, message = super().checkParameterValues(parameters, context)
+        return check_parameter_values(self, parameters, context, ok, message,
+                                      strictly_positive=self.STRICTLY_POSITIVE, largest={self.DTM_CELL: MAX_CELL_M})
+
+    def checkGroundPointsDestination(self, parameters, context):  # noqa: N802
+        """The ground-point layer is written after the core run: its folder is checked before the
+        work starts, so that a run that cannot write it writes nothing at all."""
+        if not parameters.get(self.GROUND_POINTS):
+            return
+        why = destination_folder_problem(self.parameterDefinition(self.GROUND_POINTS).description(),
+                                         self.parameterAsOutputLayer(parameters, self.GROUND_POINTS, context))
+        if why:
+            raise QgsProcessingException(why)
 
     def ignoredClasses(self, parameters, context, errors):  # noqa: N802
         """IGNORE_CLASSES as codes; IGNORE_NOISE=false (older models and scripts) drops 7 and 18."""
@@ -319,6 +424,19 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
                            workers=self.parameterAsInt(parameters, self.WORKERS, context),
                            work_dir=self.parameterAsFile(parameters, self.WORK_FOLDER, context) or None,
                            scheduler=(self.parameterAsString(parameters, self.SCHEDULER, context) or "").strip())
+
+    def writeGroundPointsOrUndo(self, parameters, context, feedback, run, written):  # noqa: N802
+        """The ground-point layer, written by QGIS after the core has committed the other outputs:
+        should it fail all the same (its folder was checked before the work), the outputs this run
+        wrote (``written``) are removed, so that the run leaves all its outputs or none."""
+        try:
+            return self._write_ground_points(parameters, context, feedback, run)
+        except Exception as err:
+            for path in written:
+                if path and os.path.isfile(path):
+                    os.remove(path)
+            raise QgsProcessingException(f"{err}; the ground points could not be written, so the run's other "
+                                         "outputs were removed") from err
 
     def _write_ground_points(self, parameters, context, feedback, run):
         fields = QgsFields()

@@ -9,7 +9,7 @@ from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException, QgsProces
                        QgsProcessingParameterRasterDestination, QgsProcessingParameterString)
 from qgis.PyQt.QtGui import QIcon
 
-from .base import core_modules, dialog_help, feedback_callables
+from .base import check_parameter_values, core_modules, dialog_help, feedback_callables
 from .discovery import Discoverable
 
 _ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
@@ -40,6 +40,13 @@ class _RFBase(Discoverable, QgsProcessingAlgorithm):
 
     def createInstance(self):  # noqa: N802
         return type(self)()
+
+    def checkParameterValues(self, parameters, context):  # noqa: N802
+        """QGIS's check, with what is wrong said in the dialog's words (an ISPRS .txt, a cell of -1)."""
+        from ..core.grids.spec import MAX_CELL_M
+        ok, message = super().checkParameterValues(parameters, context)
+        return check_parameter_values(self, parameters, context, ok, message, strictly_positive=("DTM_CELL", "BLOCK"),
+                                      largest={"DTM_CELL": MAX_CELL_M})
 
 
 class RFTrainAlgorithm(_RFBase):

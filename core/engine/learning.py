@@ -10,6 +10,7 @@ from typing import List, Optional
 import numpy as np
 
 from ..errors import InputError
+from ..io import atomic_path
 from ..learn.model_file import MODEL_EXTENSION, load_model, save_model
 from ..learn.rf import (CRITERIA, DEFAULT_PRESET, PRESETS, SCALERS, ForestParams, Model, feature_matrix,
                         permutation_importance, resolve_features, spatial_split, train_forest)
@@ -107,7 +108,6 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
     from ..io import check_output_path, read_cloud
     from ..metrics import class_report
     from ..progress import Steps
-    from ..learn.report import write_report
     steps = Steps(progress, is_cancelled)
     log = log or (lambda _msg: None)
     check_output_path(model_path, inputs=[input_path, validation_path, test_path], extensions=(MODEL_EXTENSION,),
@@ -197,7 +197,7 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
     timings["permutation importance"] = time.perf_counter() - t3
     model.meta.update(classes_learned=list(classes), test_accuracy=evaluations["test set"].accuracy)
     steps.check()
-    save_model(model, model_path)
+    settings = None
     if report_path:
         settings = dict(input=input_path, features=", ".join(names), classes=", ".join(map(str, classes)),
                         criterion=model.meta["params"]["criterion"], trees=model.meta["params"]["n_trees"],
@@ -205,11 +205,36 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
                         samples_per_tree=model.meta["params"]["max_samples"],
                         split=(f"spatial blocks of {options.block_m:g} m, fractions {options.fractions}"
                                if not (validation_path and test_path) else "separate files"))
-        write_report(report_path, title="GroundSieve Random Forest training", evaluations=evaluations,
-                     features=names, impurity=model.meta["impurity_importance"], permutation=perm,
-                     timings=timings, settings=settings, grid=grid_rows, notes=notes)
+    _write_training_outputs(model, model_path, report_path, dict(
+        title="GroundSieve Random Forest training", evaluations=evaluations, features=names,
+        impurity=model.meta["impurity_importance"], permutation=perm, timings=timings, settings=settings,
+        grid=grid_rows, notes=notes))
     steps.report(1.0)
     return TrainRun(model, evaluations, names, timings, grid_rows, notes)
+
+
+def _write_training_outputs(model, model_path: str, report_path: Optional[str], report: dict) -> None:
+    """Write the model file, the HTML report and its CSV together: each to a temporary beside it,
+    all renamed into place only once all three are complete, so that a failure in any (a full
+    disk while writing the report) leaves none of them, not a model without its report."""
+    import contextlib
+    from ..learn.report import report_csv_path, write_report
+    from ..errors import OutputError
+    with contextlib.ExitStack() as stack:
+        tmp_model = stack.enter_context(atomic_path(model_path))
+        tmp_report = tmp_csv = None
+        if report_path:
+            tmp_report = stack.enter_context(atomic_path(report_path))
+            tmp_csv = stack.enter_context(atomic_path(report_csv_path(report_path)))
+        try:
+            target = model_path
+            save_model(model, tmp_model, atomic=False)
+            if report_path:
+                target = f"{report_path} (or its CSV {report_csv_path(report_path)})"
+                write_report(tmp_report, csv_path=tmp_csv, atomic=False, **report)
+        except OSError as err:
+            raise OutputError(f"{target}: cannot be written ({err.strerror or err}); nothing was written: "
+                              f"neither the model {model_path} nor its report") from err
 
 
 def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_path: Optional[str] = None,

@@ -29,7 +29,7 @@ from typing import Callable, Optional
 import numpy as np
 
 from ..errors import InvalidParameterError
-from ..grids.spec import GridSpec, memory_budget
+from ..grids.spec import MAX_CELL_M, GridSpec, memory_budget
 from ..io import (CLASS_GROUND, CLASS_UNCLASSIFIED, NOISE_CLASSES, PointCloud, atomic_path, check_output_path,
                  read_cloud, write_classified)
 from ..io.clouds import parse_classes
@@ -89,6 +89,9 @@ class DTMOptions:
         _check_budget(self.memory_budget_bytes, "memory_budget_bytes")
         if not (math.isfinite(self.cell_size_m) and self.cell_size_m > 0):
             raise InvalidParameterError(f"DTM cell size must be > 0 m (got {self.cell_size_m})")
+        if self.cell_size_m > MAX_CELL_M:
+            raise InvalidParameterError(f"DTM cell size: {self.cell_size_m:g} m is larger than any map "
+                                        f"(at most {MAX_CELL_M:g} m)")
         if int(self.points_per_cell) != self.points_per_cell or self.points_per_cell < 0:
             raise InvalidParameterError(f"points_per_cell must be a whole number >= 0 (got {self.points_per_cell})")
 
@@ -213,15 +216,18 @@ def check_dtm_memory(x, y, options: DTMOptions) -> GridSpec:
         return GridSpec.covering(x, y, options.cell_size_m, what="DTM", bytes_per_cell=DTM_BYTES_PER_CELL)
 
 
-def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions):
+def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions, why_none: str = "", path: str = ""):
     """DTM grid covering the points ``x, y`` (give only those that may enter a DTM: neither
     withheld nor ignored), interpolated from the ground points among them. The grid's memory is
-    checked against the budget before it is allocated."""
+    checked against the budget before it is allocated. ``why_none``: the filter's explanation when
+    it found no ground point (quoted in the refusal); ``path``: the input, named in it."""
     from ..grids.rasterize import tin_dtm
     with memory_budget(options.memory_budget_bytes):
         grid = GridSpec.covering(x, y, options.cell_size_m, what="DTM", bytes_per_cell=DTM_BYTES_PER_CELL)
     if not ground.any():
-        raise InvalidParameterError("the filter found no ground point: no DTM can be made")
+        raise InvalidParameterError((f"{path}: " if path else "")
+                                    + "the filter found no ground point: no DTM can be made"
+                                    + (f". Why: {why_none}" if why_none else ""))
     dtm = tin_dtm(x[ground], y[ground], z[ground], grid, fill_outside=options.fill_outside_hull,
                   points_per_cell=options.points_per_cell)
     return grid, dtm
@@ -296,7 +302,8 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     if dtm_path:
         # The DTM spans only the points that may enter it: not withheld, not ignored (noise may lie far away).
         area = done.processable
-        run.dtm_grid, run.dtm = make_dtm(cloud.x[area], cloud.y[area], cloud.z[area], ground[area], dtm)
+        run.dtm_grid, run.dtm = make_dtm(cloud.x[area], cloud.y[area], cloud.z[area], ground[area], dtm,
+                                         getattr(done.detail, "no_ground_reason", ""), input_path)
         steps.report(0.85)
     extra = [(path, *make(run)) for path, make in rasters.items()]
     if dtm_path:

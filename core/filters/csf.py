@@ -260,6 +260,10 @@ class CSF:
             x0, y0 = float(x.min()), float(y.min())
             ncols = int((float(x.max()) - x0) / LOW_OUTLIER_CELL_M) + 1
             nrows = int((float(y.max()) - y0) / LOW_OUTLIER_CELL_M) + 1
+            # Two float64 grids (the lowest z per cell and its reference): refused before allocating
+            # when too large (a point 1000 km away made a bare MemoryError).
+            check_memory(nrows * ncols * 16.0, what="CSF low-outlier grid", shape=(nrows, ncols),
+                         cell=LOW_OUTLIER_CELL_M, x=x, y=y)
             terrain._low_outliers_kernel(x, y, z, x0, y0, LOW_OUTLIER_CELL_M, ncols, nrows,
                                    float(self.low_outlier_m), low)
         use = ~low

@@ -62,6 +62,8 @@ class EVCResult:
     evc: np.ndarray                 #: on the small grid (NaN = empty or undefined)
     classes: np.ndarray             #: uint8 on the small grid: 0 empty, 1 ground, 2 veg. area, 3 veg. boundary
     threshold: float                #: the threshold used (given, or found by natural breaks)
+    #: when no point is ground: why, and what to change (the DTM's refusal quotes it)
+    no_ground_reason: str = ""
 
 
 @dataclass(frozen=True)
@@ -168,8 +170,22 @@ class EVC:
         cls_at_point = np.empty(x.shape[0], dtype=np.uint8)
         _cell_lookup_kernel(x, y, classes, small.x0, small.top, small.cell, cls_at_point)
         steps.report(1.0)
-        return EVCResult(cls_at_point == GROUND, small, large, small_mean, large_mean, difference, evc,
-                         classes, threshold)
+        ground = cls_at_point == GROUND
+        return EVCResult(ground, small, large, small_mean, large_mean, difference, evc, classes, threshold,
+                         "" if ground.any() else self._why_no_ground(small_mean, mean, std, threshold))
+
+    def _why_no_ground(self, small_mean, mean, std, threshold) -> str:
+        """Why the filter called no cell ground, in words that say what to change."""
+        occupied = ~np.isnan(small_mean)
+        flat = occupied & (mean == 0) & (std == 0)
+        if self.ground_offset_m == 0 and flat.sum() >= 0.5 * max(1, int(occupied.sum())):
+            return (f"the surface is perfectly flat ({flat.sum() / max(1, occupied.sum()):.0%} of the "
+                    f"{self.small_scale_m:g} m cells lie exactly on the {self.large_scale_m:g} m surface): there "
+                    "the paper's EVC, standard deviation / mean of the difference, is 0 / 0, undefined, and "
+                    "Table 2 calls no such cell ground. Set the ground offset (the ground's roughness, e.g. 0.1 m; "
+                    "'Ground offset added to the mean difference (m)' in QGIS), which makes a smooth surface ground")
+        return (f"no cell has an EVC in (0, {threshold:g}] (the threshold): raise the threshold, or set the ground "
+                "offset (e.g. 0.1 m), or check the scales against the point spacing")
 
 
 def natural_break(evc: np.ndarray, max_values: int = 200_000, upper_percentile: float = 95.0) -> float:

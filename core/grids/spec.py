@@ -22,6 +22,9 @@ from ..errors import InvalidParameterError, MemoryBudgetError
 #: Largest grid the core agrees to allocate (cells) whatever the memory: index arithmetic and
 #: rasters beyond this are not meant for one piece.
 MAX_CELLS = 400_000_000
+#: The largest cell accepted, in metres (1000 km: a cell wider than a country is a typing error;
+#: much larger ones, 1e300, overflow the grid's coordinates).
+MAX_CELL_M = 1e6
 
 #: Share of the memory available at the start of a grid that one run may use by default.
 DEFAULT_MEMORY_FRACTION = 0.6
@@ -148,7 +151,8 @@ def check_memory(nbytes: float, *, what: str, shape: tuple, cell: float, x=None,
             message += (f". Likely cause: {some} {_distance(float(dist[worst]))} from the others, at "
                         f"x {float(x[i]):.2f}, y {float(y[i]):.2f} (the others span about "
                         f"{core[1] - core[0]:,.0f} x {core[3] - core[2]:,.0f} m)")
-    message += (". Class such points as noise (7, which is ignored by default) or remove them, use a larger "
+    message += (". Class such points as noise (7, which is ignored by default) or remove them; if the file holds "
+                "separate survey areas, split it into one file per area; or use a larger "
                 "cell size, or set a larger memory budget. A grid over the whole extent is what costs: the "
                 "survey-scale tiler, which grids only where points are, will avoid it once the run goes "
                 "through it.")
@@ -174,6 +178,9 @@ class GridSpec:
         is above the budget (:func:`check_memory`), or when it has more than ``MAX_CELLS``."""
         if not (cell > 0 and math.isfinite(cell)):
             raise InvalidParameterError(f"{what}: cell size must be a finite number > 0 (got {cell})")
+        if cell > MAX_CELL_M:
+            raise InvalidParameterError(f"{what}: a cell size of {cell:g} m is larger than any map "
+                                        f"(at most {MAX_CELL_M:g} m); give the cell size in metres")
         xmin, xmax = float(np.min(x)), float(np.max(x))
         ymin, ymax = float(np.min(y)), float(np.max(y))
         x0 = math.floor(xmin / cell) * cell

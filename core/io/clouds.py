@@ -169,6 +169,17 @@ def _records_before_evlrs(header) -> Optional[int]:
     return (start - int(header.offset_to_point_data)) // int(header.point_format.size)
 
 
+def _records_held(path: str, header) -> Optional[int]:
+    """How many whole point records an uncompressed LAS file holds between the point data's start
+    and its end (the first EVLR, or the end of the file); None for LAZ (no cheap bound)."""
+    if header.are_points_compressed:
+        return None
+    end = os.path.getsize(path)
+    if header.version.minor >= 4 and header.number_of_evlrs and int(header.start_of_first_evlr or 0) > 0:
+        end = min(end, int(header.start_of_first_evlr))
+    return max(0, end - int(header.offset_to_point_data)) // int(header.point_format.size)
+
+
 def _read_las(path: str) -> PointCloud:
     import laspy
     notes = []
@@ -188,6 +199,13 @@ def _read_las(path: str) -> PointCloud:
                              f"{room:,} point records before its extended VLRs (at byte "
                              f"{evlr_at:,}); read those {room:,}, "
                              f"{announced - room:,} missing (the header's count is wrong).")
+            held = _records_held(path, header)
+            if las is None and held is not None and held > int(header.point_count):
+                notes.append(f"Warning: {path}: the header announces {int(header.point_count):,} points but the "
+                             f"file holds {held:,} point records; read the {int(header.point_count):,} announced, "
+                             f"{held - int(header.point_count):,} ignored (the header's count is wrong, or "
+                             "something else follows the points; rewrite the file with a tool that fixes its "
+                             "header to use them all).")
         if las is None:
             las = laspy.read(path)
     except Exception as err:  # laspy raises many types for damaged files

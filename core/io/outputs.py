@@ -37,7 +37,29 @@ def check_output_path(path: str, *, inputs=(), extensions=LAS_EXTENSIONS, what: 
     folder = os.path.dirname(real) or "."
     if not os.path.isdir(folder):
         raise OutputError(f"{path}: the folder {folder} does not exist")
+    check_folder_writable(path, folder)
     return path
+
+
+def check_folder_writable(path: str, folder: str) -> None:
+    """Refuse ``path`` when its folder cannot take a new file (read-only folder or file system, no
+    permission), found by creating and deleting a probe named as a temporary (so that a run killed
+    in between leaves a file the next run removes): permissions alone do not tell (an
+    administrator ignores them; a read-only mount does not show in them)."""
+    try:
+        fd, probe = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.gs{os.getpid()}-", suffix=f".part{_ext(path)}",
+                                     dir=folder)
+    except OSError as err:
+        raise OutputError(f"{path}: the folder {folder} cannot be written to ({_reason(err)}); "
+                          "choose a folder where you may create files") from err
+    os.close(fd)
+    with contextlib.suppress(OSError):
+        os.remove(probe)
+
+
+def _reason(err: OSError) -> str:
+    """An OSError in the user's words: its message without the path (the caller names the file)."""
+    return err.strerror or str(err)
 
 
 def check_distinct_outputs(outputs) -> None:
@@ -99,7 +121,10 @@ def atomic_path(path: str):
     folder = os.path.dirname(os.path.abspath(path))
     base = os.path.basename(path)
     remove_stale_temporaries(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{base}.gs{os.getpid()}-", suffix=f".part{_ext(path)}", dir=folder)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{base}.gs{os.getpid()}-", suffix=f".part{_ext(path)}", dir=folder)
+    except OSError as err:
+        raise OutputError(f"{path}: cannot be written ({_reason(err)})") from err
     os.close(fd)
     try:
         yield tmp
@@ -107,6 +132,11 @@ def atomic_path(path: str):
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; the output follows the umask like any file
         os.replace(tmp, path)
+    except OSError as err:
+        with contextlib.suppress(OSError):
+            os.remove(tmp)
+        # A full disk or a folder made read-only meanwhile: the user's words, not a traceback.
+        raise OutputError(f"{path}: cannot be written ({_reason(err)})") from err
     except BaseException:
         with contextlib.suppress(OSError):
             os.remove(tmp)

@@ -3,6 +3,7 @@
 A file whose format, version or checksum does not match is refused."""
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -38,8 +39,9 @@ def _digest(arrays: Dict[str, np.ndarray], header: dict) -> str:
     return h.hexdigest()
 
 
-def save_model(model: Model, path: str) -> None:
-    """Write ``model`` to ``path`` (.npz) atomically."""
+def save_model(model: Model, path: str, *, atomic: bool = True) -> None:
+    """Write ``model`` to ``path`` (.npz), atomically unless the caller already writes to a
+    temporary path of its own (``atomic=False``)."""
     path = os.fspath(path)
     if not path.lower().endswith(MODEL_EXTENSION):
         raise InvalidParameterError(f"{path}: a model file must end in {MODEL_EXTENSION}")
@@ -51,7 +53,7 @@ def save_model(model: Model, path: str) -> None:
                   scaler=model.scaler.kind)
     header["sha256"] = _digest(arrays, header)
     arrays["header"] = np.frombuffer(json.dumps(header, sort_keys=True).encode("utf-8"), dtype=np.uint8)
-    with atomic_path(path) as tmp:
+    with (atomic_path(path) if atomic else contextlib.nullcontext(path)) as tmp:
         with open(tmp, "wb") as handle:
             np.savez_compressed(handle, **arrays)
 

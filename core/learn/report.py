@@ -5,6 +5,7 @@ report needs no plotting library and opens in any browser.
 """
 from __future__ import annotations
 
+import contextlib
 import csv
 import html
 import io
@@ -91,8 +92,11 @@ def _report_table(report: ClassReport) -> str:
 
 def write_report(path: str, *, title: str, evaluations: Dict[str, ClassReport], features: List[str],
                  impurity: Sequence[float], permutation: Optional[Sequence[float]], timings: Dict[str, float],
-                 settings: Dict[str, object], notes: Sequence[str] = (), grid: Optional[List[dict]] = None) -> None:
-    """Write the HTML report to ``path`` and the same figures as CSV beside it (``.csv``)."""
+                 settings: Dict[str, object], notes: Sequence[str] = (), grid: Optional[List[dict]] = None,
+                 csv_path: Optional[str] = None, atomic: bool = True) -> None:
+    """Write the HTML report to ``path`` and the same figures as CSV beside it (``.csv``, or
+    ``csv_path``), each atomically unless the caller already writes to temporary paths of its own
+    (``atomic=False``, e.g. to commit them together with a model file)."""
     out = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title><style>"
            "body{font-family:sans-serif;margin:1.5em;max-width:60em}table{border-collapse:collapse;margin:.5em 0}"
            "td,th{border:1px solid #bbb;padding:.25em .6em;text-align:right}th:first-child,td:first-child"
@@ -119,10 +123,10 @@ def write_report(path: str, *, title: str, evaluations: Dict[str, ClassReport], 
     out.append("<h2>Timings (s)</h2><table>" + "".join(
         f"<tr><td>{html.escape(k)}</td><td>{v:.2f}</td></tr>" for k, v in timings.items()) + "</table>")
     out.append("</body></html>")
-    with atomic_path(path) as tmp:
+    with (atomic_path(path) if atomic else contextlib.nullcontext(path)) as tmp:
         with open(tmp, "w", encoding="utf-8") as handle:
             handle.write("\n".join(out))
-    csv_path = str(path).rsplit(".", 1)[0] + ".csv"
+    csv_path = csv_path or report_csv_path(path)
     buffer = io.StringIO()
     writer = csv.writer(buffer)
     writer.writerow(["set", "class", "precision", "recall", "f1", "support"])
@@ -136,6 +140,11 @@ def write_report(path: str, *, title: str, evaluations: Dict[str, ClassReport], 
     writer.writerow(["feature", "impurity_importance", "permutation_importance"])
     for i, name in enumerate(features):
         writer.writerow([name, f"{impurity[i]:.6f}", "" if permutation is None else f"{permutation[i]:.6f}"])
-    with atomic_path(csv_path) as tmp:
+    with (atomic_path(csv_path) if atomic else contextlib.nullcontext(csv_path)) as tmp:
         with open(tmp, "w", encoding="utf-8", newline="") as handle:
             handle.write(buffer.getvalue())
+
+
+def report_csv_path(path: str) -> str:
+    """The CSV written beside the HTML report ``path``."""
+    return str(path).rsplit(".", 1)[0] + ".csv"

@@ -77,7 +77,7 @@ def test_evc_with_defaults_only(groundsieve_provider, scene_laz, tmp_path):
 
 
 @pytest.mark.parametrize("params, message", [
-    ({"RADIUS": 0}, "RADIUS"),  # below the form's minimum: QGIS refuses it before the run
+    ({"RADIUS": 0}, r"Neighbourhood radius \(cells\) must be at least 1 \(got 0\)"),  # refused before the run, by its label
     ({"SMALL_SCALE": 2.0, "LARGE_SCALE": 2.0}, "large_scale_m"),
     ({"LARGE_SCALE": 5000.0}, "larger than the cloud"),
 ])
