@@ -133,6 +133,8 @@ def explain_parameter(param, value, strictly_positive=(), largest=None):
     if isinstance(param, QgsProcessingParameterFile) and isinstance(value, str):
         if param.behavior() != QgsProcessingParameterFile.Behavior.File:
             return None
+        if os.path.isdir(value) and "folder" in (param.fileFilter() or "").lower():
+            return None  # the survey inputs take a folder of LAS/LAZ files too
         if not os.path.isfile(value):
             return f"{label}: {value} does not exist or is not a file"
         extensions = _file_extensions(param.fileFilter())

@@ -52,6 +52,9 @@ BYTES_PER_POINT = 330
 SPARSE_AREA_M2 = 1e8
 
 
+#: a tile holding fewer points than this, buffer included, is not filtered (isolated points)
+MIN_TILE_POINTS = 50
+
 def machine_memory_bytes() -> int:
     try:
         return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
@@ -465,7 +468,11 @@ def _tile_job(job) -> Optional[dict]:
             return None
         cloud = tile_cloud(clouds, path=where)
         del clouds
-        if workflow.select_points(cloud, options).any():
+        if len(cloud) < MIN_TILE_POINTS:
+            # Isolated points (a stray point far from the survey): too few for any filter's grid;
+            # they keep their classes and are not ground.
+            cls, ground = cloud.classification, np.zeros(len(cloud), dtype=bool)
+        elif workflow.select_points(cloud, options).any():
             done = workflow.classify_cloud(cloud, job["algorithm"], options, Steps(is_cancelled=job["is_cancelled"]))
             cls, ground = done.classification, done.ground
         else:  # nothing to filter here (all noise): the points keep their classes

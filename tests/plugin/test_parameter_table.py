@@ -24,6 +24,9 @@ def test_the_dialog_is_the_table_and_its_defaults_the_filter_s(groundsieve_provi
 def test_a_bad_scheduler_address_is_a_processing_error(groundsieve_provider, tmp_path):
     import processing
     from qgis.core import QgsProcessingException
+    from groundsieve.core.io import new_las, write_las
+    src = tmp_path / "in.laz"
+    write_las(new_las([0.0, 10.0, 0.0], [0.0, 0.0, 10.0], [0.0, 0.0, 0.0]), str(src))
     with pytest.raises(QgsProcessingException, match="tcp://host:port"):
-        processing.run("groundsieve:pmf", {"INPUT": str(tmp_path / "none.laz"), "OUTPUT": str(tmp_path / "o.laz"),
+        processing.run("groundsieve:pmf", {"INPUT": str(src), "OUTPUT": str(tmp_path / "o.laz"),
                                            "SCHEDULER": "somewhere"})

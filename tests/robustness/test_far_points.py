@@ -1,14 +1,13 @@
-"""Issue 14, items 3 and 5: a single point 1000 km away, and two survey areas 50 km apart in one
-file, are refused (a whole-cloud grid spans the bounding box) with a message saying where the
-far point is and what to do, for every ground filter that grids the cloud (CSF gave a traceback);
-nothing written, the input unchanged."""
+"""Issue 14, items 3 and 5, and issue 10: a single point 1000 km away, and two survey areas 50 km
+apart in one file, run through the survey engine, which grids only where points are (a whole-cloud
+grid spanning the bounding box is refused by the memory guard with the point's place); the input
+is unchanged."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 from groundsieve.core.engine import workflow
-from groundsieve.core.errors import GroundSieveError
 from groundsieve.core.filters.csf import CSF
 from groundsieve.core.filters.evc import EVC
 from groundsieve.core.filters.pmf import PMF
@@ -31,29 +30,41 @@ def _write(path, offsets):
     las.write(str(path))
 
 
+def _classes(path):
+    import laspy
+    return np.asarray(laspy.read(str(path)).classification)
+
+
 @pytest.mark.parametrize("algorithm", [SMRF(), PMF(), CSF(), EVC(ground_offset_m=0.1)], ids=lambda a: a.name)
-def test_a_point_1000_km_away_is_refused_with_its_place(tmp_path, algorithm):
+def test_a_point_1000_km_away_runs_in_tiles_where_points_are(tmp_path, algorithm):
+    """A whole-cloud grid would span 1000 km (the memory guard refuses it, naming the point: see
+    tests/core/test_memory_guard.py); the survey engine grids only where points are, so the run
+    goes through: the stray point, alone in its tile, keeps its class and is not ground."""
     src = tmp_path / "in" / "far.las"
     src.parent.mkdir()
     _write(src, [(3999, (1_000_000.0, 1_000_000.0))])
+    near = tmp_path / "in" / "near.las"
+    _write(near, [])
     out = tmp_path / "out"
     out.mkdir()
     before = sha256(src)
-    with pytest.raises(GroundSieveError) as err:
-        workflow.run_ground_filter(str(src), str(out / "c.las"), algorithm)  # the filter's own grids
-    message = str(err.value)
-    assert "1 point lies" in message and "from the others" in message, message
-    assert "remove them" in message
-    assert everything_in(out) == [] and sha256(src) == before
+    logged = []
+    workflow.run_ground_filter(str(src), str(out / "c.las"), algorithm, log=logged.append)
+    workflow.run_ground_filter(str(near), str(out / "n.las"), algorithm)
+    cls, ref = _classes(out / "c.las"), _classes(out / "n.las")
+    assert len(cls) == 4000 and cls[3999] != 2
+    assert (cls[:3999] == ref[:3999]).mean() > 0.99
+    assert any("tile" in line.lower() for line in logged)
+    assert everything_in(out) == ["c.las", "n.las"] and sha256(src) == before
 
 
-def test_two_areas_50_km_apart_are_refused_with_what_to_do(tmp_path):
+def test_two_areas_50_km_apart_run_in_tiles(tmp_path):
     src = tmp_path / "in" / "two.las"
     src.parent.mkdir()
     _write(src, [(2000, (50_000.0, 50_000.0))])
     out = tmp_path / "out"
     out.mkdir()
-    with pytest.raises(GroundSieveError) as err:
-        workflow.run_ground_filter(str(src), str(out / "c.las"), SMRF())
-    assert "split it into one file per area" in str(err.value), str(err.value)
-    assert everything_in(out) == []
+    workflow.run_ground_filter(str(src), str(out / "c.las"), SMRF())
+    cls = _classes(out / "c.las")
+    assert (cls[:2000] == 2).mean() > 0.3 and (cls[2000:] == 2).mean() > 0.3
+    assert everything_in(out) == ["c.las"]
