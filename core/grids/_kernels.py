@@ -139,39 +139,47 @@ def _cubic_at_points_kernel(grid, x, y, x0, top, cell, out):
         out[k] = _cubic_one(grid, (x[k] - x0) / cell - 0.5, (top - y[k]) / cell - 0.5, wx, wy)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _fill_triangle(px, py, pz, i0, i1, i2, x0, top, cell, row_lo, row_hi, out):
+    """Give each cell centre of rows ``row_lo..row_hi`` inside triangle (i0, i1, i2) the height
+    of the triangle's plane there."""
+    nrows, ncols = out.shape
+    xa, ya, za = px[i0], py[i0], pz[i0]
+    xb, yb, zb = px[i1], py[i1], pz[i1]
+    xc, yc, zc = px[i2], py[i2], pz[i2]
+    det = (yb - yc) * (xa - xc) + (xc - xb) * (ya - yc)
+    if det == 0.0:
+        return
+    xmin = min(xa, min(xb, xc))
+    xmax = max(xa, max(xb, xc))
+    c_lo = max(int(math.ceil((xmin - x0) / cell - 0.5)), 0)
+    c_hi = min(int(math.floor((xmax - x0) / cell - 0.5)), ncols - 1)
+    eps = -1e-9
+    for r in range(row_lo, row_hi + 1):
+        yy = top - (r + 0.5) * cell
+        for c in range(c_lo, c_hi + 1):
+            xx = x0 + (c + 0.5) * cell
+            l1 = ((yb - yc) * (xx - xc) + (xc - xb) * (yy - yc)) / det
+            l2 = ((yc - ya) * (xx - xc) + (xa - xc) * (yy - yc)) / det
+            l3 = 1.0 - l1 - l2
+            if l1 >= eps and l2 >= eps and l3 >= eps:
+                out[r, c] = l1 * za + l2 * zb + l3 * zc
+
+
 @njit(cache=True, nogil=True)
 def _rasterize_tin_kernel(px, py, pz, simplices, x0, top, cell, out):
     """Linear interpolation on a triangulation: each cell centre inside a triangle
     gets the plane of that triangle. Cells covered by no triangle keep their value."""
-    nrows, ncols = out.shape
+    nrows = out.shape[0]
     for t in range(simplices.shape[0]):
         i0 = simplices[t, 0]
         i1 = simplices[t, 1]
         i2 = simplices[t, 2]
-        xa, ya, za = px[i0], py[i0], pz[i0]
-        xb, yb, zb = px[i1], py[i1], pz[i1]
-        xc, yc, zc = px[i2], py[i2], pz[i2]
-        det = (yb - yc) * (xa - xc) + (xc - xb) * (ya - yc)
-        if det == 0.0:
-            continue
-        xmin = min(xa, min(xb, xc))
-        xmax = max(xa, max(xb, xc))
-        ymin = min(ya, min(yb, yc))
-        ymax = max(ya, max(yb, yc))
-        c_lo = max(int(math.ceil((xmin - x0) / cell - 0.5)), 0)
-        c_hi = min(int(math.floor((xmax - x0) / cell - 0.5)), ncols - 1)
+        ymin = min(py[i0], min(py[i1], py[i2]))
+        ymax = max(py[i0], max(py[i1], py[i2]))
         r_lo = max(int(math.ceil((top - ymax) / cell - 0.5)), 0)
         r_hi = min(int(math.floor((top - ymin) / cell - 0.5)), nrows - 1)
-        eps = -1e-9
-        for r in range(r_lo, r_hi + 1):
-            yy = top - (r + 0.5) * cell
-            for c in range(c_lo, c_hi + 1):
-                xx = x0 + (c + 0.5) * cell
-                l1 = ((yb - yc) * (xx - xc) + (xc - xb) * (yy - yc)) / det
-                l2 = ((yc - ya) * (xx - xc) + (xa - xc) * (yy - yc)) / det
-                l3 = 1.0 - l1 - l2
-                if l1 >= eps and l2 >= eps and l3 >= eps:
-                    out[r, c] = l1 * za + l2 * zb + l3 * zc
+        _fill_triangle(px, py, pz, i0, i1, i2, x0, top, cell, r_lo, r_hi, out)
 
 
 @njit(cache=True, nogil=True)
@@ -244,7 +252,7 @@ def _rasterize_tin_bands_kernel(px, py, pz, simplices, x0, top, cell, out, band)
     """:func:`_rasterize_tin_kernel` in parallel over bands of ``band`` rows: each band takes
     the triangles reaching it in the serial order, so every cell gets the same value as the
     serial kernel (the last triangle holding its centre)."""
-    nrows, ncols = out.shape
+    nrows = out.shape[0]
     m = simplices.shape[0]
     r_lo, r_hi = _triangle_rows(px, py, simplices, top, cell, nrows)
     nb = (nrows + band - 1) // band
@@ -267,26 +275,5 @@ def _rasterize_tin_bands_kernel(px, py, pz, simplices, x0, top, cell, out, band)
         row1 = min(row0 + band, nrows) - 1
         for k in range(start[b], start[b + 1]):
             t = members[k]
-            i0 = simplices[t, 0]
-            i1 = simplices[t, 1]
-            i2 = simplices[t, 2]
-            xa, ya, za = px[i0], py[i0], pz[i0]
-            xb, yb, zb = px[i1], py[i1], pz[i1]
-            xc, yc, zc = px[i2], py[i2], pz[i2]
-            det = (yb - yc) * (xa - xc) + (xc - xb) * (ya - yc)
-            if det == 0.0:
-                continue
-            xmin = min(xa, min(xb, xc))
-            xmax = max(xa, max(xb, xc))
-            c_lo = max(int(math.ceil((xmin - x0) / cell - 0.5)), 0)
-            c_hi = min(int(math.floor((xmax - x0) / cell - 0.5)), ncols - 1)
-            eps = -1e-9
-            for r in range(max(r_lo[t], row0), min(r_hi[t], row1) + 1):
-                yy = top - (r + 0.5) * cell
-                for c in range(c_lo, c_hi + 1):
-                    xx = x0 + (c + 0.5) * cell
-                    l1 = ((yb - yc) * (xx - xc) + (xc - xb) * (yy - yc)) / det
-                    l2 = ((yc - ya) * (xx - xc) + (xa - xc) * (yy - yc)) / det
-                    l3 = 1.0 - l1 - l2
-                    if l1 >= eps and l2 >= eps and l3 >= eps:
-                        out[r, c] = l1 * za + l2 * zb + l3 * zc
+            _fill_triangle(px, py, pz, simplices[t, 0], simplices[t, 1], simplices[t, 2], x0, top, cell,
+                           max(r_lo[t], row0), min(r_hi[t], row1), out)
