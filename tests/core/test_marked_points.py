@@ -168,11 +168,11 @@ def test_parse_classes_refuses(text):
         parse_classes(text)
 
 
-def test_rfclassify_keeps_marked_points_out_of_features_prediction_and_dtm(tmp_path):
+def train_block_model(tmp_path):
+    """A model of ground (2) against the block (1) from the height above the lowest point within
+    2.5 m, trained on an unmarked scene; returns its path."""
     from groundsieve.core.engine import learning
     from groundsieve.core.learn import rf
-    # A model of ground (2) against the block (1) from the height above the lowest point within 2.5 m:
-    # a withheld point 5 m below would change that feature for its neighbours if it were used.
     train = tmp_path / "train.las"
     kind, _ = write_scene(train, marked=False, seed=5)
     las = laspy.read(str(train))
@@ -182,6 +182,13 @@ def test_rfclassify_keeps_marked_points_out_of_features_prediction_and_dtm(tmp_p
     learning.train_file(str(train), str(model), None,
                         learning.TrainOptions(features=("height_above_min_r2p5",), classes=(1, 2), block_m=10.0,
                                               params=rf.ForestParams(n_trees=5)))
+    return model
+
+
+def test_rfclassify_keeps_marked_points_out_of_features_prediction_and_dtm(tmp_path):
+    from groundsieve.core.engine import learning
+    # A withheld point 5 m below would change the model's feature for its neighbours if it were used.
+    model = train_block_model(tmp_path)
     src = tmp_path / "in.las"
     kind, cls_in = write_scene(src, far_noise=True)
     _, wh_in, syn_in = read(src)

@@ -7,7 +7,7 @@ from pathlib import Path
 import laspy
 import numpy as np
 
-from groundsieve.tests.core.test_marked_points import write_scene
+from groundsieve.tests.core.test_marked_points import train_block_model, write_scene
 
 REPO = Path(__file__).resolve().parents[2]
 WRAPPER = REPO / "scripts" / "qgis-process"
@@ -78,17 +78,7 @@ def test_ignore_classes_parameter_and_its_refusal(tmp_path):
 
 
 def test_rfclassify_keeps_withheld_and_noise(tmp_path):
-    from groundsieve.core.engine import learning
-    from groundsieve.core.learn import rf
-    train = tmp_path / "train.las"
-    kind, _ = write_scene(train, marked=False, seed=5)
-    las = laspy.read(str(train))
-    las.classification = np.where(kind == "block", 1, 2).astype(np.uint8)
-    las.write(str(train))
-    model = tmp_path / "m.npz"
-    learning.train_file(str(train), str(model), None,
-                        learning.TrainOptions(features=("height_above_min_r2p5",), classes=(1, 2), block_m=10.0,
-                                              params=rf.ForestParams(n_trees=5)))
+    model = train_block_model(tmp_path)
     src = tmp_path / "in.las"
     kind, cls_in = write_scene(src, fmt=1, far_noise=True)
     _, wh_in, syn_in = _read(src)
