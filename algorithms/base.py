@@ -387,7 +387,7 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
                                                    [output_path, dtm_path, *(p for p, _m in rasters.values())])
         if sink_id is not None:
             results[self.GROUND_POINTS] = sink_id
-        pointclouds.load_or_log(context, feedback, output_path, self.parameterDefinition(self.OUTPUT).description(),
+        pointclouds.load_or_log(context, feedback, output_path, self.parameterDefinition(self.OUTPUT).description().split(" (")[0],
                                 self.OUTPUT)
         styles.style_when_loaded(context, dtm_path, styles.DTM_STYLE)
         for name, (path, _make) in rasters.items():
