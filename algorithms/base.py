@@ -39,10 +39,14 @@ given to the filter, never become ground, never enter the DTM, and keep their cl
 <code>7,18,20-25</code>, as PDAL's <code>ignore</code> and LAStools' <code>-ignore_class</code>;
 empty = none): points of these classes are treated as withheld: not filtered, not ground, not in
 the DTM (whose grid spans only the other points), their class kept.</p>
-<p><b>DTM</b> (optional): a GeoTIFF of the ground points interpolated linearly on their Delaunay
+<p>Where this QGIS opens point clouds (a point-cloud provider for LAS/LAZ, COPC or .vpc: PDAL in the
+Windows and macOS builds), <i>or a loaded point-cloud layer</i> takes a layer of the project instead
+of a path, and the classified cloud is loaded as a point-cloud layer when the run ends; where it cannot
+(Debian's builds have no PDAL), the log says where the classified cloud was written.</p>
+<p><b>DTM</b> (on by default; untick or leave empty in qgis_process to skip it): a GeoTIFF of the ground points interpolated linearly on their Delaunay
 triangulation, cell size <i>DTM cell size</i>, the cloud's CRS, nodata -9999 outside the hull of
-the ground points unless <i>Fill cells outside the ground hull</i> is ticked (nearest value).</p>
-<p><b>Ground points</b> (optional, off by default): the ground points as a PointZ layer with return
+the ground points unless <i>DTM: fill cells outside the ground hull</i> is ticked (nearest value).</p>
+<p><b>Ground points as a vector layer</b> (advanced, off by default): the ground points as a PointZ layer with return
 number and intensity; meant for small clouds.</p>
 <p>Outputs are written under a temporary name (<code>.NAME.gs&lt;process id&gt;-&lt;random&gt;.part</code> and the
 extension, hidden, beside the output) and renamed when complete: a failed or cancelled run leaves
@@ -276,10 +280,31 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         return type(self)()
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        self.addParameter(QgsProcessingParameterFile(
-            self.INPUT, "Input point cloud (LAS/LAZ, a folder of them, a .vpc, or ISPRS .txt)",
-            behavior=QgsProcessingParameterFile.Behavior.File, fileFilter=INPUT_FILTER))
+        """Every ground filter's parameters, in one place and one order: the input, the filter's
+        own, the point selection, the tiles (advanced), then the outputs with the DTM's options
+        beside the DTM (see addOutputParameters)."""
+        self.addInputParameters()
         self.initFilterParameters()
+        self.addSelectionParameters()
+        self.addTileParameters()
+        self.addOutputParameters()
+
+    INPUT_LAYER = "INPUT_LAYER"
+
+    def addInputParameters(self):  # noqa: N802
+        """INPUT, a file parameter on every QGIS (a path, a folder, a .vpc, an ISPRS .txt); and,
+        where this QGIS opens point clouds the filters read (algorithms/pointclouds.py decides),
+        INPUT_LAYER, a loaded point-cloud layer that replaces it."""
+        from . import pointclouds
+        param = QgsProcessingParameterFile(
+            self.INPUT, "Input point cloud (LAS/LAZ, a folder of them, a .vpc, or ISPRS .txt)",
+            behavior=QgsProcessingParameterFile.Behavior.File, fileFilter=INPUT_FILTER)
+        self.addParameter(param)
+        if pointclouds.add_input_layer_parameter(self, self.INPUT_LAYER, "…or a loaded point-cloud layer"):
+            pointclouds.make_input_optional(param)
+
+    def addSelectionParameters(self):  # noqa: N802
+        """Which points are filtered and which classes are kept."""
         self.addParameter(QgsProcessingParameterBoolean(
             self.LAST_RETURNS, "Filter only last returns (others become non-ground)", defaultValue=False))
         self.addParameter(QgsProcessingParameterString(
@@ -291,25 +316,38 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         self.addParameter(ignore_noise)
         self.addParameter(QgsProcessingParameterBoolean(
             self.KEEP_CLASSES, "Keep existing classes other than 0, 1, 2 (never made ground)", defaultValue=False))
-        self.addParameter(QgsProcessingParameterFileDestination(
-            self.OUTPUT, "Classified point cloud (a .vpc for several input files)",
-            fileFilter="LAZ (*.laz);;LAS (*.las);;Virtual point cloud (*.vpc)"))
-        self.addParameter(QgsProcessingParameterRasterDestination(
-            self.DTM, "DTM (ground surface)", optional=True, createByDefault=False))
+
+    def addOutputParameters(self):  # noqa: N802
+        """The one rule of outputs, for every filter and evcrasters: the classified cloud (loaded
+        where QGIS can show it, else logged); the DTM offered by default, its cell size and fill
+        option last among the inputs, right above the outputs (QGIS's dialog lists every output
+        after every input); the ground-point layer off by default and advanced; the filter's
+        intermediate rasters (rasterOutputs) off by default."""
         self.addParameter(QgsProcessingParameterNumber(
             self.DTM_CELL, "DTM cell size (m)", type=QgsProcessingParameterNumber.Type.Double,
             defaultValue=1.0, minValue=0.0))
         self.addParameter(QgsProcessingParameterBoolean(
-            self.DTM_FILL, "Fill DTM cells outside the ground hull (nearest value)", defaultValue=False))
-        self.addParameter(QgsProcessingParameterFeatureSink(
-            self.GROUND_POINTS, "Ground points", type=QgsProcessing.SourceType.TypeVectorPoint,
-            optional=True, createByDefault=False))
-        self.addTileParameters()
+            self.DTM_FILL, "DTM: fill cells outside the ground hull (nearest value)", defaultValue=False))
+        self.addParameter(QgsProcessingParameterFileDestination(
+            self.OUTPUT, "Classified point cloud (a .vpc for several input files)",
+            fileFilter="LAZ (*.laz);;LAS (*.las);;Virtual point cloud (*.vpc)"))
+        self.addParameter(QgsProcessingParameterRasterDestination(
+            self.DTM, "DTM (ground surface)", optional=True, createByDefault=True))
+        self.addExtraOutputParameters()
+        ground_points = QgsProcessingParameterFeatureSink(
+            self.GROUND_POINTS, "Ground points as a vector layer (small clouds only)",
+            type=QgsProcessing.SourceType.TypeVectorPoint, optional=True, createByDefault=False)
+        ground_points.setFlags(ground_points.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
+        self.addParameter(ground_points)
+
+    def addExtraOutputParameters(self):  # noqa: N802
+        """The filter's intermediate rasters (evcrasters): optional, not created by default."""
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         errors, workflow = core_modules()
         self.checkGroundPointsDestination(parameters, context)
-        input_path = self.parameterAsFile(parameters, self.INPUT, context)
+        from . import pointclouds, styles
+        input_path = pointclouds.input_path(self, parameters, context, self.INPUT, self.INPUT_LAYER)
         output_path = self.parameterAsFileOutput(parameters, self.OUTPUT, context)
         dtm_path = self.parameterAsOutputLayer(parameters, self.DTM, context) or None
         try:
@@ -349,7 +387,16 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
                                                    [output_path, dtm_path, *(p for p, _m in rasters.values())])
         if sink_id is not None:
             results[self.GROUND_POINTS] = sink_id
+        pointclouds.load_or_log(context, feedback, output_path, self.parameterDefinition(self.OUTPUT).description().split(" (")[0],
+                                self.OUTPUT)
+        styles.style_when_loaded(context, dtm_path, styles.DTM_STYLE)
+        for name, (path, _make) in rasters.items():
+            styles.style_when_loaded(context, path, self.rasterStyles().get(name))
         return results
+
+    def rasterStyles(self):  # noqa: N802
+        """{output name: layer post-processor} of the rasters styled when loaded (algorithms/styles)."""
+        return {}
 
     def checkDistinctOutputs(self, outputs):  # noqa: N802
         """Refuse two outputs on one file before any work, naming them as the dialog does."""
@@ -363,6 +410,10 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         """QGIS's check, with what is wrong said in the dialog's words (a cell size of -1, inf or text)."""
         from ..core.grids.spec import MAX_CELL_M
         ok, message = super().checkParameterValues(parameters, context)
+        layer_input = self.parameterDefinition(self.INPUT_LAYER)
+        if layer_input is not None and not parameters.get(self.INPUT) and not parameters.get(self.INPUT_LAYER):
+            return False, (f"{self.parameterDefinition(self.INPUT).description()}: give a file, a folder or a "
+                           f".vpc, or a layer in '{layer_input.description()}'")
         return check_parameter_values(self, parameters, context, ok, message,
                                       strictly_positive=self.STRICTLY_POSITIVE, largest={self.DTM_CELL: MAX_CELL_M})
 

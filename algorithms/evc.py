@@ -85,18 +85,20 @@ class EVCRastersAlgorithm(EVCAlgorithm):
         return dialog_help(EVC_HELP + """<p>This workflow also writes the filter's intermediate grids as GeoTIFF with
 the cloud's CRS: the small- and large-scale mean elevations, the elevation difference, the EVC and
 the class raster (1 ground, 2 vegetation area, 3 vegetation boundary, nodata where the small cell
-is empty), to inspect and to reuse in the modeler. From <code>qgis_process</code>, name the rasters
-you want (<code>--EVC_RASTER=evc.tif --CLASS_RASTER=classes.tif</code> ...); unnamed ones are not
-written there.</p>""" + COMMON_HELP)
+is empty; loaded with these names and colours in its legend), to inspect and to reuse in the modeler.
+Each is off by default: tick the ones you want in the dialog, or name them in <code>qgis_process</code>
+(<code>--EVC_RASTER=evc.tif --CLASS_RASTER=classes.tif</code> ...).</p>""" + COMMON_HELP)
 
-    def initFilterParameters(self):  # noqa: N802
-        super().initFilterParameters()
+    def addExtraOutputParameters(self):  # noqa: N802
         for name, (label, _make) in self.RASTERS.items():
-            # Optional, created by default: the toolbox and the modeler make them (temporary files
-            # unless named); qgis_process 3.22 refuses unnamed mandatory outputs, so there the user
-            # names the rasters wanted (e.g. --EVC_RASTER=evc.tif).
+            # Optional and off by default, as every intermediate output of the filters: ticked in
+            # the dialog, named in qgis_process (e.g. --EVC_RASTER=evc.tif) or in the modeler.
             self.addParameter(QgsProcessingParameterRasterDestination(
-                name, label, optional=True, createByDefault=True))
+                name, label, optional=True, createByDefault=False))
+
+    def rasterStyles(self):  # noqa: N802
+        from .styles import EVC_CLASS_STYLE
+        return {self.CLASS_RASTER: EVC_CLASS_STYLE}
 
     def rasterOutputs(self, parameters, context):  # noqa: N802
         return {name: (self.parameterAsOutputLayer(parameters, name, context),

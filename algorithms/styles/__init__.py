@@ -1,0 +1,61 @@
+"""Styles given to GroundSieve's rasters when QGIS loads them at the end of a run: the EVC class
+raster as a paletted layer with a legend (its classes named and coloured), the DTM as an
+elevation ramp. Applied by layer post-processors (QgsProcessingLayerPostProcessorInterface), which
+run in the main thread once the layer is loaded; qgis_process loads nothing, so styles nothing."""
+from qgis.core import (QgsColorRampShader, QgsPalettedRasterRenderer, QgsProcessingLayerPostProcessorInterface,
+                       QgsRasterBandStats, QgsRasterLayer, QgsRasterShader, QgsSingleBandPseudoColorRenderer,
+                       QgsStyle)
+from qgis.PyQt.QtGui import QColor
+
+#: the EVC filter's classes (Fan et al. 2023, Table 2): value, legend label, colour
+EVC_CLASSES = ((1, "Ground", "#b07d3c"),
+               (2, "Vegetation area", "#1a7f2e"),
+               (3, "Vegetation boundary", "#9bd35a"))
+
+
+def style_evc_classes(layer):
+    """A paletted renderer with the three EVC classes named and coloured (nodata stays empty)."""
+    classes = [QgsPalettedRasterRenderer.Class(value, QColor(colour), label) for value, label, colour in EVC_CLASSES]
+    layer.setRenderer(QgsPalettedRasterRenderer(layer.dataProvider(), 1, classes))
+    layer.triggerRepaint()
+
+
+def style_dtm(layer):
+    """An elevation ramp (QGIS's "Spectral", low blue to high red) stretched over the band's
+    minimum and maximum, five classes interpolated: a DTM reads as terrain, not as grey."""
+    provider = layer.dataProvider()
+    stats = provider.bandStatistics(1, QgsRasterBandStats.Min | QgsRasterBandStats.Max)
+    if not stats.maximumValue > stats.minimumValue:
+        return  # an empty or flat DTM: QGIS's default grey is as good
+    ramp = QgsStyle.defaultStyle().colorRamp("Spectral")
+    if ramp is None:
+        return
+    ramp.invert()
+    shader_function = QgsColorRampShader(stats.minimumValue, stats.maximumValue, ramp)
+    shader_function.classifyColorRamp(5, -1)
+    shader = QgsRasterShader()
+    shader.setRasterShaderFunction(shader_function)
+    layer.setRenderer(QgsSingleBandPseudoColorRenderer(provider, 1, shader))
+    layer.triggerRepaint()
+
+
+class _Styler(QgsProcessingLayerPostProcessorInterface):
+    def __init__(self, apply):
+        super().__init__()
+        self._apply = apply
+
+    def postProcessLayer(self, layer, context, feedback):  # noqa: N802
+        if isinstance(layer, QgsRasterLayer) and layer.isValid():
+            self._apply(layer)
+
+
+#: one instance each, alive for the session (QGIS keeps a bare pointer to a post-processor)
+EVC_CLASS_STYLE = _Styler(style_evc_classes)
+DTM_STYLE = _Styler(style_dtm)
+
+
+def style_when_loaded(context, path, styler):
+    """Give the raster ``path`` its style if this run loads it when it ends (the dialog, the
+    modeler with 'open output file'); nothing otherwise."""
+    if styler is not None and path and context.willLoadLayerOnCompletion(path):
+        context.layerToLoadOnCompletionDetails(path).setPostProcessor(styler)

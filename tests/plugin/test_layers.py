@@ -1,0 +1,204 @@
+"""Point-cloud layers and the outputs every filter offers, on the running QGIS (3.22 and 3.40 here):
+the capability is read from the registered point-cloud providers (algorithms/pointclouds.py), the
+classified cloud is loaded where one opens it and logged where none does, the EVC class raster
+and the DTM are styled when they load. Run on 3.40 with
+``env $(scripts/qgis-340 --env) GROUNDSIEVE_EXPECT_QGIS=3.40 .venv/bin/python -m pytest tests/plugin/test_layers.py``."""
+import json
+
+import pytest
+
+FILTERS = ["smrf", "csf", "ptd", "pmf", "echogrid", "evc", "evcrasters", "hybrid"]
+
+
+def _alg(name):
+    from qgis.core import QgsApplication
+    return QgsApplication.processingRegistry().algorithmById(f"groundsieve:{name}")
+
+
+def _advanced(param):
+    from qgis.core import QgsProcessingParameterDefinition as D
+    return bool(param.flags() & D.Flag.FlagAdvanced)
+
+
+@pytest.mark.parametrize("name", FILTERS)
+def test_one_output_rule_for_every_filter(groundsieve_provider, name):
+    from qgis.core import QgsProcessingParameterDefinition as D
+    alg = _alg(name)
+    params = alg.parameterDefinitions()
+    dtm, ground = alg.parameterDefinition("DTM"), alg.parameterDefinition("GROUND_POINTS")
+    assert dtm.createByDefault() and dtm.flags() & D.Flag.FlagOptional  # offered, may be skipped
+    assert not ground.createByDefault() and _advanced(ground)  # 740,000 points would hide the DTM
+    # The DTM's options close the inputs the dialog shows, right above the outputs it lists last.
+    shown = [p.name() for p in params if not p.isDestination() and not _advanced(p)
+             and not p.flags() & D.Flag.FlagHidden]
+    assert shown[-2:] == ["DTM_CELL", "DTM_FILL"]
+    assert any(_advanced(p) for p in params if not p.isDestination())  # an Advanced section
+    for extra in (p for p in params if p.isDestination() and p.name() not in ("OUTPUT", "DTM", "GROUND_POINTS")):
+        assert not extra.createByDefault(), extra.name()  # intermediate rasters are opt-in
+
+
+def test_capability_comes_from_the_providers(groundsieve_provider):
+    from qgis.core import Qgis
+    from groundsieve.algorithms import pointclouds
+    patterns = pointclouds.point_cloud_patterns()
+    offered = pointclouds.reads_loaded_layers()
+    for name in FILTERS:
+        assert (_alg(name).parameterDefinition("INPUT_LAYER") is not None) == offered
+    # What the two QGIS here register (QGIS_ENV.md): 3.22 only ept; 3.40 copc, ept, vpc; neither pdal.
+    assert "pdal" not in patterns and "*.json" not in str(patterns)
+    if Qgis.QGIS_VERSION_INT < 32400:
+        assert set(patterns) == {"ept"} and not offered
+        assert pointclouds.providers_opening("/x/out.vpc") == []
+    else:
+        assert {"copc", "vpc"} <= set(patterns) and offered
+        assert pointclouds.providers_opening("/x/OUT.VPC") == ["vpc"]
+        assert pointclouds.providers_opening("/x/out.copc.laz") == ["copc"]
+    assert pointclouds.providers_opening("/x/out.laz") == []
+    # A build with PDAL (Windows, macOS) declares LAS/LAZ: the same code then loads .laz outputs.
+    pdal = {"pdal": ["*.las", "*.laz", "*.e57"]}
+    assert pointclouds.providers_opening("/x/OUT.LAZ", pdal) == ["pdal"] and pointclouds.reads_loaded_layers(pdal)
+    assert not pointclouds.reads_loaded_layers({"ept": ["ept.json"]})
+
+
+class _Feedback:
+    def __new__(cls):
+        from qgis.core import QgsProcessingFeedback
+
+        class Feedback(QgsProcessingFeedback):
+            def __init__(self):
+                super().__init__()
+                self.infos = []
+
+            def pushInfo(self, info):  # noqa: N802
+                self.infos.append(info)
+                super().pushInfo(info)
+        return Feedback()
+
+
+def _context():
+    from qgis.core import QgsProcessingContext, QgsProject
+    context = QgsProcessingContext()
+    context.setProject(QgsProject.instance())
+    return context
+
+
+def test_classified_laz_is_logged_where_no_provider_opens_it(groundsieve_provider, scene_laz, tmp_path):
+    import processing
+    src, _scene = scene_laz
+    out = tmp_path / "classified.laz"
+    context, feedback = _context(), _Feedback()
+    processing.run("groundsieve:smrf", {"INPUT": str(src), "OUTPUT": str(out)}, context=context, feedback=feedback)
+    assert out.exists()
+    assert not context.willLoadLayerOnCompletion(str(out))
+    said = [i for i in feedback.infos if str(out) in i and "Not loaded" in i]
+    assert len(said) == 1 and "no point-cloud provider that opens .laz files" in said[0]
+
+
+def _load_results(alg_id, context, feedback):
+    """What the dialog does when the run ends: load the layers to load and run their post-processors."""
+    from processing.gui.Postprocessing import handleAlgorithmResults
+    from qgis.core import QgsApplication
+    assert handleAlgorithmResults(QgsApplication.processingRegistry().algorithmById(alg_id), context, feedback)
+
+
+def _project_layer(path):
+    from qgis.core import QgsProject
+    found = [lay for lay in QgsProject.instance().mapLayers().values() if lay.source().split("|")[0] == str(path)]
+    assert len(found) == 1, [lay.source() for lay in QgsProject.instance().mapLayers().values()]
+    return found[0]
+
+
+def test_evc_class_raster_and_dtm_load_styled(groundsieve_provider, scene_laz, tmp_path):
+    import processing
+    from qgis.core import QgsProcessingOutputLayerDefinition, QgsProject
+    src, _scene = scene_laz
+    classes, dtm = tmp_path / "classes.tif", tmp_path / "dtm.tif"
+    context, feedback = _context(), _Feedback()
+    # As the dialog passes outputs with "Open output file after running" ticked.
+    params = {"INPUT": str(src), "OUTPUT": str(tmp_path / "c.laz"), "SMALL_SCALE": 0.5, "LARGE_SCALE": 4.0,
+              "CLASS_RASTER": QgsProcessingOutputLayerDefinition(str(classes), QgsProject.instance()),
+              "DTM": QgsProcessingOutputLayerDefinition(str(dtm), QgsProject.instance())}
+    processing.run("groundsieve:evcrasters", params, context=context, feedback=feedback)
+    assert not (tmp_path / "evc.tif").exists() and len(list(tmp_path.glob("*.tif"))) == 2  # only what was asked
+    _load_results("groundsieve:evcrasters", context, feedback)
+    try:
+        layer = _project_layer(classes)
+        assert layer.renderer().type() == "paletted"
+        legend = layer.renderer().legendSymbologyItems()
+        assert [label for label, _colour in legend] == ["Ground", "Vegetation area", "Vegetation boundary"]
+        assert len({colour.name() for _label, colour in legend}) == 3
+        assert [c.value for c in layer.renderer().classes()] == [1, 2, 3]
+        dtm_layer = _project_layer(dtm)
+        assert dtm_layer.renderer().type() == "singlebandpseudocolor"
+        shader = dtm_layer.renderer().shader().rasterShaderFunction()
+        stats = dtm_layer.dataProvider().bandStatistics(1)
+        assert shader.minimumValue() == pytest.approx(stats.minimumValue)
+        assert shader.maximumValue() == pytest.approx(stats.maximumValue)
+    finally:
+        QgsProject.instance().removeAllMapLayers()
+
+
+def test_vpc_output_loads_and_a_loaded_layer_is_an_input(groundsieve_provider, scene_laz, tmp_path):
+    """Where a provider opens .vpc (QGIS >= 3.32: 3.40 here), the survey's .vpc comes back as a
+    point-cloud layer, and that loaded layer can be the next run's input."""
+    import processing
+    from qgis.core import QgsPointCloudLayer, QgsProject
+    from groundsieve.algorithms import pointclouds
+    from .test_survey_inputs import _split
+    if not pointclouds.providers_opening("x.vpc"):
+        pytest.skip("this QGIS has no point-cloud provider for .vpc (QGIS < 3.32)")
+    src, _scene = scene_laz
+    _split(src, tmp_path / "in")
+    out = tmp_path / "out" / "classified.vpc"
+    out.parent.mkdir()
+    context, feedback = _context(), _Feedback()
+    processing.run("groundsieve:smrf", {"INPUT": str(tmp_path / "in"), "OUTPUT": str(out), "TILE_SIZE": 50.0},
+                   context=context, feedback=feedback)
+    assert context.willLoadLayerOnCompletion(str(out))
+    assert not [i for i in feedback.infos if "Not loaded" in i]
+    _load_results("groundsieve:smrf", context, feedback)
+    try:
+        layer = _project_layer(out)
+        assert isinstance(layer, QgsPointCloudLayer) and layer.isValid() and layer.providerType() == "vpc"
+        again = tmp_path / "again.vpc"
+        result = processing.run("groundsieve:echogrid", {"INPUT_LAYER": layer.id(), "OUTPUT": str(again)},
+                                context=_context(), feedback=_Feedback())
+        assert result["POINT_COUNT"] == sum(f["properties"]["pc:count"]
+                                            for f in json.loads(out.read_text())["features"])
+        assert len(json.loads(again.read_text())["features"]) == 2
+    finally:
+        QgsProject.instance().removeAllMapLayers()
+
+
+def test_no_input_at_all_is_refused_by_its_label(groundsieve_provider, tmp_path):
+    """The file input is optional only where a loaded layer may replace it; given neither, the
+    run is refused by the labels of both."""
+    import processing
+    from qgis.core import QgsProcessingException, QgsProcessingParameterDefinition as D
+    optional = bool(_alg("smrf").parameterDefinition("INPUT").flags() & D.Flag.FlagOptional)
+    assert optional == (_alg("smrf").parameterDefinition("INPUT_LAYER") is not None)
+    if not optional:
+        pytest.skip("INPUT is mandatory on this QGIS (no loaded point-cloud layer to replace it)")
+    with pytest.raises(QgsProcessingException) as err:
+        processing.run("groundsieve:smrf", {"OUTPUT": str(tmp_path / "c.laz")})
+    assert "Input point cloud" in str(err.value) and "or a loaded point-cloud layer" in str(err.value)
+
+
+@pytest.mark.xfail(strict=True, reason="core/io/lasfiles.py write_vpc puts the cloud's own coordinates in the "
+                   "STAC 'bbox' and 'geometry', which QGIS's vpc provider reads as WGS 84 (lon/lat): the layer's "
+                   "extent is inf; with bbox/geometry in EPSG:4326 (proj:bbox native, as PDAL wrench writes) it is "
+                   "the survey's. Owned by engineer scale; remove this xfail when fixed.")
+def test_loaded_vpc_has_the_survey_extent(groundsieve_provider, scene_laz, tmp_path):
+    import math
+    from qgis.core import QgsPointCloudLayer
+    from groundsieve.algorithms import pointclouds
+    from groundsieve.core.io.lasfiles import scan_header, write_vpc
+    from .test_survey_inputs import _split
+    if not pointclouds.providers_opening("x.vpc"):
+        pytest.skip("this QGIS has no point-cloud provider for .vpc (QGIS < 3.32)")
+    src, _scene = scene_laz
+    files = _split(src, tmp_path / "in")
+    vpc = tmp_path / "in" / "survey.vpc"
+    write_vpc(str(vpc), [scan_header(f) for f in files], files)
+    extent = QgsPointCloudLayer(str(vpc), "survey", "vpc").extent()
+    assert math.isfinite(extent.xMinimum()) and math.isfinite(extent.yMaximum())
