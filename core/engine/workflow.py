@@ -151,6 +151,8 @@ def call_filter(algorithm, cloud: PointCloud, idx: np.ndarray, steps: Steps, log
     ``wants_log = True`` and gets ``log``.
     """
     xyz = np.column_stack([cloud.x[idx], cloud.y[idx], cloud.z[idx]])
+    steps.report(0.01)  # the copy takes a while on millions of points: the bar moves past it
+    steps = steps.sub(0.02, 1.0)
     extra = {name: np.ascontiguousarray(getattr(cloud, name)[idx])
              for name in getattr(algorithm, "point_fields", ())}
     if getattr(algorithm, "wants_log", False):
@@ -184,8 +186,9 @@ def classify_cloud(cloud: PointCloud, algorithm, options: FilterOptions = Filter
             f"ignored class {_codes(options.ignored)} left out, keeping their class"
             + (", non-last returns left out" if options.last_returns_only else "") + ").")
     idx = np.flatnonzero(filtered)
+    steps.report(0.01)
     with memory_budget(options.memory_budget_bytes):
-        sub_ground, detail = call_filter(algorithm, cloud, idx, steps, log)
+        sub_ground, detail = call_filter(algorithm, cloud, idx, steps.sub(0.01, 1.0), log)
     cls = cloud.classification.copy()
     # Who gets a new class: every processable point (non-last returns too: they are not ground),
     # or with kept classes only those of class 0, 1 or 2.

@@ -108,6 +108,7 @@ class SMRF:
         zmin = inpaint_harmonic(zmin)
         steps.report(0.1)
         low = progressive_filter(-zmin, [1], self.cell_size_m, self.low_outlier_slope)
+        steps.report(0.12)
         if self.low_outlier_fill and low.any():
             zmin[low] = np.nan
             zmin = inpaint_harmonic(zmin)
