@@ -112,6 +112,30 @@ def full_run(driver, alg_id, cloud, folder, timeout):
             "trace": [(round(t, 2), v) for t, v, _d in samples][::10]}
 
 
+def cancel_at(driver, alg_id, cloud, folder, at_s, timeout):
+    """Click Cancel ``at_s`` seconds after Run whatever the log says (for code that logs no stages)."""
+    outs = outputs_for(fresh(folder))
+    dlg = driver.dialog(alg_id, {"INPUT": cloud, "DTM_CELL": 1.0, **outs})
+    start = driver.press_run(dlg)
+    clicked = None
+    while driver.ended is None and time.perf_counter() - start < timeout:
+        driver.app.processEvents()
+        if clicked is None and time.perf_counter() - start >= at_s:
+            dlg.cancelButton().click()
+            clicked = time.perf_counter()
+        time.sleep(0.01)
+    ended = driver.ended
+    driver.spin(0.5)
+    log = driver.log_text(dlg)
+    dlg.close()
+    driver.spin(0.2)
+    return {"alg": alg_id, "kind": "cancel", "stage": f"t={at_s:g}s", "clicked_in": f"t={at_s:g}s",
+            "click_late_s": None if clicked is None else clicked - start - at_s,
+            "clicked_after_s": None if clicked is None else clicked - start,
+            "stop_s": None if (clicked is None or ended is None) else ended - clicked,
+            "left": sorted(os.listdir(folder)), "log_tail": log[-400:]}
+
+
 def cancel_run(driver, alg_id, cloud, folder, stage, timeout):
     outs = outputs_for(fresh(folder))
     dlg = driver.dialog(alg_id, {"INPUT": cloud, "DTM_CELL": 1.0, **outs})
@@ -129,6 +153,7 @@ def cancel_run(driver, alg_id, cloud, folder, stage, timeout):
             clicked_in = stage if not any(k in text.split(key, 1)[1] for k in later) else "later"
             dlg.cancelButton().click()
             clicked = time.perf_counter()
+            late = clicked - seen_at - delay
         time.sleep(0.01)
     ended = driver.ended
     driver.spin(0.5)
@@ -137,6 +162,7 @@ def cancel_run(driver, alg_id, cloud, folder, stage, timeout):
     driver.spin(0.2)
     left = sorted(os.listdir(folder))
     return {"alg": alg_id, "kind": "cancel", "stage": stage, "clicked_in": clicked_in,
+            "click_late_s": None if clicked is None else late,
             "clicked_after_s": None if clicked is None else clicked - start,
             "stop_s": None if (clicked is None or ended is None) else ended - clicked,
             "left": left, "log_tail": log[-400:]}
@@ -149,6 +175,7 @@ def main() -> int:
     ap.add_argument("--algs", default="smrf,csf")
     ap.add_argument("--stages", default=",".join(ORDER))
     ap.add_argument("--no-full", action="store_true")
+    ap.add_argument("--at", default="", help="also cancel at these seconds after Run (e.g. 1,4,6,8)")
     ap.add_argument("--timeout", type=float, default=120.0)
     args = ap.parse_args()
 
@@ -170,6 +197,10 @@ def main() -> int:
         for stage in [s for s in args.stages.split(",") if s]:
             results.append(cancel_run(driver, alg_id, args.cloud, os.path.join(args.work, alg, stage), stage,
                                       args.timeout))
+            print(json.dumps(results[-1]), file=sys.stderr, flush=True)
+        for at_s in [float(t) for t in args.at.split(",") if t]:
+            results.append(cancel_at(driver, alg_id, args.cloud, os.path.join(args.work, alg, f"at{at_s:g}"), at_s,
+                                     args.timeout))
             print(json.dumps(results[-1]), file=sys.stderr, flush=True)
     print(json.dumps(results))
     QgsApplication.processingRegistry().removeProvider(provider)
