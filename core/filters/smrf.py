@@ -35,6 +35,10 @@ from ..progress import Steps
 from ..validate import _require, check_number, validate_xyz
 
 
+#: points classified against the final surface per kernel call (progress and cancel between)
+POINTS_PER_SLICE = 500_000
+
+
 @dataclass(frozen=True)
 class SMRFResult:
     ground: np.ndarray          #: bool per point
@@ -127,8 +131,13 @@ class SMRF:
             np.zeros_like(zpro), np.zeros_like(zpro))
         slope_grid = np.sqrt(gx * gx + gy * gy)
         ground = np.empty(x.shape[0], dtype=np.bool_)
-        _classify_against_surface_kernel(x, y, z, zpro, slope_grid, grid.x0, grid.top, grid.cell,
-                                         float(self.elevation_threshold_m), float(self.elevation_scalar),
-                                         ground)
+        # Point by point and independent: in slices, with progress and a cancel check between them.
+        n = x.shape[0]
+        for i in range(0, n, POINTS_PER_SLICE):
+            j = min(i + POINTS_PER_SLICE, n)
+            _classify_against_surface_kernel(x[i:j], y[i:j], z[i:j], zpro, slope_grid, grid.x0, grid.top, grid.cell,
+                                             float(self.elevation_threshold_m), float(self.elevation_scalar),
+                                             ground[i:j])
+            steps.report(0.85 + 0.15 * j / n)
         steps.report(1.0)
         return SMRFResult(ground, grid, zpro, objects)

@@ -102,10 +102,12 @@ def full_run(driver, alg_id, cloud, folder, timeout):
     # stand-stills: the longest time the bar's value did not change, from the click to the end
     changes = [0.0] + [t for (t, v), (_t0, v0) in zip(((s[0], s[1]) for s in samples[1:]),
                                                       ((s[0], s[1]) for s in samples[:-1])) if v != v0] + [end]
-    still = max(b - a for a, b in zip(changes, changes[1:]))
+    still, still_from = max((b - a, a) for a, b in zip(changes, changes[1:]))
+    still_value = next((v for t, v, _d in samples if t >= still_from), None)
     full_before_outputs = [t for t, v, done in samples if v >= 100 and not done]
     return {"alg": alg_id, "kind": "full", "seconds": end, "longest_still_s": still,
-            "still_share": still / end, "samples": len(samples),
+            "still_share": still / end, "still_from_s": still_from, "still_at_value": still_value,
+            "samples": len(samples),
             "first_100_s": next((t for t, v, _d in samples if v >= 100), None),
             "hundred_before_outputs": len(full_before_outputs), "ended": driver.ended is not None,
             "outputs": sorted(os.listdir(folder)), "log_tail": log[-600:],
