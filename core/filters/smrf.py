@@ -106,8 +106,7 @@ class SMRF:
         grid = GridSpec.covering(x, y, self.cell_size_m, what="SMRF grid", bytes_per_cell=96,
                                  bytes_per_empty_cell=FILL_BYTES_PER_EMPTY_CELL)
         steps.report(0.02)
-        zmin = cell_min(x, y, z, grid)
-        steps.report(0.05)
+        zmin = cell_min(x, y, z, grid, steps.sub(0.02, 0.05))
         empty = np.isnan(zmin)
         zmin = inpaint_harmonic(zmin)
         steps.report(0.1)

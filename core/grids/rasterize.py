@@ -22,12 +22,17 @@ def _xyz(x, y, z):
             np.ascontiguousarray(z, dtype=np.float64))
 
 
-def cell_min(x, y, z, grid: GridSpec) -> np.ndarray:
-    """Lowest z per cell of ``grid``; NaN where a cell holds no point."""
+def cell_min(x, y, z, grid: GridSpec, steps: Optional[Steps] = None) -> np.ndarray:
+    """Lowest z per cell of ``grid``; NaN where a cell holds no point. With ``steps``, the kernel
+    runs in a worker thread and a cancel is honoured at once (:func:`run_cancellable`)."""
     from ._kernels import _cell_min_kernel
     x, y, z = _xyz(x, y, z)
     out = np.empty(grid.shape, dtype=np.float64)
-    _cell_min_kernel(x, y, z, grid.x0, grid.top, grid.cell, grid.nrows, grid.ncols, out)
+    args = (x, y, z, grid.x0, grid.top, grid.cell, grid.nrows, grid.ncols, out)
+    if steps is None:
+        _cell_min_kernel(*args)
+    else:
+        run_cancellable(_cell_min_kernel, *args, steps=steps, expected_s=THIN_S_PER_POINT * x.size)
     return out
 
 
