@@ -1,11 +1,13 @@
 """The real QGIS desktop dialogs on a virtual display (tests/desktop/harness.py drives them):
 SMRF and CSF on a generated cloud of over 5 M points. A click on Cancel while the cloud is read,
 filtered, triangulated into the DTM or written stops the run within 1.5 s and leaves no output and
-no temporary file (and the dialog stays responsive: the click lands when due); over a whole run the progress bar never stands still for more than 10 % of
-the run's time and shows 100 % only once every output is on disk.
+no temporary file, and the dialog stays responsive (the click lands when due); over a whole run the
+progress bar never stands still for more than 10 % of the run's time and shows 100 % only once
+every output is on disk.
 
-Slow (a minute and a half): run with ``make test-desktop``; ``make test`` runs it too. Skipped
-without Xvfb (``scripts/bootstrap`` installs it), except under ``CI=true``, where it fails."""
+About 80 s on a quiet machine (175 s at a load average of 10): ``make test-desktop``; ``make test``
+runs it too. Skipped without Xvfb (``scripts/bootstrap`` installs it), except under ``CI=true``,
+where it fails."""
 from __future__ import annotations
 
 import json
