@@ -3,7 +3,7 @@
 PY := .venv/bin/python
 VERSION := $(shell sed -n 's/^version=//p' metadata.txt)
 
-.PHONY: env demo test test-core test-qgis340 zip bench clean
+.PHONY: env demo test test-core test-desktop test-qgis340 screenshots zip bench clean
 
 # The plugin tests run on Debian 12's QGIS 3.22 (the system's) and again on QGIS 3.40 LTR from
 # bookworm-backports, unpacked beside it by scripts/qgis-340. The installer test needs the
@@ -26,6 +26,15 @@ test-qgis340: env
 
 test-core: env
 	$(PY) -m pytest -q -ra tests/core
+
+# The real desktop dialogs on a virtual display (Xvfb): cancel at every stage, progress over a run,
+# on a generated 5 M point cloud (about 90 s; part of `make test` through tests/desktop).
+test-desktop: env
+	$(PY) -m pytest -q -ra tests/desktop
+
+# docs/img/*.png: every algorithm's dialog, from the real QGIS dialogs (about 20 s)
+screenshots: env
+	scripts/screenshots
 
 zip:
 	@mkdir -p dist

@@ -28,17 +28,23 @@ class Steps:
 
     def __init__(self, progress: Optional[ProgressFn] = None,
                  is_cancelled: Optional[CancelFn] = None,
-                 start: float = 0.0, stop: float = 1.0):
+                 start: float = 0.0, stop: float = 1.0, _shown: Optional[list] = None):
         self._progress = progress or _noop_progress
         self._is_cancelled = is_cancelled or _never
         self.start = start
         self.stop = stop
+        #: the highest value reported so far, shared with the children: the bar never goes back
+        self._shown = _shown if _shown is not None else [0.0]
 
     def report(self, fraction: float) -> None:
-        """Report ``fraction`` (0..1) of this job done; raise Cancelled if asked to stop."""
+        """Report ``fraction`` (0..1) of this job done; raise Cancelled if asked to stop. The value
+        passed on never falls below one reported before by this reporter or its relatives (a
+        child that restarts from its own 0 holds the bar where it is)."""
         self.check()
         fraction = min(max(fraction, 0.0), 1.0)
-        self._progress(self.start + (self.stop - self.start) * fraction)
+        value = max(self.start + (self.stop - self.start) * fraction, self._shown[0])
+        self._shown[0] = value
+        self._progress(value)
 
     def check(self) -> None:
         if self._is_cancelled():
@@ -48,8 +54,46 @@ class Steps:
         """A child reporter covering ``[start, stop]`` (fractions of this job)."""
         span = self.stop - self.start
         return Steps(self._progress, self._is_cancelled,
-                     self.start + span * start, self.start + span * stop)
+                     self.start + span * start, self.start + span * stop, self._shown)
 
     @property
     def is_cancelled(self) -> CancelFn:
         return self._is_cancelled
+
+
+def run_cancellable(fn, *args, steps: Optional[Steps] = None, expected_s: float = 0.0, poll_s: float = 0.05):
+    """``fn(*args)`` (a numba kernel that releases the GIL) in a worker thread, while this thread
+    checks cancellation every ``poll_s`` seconds: a cancel raises :class:`Cancelled` at once,
+    without waiting for the kernel (which finishes in the background, its result dropped).
+    With ``expected_s`` > 0 the progress moves with the time elapsed (an estimate: a kernel cannot
+    tell how far it is), approaching 98 % of ``steps``, and goes to 100 % when it returns."""
+    import math
+    import threading
+    import time
+    steps = steps or Steps()
+    steps.check()
+    box = {}
+
+    def work():
+        try:
+            box["value"] = fn(*args)
+        except BaseException as err:  # handed to the caller
+            box["error"] = err
+
+    worker = threading.Thread(target=work, name="groundsieve-kernel", daemon=True)
+    start = time.perf_counter()
+    worker.start()
+    while True:
+        worker.join(poll_s)
+        if not worker.is_alive():
+            break
+        if expected_s > 0:
+            # 63 % at the expected time, then ever slower: still moving on a machine slower than
+            # expected, never at 100 % before the kernel ends
+            steps.report(0.98 * (1.0 - math.exp(-(time.perf_counter() - start) / expected_s)))
+        else:
+            steps.check()
+    if "error" in box:
+        raise box["error"]
+    steps.report(1.0)
+    return box["value"]

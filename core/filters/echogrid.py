@@ -38,7 +38,7 @@ import numpy as np
 
 from ..errors import InvalidParameterError
 from ..grids.spec import MAX_CELLS, check_memory
-from ..progress import Steps
+from ..progress import Steps, run_cancellable
 from ..validate import check_choice, check_number, validate_xyz
 
 MODES = ("faithful", "evidence")
@@ -129,24 +129,26 @@ class EchoGrid:
         zmax = np.empty(nx * ny)
         only_first = np.empty(nx * ny, dtype=np.bool_)
         only_single = np.empty(nx * ny, dtype=np.bool_)
-        _echo_grid_stats_kernel(x, y, z, rn, nr, x0, y0, size, nx, ny, zmin, zmax, only_first, only_single)
-        steps.report(0.5)
+        # per-point kernels in a worker thread: cancel honoured at once, the bar moves
+        run_cancellable(_echo_grid_stats_kernel, x, y, z, rn, nr, x0, y0, size, nx, ny, zmin, zmax, only_first,
+                        only_single, steps=steps.sub(0.0, 0.5), expected_s=3e-8 * n)
         occupied = np.isfinite(zmin)
         if self.mode == "faithful":
             reference = zmin
             bypass = only_first & occupied if has_returns else np.zeros_like(occupied)
         else:
             reachable = np.empty((ny, nx))
-            _lower_envelope_kernel(zmin.reshape(ny, nx), int(math.ceil(self.neighbourhood_m / size)),
-                                   size, float(self.slope), reachable)
+            run_cancellable(_lower_envelope_kernel, zmin.reshape(ny, nx), int(math.ceil(self.neighbourhood_m / size)),
+                            size, float(self.slope), reachable, steps=steps.sub(0.5, 0.6))
             reachable = reachable.ravel()
             raised = occupied & (zmin > reachable + self.dz_m)  # empty kernels: inf > inf is False
             reference = np.where(raised, reachable, zmin)
             flat = (zmax - zmin) <= self.dz_m
             bypass = (only_single & flat & ~raised & occupied) if has_returns else np.zeros_like(occupied)
         ground = np.empty(n, dtype=np.bool_)
-        _echo_grid_classify_kernel(x, y, z, x0, y0, size, nx, np.ascontiguousarray(reference),
-                                   np.ascontiguousarray(bypass), float(self.dz_m), ground)
+        run_cancellable(_echo_grid_classify_kernel, x, y, z, x0, y0, size, nx, np.ascontiguousarray(reference),
+                        np.ascontiguousarray(bypass), float(self.dz_m), ground, steps=steps.sub(0.6, 0.99),
+                        expected_s=3e-8 * n)
         if self.mode == "evidence" and has_returns:
             ground &= rn >= nr  # a return followed by others is not the ground
         steps.report(1.0)

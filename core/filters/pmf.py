@@ -79,7 +79,7 @@ import numpy as np
 
 from ..errors import InvalidParameterError
 from ..grids.spec import GridSpec
-from ..progress import Steps
+from ..progress import Steps, run_cancellable
 from ..validate import check_number, validate_xyz
 
 #: Longest window series accepted (a guard against a linear series of thousands of windows).
@@ -262,8 +262,11 @@ class PMF:
         # Peak per cell: the minimum surface, its nearest fill (with the int32 indices of the distance
         # transform), the openings and the flags: about twelve 8-byte grids.
         grid = GridSpec.covering(xyz[:, 0], xyz[:, 1], self.cell_size_m, what="PMF grid", bytes_per_cell=96)
+        steps.report(0.02)
         zmin = np.empty(grid.shape, dtype=np.float64)
-        _xyz_cell_min_kernel(xyz, grid.x0, grid.top, grid.cell, zmin)
+        # in a worker thread: cancel honoured at once (its first call also loads numba's cache)
+        run_cancellable(_xyz_cell_min_kernel, xyz, grid.x0, grid.top, grid.cell, zmin, steps=steps.sub(0.02, 0.08),
+                        expected_s=2e-8 * xyz.shape[0])
         empty = np.isnan(zmin)
         surface = fill_nearest(zmin) if empty.any() else zmin
         del zmin
@@ -280,6 +283,7 @@ class PMF:
         # The highest z a point of each cell may have and be ground (-inf: flagged cell).
         limit = np.where(flag == 0, surface + self.initial_distance_m, -np.inf)
         ground = np.empty(xyz.shape[0], dtype=np.bool_)
-        _below_limit_kernel(xyz, grid.x0, grid.top, grid.cell, limit, ground)
+        run_cancellable(_below_limit_kernel, xyz, grid.x0, grid.top, grid.cell, limit, ground,
+                        steps=steps.sub(0.9, 1.0), expected_s=2e-8 * xyz.shape[0])
         steps.report(1.0)
         return PMFResult(ground, grid, surface, empty, last, flag, windows, thresholds)

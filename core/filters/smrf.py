@@ -35,6 +35,10 @@ from ..progress import Steps
 from ..validate import _require, check_number, validate_xyz
 
 
+#: points classified against the final surface per kernel call (progress and cancel between)
+POINTS_PER_SLICE = 500_000
+
+
 @dataclass(frozen=True)
 class SMRFResult:
     ground: np.ndarray          #: bool per point
@@ -101,11 +105,13 @@ class SMRF:
         # the gradient); every cell no point reaches costs the harmonic fill's sparse LU on top.
         grid = GridSpec.covering(x, y, self.cell_size_m, what="SMRF grid", bytes_per_cell=96,
                                  bytes_per_empty_cell=FILL_BYTES_PER_EMPTY_CELL)
-        zmin = cell_min(x, y, z, grid)
+        steps.report(0.02)
+        zmin = cell_min(x, y, z, grid, steps.sub(0.02, 0.05))
         empty = np.isnan(zmin)
         zmin = inpaint_harmonic(zmin)
         steps.report(0.1)
         low = progressive_filter(-zmin, [1], self.cell_size_m, self.low_outlier_slope)
+        steps.report(0.12)
         if self.low_outlier_fill and low.any():
             zmin[low] = np.nan
             zmin = inpaint_harmonic(zmin)
@@ -124,8 +130,13 @@ class SMRF:
             np.zeros_like(zpro), np.zeros_like(zpro))
         slope_grid = np.sqrt(gx * gx + gy * gy)
         ground = np.empty(x.shape[0], dtype=np.bool_)
-        _classify_against_surface_kernel(x, y, z, zpro, slope_grid, grid.x0, grid.top, grid.cell,
-                                         float(self.elevation_threshold_m), float(self.elevation_scalar),
-                                         ground)
+        # Point by point and independent: in slices, with progress and a cancel check between them.
+        n = x.shape[0]
+        for i in range(0, n, POINTS_PER_SLICE):
+            j = min(i + POINTS_PER_SLICE, n)
+            _classify_against_surface_kernel(x[i:j], y[i:j], z[i:j], zpro, slope_grid, grid.x0, grid.top, grid.cell,
+                                             float(self.elevation_threshold_m), float(self.elevation_scalar),
+                                             ground[i:j])
+            steps.report(0.85 + 0.15 * j / n)
         steps.report(1.0)
         return SMRFResult(ground, grid, zpro, objects)

@@ -85,14 +85,14 @@ def _link(twin, a, b):
 @njit(cache=True, nogil=True)
 def _legalize(a, px, py, tri, twin, hull_tri, stack):
     """Lawson flips from half-edge ``a`` (whose opposite vertex is the point just added),
-    spreading to the edges opposite that point after each flip."""
+    spreading to the edges opposite that point after each flip. ``stack`` holds the edges still
+    to check; it doubles when full (never an edge dropped), and the stack in use is returned."""
     top = 0
-    cap = stack.shape[0]
     while True:
         b = twin[a]
         if b == -1:
             if top == 0:
-                return
+                return stack
             top -= 1
             a = stack[top]
             continue
@@ -119,12 +119,15 @@ def _legalize(a, px, py, tri, twin, hull_tri, stack):
             _link(twin, b, har)
             _link(twin, ar, bl)
             br = b0 + (b + 1) % 3
-            if top < cap:
-                stack[top] = br
-                top += 1
+            if top == stack.shape[0]:
+                bigger = np.empty(2 * stack.shape[0], dtype=np.int64)
+                bigger[:top] = stack
+                stack = bigger
+            stack[top] = br
+            top += 1
         else:
             if top == 0:
-                return
+                return stack
             top -= 1
             a = stack[top]
 
@@ -191,9 +194,10 @@ def _sort_by_distance(dist):
 
 
 @njit(cache=True, nogil=True)
-def delaunay_kernel(px, py):
+def delaunay_kernel(px, py, stack_size=1024):
     """(m, 3) counter-clockwise triangles of the Delaunay triangulation of distinct points
-    ``px, py`` (best relative to the data's corner); (0, 3) when they are all on a line."""
+    ``px, py`` (best relative to the data's corner); (0, 3) when they are all on a line.
+    ``stack_size``: first room of the flip stack, which grows as needed (tests set it tiny)."""
     n = px.shape[0]
     empty = np.empty((0, 3), dtype=np.int64)
     if n < 3:
@@ -274,7 +278,7 @@ def delaunay_kernel(px, py):
     max_t = max(2 * n - 5, 1)
     tri = np.empty(3 * max_t, dtype=np.int32)
     twin = np.full(3 * max_t, -1, dtype=np.int32)
-    stack = np.empty(1024, dtype=np.int64)
+    stack = np.empty(max(1, stack_size), dtype=np.int64)
 
     hull_next[i0] = i1
     hull_next[i1] = i2
@@ -324,7 +328,7 @@ def delaunay_kernel(px, py):
         nt += 1
         hull_tri[e] = t
         hull_tri[i] = t + 1
-        _legalize(t + 2, px, py, tri, twin, hull_tri, stack)
+        stack = _legalize(t + 2, px, py, tri, twin, hull_tri, stack)
         # Walk forward over the other visible edges.
         n_ = nxt
         while True:
@@ -334,7 +338,7 @@ def delaunay_kernel(px, py):
             t = _add_triangle(tri, twin, nt, n_, i, q, hull_tri[i], -1, hull_tri[n_])
             nt += 1
             hull_tri[i] = t + 1
-            _legalize(t + 2, px, py, tri, twin, hull_tri, stack)
+            stack = _legalize(t + 2, px, py, tri, twin, hull_tri, stack)
             hull_next[n_] = n_  # out of the hull
             n_ = q
         # Walk backward if the first visible edge may not have been the first one.
@@ -346,7 +350,7 @@ def delaunay_kernel(px, py):
                 t = _add_triangle(tri, twin, nt, q, i, e, -1, hull_tri[e], hull_tri[q])
                 nt += 1
                 hull_tri[q] = t
-                _legalize(t + 2, px, py, tri, twin, hull_tri, stack)
+                stack = _legalize(t + 2, px, py, tri, twin, hull_tri, stack)
                 hull_next[e] = e
                 e = q
         hull_prev[i] = e

@@ -207,3 +207,21 @@ def test_bucket_sort_orders_like_a_stable_sort(kind):
          "skewed": rng.exponential(1.0, 5000) ** 4,            # most in the first buckets
          "outlier": np.r_[rng.uniform(0, 1, 4999), 1e9]}[kind]  # all but one in bucket 0
     np.testing.assert_array_equal(_sort_by_distance(d), np.argsort(d, kind="stable"))
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_flip_stack_grows_instead_of_dropping_edges(kind):
+    """The flip stack used to be capped at 1024 edges, dropping the rest silently. It now starts at
+    ``stack_size`` and doubles: started at 1 (so every chain of two pending flips overflows it, the
+    path the old cap took), the triangles are exactly those of the default and still Delaunay."""
+    from groundsieve.core.grids._delaunay import delaunay_kernel
+    x, y = scene(kind, seed=5)
+    rx, ry = np.ascontiguousarray(x - x.min()), np.ascontiguousarray(y - y.min())
+    default = delaunay_kernel(rx, ry)
+    for size in (1, 2, 3):
+        np.testing.assert_array_equal(delaunay_kernel(rx, ry, size), default)
+    # and empty circumcircles (checked on the random scene, where the triangulation is unique)
+    if kind == "random":
+        theirs = np.sort(np.sort(delaunay(x, y, method="qhull"), axis=1), axis=0)
+        ours = np.sort(np.sort(delaunay_kernel(rx, ry, 1), axis=1), axis=0)
+        np.testing.assert_array_equal(ours[np.lexsort(ours.T[::-1])], theirs[np.lexsort(theirs.T[::-1])])
