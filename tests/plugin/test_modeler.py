@@ -166,3 +166,40 @@ def test_point_cloud_input_keeps_qgis_widgets_outside_the_modeler(groundsieve_pr
     assert type(wrapper).__name__ == "QgsAbstractProcessingParameterWidgetWrapper" or \
         wrapper.parameterDefinition().name() == "INPUT"
     dialog.deleteLater()
+
+
+def test_model_chains_the_classified_cloud_into_the_layer_input(groundsieve_provider, scene_laz, tmp_path):
+    """Where the point-cloud-layer input exists (QGIS opens some point clouds), the modeler offers
+    it the classified cloud of a previous child too: the model runs with it, the file read as is
+    even where no provider of this QGIS opens a .laz as a layer."""
+    import pytest
+    from qgis.core import (QgsApplication, QgsProcessingContext, QgsProcessingFeedback,
+                           QgsProcessingModelAlgorithm, QgsProcessingModelChildAlgorithm,
+                           QgsProcessingModelChildParameterSource as Source, QgsProcessingModelOutput,
+                           QgsProcessingModelParameter, QgsProcessingParameterFile)
+    if QgsApplication.processingRegistry().algorithmById("groundsieve:echogrid").parameterDefinition(
+            "INPUT_LAYER") is None:
+        pytest.skip("this QGIS opens no point-cloud format the filters read: no layer input")
+    src, scene = scene_laz
+    model = QgsProcessingModelAlgorithm("layer chain", "tests")
+    model.addModelParameter(QgsProcessingParameterFile("cloud", "Point cloud"), QgsProcessingModelParameter("cloud"))
+    for alg_id, child_id, sources in [("groundsieve:smrf", "smrf", {"INPUT": Source.fromModelParameter("cloud")}),
+                                      ("groundsieve:echogrid", "echo", {"INPUT_LAYER": Source.fromChildOutput(
+                                          "smrf", "OUTPUT"), "MODE": Source.fromStaticValue(1)})]:
+        child = QgsProcessingModelChildAlgorithm(alg_id)
+        child.setChildId(child_id)
+        for definition in QgsApplication.processingRegistry().algorithmById(alg_id).parameterDefinitions():
+            if not definition.isDestination() and definition.name() not in sources:
+                sources[definition.name()] = Source.fromStaticValue(definition.defaultValue())
+        for name, source in sources.items():
+            child.addParameterSources(name, [source])
+        out = QgsProcessingModelOutput("classified")
+        out.setChildId(child_id)
+        out.setChildOutputName("OUTPUT")
+        child.setModelOutputs({"classified": out})
+        model.addChildAlgorithm(child)
+    first, second = tmp_path / "smrf.laz", tmp_path / "echo.laz"
+    results, ok = model.run({"cloud": str(src), "smrf:classified": str(first), "echo:classified": str(second)},
+                            QgsProcessingContext(), QgsProcessingFeedback())
+    assert ok
+    assert (classes_of(second) == 2).sum() > 0.3 * len(scene.x)
