@@ -150,22 +150,26 @@ def test_point_cloud_input_keeps_qgis_widgets_outside_the_modeler(groundsieve_pr
     models and qgis_process read it as before."""
     from processing.gui.wrappers import WidgetWrapperFactory
     from qgis.core import QgsApplication
-    from qgis.gui import QgsAbstractProcessingParameterWidgetWrapper
+    from qgis.gui import QgsAbstractProcessingParameterWidgetWrapper, QgsProcessingGui
     from qgis.PyQt.QtWidgets import QDialog
 
     class AlgorithmDialog(QDialog):  # Processing tells its dialogs apart by class name
+        pass
+
+    class BatchAlgorithmDialog(QDialog):
         pass
 
     alg = QgsApplication.processingRegistry().algorithmById("groundsieve:smrf")
     param = alg.parameterDefinition("INPUT")
     assert (param.type(), param.name()) == ("file", "INPUT")
     assert param.metadata()["widget_wrapper"]["class"].endswith("pointclouds.PointCloudInputWidget")
-    dialog = AlgorithmDialog()
-    wrapper = WidgetWrapperFactory.create_wrapper(param, dialog)
-    assert isinstance(wrapper, QgsAbstractProcessingParameterWidgetWrapper)
-    assert type(wrapper).__name__ == "QgsAbstractProcessingParameterWidgetWrapper" or \
-        wrapper.parameterDefinition().name() == "INPUT"
-    dialog.deleteLater()
+    standard = getattr(QgsProcessingGui, "Standard", None) or QgsProcessingGui.WidgetType.Standard
+    batch = getattr(QgsProcessingGui, "Batch", None) or QgsProcessingGui.WidgetType.Batch
+    for dialog, kind in ((AlgorithmDialog(), standard), (BatchAlgorithmDialog(), batch)):
+        wrapper = WidgetWrapperFactory.create_wrapper(param, dialog)
+        assert isinstance(wrapper, QgsAbstractProcessingParameterWidgetWrapper)
+        assert wrapper.type() == kind and wrapper.parameterDefinition().name() == "INPUT"
+        dialog.deleteLater()
 
 
 def test_model_chains_the_classified_cloud_into_the_layer_input(groundsieve_provider, scene_laz, tmp_path):
