@@ -176,7 +176,7 @@ def _child_output(model, source):
     return (algorithm, output) if output is not None else None
 
 
-def keep_point_cloud_outputs(widget, model, child_id):
+def keep_point_cloud_outputs(widget, model):
     """Remove from a modeler parameter widget's list of child outputs those that cannot be a point
     cloud; return the [child id, output name] removed. (QGIS's widget lists child outputs in a
     combo box whose items hold [child id, output name]; a widget built otherwise is left alone.)"""
@@ -212,17 +212,16 @@ class PointCloudInputWidget:
     outputs that cannot be a point cloud."""
 
     def __new__(cls, param, dialog, row=0, col=0, **_options):
-        from processing.gui.wrappers import WidgetWrapperFactory, dialogTypes
-        from qgis.gui import QgsGui, QgsProcessingGui
+        from processing.gui.wrappers import DIALOG_STANDARD, WidgetWrapperFactory, dialogTypes
+        from qgis.gui import QgsGui
         registry = QgsGui.processingGuiRegistry()
         kind = dialog.__class__.__name__
         if kind == "ModelerParametersDialog":
             wrapper = registry.createModelerParameterWidget(dialog.model, dialog.childId, param, dialog.context)
             if wrapper is not None:
-                keep_point_cloud_outputs(wrapper, dialog.model, dialog.childId)
-        else:
-            standard = getattr(QgsProcessingGui, "Standard", None) or QgsProcessingGui.WidgetType.Standard
-            wrapper = registry.createParameterWidgetWrapper(param, dialogTypes.get(kind, standard))
+                keep_point_cloud_outputs(wrapper, dialog.model)
+        else:  # exactly what Processing does for a parameter without this metadata
+            wrapper = registry.createParameterWidgetWrapper(param, dialogTypes.get(kind, DIALOG_STANDARD))
         if wrapper is None:
             return WidgetWrapperFactory.create_wrapper_from_class(param, dialog, row, col)
         wrapper.setDialog(dialog)

@@ -148,9 +148,9 @@ def test_point_cloud_input_keeps_qgis_widgets_outside_the_modeler(groundsieve_pr
     """Outside the modeler the input's widget is exactly the one QGIS gives a file parameter
     (the algorithm and batch dialogs); the parameter's type and name are unchanged, so saved
     models and qgis_process read it as before."""
-    from processing.gui.wrappers import WidgetWrapperFactory
+    from processing.gui.wrappers import DIALOG_BATCH, DIALOG_STANDARD, WidgetWrapperFactory
     from qgis.core import QgsApplication
-    from qgis.gui import QgsAbstractProcessingParameterWidgetWrapper, QgsProcessingGui
+    from qgis.gui import QgsAbstractProcessingParameterWidgetWrapper
     from qgis.PyQt.QtWidgets import QDialog
 
     class AlgorithmDialog(QDialog):  # Processing tells its dialogs apart by class name
@@ -163,9 +163,7 @@ def test_point_cloud_input_keeps_qgis_widgets_outside_the_modeler(groundsieve_pr
     param = alg.parameterDefinition("INPUT")
     assert (param.type(), param.name()) == ("file", "INPUT")
     assert param.metadata()["widget_wrapper"]["class"].endswith("pointclouds.PointCloudInputWidget")
-    standard = getattr(QgsProcessingGui, "Standard", None) or QgsProcessingGui.WidgetType.Standard
-    batch = getattr(QgsProcessingGui, "Batch", None) or QgsProcessingGui.WidgetType.Batch
-    for dialog, kind in ((AlgorithmDialog(), standard), (BatchAlgorithmDialog(), batch)):
+    for dialog, kind in ((AlgorithmDialog(), DIALOG_STANDARD), (BatchAlgorithmDialog(), DIALOG_BATCH)):
         wrapper = WidgetWrapperFactory.create_wrapper(param, dialog)
         assert isinstance(wrapper, QgsAbstractProcessingParameterWidgetWrapper)
         assert wrapper.type() == kind and wrapper.parameterDefinition().name() == "INPUT"
