@@ -294,12 +294,13 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
     def addInputParameters(self):  # noqa: N802
         """INPUT, a file parameter on every QGIS (a path, a folder, a .vpc, an ISPRS .txt); and,
         where this QGIS opens point clouds the filters read (algorithms/pointclouds.py decides),
-        INPUT_LAYER, a loaded point-cloud layer that replaces it."""
+        INPUT_LAYER, a loaded point-cloud layer that replaces it. In the modeler both offer only
+        what can be a point cloud (pointclouds.offer_point_clouds_in_modeler)."""
         from . import pointclouds
         param = QgsProcessingParameterFile(
             self.INPUT, "Input point cloud (LAS/LAZ, a folder of them, a .vpc, or ISPRS .txt)",
             behavior=QgsProcessingParameterFile.Behavior.File, fileFilter=INPUT_FILTER)
-        self.addParameter(param)
+        self.addParameter(pointclouds.offer_point_clouds_in_modeler(param))
         if pointclouds.add_input_layer_parameter(self, self.INPUT_LAYER, "…or a loaded point-cloud layer"):
             pointclouds.make_input_optional(param)
 

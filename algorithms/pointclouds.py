@@ -11,7 +11,12 @@ Every decision below comes from the file patterns the registered point-cloud pro
   layer* parameter is offered beside it (its source file is read);
 - the classified cloud is loaded as a point-cloud layer when the run ends where a provider opens
   the file written (a .las/.laz with ``pdal``, a .vpc with ``vpc``); elsewhere the log says where it
-  was written and why it is not loaded.
+  was written and why it is not loaded;
+- in the graphical modeler, the point-cloud inputs offer only what can be a point cloud (see
+  ``point_cloud_sources``): QGIS's modeler keys a file parameter's choices on output *types* alone
+  (``availableSourcesForChild``, 3.22 to 3.40), so it would offer a DTM raster, a vector layer or an
+  ``.npz`` model as well; the inputs carry the ``widget_wrapper`` metadata that Processing's dialogs
+  honour, whose class keeps QGIS's own widgets and removes the other outputs in the modeler only.
 """
 import fnmatch
 import os
@@ -68,6 +73,7 @@ def add_input_layer_parameter(algorithm, name, label):
     from qgis.core import QgsProcessingParameterPointCloudLayer  # QGIS >= 3.22
     param = QgsProcessingParameterPointCloudLayer(name, label, optional=True)
     param.setHelp("A point-cloud layer loaded in the project (its file is read); replaces the path above.")
+    offer_point_clouds_in_modeler(param)
     algorithm.addParameter(param)
     return True
 
@@ -76,7 +82,10 @@ def input_path(algorithm, parameters, context, file_name, layer_name):
     """The path of the input cloud: the loaded layer's file when a layer is given, else the file
     parameter's value; a layer that is not a local file the filters read is refused by its label."""
     definition = algorithm.parameterDefinition(layer_name)
-    if definition is not None and parameters.get(layer_name):
+    value = parameters.get(layer_name) if definition is not None else None
+    if isinstance(value, str) and value.lower().endswith(READ_SUFFIXES) and os.path.isfile(value):
+        return value  # a file path (e.g. a previous child's classified cloud in a model), read as is
+    if value:
         layer = algorithm.parameterAsPointCloudLayer(parameters, layer_name, context)
         if layer is None:
             raise QgsProcessingException(f"{definition.description()}: {parameters.get(layer_name)} is not a "
@@ -116,3 +125,104 @@ def load_or_log(context, feedback, path, layer_name, output_name):
                       f"that opens {ext} files (QGIS builds with PDAL, as on Windows and macOS, do); "
                       "open it there, in CloudCompare, or use the DTM.")
     return None
+
+
+# -- the graphical modeler ------------------------------------------------------------------
+#: output types that can carry a point cloud (``outputPointCloud``: QGIS >= 3.24)
+_CLOUD_OUTPUT_TYPES = ("outputFile", "outputPointCloud")
+
+
+def _filter_suffixes(file_filter):
+    """The lower-case suffixes a Qt file filter names (``"LAZ (*.laz);;All (*)"`` -> {".laz"})."""
+    suffixes = set()
+    for group in (file_filter or "").split(";;"):
+        inside = group[group.find("(") + 1:group.rfind(")")] if "(" in group else group
+        suffixes.update(p.lower()[1:] for p in inside.split() if p.startswith("*.") and len(p) > 2)
+    return suffixes
+
+
+def is_point_cloud_output(algorithm, output):
+    """True when a child algorithm's output can be a point cloud the filters read: a point-cloud
+    layer output, or a file output whose destination names a point-cloud extension in its file
+    filter (our classified clouds: .laz/.las/.vpc). A raster, a vector layer, an .npz model, an
+    HTML report or a file of no declared point-cloud extension is not."""
+    if output.type() == "outputPointCloud":
+        return True
+    if output.type() != "outputFile":
+        return False
+    destination = algorithm.parameterDefinition(output.name())
+    file_filter = getattr(destination, "fileFilter", None)
+    return bool(file_filter) and bool(_filter_suffixes(file_filter()) & set(READ_SUFFIXES))
+
+
+def point_cloud_sources(model, child_id, parameter_types=("file",)):
+    """What the modeler offers to a GroundSieve point-cloud input of the child ``child_id``: the
+    model inputs of ``parameter_types`` (a file or folder input) and the outputs of the other
+    children (not those depending on this one) that ``is_point_cloud_output`` accepts."""
+    sources = []
+    for source in model.availableSourcesForChild(child_id, list(parameter_types), list(_CLOUD_OUTPUT_TYPES), []):
+        child_output = _child_output(model, source)
+        if child_output is None or is_point_cloud_output(*child_output):
+            sources.append(source)
+    return sources
+
+
+def _child_output(model, source):
+    """(algorithm, output definition) of a child-output source; None for any other source."""
+    if not source.outputChildId():
+        return None
+    algorithm = model.childAlgorithm(source.outputChildId()).algorithm()
+    output = algorithm.outputDefinition(source.outputName()) if algorithm is not None else None
+    return (algorithm, output) if output is not None else None
+
+
+def keep_point_cloud_outputs(widget, model):
+    """Remove from a modeler parameter widget's list of child outputs those that cannot be a point
+    cloud; return the [child id, output name] removed. (QGIS's widget lists child outputs in a
+    combo box whose items hold [child id, output name]; a widget built otherwise is left alone.)"""
+    from qgis.PyQt.QtWidgets import QComboBox
+    removed = []
+    for combo in widget.findChildren(QComboBox):
+        items = [combo.itemData(i) for i in range(combo.count())]
+        if not items or not all(isinstance(d, list) and len(d) == 2 for d in items):
+            continue
+        for index in reversed(range(combo.count())):
+            child, name = combo.itemData(index)
+            algorithm = model.childAlgorithm(child).algorithm() if child in model.childAlgorithms() else None
+            output = algorithm.outputDefinition(name) if algorithm is not None else None
+            if output is None or not is_point_cloud_output(algorithm, output):
+                combo.removeItem(index)
+                removed.append([child, name])
+    return removed
+
+
+def offer_point_clouds_in_modeler(param):
+    """Give a point-cloud input (a file or point-cloud layer parameter) the widget below in
+    Processing's dialogs; the parameter's type, name and value are unchanged."""
+    metadata = param.metadata()
+    metadata["widget_wrapper"] = {"class": f"{__name__}.PointCloudInputWidget"}
+    param.setMetadata(metadata)
+    return param
+
+
+class PointCloudInputWidget:
+    """The ``widget_wrapper`` of the point-cloud inputs (Processing's WidgetWrapperFactory builds
+    it with (parameter, dialog, row, col)). It returns QGIS's own widget for the dialog at hand,
+    as Processing would without the metadata; in the modeler, that widget without the child
+    outputs that cannot be a point cloud."""
+
+    def __new__(cls, param, dialog, row=0, col=0, **_options):
+        from processing.gui.wrappers import DIALOG_STANDARD, WidgetWrapperFactory, dialogTypes
+        from qgis.gui import QgsGui
+        registry = QgsGui.processingGuiRegistry()
+        kind = dialog.__class__.__name__
+        if kind == "ModelerParametersDialog":
+            wrapper = registry.createModelerParameterWidget(dialog.model, dialog.childId, param, dialog.context)
+            if wrapper is not None:
+                keep_point_cloud_outputs(wrapper, dialog.model)
+        else:  # exactly what Processing does for a parameter without this metadata
+            wrapper = registry.createParameterWidgetWrapper(param, dialogTypes.get(kind, DIALOG_STANDARD))
+        if wrapper is None:
+            return WidgetWrapperFactory.create_wrapper_from_class(param, dialog, row, col)
+        wrapper.setDialog(dialog)
+        return wrapper

@@ -153,7 +153,9 @@ def test_installer_puts_the_packages_into_a_bare_qgis_python_and_the_algorithms_
     """))
     userbase = tmp_path / "userbase"
     env = {k: v for k, v in os.environ.items()
-           if k not in ("PYTHONPATH", "VIRTUAL_ENV", "PYTHONHOME", "PYTHONNOUSERSITE")}
+           if k not in ("PYTHONPATH", "VIRTUAL_ENV", "PYTHONHOME", "PYTHONNOUSERSITE",
+                        # Debian's own QGIS, also when the tests run with QGIS 3.40's libraries
+                        "LD_LIBRARY_PATH", "QGIS_PREFIX_PATH", "QGIS_PROCESS")}
     env.update(PYTHONUSERBASE=str(userbase), QT_QPA_PLATFORM="offscreen", PROJ_DATA="/usr/share/proj",
                QGIS_CUSTOM_CONFIG_PATH=str(tmp_path / "profile"))
     done = subprocess.run([SYSTEM_PYTHON, str(script)], capture_output=True, text=True, env=env, timeout=900)
