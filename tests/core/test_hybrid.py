@@ -179,3 +179,41 @@ def test_rf_feature_matrix_computes_the_hybrid_features(tmp_path):
     X = feature_matrix(cloud, names)
     np.testing.assert_array_equal(X[:, :-1], hybrid_features(xyz, PRESETS["HYBRID"]))
     assert (X[:, -1] == 1).all()
+
+
+def test_tiled_runs_on_a_file_and_a_folder_equal_the_whole_run(tmp_path):
+    """groundsieve:hybrid on surveys (issue 12): the buffered-tile engine (core/engine/tiles.py), with
+    the filter's reach as the buffer, classifies as the whole-cloud run on >= 99.9 % of the points,
+    on one LAZ cut into 80 m tiles (threads) and on a folder of two LAZ (worker processes, so the
+    filter and its model cross a process boundary)."""
+    import laspy
+    from groundsieve.core.engine.tiles import TileOptions, TiledRun
+    from groundsieve.core.engine.workflow import FilterOptions, classify_cloud, run_ground_filter
+    from groundsieve.core.io import read_cloud
+    from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+    scene = make_scene(SceneSpec(size_m=240.0, density_per_m2=3.0, seed=5))
+    path = tmp_path / "scene.laz"
+    write_scene(scene, path)
+    hybrid = Hybrid()
+    assert hybrid.reach_m == 38.0  # SMRF's (window 18 m) beyond the 18 m opening's 2 x 18 + 2
+    whole = classify_cloud(read_cloud(str(path)), hybrid).classification
+    run = run_ground_filter(str(path), str(tmp_path / "tiled.laz"), hybrid,
+                            options=FilterOptions(tiling=TileOptions(tile_size_m=80.0, workers=2, parallel="threads")))
+    assert isinstance(run, TiledRun) and run.tiles >= 9 and run.buffer_m >= hybrid.reach_m
+    got = np.asarray(laspy.read(tmp_path / "tiled.laz").classification)
+    assert np.mean(got == whole) >= 0.999
+    # A folder of two files (west and east halves), in worker processes.
+    las = laspy.read(path)
+    folder = tmp_path / "survey"
+    folder.mkdir()
+    west = np.asarray(las.x) < np.median(np.asarray(las.x))
+    for name, part in (("west.laz", west), ("east.laz", ~west)):
+        piece = laspy.LasData(las.header)
+        piece.points = las.points[part]
+        piece.write(folder / name)
+    run = run_ground_filter(str(folder), str(tmp_path / "classified.vpc"), hybrid, options=FilterOptions(
+        tiling=TileOptions(tile_size_m=80.0, workers=2, parallel="processes")))
+    assert isinstance(run, TiledRun)
+    for name, part in (("west.laz", west), ("east.laz", ~west)):
+        got = np.asarray(laspy.read(tmp_path / "classified" / name).classification)
+        assert np.mean(got == whole[part]) >= 0.999, name
