@@ -217,3 +217,23 @@ def test_tiled_runs_on_a_file_and_a_folder_equal_the_whole_run(tmp_path):
     for name, part in (("west.laz", west), ("east.laz", ~west)):
         got = np.asarray(laspy.read(tmp_path / "classified" / name).classification)
         assert np.mean(got == whole[part]) >= 0.999, name
+
+
+def test_far_apart_sites_get_the_features_of_each_site_alone():
+    """Training samples merged into one file (sites kilometres apart): each site's features are
+    those it has alone, not those of one huge grid inpainted across the gap."""
+    from groundsieve.core.learn.hybrid import islands
+    a = plane_scene(seed=3, box=BOX)[0]
+    b = plane_scene(seed=4, box=BOX)[0] + np.array([5000.0, -3000.0, 40.0])
+    both = np.vstack([a, b])
+    label = islands(both[:, 0], both[:, 1], 64.0)
+    assert set(label[:len(a)]) == {label[0]} and set(label[len(a):]) == {label[-1]} and label[0] != label[-1]
+    names = list(DEFAULT_FEATURES)
+    merged = hybrid_features(both, names)
+    np.testing.assert_array_equal(merged[:len(a)], hybrid_features(a, names))
+    np.testing.assert_array_equal(merged[len(a):], hybrid_features(b, names))
+    # Points 10 m apart (a gap smaller than the reach) stay one site.
+    assert len(set(islands(np.array([0.0, 10.0, 20.0]), np.zeros(3), 64.0))) == 1
+    # A huge extent (no coarse grid): the sparse path gives the same grouping.
+    far = np.array([0.0, 1.0, 1e9, 1e9 + 1.0])
+    assert list(islands(far, np.zeros(4), 64.0)) == [0, 0, 1, 1]
