@@ -81,10 +81,10 @@ label), as Matrone et al. (2024, Method 3) did to test whether the return number
 <p><b>Features</b>: the paper's configurations: C1 RGB; C2 RGB + return number; C3 + scan angle and
 GPS time; C4 + verticality (0.6 m), planarity (0.6 m), eigenentropy (0.4 m), surface variation
 (0.6 m); C5 = C4 without scan angle and GPS time (the paper's best). Clouds without colour use the
-intensity in place of RGB. <b>C5H</b> (default, ours) adds the height above the lowest point within
+intensity in place of RGB. <b>C5H</b> (ours) adds the height above the lowest point within
 2.5 m and the local point density, which carry the ground contrast on sparse airborne clouds where the
 paper's small spheres hold few points. <i>custom</i>: a comma-separated list such as
-<code>intensity,return_number,number_of_returns,planarity_r0p6,height_above_min_r2p5</code>. <b>HYBRID</b>: the features of
+<code>intensity,return_number,number_of_returns,planarity_r0p6,height_above_min_r2p5</code>. <b>HYBRID</b> (default): the features of
 <i>Ground filter (learned hybrid)</i> (heights above SMRF's provisional surface and above the minimum
 surface opened with 2, 6 and 18 m windows, that surface's slope and curvature; x, y, z only): train
 ground (2) against other classes on your own data and use the model there or here. Geometric
@@ -109,13 +109,14 @@ importances, timings) with the same figures in a CSV beside it.</p>""")
             defaultValue="", optional=True))
         self.addParameter(QgsProcessingParameterEnum(
             self.PRESET, "Features", options=[
-                "C5H: C5 + height above ground minimum and density (default)", "C1: RGB",
+                "C5H: C5 + height above ground minimum and density", "C1: RGB",
                 "C2: RGB + return number", "C3: RGB + return number, scan angle, GPS time",
                 "C4: C3 + verticality, planarity, eigenentropy, surface variation",
                 "C5: RGB + return number + the four geometric features (paper's best)",
                 "custom list",
                 "HYBRID: heights above SMRF's surface and 2, 6, 18 m openings (x, y, z only; "
-                "the model also runs in Ground filter (learned hybrid))"], defaultValue=0))
+                "the model also runs in Ground filter (learned hybrid); default)"],
+            defaultValue=PRESET_NAMES.index("HYBRID")))
         self.addParameter(QgsProcessingParameterString(
             self.CUSTOM_FEATURES, "Custom feature list (with 'custom list')", defaultValue="", optional=True))
         self.addParameter(QgsProcessingParameterEnum(self.CRITERION, "Splitting criterion", options=list(CRITERIA),

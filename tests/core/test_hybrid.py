@@ -237,3 +237,27 @@ def test_far_apart_sites_get_the_features_of_each_site_alone():
     # A huge extent (no coarse grid): the sparse path gives the same grouping.
     far = np.array([0.0, 1.0, 1e9, 1e9 + 1.0])
     assert list(islands(far, np.zeros(4), 64.0)) == [0, 0, 1, 1]
+
+
+def test_rftrain_defaults_train_the_hybrid_features_and_the_model_runs_in_both(tmp_path):
+    """Issue 12: rftrain's default features are the hybrid filter's (x, y, z only); the model it
+    writes runs in groundsieve:hybrid and in groundsieve:rfclassify, with the same ground."""
+    from groundsieve.core.engine import learning
+    from groundsieve.core.io import new_las, write_las
+    from groundsieve.core.learn import rf
+    assert learning.TrainOptions().features == rf.PRESETS["HYBRID"] == tuple(DEFAULT_FEATURES)
+    xyz, truth = plane_scene(seed=21, size=80.0, density=2.0, boxes=[(10, 30, 10, 30), (45, 70, 50, 60)])
+    train = tmp_path / "train.las"
+    write_las(new_las(xyz[:, 0], xyz[:, 1], xyz[:, 2], point_format=0,
+                      classification=np.where(truth, 2, 1).astype(np.uint8)), str(train))
+    model = tmp_path / "m.npz"
+    learning.train_file(str(train), str(model), None,
+                        learning.TrainOptions(params=ForestParams(n_trees=5), block_m=10.0))
+    other, other_truth = plane_scene(seed=22, size=60.0, density=2.0, boxes=[(20, 40, 15, 35)])
+    target = tmp_path / "other.las"
+    write_las(new_las(other[:, 0], other[:, 1], other[:, 2], point_format=0,
+                      classification=np.ones(len(other), dtype=np.uint8)), str(target))
+    _cloud, predicted = learning.classify_file(str(target), str(tmp_path / "out.las"), str(model))
+    by_filter = Hybrid(model_path=str(model))(other)
+    assert ground_accuracy(predicted == 2, other_truth).total < 0.05
+    assert np.mean((predicted == 2) == by_filter) >= 0.999
