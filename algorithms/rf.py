@@ -19,6 +19,7 @@ PRESET_NAMES = ("C5H", "C1", "C2", "C3", "C4", "C5", "custom", "HYBRID")
 CRITERIA = ("gini", "entropy")
 SCALERS = ("none", "standard", "robust")
 CLOUD_FILTER = "Point clouds (*.las *.laz *.LAS *.LAZ)"
+SURVEY_FILTER = CLOUD_FILTER + ";;Virtual point clouds (*.vpc)"
 
 
 def _rf(extra=None):
@@ -213,14 +214,18 @@ Deleted)") and
 points of the <b>Ignored classes</b> (default <code>7,18</code>, noise; a list or ranges such as
 <code>7,18,20-25</code>; empty = none) keep their class and flags and are left out of the features'
 neighbourhoods, the prediction and the DTM, whose grid spans only the other points.</p>
+<p><b>Surveys</b>: a virtual point cloud (.vpc) or a cloud larger than the memory is classified in
+buffered tiles, as the ground filters do (the buffer is the reach of the model's features); this works
+for ground models (classes 2 and 1) whose features come from x, y, z (the default HYBRID preset, or
+geometric features); other models are refused for surveys with the reason.</p>
 <p>The model is refused with a clear message when the file was changed or is not a GroundSieve
 model, or when the cloud cannot give the model's features (e.g. colour in one and not the other).
 Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.addParameter(QgsProcessingParameterFile(
-            self.INPUT, "Point cloud (LAS/LAZ)", behavior=QgsProcessingParameterFile.Behavior.File,
-            fileFilter=CLOUD_FILTER))
+            self.INPUT, "Point cloud (LAS/LAZ, or a .vpc survey)", behavior=QgsProcessingParameterFile.Behavior.File,
+            fileFilter=SURVEY_FILTER))
         self.addParameter(QgsProcessingParameterFile(
             self.MODEL, "Model file", behavior=QgsProcessingParameterFile.Behavior.File,
             fileFilter="GroundSieve model (*.npz)"))

@@ -237,19 +237,57 @@ def _write_training_outputs(model, model_path: str, report_path: Optional[str], 
                               f"neither the model {model_path} nor its report") from err
 
 
+def classify_survey(input_path: str, output_path: str, model_path: str, *, dtm_path: Optional[str] = None,
+                    dtm=None, ignore_classes=(7, 18), tiling=None, progress=None, is_cancelled=None, log=None):
+    """rfclassify on a survey (a folder, a .vpc, a tile size set or a cloud beyond the memory
+    budget): the model runs as a ground filter in the buffered-tile engine (core/engine/tiles.py),
+    through :class:`~groundsieve.core.learn.hybrid.Hybrid` (ground where the model's ground
+    probability is at least 0.5; its reach, from the model's features, is the tiles' buffer). This
+    needs a ground model (classes 2 and 1 only) whose features come from x, y, z (the hybrid and
+    geometric features); other models are refused with the reason."""
+    from ..learn.hybrid import GROUND_CLASS, Hybrid, unknown_features
+    from .tiles import TileOptions
+    from .workflow import DTMOptions, FilterOptions, run_ground_filter
+    model = load_model(model_path)
+    classes = sorted(int(c) for c in model.classes)
+    if GROUND_CLASS not in classes or not set(classes) <= {1, GROUND_CLASS}:
+        raise InputError(f"{model_path}: on a survey (a folder, a .vpc or a cloud larger than the memory), "
+                         f"only a ground model (classes 2 and 1) runs tile by tile; this model has the classes "
+                         f"{', '.join(map(str, classes))}: classify each file on its own")
+    other = unknown_features(model.features)
+    if other:
+        raise InputError(f"{model_path}: on a survey, the model's features must come from x, y, z (the HYBRID "
+                         f"preset or geometric features); this model also uses {', '.join(other)}: classify "
+                         "each file on its own")
+    options = FilterOptions(ignore_classes=ignore_classes if ignore_classes is not None else (),
+                            tiling=tiling or TileOptions())
+    return run_ground_filter(input_path, output_path, Hybrid(model_path=model_path), options=options,
+                             dtm_path=dtm_path, dtm=dtm or DTMOptions(), progress=progress,
+                             is_cancelled=is_cancelled, log=log)
+
+
 def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_path: Optional[str] = None,
-                  dtm=None, ignore_classes=(7, 18), progress=None, is_cancelled=None, log=None):
+                  dtm=None, ignore_classes=(7, 18), tiling=None, progress=None, is_cancelled=None, log=None):
     """Apply a saved model to ``input_path``; write the classified cloud (the model's ASPRS codes)
     and, optionally, a DTM from the points predicted as ground (class 2).
 
     The ground filters' rules on marked points hold here too: withheld points and points of
     ``ignore_classes`` (noise 7 and 18 by default; a list or text such as "7,18,20-25") keep their
     class and flags, and stay out of the features' neighbourhoods, the prediction and the DTM,
-    whose grid spans only the other points."""
+    whose grid spans only the other points.
+
+    A survey (a folder or .vpc of LAS/LAZ, a ``tiling`` tile size, or a cloud beyond the memory
+    budget) is classified tile by tile by :func:`classify_survey` (ground models only); the
+    result is then the engine's ``TiledRun``, not ``(cloud, predicted)``."""
     from ..io import CLASS_GROUND, read_cloud
     from ..progress import Steps
     from .workflow import (DTMOptions, FilterOptions, check_dtm_memory, check_outputs, make_dtm, processable,
                            write_outputs)
+    from .tiles import TileOptions, needs_tiling
+    if needs_tiling(input_path, tiling or TileOptions()):
+        return classify_survey(input_path, output_path, model_path, dtm_path=dtm_path, dtm=dtm,
+                               ignore_classes=ignore_classes, tiling=tiling, progress=progress,
+                               is_cancelled=is_cancelled, log=log)
     steps = Steps(progress, is_cancelled)
     log = log or (lambda _msg: None)
     dtm = dtm or DTMOptions()
