@@ -109,17 +109,21 @@ def islands(x: np.ndarray, y: np.ndarray, block_m: float) -> np.ndarray:
     ``block_m`` apart."""
     if len(x) == 0:
         return np.zeros(0, dtype=np.int64)
-    bx = ((x - x.min()) // block_m).astype(np.int64)
-    by = ((y - y.min()) // block_m).astype(np.int64)
-    nx, ny = int(bx.max()) + 1, int(by.max()) + 1
+    x0, y0 = float(x.min()), float(y.min())
+    nx = int((float(x.max()) - x0) // block_m) + 1
+    ny = int((float(y.max()) - y0) // block_m) + 1
     if nx * ny <= 4_000_000:  # a coarse occupancy grid (the usual case: one pass, no sort)
         from scipy.ndimage import label as _label
-        key = by * nx + bx
-        occupied = (np.bincount(key, minlength=nx * ny) > 0).reshape(ny, nx)
+        from ._hybrid_kernels import _block_label, _block_occupancy
+        occupied = np.zeros((ny, nx), dtype=np.bool_)
+        _block_occupancy(x, y, x0, y0, float(block_m), nx, ny, occupied)
         grid_label, count = _label(occupied, structure=np.ones((3, 3), dtype=bool))
-        if count <= 1:
-            return np.zeros(len(x), dtype=np.int64)
-        return grid_label.reshape(-1)[key].astype(np.int64) - 1
+        out = np.zeros(len(x), dtype=np.int64)
+        if count > 1:
+            _block_label(x, y, x0, y0, float(block_m), nx, ny, grid_label.astype(np.int64) - 1, out)
+        return out
+    bx = ((x - x0) // block_m).astype(np.int64)
+    by = ((y - y0) // block_m).astype(np.int64)
     # Points spread over a huge extent: the occupied blocks only, joined by union-find.
     keys, inverse = np.unique(by * nx + bx, return_inverse=True)
     index = {int(k): j for j, k in enumerate(keys)}
