@@ -42,7 +42,8 @@ def main():
     ap.add_argument("--work", default=None)
     args = ap.parse_args()
     work = args.work or tempfile.mkdtemp(prefix="rftrain_isprs_")
-    options = learning.TrainOptions() if args.preset is None else learning.TrainOptions(features=rf.PRESETS[args.preset])
+    options = (learning.TrainOptions() if args.preset is None
+               else learning.TrainOptions(features=rf.PRESETS[args.preset]))
     paths = sorted(glob.glob(os.path.join(args.data, "samp*.txt")))
     names = [os.path.basename(p).split(".")[0] for p in paths]
     truth = {n: to_las(p, os.path.join(work, n + ".las")) for n, p in zip(names, paths)}
