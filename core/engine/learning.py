@@ -11,6 +11,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io import atomic_path
+from ..learn.hybrid import GROUND_CLASS, Hybrid, HybridResult, hybrid_features
 from ..learn.model_file import MODEL_EXTENSION, load_model, save_model
 from ..learn.rf import (CRITERIA, DEFAULT_PRESET, PRESETS, SCALERS, ForestParams, Model, feature_matrix,
                         permutation_importance, resolve_features, spatial_split, train_forest)
@@ -237,15 +238,34 @@ def _write_training_outputs(model, model_path: str, report_path: Optional[str], 
                               f"neither the model {model_path} nor its report") from err
 
 
+@dataclass(frozen=True)
+class ModelGround(Hybrid):
+    """A ground model as a ground filter for the buffered-tile engine, with rfclassify's rule: the
+    predicted class (the model's ``predict``: the most probable, a tie to the first class, 1), not
+    the hybrid filter's threshold (ground at a probability of 0.5 or more), so that tiled and whole
+    runs of rfclassify agree on ties too."""
+    name = "rfclassify"
+
+    def run(self, xyz, steps=None):
+        from ..progress import Steps
+        steps = steps or Steps()
+        X = hybrid_features(xyz, self.features, cell_size_m=self.cell_size_m, steps=steps.sub(0.0, 0.6))
+        proba = self.model.predict_proba(X)
+        predicted = np.asarray(self.model.classes)[np.argmax(proba, axis=1)]  # as Model.predict
+        ground = proba[:, [int(c) for c in self.model.classes].index(GROUND_CLASS)]
+        steps.report(1.0)
+        return HybridResult(predicted == GROUND_CLASS, ground.astype(np.float32))
+
+
 def classify_survey(input_path: str, output_path: str, model_path: str, *, dtm_path: Optional[str] = None,
                     dtm=None, ignore_classes=(7, 18), tiling=None, progress=None, is_cancelled=None, log=None):
     """rfclassify on a survey (a folder, a .vpc, a tile size set or a cloud beyond the memory
     budget): the model runs as a ground filter in the buffered-tile engine (core/engine/tiles.py),
-    through :class:`~groundsieve.core.learn.hybrid.Hybrid` (ground where the model's ground
-    probability is at least 0.5; its reach, from the model's features, is the tiles' buffer). This
+    through :class:`ModelGround` (the hybrid filter with rfclassify's rule: the predicted class;
+    its reach, from the model's features, is the tiles' buffer). This
     needs a ground model (classes 2 and 1 only) whose features come from x, y, z (the hybrid and
     geometric features); other models are refused with the reason."""
-    from ..learn.hybrid import GROUND_CLASS, Hybrid, unknown_features
+    from ..learn.hybrid import unknown_features
     from .tiles import TileOptions
     from .workflow import DTMOptions, FilterOptions, run_ground_filter
     model = load_model(model_path)
@@ -261,7 +281,7 @@ def classify_survey(input_path: str, output_path: str, model_path: str, *, dtm_p
                          "each file on its own")
     options = FilterOptions(ignore_classes=ignore_classes if ignore_classes is not None else (),
                             tiling=tiling or TileOptions())
-    return run_ground_filter(input_path, output_path, Hybrid(model_path=model_path), options=options,
+    return run_ground_filter(input_path, output_path, ModelGround(model_path=model_path), options=options,
                              dtm_path=dtm_path, dtm=dtm or DTMOptions(), progress=progress,
                              is_cancelled=is_cancelled, log=log)
 
