@@ -5,7 +5,7 @@ import os
 from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException,
                        QgsProcessingOutputString, QgsProcessingParameterEnum,
                        QgsProcessingParameterFile, QgsProcessingParameterFileDestination,
-                       QgsProcessingParameterNumber)
+                       QgsProcessingParameterNumber, QgsProcessingParameterString)
 from qgis.PyQt.QtGui import QIcon
 
 from .base import core_modules, dialog_help, feedback_callables, warn_about_crs
@@ -35,6 +35,7 @@ class FeaturesAlgorithm(Discoverable, QgsProcessingAlgorithm):
     EXTRA = "EXTRA"
     EXTRA_RADIUS = "EXTRA_RADIUS"
     COLUMN_RADIUS = "COLUMN_RADIUS"
+    IGNORE_CLASSES = "IGNORE_CLASSES"
     OUTPUT = "OUTPUT"
     FEATURES = "FEATURES"
 
@@ -86,6 +87,10 @@ larger radii there.</p>
 <p><b>Radius of each paper feature</b> (m): 0 leaves that feature out. <b>Other features</b>: any of
 the others, at the <b>radius of the other features</b>, except the height above the column minimum,
 which uses the <b>column radius</b>. All features at one radius cost one pass over the points.</p>
+<p><b>Withheld points</b> (the LAS flag: "should not be included in processing") and points of the
+<b>Ignored classes</b> (default <code>7,18</code>, noise; a list or ranges such as <code>7,18,20-25</code>;
+empty = none) are left out of every neighbourhood and get no value (NaN), as in <i>Classify with
+Random Forest model</i>: the features written are those the classifier computes.</p>
 <h3>Output</h3>
 <p>LAS or LAZ (by extension) with every dimension, extra bytes, VLR and the CRS of the input, plus the
 features named <code>&lt;feature&gt;_r&lt;radius&gt;</code> with <code>p</code> as the decimal mark,
@@ -110,6 +115,9 @@ the cloud's CRS. The output is written under a temporary name and renamed when c
         self.addParameter(QgsProcessingParameterNumber(
             self.COLUMN_RADIUS, "Column radius of the height above the column minimum (m)", type=Double,
             defaultValue=2.5, minValue=0.0))
+        self.addParameter(QgsProcessingParameterString(
+            self.IGNORE_CLASSES, "Ignored classes: out of the neighbourhoods, no value (e.g. 7,18,20-25)",
+            defaultValue="7,18", optional=True))
         self.addParameter(QgsProcessingParameterFileDestination(
             self.OUTPUT, "Point cloud with features", fileFilter="LAZ (*.laz);;LAS (*.las)"))
         self.addOutput(QgsProcessingOutputString(self.FEATURES, "Feature names (comma-separated)"))
@@ -141,7 +149,9 @@ the cloud's CRS. The output is written under a temporary name and renamed when c
         try:
             spec = features.FeatureSpec(tuple(pairs))
             feedback.pushInfo("Features: " + ", ".join(spec.names))
-            run = features_run.run_features(input_path, output_path, spec, **feedback_callables(feedback))
+            ignore = self.parameterAsString(parameters, self.IGNORE_CLASSES, context) or ""
+            run = features_run.run_features(input_path, output_path, spec, ignore_classes=ignore,
+                                            **feedback_callables(feedback))
         except errors.GroundSieveError as err:
             raise QgsProcessingException(str(err)) from err
         warn_about_crs(feedback, input_path, run.cloud.crs_wkt, "every radius")

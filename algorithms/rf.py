@@ -19,6 +19,7 @@ PRESET_NAMES = ("C5H", "C1", "C2", "C3", "C4", "C5", "custom", "HYBRID")
 CRITERIA = ("gini", "entropy")
 SCALERS = ("none", "standard", "robust")
 CLOUD_FILTER = "Point clouds (*.las *.laz *.LAS *.LAZ)"
+SURVEY_FILTER = CLOUD_FILTER + ";;Virtual point clouds (*.vpc)"
 
 
 def _rf(extra=None):
@@ -81,10 +82,10 @@ label), as Matrone et al. (2024, Method 3) did to test whether the return number
 <p><b>Features</b>: the paper's configurations: C1 RGB; C2 RGB + return number; C3 + scan angle and
 GPS time; C4 + verticality (0.6 m), planarity (0.6 m), eigenentropy (0.4 m), surface variation
 (0.6 m); C5 = C4 without scan angle and GPS time (the paper's best). Clouds without colour use the
-intensity in place of RGB. <b>C5H</b> (default, ours) adds the height above the lowest point within
+intensity in place of RGB. <b>C5H</b> (ours) adds the height above the lowest point within
 2.5 m and the local point density, which carry the ground contrast on sparse airborne clouds where the
 paper's small spheres hold few points. <i>custom</i>: a comma-separated list such as
-<code>intensity,return_number,number_of_returns,planarity_r0p6,height_above_min_r2p5</code>. <b>HYBRID</b>: the features of
+<code>intensity,return_number,number_of_returns,planarity_r0p6,height_above_min_r2p5</code>. <b>HYBRID</b> (default): the features of
 <i>Ground filter (learned hybrid)</i> (heights above SMRF's provisional surface and above the minimum
 surface opened with 2, 6 and 18 m windows, that surface's slope and curvature; x, y, z only): train
 ground (2) against other classes on your own data and use the model there or here. Geometric
@@ -109,13 +110,14 @@ importances, timings) with the same figures in a CSV beside it.</p>""")
             defaultValue="", optional=True))
         self.addParameter(QgsProcessingParameterEnum(
             self.PRESET, "Features", options=[
-                "C5H: C5 + height above ground minimum and density (default)", "C1: RGB",
+                "C5H: C5 + height above ground minimum and density", "C1: RGB",
                 "C2: RGB + return number", "C3: RGB + return number, scan angle, GPS time",
                 "C4: C3 + verticality, planarity, eigenentropy, surface variation",
                 "C5: RGB + return number + the four geometric features (paper's best)",
                 "custom list",
                 "HYBRID: heights above SMRF's surface and 2, 6, 18 m openings (x, y, z only; "
-                "the model also runs in Ground filter (learned hybrid))"], defaultValue=0))
+                "the model also runs in Ground filter (learned hybrid); default)"],
+            defaultValue=PRESET_NAMES.index("HYBRID")))
         self.addParameter(QgsProcessingParameterString(
             self.CUSTOM_FEATURES, "Custom feature list (with 'custom list')", defaultValue="", optional=True))
         self.addParameter(QgsProcessingParameterEnum(self.CRITERION, "Splitting criterion", options=list(CRITERIA),
@@ -212,14 +214,18 @@ Deleted)") and
 points of the <b>Ignored classes</b> (default <code>7,18</code>, noise; a list or ranges such as
 <code>7,18,20-25</code>; empty = none) keep their class and flags and are left out of the features'
 neighbourhoods, the prediction and the DTM, whose grid spans only the other points.</p>
+<p><b>Surveys</b>: a virtual point cloud (.vpc) or a cloud larger than the memory is classified in
+buffered tiles, as the ground filters do (the buffer is the reach of the model's features); this works
+for ground models (classes 2 and 1) whose features come from x, y, z (the default HYBRID preset, or
+geometric features); other models are refused for surveys with the reason.</p>
 <p>The model is refused with a clear message when the file was changed or is not a GroundSieve
 model, or when the cloud cannot give the model's features (e.g. colour in one and not the other).
 Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.addParameter(QgsProcessingParameterFile(
-            self.INPUT, "Point cloud (LAS/LAZ)", behavior=QgsProcessingParameterFile.Behavior.File,
-            fileFilter=CLOUD_FILTER))
+            self.INPUT, "Point cloud (LAS/LAZ, or a .vpc survey)", behavior=QgsProcessingParameterFile.Behavior.File,
+            fileFilter=SURVEY_FILTER))
         self.addParameter(QgsProcessingParameterFile(
             self.MODEL, "Model file", behavior=QgsProcessingParameterFile.Behavior.File,
             fileFilter="GroundSieve model (*.npz)"))

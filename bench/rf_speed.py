@@ -25,7 +25,7 @@ def main():
     ap.add_argument("--rf-millions", type=float, default=5.0)
     ap.add_argument("--trees", type=int, default=100)
     args = ap.parse_args()
-    geometric = [n for n in rf.PRESETS[rf.DEFAULT_PRESET] if "_r" in n]
+    geometric = [n for n in rf.PRESETS["C5H"] if "_r" in n]  # the point features (C5H)
     spec = FeatureSpec.from_names(geometric)
     compute_features(make_scene(SceneSpec(size_m=30, seed=9)).xyz, spec)  # compile
     rows = []

@@ -9,7 +9,7 @@ from typing import Callable, Dict, Optional, Tuple
 
 import numpy as np
 
-from ..errors import InvalidParameterError, OutputError
+from ..errors import InputError, InvalidParameterError, OutputError
 from ..io import PointCloud, check_output_path, new_las, read_cloud, write_las
 from ..learn.features import (_NAME_RE, COLUMN_FEATURES, EIGEN_FEATURES, MAX_NAME_LENGTH, MIN_POINTS, FeatureSpec,
                              compute_features, parse_feature_name)
@@ -99,12 +99,19 @@ class FeaturesRun:
 
 
 def run_features(input_path: str, output_path: str, spec: FeatureSpec = FeatureSpec(), *,
+                 ignore_classes=(7, 18),
                  progress: Optional[Callable[[float], None]] = None,
                  is_cancelled: Optional[Callable[[], bool]] = None,
                  log: Optional[Callable[[str], None]] = None) -> FeaturesRun:
     """Read ``input_path``, compute the features of ``spec`` for every point and write
     ``output_path`` (LAS/LAZ) with them as extra bytes. The output is written under a temporary
-    name and renamed when complete; the input is never modified."""
+    name and renamed when complete; the input is never modified.
+
+    As in groundsieve:rfclassify and the ground filters, withheld points and points of
+    ``ignore_classes`` (noise 7 and 18 by default; a list or text such as "7,18,20-25") stay out
+    of every neighbourhood and get no value (NaN): the features written are those the classifier
+    computes on the same cloud."""
+    from .workflow import FilterOptions, processable
     steps = Steps(progress, is_cancelled)
     log = log or (lambda _msg: None)
     check_output_path(output_path, inputs=[input_path])
@@ -112,11 +119,29 @@ def run_features(input_path: str, output_path: str, spec: FeatureSpec = FeatureS
     cloud = read_cloud(input_path)
     log(f"Read {len(cloud):,} points from {input_path}.")
     check_names_free(cloud, spec.names, output_path)
+    options = FilterOptions(ignore_classes=ignore_classes if ignore_classes is not None else ())
+    may = processable(cloud, options)
+    n_may = int(may.sum())
+    if n_may == 0:
+        raise InputError(f"{input_path}: every point is withheld or of an ignored class "
+                         f"({', '.join(map(str, options.ignored)) or 'none'}): no feature to compute")
+    if n_may < len(cloud):
+        log(f"{int(cloud.withheld_mask.sum()):,} withheld point(s) and {int((~may & ~cloud.withheld_mask).sum()):,} "
+            f"of an ignored class ({', '.join(map(str, options.ignored)) or 'none'}) are left out of the "
+            "neighbourhoods and get no value (NaN).")
     steps.report(0.05)
-    features = compute_features(cloud.xyz, spec, steps=steps.sub(0.05, 0.85))
+    if n_may == len(cloud):
+        features = compute_features(cloud.xyz, spec, steps=steps.sub(0.05, 0.85))
+    else:
+        part = compute_features(cloud.xyz[may], spec, steps=steps.sub(0.05, 0.85))
+        features = {}
+        for name, values in part.items():
+            full = np.full(len(cloud), np.nan, dtype=np.float32)
+            full[may] = values
+            features[name] = full
     for radius, wanted in spec.sphere_passes().items():
         eigen = [name for feature, name in wanted if feature in EIGEN_FEATURES]
-        missing = int(np.isnan(features[eigen[0]]).sum()) if eigen else 0
+        missing = int(np.isnan(features[eigen[0]][may]).sum()) if eigen else 0
         if missing:
             log(f"{missing:,} point(s) ({100.0 * missing / len(cloud):.1f} %) have fewer than {MIN_POINTS} points "
                 f"(or only coincident ones) within {radius:g} m: no value (NaN) for {', '.join(eigen)}.")

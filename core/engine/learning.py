@@ -11,6 +11,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io import atomic_path
+from ..learn.hybrid import GROUND_CLASS, Hybrid, HybridResult, hybrid_features
 from ..learn.model_file import MODEL_EXTENSION, load_model, save_model
 from ..learn.rf import (CRITERIA, DEFAULT_PRESET, PRESETS, SCALERS, ForestParams, Model, feature_matrix,
                         permutation_importance, resolve_features, spatial_split, train_forest)
@@ -237,19 +238,76 @@ def _write_training_outputs(model, model_path: str, report_path: Optional[str], 
                               f"neither the model {model_path} nor its report") from err
 
 
+@dataclass(frozen=True)
+class ModelGround(Hybrid):
+    """A ground model as a ground filter for the buffered-tile engine, with rfclassify's rule: the
+    predicted class (the model's ``predict``: the most probable, a tie to the first class, 1), not
+    the hybrid filter's threshold (ground at a probability of 0.5 or more), so that tiled and whole
+    runs of rfclassify agree on ties too."""
+    name = "rfclassify"
+
+    def run(self, xyz, steps=None):
+        from ..progress import Steps
+        steps = steps or Steps()
+        X = hybrid_features(xyz, self.features, cell_size_m=self.cell_size_m, steps=steps.sub(0.0, 0.6))
+        proba = self.model.predict_proba(X)
+        predicted = np.asarray(self.model.classes)[np.argmax(proba, axis=1)]  # as Model.predict
+        ground = proba[:, [int(c) for c in self.model.classes].index(GROUND_CLASS)]
+        steps.report(1.0)
+        return HybridResult(predicted == GROUND_CLASS, ground.astype(np.float32))
+
+
+def classify_survey(input_path: str, output_path: str, model_path: str, *, dtm_path: Optional[str] = None,
+                    dtm=None, ignore_classes=(7, 18), tiling=None, progress=None, is_cancelled=None, log=None):
+    """rfclassify on a survey (a folder, a .vpc, a tile size set or a cloud beyond the memory
+    budget): the model runs as a ground filter in the buffered-tile engine (core/engine/tiles.py),
+    through :class:`ModelGround` (the hybrid filter with rfclassify's rule: the predicted class;
+    its reach, from the model's features, is the tiles' buffer). This
+    needs a ground model (classes 2 and 1 only) whose features come from x, y, z (the hybrid and
+    geometric features); other models are refused with the reason."""
+    from ..learn.hybrid import unknown_features
+    from .tiles import TileOptions
+    from .workflow import DTMOptions, FilterOptions, run_ground_filter
+    model = load_model(model_path)
+    classes = sorted(int(c) for c in model.classes)
+    if GROUND_CLASS not in classes or not set(classes) <= {1, GROUND_CLASS}:
+        raise InputError(f"{model_path}: on a survey (a folder, a .vpc or a cloud larger than the memory), "
+                         f"only a ground model (classes 2 and 1) runs tile by tile; this model has the classes "
+                         f"{', '.join(map(str, classes))}: classify each file on its own")
+    other = unknown_features(model.features)
+    if other:
+        raise InputError(f"{model_path}: on a survey, the model's features must come from x, y, z (the HYBRID "
+                         f"preset or geometric features); this model also uses {', '.join(other)}: classify "
+                         "each file on its own")
+    options = FilterOptions(ignore_classes=ignore_classes if ignore_classes is not None else (),
+                            tiling=tiling or TileOptions())
+    return run_ground_filter(input_path, output_path, ModelGround(model_path=model_path), options=options,
+                             dtm_path=dtm_path, dtm=dtm or DTMOptions(), progress=progress,
+                             is_cancelled=is_cancelled, log=log)
+
+
 def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_path: Optional[str] = None,
-                  dtm=None, ignore_classes=(7, 18), progress=None, is_cancelled=None, log=None):
+                  dtm=None, ignore_classes=(7, 18), tiling=None, progress=None, is_cancelled=None, log=None):
     """Apply a saved model to ``input_path``; write the classified cloud (the model's ASPRS codes)
     and, optionally, a DTM from the points predicted as ground (class 2).
 
     The ground filters' rules on marked points hold here too: withheld points and points of
     ``ignore_classes`` (noise 7 and 18 by default; a list or text such as "7,18,20-25") keep their
     class and flags, and stay out of the features' neighbourhoods, the prediction and the DTM,
-    whose grid spans only the other points."""
+    whose grid spans only the other points.
+
+    A survey (a folder or .vpc of LAS/LAZ, a ``tiling`` tile size, or a cloud beyond the memory
+    budget) is classified tile by tile by :func:`classify_survey` (ground models only); the
+    result is then the engine's ``TiledRun``, not ``(cloud, predicted)``."""
     from ..io import CLASS_GROUND, read_cloud
     from ..progress import Steps
     from .workflow import (DTMOptions, FilterOptions, check_dtm_memory, check_outputs, make_dtm, processable,
                            write_outputs)
+    from .tiles import TileOptions, needs_tiling
+    if needs_tiling(input_path, tiling or TileOptions()):
+        return classify_survey(input_path, output_path, model_path, dtm_path=dtm_path, dtm=dtm,
+                               ignore_classes=ignore_classes, tiling=tiling, progress=progress,
+                               is_cancelled=is_cancelled, log=log)
     steps = Steps(progress, is_cancelled)
     log = log or (lambda _msg: None)
     dtm = dtm or DTMOptions()

@@ -47,3 +47,21 @@ def _point_features_kernel(x, y, z, surfaces, surface_mode, zmin_raw, zmax_raw, 
         out[i, k] = z[i] - lo
         out[i, k + 1] = hi - lo
         out[i, k + 2] = (z[i] - lo) / (hi - lo) if hi > lo else 0.0
+
+
+@njit(cache=True, nogil=True)
+def _block_occupancy(x, y, x0, y0, block, nx, ny, out):
+    """``out[row, col]`` = True where a point falls in the ``block`` m block (col from ``x0``, row from ``y0``)."""
+    for i in range(x.shape[0]):
+        c = min(int((x[i] - x0) / block), nx - 1)
+        r = min(int((y[i] - y0) / block), ny - 1)
+        out[r, c] = True
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _block_label(x, y, x0, y0, block, nx, ny, labels, out):
+    """``out[i]`` = ``labels`` of the block of point i."""
+    for i in prange(x.shape[0]):
+        c = min(int((x[i] - x0) / block), nx - 1)
+        r = min(int((y[i] - y0) / block), ny - 1)
+        out[i] = labels[r, c]

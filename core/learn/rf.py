@@ -246,7 +246,9 @@ PRESETS = {
     "HYBRID": ("above_smrf", "smrf_slope", "smrf_curvature", "above_opening_r2", "above_opening_r6",
                "above_opening_r18"),
 }
-DEFAULT_PRESET = "C5H"
+#: rftrain's default (issue 12): the hybrid filter's features, which need x, y, z only and know where the
+#: ground roughly is; the paper's C1-C5 and C5H stay available.
+DEFAULT_PRESET = "HYBRID"
 
 
 def _has_colour(cloud) -> bool:

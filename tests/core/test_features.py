@@ -515,3 +515,46 @@ def test_output_must_not_be_the_input(tmp_path):
         run_features(str(src), str(src))
     with pytest.raises(OutputError, match=r"\.las or \.laz"):
         run_features(str(src), str(tmp_path / "out.txt"))
+
+
+def test_withheld_and_ignored_points_stay_out_of_the_neighbourhoods(tmp_path):
+    """As in rfclassify: withheld points and points of an ignored class (7, 18 by default) are in no
+    neighbourhood and get NaN; every other point's features are those of the cloud without them."""
+    las = sample_las(n=2000, seed=5)
+    classes = np.asarray(las.classification).copy()
+    classes[np.isin(classes, (7, 18))] = 1  # no other noise than the points below
+    classes[:150] = 7                      # noise, ignored by default
+    las.classification = classes
+    withheld = np.zeros(len(classes), dtype=bool)
+    withheld[150:300] = True
+    las.withheld = withheld
+    src, dst = tmp_path / "in.laz", tmp_path / "out.laz"
+    write_las(las, str(src))
+    spec = FeatureSpec(PAPER_FEATURES + (("height_above_min", 2.5),))
+    messages = []
+    run = run_features(str(src), str(dst), spec, log=messages.append)
+    cloud = read_cloud(str(src))
+    keep = np.ones(len(classes), dtype=bool)
+    keep[:300] = False
+    alone = compute_features(cloud.xyz[keep], spec)
+    written = laspy.read(str(dst))
+    for name in spec.names:
+        values = np.asarray(written[name])
+        assert np.isnan(values[:300]).all(), name
+        np.testing.assert_array_equal(values[keep], alone[name], err_msg=name)
+        np.testing.assert_array_equal(run.features[name], values)
+    # The noise points, when not ignored, change their neighbours' features (the test can fail).
+    everything = run_features(str(src), str(tmp_path / "all.laz"), spec, ignore_classes="").features
+    assert np.isnan(everything[spec.names[0]][150:300]).all()
+    assert not np.array_equal(everything["height_above_min_r2p5"][keep], alone["height_above_min_r2p5"])
+    assert any("150 withheld point(s) and 150 of an ignored class (7, 18)" in m for m in messages)
+
+
+def test_features_of_a_cloud_entirely_withheld_are_refused(tmp_path):
+    las = sample_las(n=200, seed=6)
+    las.withheld = np.ones(200, dtype=bool)
+    src = tmp_path / "in.laz"
+    write_las(las, str(src))
+    with pytest.raises(InputError, match="every point is withheld or of an ignored class"):
+        run_features(str(src), str(tmp_path / "out.laz"))
+    assert not (tmp_path / "out.laz").exists()

@@ -179,3 +179,85 @@ def test_rf_feature_matrix_computes_the_hybrid_features(tmp_path):
     X = feature_matrix(cloud, names)
     np.testing.assert_array_equal(X[:, :-1], hybrid_features(xyz, PRESETS["HYBRID"]))
     assert (X[:, -1] == 1).all()
+
+
+def test_tiled_runs_on_a_file_and_a_folder_equal_the_whole_run(tmp_path):
+    """groundsieve:hybrid on surveys (issue 12): the buffered-tile engine (core/engine/tiles.py), with
+    the filter's reach as the buffer, classifies as the whole-cloud run on >= 99.9 % of the points,
+    on one LAZ cut into 80 m tiles (threads) and on a folder of two LAZ (worker processes, so the
+    filter and its model cross a process boundary)."""
+    import laspy
+    from groundsieve.core.engine.tiles import TileOptions, TiledRun
+    from groundsieve.core.engine.workflow import FilterOptions, classify_cloud, run_ground_filter
+    from groundsieve.core.io import read_cloud
+    from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+    scene = make_scene(SceneSpec(size_m=240.0, density_per_m2=3.0, seed=5))
+    path = tmp_path / "scene.laz"
+    write_scene(scene, path)
+    hybrid = Hybrid()
+    assert hybrid.reach_m == 38.0  # SMRF's (window 18 m) beyond the 18 m opening's 2 x 18 + 2
+    whole = classify_cloud(read_cloud(str(path)), hybrid).classification
+    run = run_ground_filter(str(path), str(tmp_path / "tiled.laz"), hybrid,
+                            options=FilterOptions(tiling=TileOptions(tile_size_m=80.0, workers=2, parallel="threads")))
+    assert isinstance(run, TiledRun) and run.tiles >= 9 and run.buffer_m >= hybrid.reach_m
+    got = np.asarray(laspy.read(tmp_path / "tiled.laz").classification)
+    assert np.mean(got == whole) >= 0.999
+    # A folder of two files (west and east halves), in worker processes.
+    las = laspy.read(path)
+    folder = tmp_path / "survey"
+    folder.mkdir()
+    west = np.asarray(las.x) < np.median(np.asarray(las.x))
+    for name, part in (("west.laz", west), ("east.laz", ~west)):
+        piece = laspy.LasData(las.header)
+        piece.points = las.points[part]
+        piece.write(folder / name)
+    run = run_ground_filter(str(folder), str(tmp_path / "classified.vpc"), hybrid, options=FilterOptions(
+        tiling=TileOptions(tile_size_m=80.0, workers=2, parallel="processes")))
+    assert isinstance(run, TiledRun)
+    for name, part in (("west.laz", west), ("east.laz", ~west)):
+        got = np.asarray(laspy.read(tmp_path / "classified" / name).classification)
+        assert np.mean(got == whole[part]) >= 0.999, name
+
+
+def test_far_apart_sites_get_the_features_of_each_site_alone():
+    """Training samples merged into one file (sites kilometres apart): each site's features are
+    those it has alone, not those of one huge grid inpainted across the gap."""
+    from groundsieve.core.learn.hybrid import islands
+    a = plane_scene(seed=3, box=BOX)[0]
+    b = plane_scene(seed=4, box=BOX)[0] + np.array([5000.0, -3000.0, 40.0])
+    both = np.vstack([a, b])
+    label = islands(both[:, 0], both[:, 1], 64.0)
+    assert set(label[:len(a)]) == {label[0]} and set(label[len(a):]) == {label[-1]} and label[0] != label[-1]
+    names = list(DEFAULT_FEATURES)
+    merged = hybrid_features(both, names)
+    np.testing.assert_array_equal(merged[:len(a)], hybrid_features(a, names))
+    np.testing.assert_array_equal(merged[len(a):], hybrid_features(b, names))
+    # Points 10 m apart (a gap smaller than the reach) stay one site.
+    assert len(set(islands(np.array([0.0, 10.0, 20.0]), np.zeros(3), 64.0))) == 1
+    # A huge extent (no coarse grid): the sparse path gives the same grouping.
+    far = np.array([0.0, 1.0, 1e9, 1e9 + 1.0])
+    assert list(islands(far, np.zeros(4), 64.0)) == [0, 0, 1, 1]
+
+
+def test_rftrain_defaults_train_the_hybrid_features_and_the_model_runs_in_both(tmp_path):
+    """Issue 12: rftrain's default features are the hybrid filter's (x, y, z only); the model it
+    writes runs in groundsieve:hybrid and in groundsieve:rfclassify, with the same ground."""
+    from groundsieve.core.engine import learning
+    from groundsieve.core.io import new_las, write_las
+    from groundsieve.core.learn import rf
+    assert learning.TrainOptions().features == rf.PRESETS["HYBRID"] == tuple(DEFAULT_FEATURES)
+    xyz, truth = plane_scene(seed=21, size=80.0, density=2.0, boxes=[(10, 30, 10, 30), (45, 70, 50, 60)])
+    train = tmp_path / "train.las"
+    write_las(new_las(xyz[:, 0], xyz[:, 1], xyz[:, 2], point_format=0,
+                      classification=np.where(truth, 2, 1).astype(np.uint8)), str(train))
+    model = tmp_path / "m.npz"
+    learning.train_file(str(train), str(model), None,
+                        learning.TrainOptions(params=ForestParams(n_trees=5), block_m=10.0))
+    other, other_truth = plane_scene(seed=22, size=60.0, density=2.0, boxes=[(20, 40, 15, 35)])
+    target = tmp_path / "other.las"
+    write_las(new_las(other[:, 0], other[:, 1], other[:, 2], point_format=0,
+                      classification=np.ones(len(other), dtype=np.uint8)), str(target))
+    _cloud, predicted = learning.classify_file(str(target), str(tmp_path / "out.las"), str(model))
+    by_filter = Hybrid(model_path=str(model))(other)
+    assert ground_accuracy(predicted == 2, other_truth).total < 0.05
+    assert np.mean((predicted == 2) == by_filter) >= 0.999

@@ -237,3 +237,48 @@ def test_classify_file_refuses_a_cloud_without_the_model_features(labelled_files
     with pytest.raises(InputError, match="gps_time"):
         learning.classify_file(str(bare), str(tmp_path / "o.laz"), str(tmp_path / "m.npz"))
     assert not (tmp_path / "o.laz").exists()
+
+
+def test_rfclassify_on_a_folder_and_in_tiles_equals_the_whole_run(tmp_path):
+    """rfclassify on surveys (issue 12): a ground model of the HYBRID preset runs in the buffered-tile
+    engine; a folder of two LAZ and one LAZ cut into 80 m tiles give the whole run's classes on
+    >= 99.9 % of the points. A model of other classes is refused for a survey, with the reason."""
+    import laspy
+    from groundsieve.core.engine.tiles import TileOptions, TiledRun
+    from groundsieve.core.errors import InputError
+    from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+    train = make_scene(SceneSpec(size_m=80.0, density_per_m2=4.0, seed=41))
+    train.classification[:] = np.where(train.classification == 2, 2, 1)
+    write_scene(train, str(tmp_path / "train.laz"))
+    model = tmp_path / "ground.npz"
+    learning.train_file(str(tmp_path / "train.laz"), str(model), None,
+                        learning.TrainOptions(params=rf.ForestParams(n_trees=8, max_depth=10), block_m=20.0))
+    scene = tmp_path / "scene.laz"
+    write_scene(make_scene(SceneSpec(size_m=240.0, density_per_m2=3.0, seed=5)), str(scene))
+    _cloud, whole = learning.classify_file(str(scene), str(tmp_path / "whole.laz"), str(model))
+    run = learning.classify_file(str(scene), str(tmp_path / "tiled.laz"), str(model),
+                                 tiling=TileOptions(tile_size_m=80.0, workers=2, parallel="threads"))
+    assert isinstance(run, TiledRun) and run.tiles >= 9
+    assert np.mean(np.asarray(laspy.read(tmp_path / "tiled.laz").classification) == whole) >= 0.999
+    las = laspy.read(scene)
+    folder = tmp_path / "survey"
+    folder.mkdir()
+    west = np.asarray(las.x) < np.median(np.asarray(las.x))
+    for name, part in (("west.laz", west), ("east.laz", ~west)):
+        piece = laspy.LasData(las.header)
+        piece.points = las.points[part]
+        piece.write(folder / name)
+    run = learning.classify_file(str(folder), str(tmp_path / "classified.vpc"), str(model))
+    assert isinstance(run, TiledRun)
+    for name, part in (("west.laz", west), ("east.laz", ~west)):
+        got = np.asarray(laspy.read(tmp_path / "classified" / name).classification)
+        assert np.mean(got == whole[part]) >= 0.999, name
+    # A model of three classes cannot run tile by tile (the engine writes ground and unclassified).
+    three = make_scene(SceneSpec(size_m=60.0, density_per_m2=4.0, seed=42))
+    write_scene(three, str(tmp_path / "three.laz"))
+    assert len(set(np.unique(three.classification))) >= 3
+    learning.train_file(str(tmp_path / "three.laz"), str(tmp_path / "three.npz"), None,
+                        learning.TrainOptions(params=rf.ForestParams(n_trees=3), block_m=15.0))
+    with pytest.raises(InputError, match="only a ground model"):
+        learning.classify_file(str(folder), str(tmp_path / "again.vpc"), str(tmp_path / "three.npz"))
+    assert not (tmp_path / "again.vpc").exists()

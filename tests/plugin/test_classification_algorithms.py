@@ -107,3 +107,30 @@ def test_training_without_scikit_learn_says_so(groundsieve_provider, labelled_pa
     train, _ = labelled_pair
     with pytest.raises(QgsProcessingException, match="scikit-learn"):
         _run("rftrain", {"INPUT": str(train), "MODEL": str(tmp_path / "m.npz"), "REPORT": str(tmp_path / "r.html")})
+
+
+def test_rfclassify_on_a_vpc_equals_the_file_run(groundsieve_provider, labelled_pair, tmp_path):
+    """rfclassify given a virtual point cloud (two LAZ halves of one cloud) writes one classified file
+    per input, with the classes of the run on the whole file (>= 99.9 %)."""
+    import laspy
+    from groundsieve.core.io.lasfiles import scan_header, write_vpc
+    train, test = labelled_pair
+    model = tmp_path / "model.npz"
+    _run("rftrain", {"INPUT": str(train), "MODEL": str(model), "REPORT": str(tmp_path / "r.html"), "TREES": 10})
+    _run("rfclassify", {"INPUT": str(test), "MODEL": str(model), "OUTPUT": str(tmp_path / "whole.laz")})
+    whole = classes_of(tmp_path / "whole.laz")
+    las = laspy.read(test)
+    west = np.asarray(las.x) < np.median(np.asarray(las.x))
+    halves = []
+    for name, part in (("west.laz", west), ("east.laz", ~west)):
+        piece = laspy.LasData(las.header)
+        piece.points = las.points[part]
+        piece.write(tmp_path / name)
+        halves.append(str(tmp_path / name))
+    write_vpc(str(tmp_path / "survey.vpc"), [scan_header(p) for p in halves], halves)
+    (tmp_path / "out").mkdir()
+    _run("rfclassify", {"INPUT": str(tmp_path / "survey.vpc"), "MODEL": str(model),
+                        "OUTPUT": str(tmp_path / "out" / "classified.vpc")})
+    for name, part in (("west.laz", west), ("east.laz", ~west)):
+        got = classes_of(tmp_path / "out" / "classified" / name)
+        assert np.mean(got == whole[part]) >= 0.999, name
