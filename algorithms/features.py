@@ -8,6 +8,7 @@ from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException,
                        QgsProcessingParameterNumber, QgsProcessingParameterString)
 from qgis.PyQt.QtGui import QIcon
 
+from . import pointclouds
 from .base import core_modules, dialog_help, feedback_callables, warn_about_crs
 from .discovery import Discoverable
 
@@ -100,10 +101,10 @@ the cloud's CRS. The output is written under a temporary name and renamed when c
 """)
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        self.addParameter(QgsProcessingParameterFile(
+        self.addParameter(pointclouds.offer_point_clouds_in_modeler(QgsProcessingParameterFile(
             self.INPUT, "Input point cloud (LAS/LAZ, or ISPRS .txt)",
             behavior=QgsProcessingParameterFile.Behavior.File,
-            fileFilter="Point clouds (*.las *.laz *.LAS *.LAZ);;ISPRS text (*.txt);;All files (*.*)"))
+            fileFilter="Point clouds (*.las *.laz *.LAS *.LAZ);;ISPRS text (*.txt);;All files (*.*)")))
         for param, _feature, label, default in self.PAPER:
             self.addParameter(QgsProcessingParameterNumber(
                 param, label, type=Double, defaultValue=default, minValue=0.0))

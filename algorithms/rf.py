@@ -9,6 +9,7 @@ from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException, QgsProces
                        QgsProcessingParameterRasterDestination, QgsProcessingParameterString)
 from qgis.PyQt.QtGui import QIcon
 
+from . import pointclouds
 from .base import check_parameter_values, core_modules, dialog_help, feedback_callables
 from .discovery import Discoverable
 
@@ -102,9 +103,9 @@ recall, F1, overall accuracy, weighted averages, confusion matrices, impurity an
 importances, timings) with the same figures in a CSV beside it.</p>""")
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        self.addParameter(QgsProcessingParameterFile(
+        self.addParameter(pointclouds.offer_point_clouds_in_modeler(QgsProcessingParameterFile(
             self.INPUT, "Labelled point cloud (LAS/LAZ)", behavior=QgsProcessingParameterFile.Behavior.File,
-            fileFilter=CLOUD_FILTER))
+            fileFilter=CLOUD_FILTER)))
         self.addParameter(QgsProcessingParameterString(
             self.CLASSES, "Classes to learn (ASPRS codes, comma-separated; empty = all present)",
             defaultValue="", optional=True))
@@ -135,10 +136,12 @@ importances, timings) with the same figures in a CSV beside it.</p>""")
                                          defaultValue=100000, minValue=0),
             QgsProcessingParameterNumber(self.BLOCK, "Block size of the spatial split (m)", type=Double,
                                          defaultValue=25.0, minValue=0.0),
-            QgsProcessingParameterFile(self.VALIDATION, "Validation cloud (instead of blocks)", optional=True,
-                                       behavior=QgsProcessingParameterFile.Behavior.File, fileFilter=CLOUD_FILTER),
-            QgsProcessingParameterFile(self.TEST, "Test cloud (instead of blocks)", optional=True,
-                                       behavior=QgsProcessingParameterFile.Behavior.File, fileFilter=CLOUD_FILTER),
+            pointclouds.offer_point_clouds_in_modeler(QgsProcessingParameterFile(
+                self.VALIDATION, "Validation cloud (instead of blocks)", optional=True,
+                behavior=QgsProcessingParameterFile.Behavior.File, fileFilter=CLOUD_FILTER)),
+            pointclouds.offer_point_clouds_in_modeler(QgsProcessingParameterFile(
+                self.TEST, "Test cloud (instead of blocks)", optional=True,
+                behavior=QgsProcessingParameterFile.Behavior.File, fileFilter=CLOUD_FILTER)),
         ]
         for param in advanced:
             param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
@@ -223,9 +226,9 @@ model, or when the cloud cannot give the model's features (e.g. colour in one an
 Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        self.addParameter(QgsProcessingParameterFile(
+        self.addParameter(pointclouds.offer_point_clouds_in_modeler(QgsProcessingParameterFile(
             self.INPUT, "Point cloud (LAS/LAZ, or a .vpc survey)", behavior=QgsProcessingParameterFile.Behavior.File,
-            fileFilter=SURVEY_FILTER))
+            fileFilter=SURVEY_FILTER)))
         self.addParameter(QgsProcessingParameterFile(
             self.MODEL, "Model file", behavior=QgsProcessingParameterFile.Behavior.File,
             fileFilter="GroundSieve model (*.npz)"))
