@@ -365,7 +365,7 @@ def test_matches_the_reference_library_when_installed():
     theirs = np.zeros(len(xyz), dtype=bool)
     theirs[np.array(ground_idx, dtype=np.int64)] = True
     ours = CSF(cloth_resolution_m=0.5, rigidness=2, intersection_height="cell", low_outlier_m=0.0,
-               sweep_order="fixed")(xyz)
+               sweep_order="fixed", cloth_origin="cloud")(xyz)
     assert (ours == theirs).mean() > 0.995
 
 
