@@ -104,6 +104,7 @@ from __future__ import annotations
 
 import functools
 import math
+from typing import Optional
 from dataclasses import dataclass
 
 import numpy as np
@@ -211,6 +212,10 @@ class CSF:
     constraint_scheme: str = "library"
     sweep_order: str = "rotating"
     cloth_origin: str = "grid"
+    #: height (z, m) at or below which the cloth starts (None: the lowest point's, the
+    #: reference); a tiled run may pass the survey's lowest z so that every tile's cloth falls
+    #: from the height the whole survey's does
+    cloth_start_z: Optional[float] = None
 
     name = "csf"
 
@@ -239,6 +244,9 @@ class CSF:
         check_choice(self, "sweep_order", SWEEP_ORDERS)
         check_choice(self, "constraint_scheme", CONSTRAINT_SCHEMES)
         check_choice(self, "cloth_origin", CLOTH_ORIGINS)
+        _require(self.cloth_start_z is None or (isinstance(self.cloth_start_z, (int, float, np.floating))
+                                                and math.isfinite(self.cloth_start_z)),
+                 f"cloth_start_z must be a height in metres or None (got {self.cloth_start_z!r})")
 
     @property
     def gravity_step_m(self) -> float:
@@ -322,7 +330,8 @@ class CSF:
         steps.report(0.1)
 
         # The simulation.
-        pos = np.full(W * H, -float(zu.min()) + CLOTH_START_M)
+        lowest = float(zu.min()) if self.cloth_start_z is None else min(float(zu.min()), float(self.cloth_start_z))
+        pos = np.full(W * H, -lowest + CLOTH_START_M)
         old = pos.copy()
         movable = np.ones(W * H, dtype=np.bool_)
         quiet = np.zeros(W * H, dtype=np.bool_)
