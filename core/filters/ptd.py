@@ -57,10 +57,14 @@ on TerraScan and LP360 ground parameters):
   sloping ground (mean total error 9.9 % instead of 5.2 %).
 
 Seed cells sit on multiples of ``seed_cell_m`` (``seed_origin="grid"``, the default), so a tile
-of a survey and the whole survey pick the same seeds away from the tile's border;
+of a survey and the whole survey pick the same seeds away from the tile's border; with it the
+low-outlier test's fine grid is the seed cell halved a whole number of times and its radius a
+whole number of metres (both are derived from the density, which differs a little per tile);
 ``"cloud"`` starts them at the cloud's lowest corner (the paper's grid). What still differs in a
-tile: the ring of virtual vertices at its border, and the density-derived fine grid and support
-radius of the low-outlier check (docs/BENCHMARKS.md, "Seams of EVC, CSF and PTD").
+tile: the ring of virtual vertices at its border, and the order in which a round's accepted
+points are inserted (the order of the triangle list, which is numbered differently in a tile; a
+point whose triangle an earlier insertion changed is tested again), so a few points anywhere
+(0.04 % on a generated scene, docs/BENCHMARKS.md, "Seams of EVC, CSF and PTD").
 
 The angle, distance, seed cell and offset were chosen among literature values with the 8 ISPRS
 samples at hand (docs/BENCHMARKS.md), so the ISPRS figures of these defaults are optimistic.
@@ -207,6 +211,11 @@ class PTD:
         area = max((float(xyz[:, 0].max()) - float(xyz[:, 0].min()))
                    * (float(xyz[:, 1].max()) - float(xyz[:, 1].min())), 1e-6)  # the data's, for its density
         cell = max(math.sqrt(_POINTS_PER_FINE_CELL * area / n), max(xr, yr) / n, 1e-3)
+        if self.seed_origin == "grid":
+            # The seed cell halved a whole number of times (the nearest such size): the fine grid of
+            # the low-outlier test then also sits on the seed cells' multiples, and a tile whose
+            # density is near the survey's gets the same fine cells.
+            cell = seed_cell / 2 ** max(0, round(math.log2(seed_cell / cell)))
         ncols, nrows = int(xr // cell) + 1, int(yr // cell) + 1
         block = 32
         nkeys = ((nrows + block - 1) // block) * ((ncols + block - 1) // block) * block * block
@@ -229,6 +238,8 @@ class PTD:
         seed_of_cell = np.empty(scols * srows, dtype=np.int64)
         spacing = math.sqrt(area / n)
         radius = max(_SUPPORT_SPACINGS * spacing, _SUPPORT_MIN_RADIUS_M)
+        if self.seed_origin == "grid":  # whole metres: the same in a tile of about the same density
+            radius = float(math.ceil(radius))
         tan_angle = math.tan(math.radians(self.max_angle_deg))
         zmin_fine = np.empty(nkeys)
         K.cell_min_kernel(vz, cell_start, zmin_fine)
