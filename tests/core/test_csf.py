@@ -491,7 +491,10 @@ def test_2016_scheme_plane_is_all_ground():
 def test_2016_scheme_reproduces_the_published_isprs_figures():
     """Zhang et al. (2016) Table 3 with the paper's per-group parameters: the issue's target,
     every sample within 1.5 points of the published total error and the mean within 0.5 (the
-    2016 scheme; the library scheme misses it, see docs/BENCHMARKS.md)."""
+    2016 scheme; the library scheme misses it, see docs/BENCHMARKS.md). The cloth starts at the
+    cloud's corner, as in the paper's code (cloth_origin="cloud"): moved onto whole metres the
+    same cloth gives samp23 6.20 % and samp41 7.38 %, the placement alone moving a sample by up
+    to 2 points (docs/BENCHMARKS.md, "Seams of EVC, CSF and PTD")."""
     from groundsieve.core.io import read_cloud
     from groundsieve.core.metrics import ground_accuracy
     from groundsieve.tests.shared_data import shared_data_dir
@@ -503,7 +506,8 @@ def test_2016_scheme_reproduces_the_published_isprs_figures():
     ours = {}
     for name, (rigidness, smooth) in groups.items():
         cloud = read_cloud(str(root / f"{name}.txt"))
-        f = CSF(cloth_resolution_m=0.5, rigidness=rigidness, slope_smooth=smooth, constraint_scheme="2016")
+        f = CSF(cloth_resolution_m=0.5, rigidness=rigidness, slope_smooth=smooth, constraint_scheme="2016",
+                cloth_origin="cloud")
         ours[name] = 100 * ground_accuracy(cloud.reference_label == 0, f(cloud.xyz)).total
     report = ", ".join(f"{k} {v:.2f} (published {published[k]})" for k, v in ours.items())
     assert all(abs(ours[k] - published[k]) <= 1.5 for k in published), report
