@@ -244,6 +244,11 @@ class CSF:
         check_choice(self, "sweep_order", SWEEP_ORDERS)
         check_choice(self, "constraint_scheme", CONSTRAINT_SCHEMES)
         check_choice(self, "cloth_origin", CLOTH_ORIGINS)
+        if isinstance(self.cloth_start_z, str):  # the command line gives the optional height as text
+            try:
+                object.__setattr__(self, "cloth_start_z", float(self.cloth_start_z))
+            except ValueError:
+                pass  # refused just below, in the same words
         _require(self.cloth_start_z is None or (isinstance(self.cloth_start_z, (int, float, np.floating))
                                                 and math.isfinite(self.cloth_start_z)),
                  f"cloth_start_z must be a height in metres or None (got {self.cloth_start_z!r})")

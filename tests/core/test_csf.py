@@ -601,3 +601,33 @@ def test_cancellation_stops_within_one_iteration(after, monkeypatch):
     with pytest.raises(Cancelled):
         CSF().run(xyz, Steps(is_cancelled=lambda: calls["n"] >= after))
     assert calls["n"] == after
+
+
+# --- the cloth's start height (tiles) ----------------------------------------------------------
+
+def test_cloth_start_z_sets_the_height_the_cloth_falls_from():
+    """None (the reference) falls from just above the lowest point; the same height given is the
+    same run; a lower z (a survey's lowest point outside this tile) makes a longer fall."""
+    xyz, _ = plane_scene(seed=4, density=1.0, tilt=(0.05, 0.0), box=BOX)
+    ref = CSF().run(xyz)
+    same = CSF(cloth_start_z=float(xyz[:, 2].min())).run(xyz)
+    np.testing.assert_array_equal(same.ground, ref.ground)
+    assert same.iterations == ref.iterations
+    assert CSF(cloth_start_z=float(xyz[:, 2].min()) - 30.0).run(xyz).iterations > ref.iterations
+    assert CSF(cloth_start_z="12.5").cloth_start_z == 12.5  # the command line gives text
+    for bad in (float("nan"), "low", float("inf")):
+        with pytest.raises(InvalidParameterError, match="cloth_start_z"):
+            CSF(cloth_start_z=bad)
+
+
+def test_cloth_origin_places_the_particles():
+    """"grid" (default): particles on multiples of the cloth resolution, shared by a tile and its
+    survey; "cloud": from the lowest corner, the reference's placement."""
+    xyz, _ = plane_scene(seed=4, density=1.0, box=BOX)
+    xyz[:, :2] += 0.37  # the corner off whole metres
+    xmin = float(xyz[:, 0].min())
+    grid, cloud = CSF().run(xyz).grid, CSF(cloth_origin="cloud").run(xyz).grid
+    first_grid, first_cloud = grid.x0 + grid.cell / 2, cloud.x0 + cloud.cell / 2  # first particle
+    assert abs(first_grid - round(first_grid)) < 1e-6 and first_grid <= xmin
+    assert abs(first_cloud - (xmin - 2 * cloud.cell)) < 1e-6
+    assert abs(first_grid - first_cloud) > 0.3
