@@ -139,13 +139,13 @@ class EVC:
                 f"({span:.2f} m across): the large-scale grid would be a single cell")
         # Per small cell: the mean surface and its count, the difference, its windowed mean and
         # standard deviation, the EVC and the classes (about eight 8-byte grids).
-        small, rows_s, cols_s, (gx0_s, gy1_s) = _cells(x, y, self.small_scale_m, self.cell_origin,
-                                                       "EVC small-scale grid", 64)
-        large, rows_l, cols_l, (gx0_l, gy1_l) = _cells(x, y, self.large_scale_m, self.cell_origin,
-                                                       "EVC large-scale grid", 16)
-        small_mean = _mean_by_cell(rows_s, cols_s, z, small.shape)
-        large_mean = _mean_by_cell(rows_l, cols_l, z, large.shape)
-        del rows_l, cols_l
+        small, cell_s, (gx0_s, gy1_s) = _cells(x, y, self.small_scale_m, self.cell_origin,
+                                               "EVC small-scale grid", 64)
+        large, cell_l, (gx0_l, gy1_l) = _cells(x, y, self.large_scale_m, self.cell_origin,
+                                               "EVC large-scale grid", 16)
+        small_mean = _mean_by_cell(cell_s, z, small.shape)
+        large_mean = _mean_by_cell(cell_l, z, large.shape)
+        del cell_l
         steps.report(0.3)
         filled = large_mean
         if np.isnan(large_mean).any():
@@ -181,7 +181,7 @@ class EVC:
             classes[evc <= 0] = VEGETATION_AREA
             classes[(evc > 0) & (evc <= threshold)] = GROUND
         classes[np.isnan(small_mean)] = EMPTY
-        cls_at_point = classes[rows_s, cols_s]
+        cls_at_point = classes.ravel()[cell_s]
         steps.report(1.0)
         ground = cls_at_point == GROUND
         return EVCResult(ground, small, large, small_mean, large_mean, difference, evc, classes, threshold,
@@ -202,7 +202,7 @@ class EVC:
 
 
 def _cells(x, y, cell, origin, what, bytes_per_cell):
-    """The grid of ``cell`` m covering the points and each point's (row, col) in it.
+    """The grid of ``cell`` m covering the points and each point's cell in it (row-major index).
 
     Each point's cell is ``floor((x - o) / cell)`` counted from the origin ``o`` (0 for "grid",
     the cloud's lowest corner for "cloud"): with the "grid" origin the same float expression on
@@ -222,13 +222,14 @@ def _cells(x, y, cell, origin, what, bytes_per_cell):
                                     f"{nrows * ncols:,} cells (limit {MAX_CELLS:,}); use a larger cell size")
     grid = GridSpec(ox + gx0 * cell, oy + (gy1 + 1) * cell, float(cell), nrows, ncols)
     gx -= gx0
-    gy = gy1 - gy
-    return grid, gy, gx, (gx0, gy1)
+    np.subtract(gy1, gy, out=gy)
+    gy *= ncols
+    gy += gx
+    return grid, gy, (gx0, gy1)
 
 
-def _mean_by_cell(rows, cols, z, shape):
-    """Mean z per cell (NaN where empty)."""
-    flat = rows * shape[1] + cols
+def _mean_by_cell(flat, z, shape):
+    """Mean z per cell (NaN where empty) from each point's row-major cell index."""
     count = np.bincount(flat, minlength=shape[0] * shape[1])
     total = np.bincount(flat, weights=z, minlength=shape[0] * shape[1])
     with np.errstate(invalid="ignore", divide="ignore"):
