@@ -237,8 +237,8 @@ def part_isprs(samples, lib):
         ri, smooth = GROUPS[name]
         g, sec, _ = run_ours(ours(ri, smooth), xyz)
         acc = ground_accuracy(ref, g)
-        gr, _, _ = run_ours(ours(ri, smooth, intersection_height="cell", low_outlier_m=0.0, sweep_order="fixed"),
-                            xyz)
+        gr, _, _ = run_ours(ours(ri, smooth, intersection_height="cell", low_outlier_m=0.0, sweep_order="fixed",
+                                     cloth_origin="cloud"), xyz)
         pub = PUBLISHED[name][2]
         row = {"type1": 100 * acc.type1, "type2": 100 * acc.type2, "total": 100 * acc.total,
                "kappa": 100 * acc.kappa, "s": sec, "pub": pub, "ref": total(ref, gr),
@@ -296,7 +296,7 @@ def part_diagnose(samples, lib):
             for c in cols[:6]:
                 row[c] = math.nan
         row["ours-ref"] = total(ref, ours(ri, smooth, intersection_height="cell", low_outlier_m=0.0,
-                                          sweep_order="fixed")(xyz))
+                                          sweep_order="fixed", cloth_origin="cloud")(xyz))
         row["ours nearest"] = total(ref, ours(ri, smooth, low_outlier_m=0.0)(xyz))
         row["ours nearest + outliers (default)"] = total(ref, ours(ri, smooth)(xyz))
         row["empty particles %"] = 100.0 * empty_particle_share(xyz, RESOLUTION_M)
@@ -418,7 +418,8 @@ def part_agreement(lib, n_points, density):
     for label, algorithm in (("ours (defaults)", CSF()),
                              ("ours, fixed sweep", CSF(sweep_order="fixed")),
                              ("ours-ref (cell heights, no outlier step)",
-                              CSF(intersection_height="cell", low_outlier_m=0.0, sweep_order="fixed"))):
+                              CSF(intersection_height="cell", low_outlier_m=0.0, sweep_order="fixed",
+                                  cloth_origin="cloud"))):
         g, sec, res = run_ours(algorithm, xyz)
         same = fmt(100 * (g == gl).mean(), 3) if gl is not None else "n/a"
         ratio = fmt(lsec / sec) if lsec is not None else "n/a"

@@ -90,10 +90,11 @@ FILTERS: Dict[str, Callable[[ParamsRow], Callable]] = {
     "pmf-linear": lambda row: make_pmf(row, exponential=False),
     "csf": make_csf,
     # The authors' library's behaviour: cell heights with scan-line fill, no low-outlier step, its sweep order.
-    "csf-ref": lambda row: make_csf(row, intersection_height="cell", low_outlier_m=0.0, sweep_order="fixed"),
+    "csf-ref": lambda row: make_csf(row, intersection_height="cell", low_outlier_m=0.0, sweep_order="fixed",
+                                    cloth_origin="cloud"),
     "csf-paper": make_csf_paper,
     "csf-paper-ref": lambda row: make_csf_paper(row, intersection_height="cell", low_outlier_m=0.0,
-                                                sweep_order="fixed"),
+                                                sweep_order="fixed", cloth_origin="cloud"),
     # The reference's fixed sweep order (the default cycles through 8 orders).
     "csf-fixed": lambda row: make_csf(row, sweep_order="fixed"),
     "csf-paper-fixed": lambda row: make_csf_paper(row, sweep_order="fixed"),

@@ -2,12 +2,14 @@
 
 Seams, on the two adjacent bcts tiles of ../shared/data (seam at y = 629400):
 
-    .venv/bin/python bench/tiles.py seams [--filters smrf pmf csf] [--tile 100]
+    .venv/bin/python bench/tiles.py seams [--filters smrf pmf csf csf-startz] [--tile 100] [--buffers 60 90]
 
 Each filter runs (1) on the merged cloud in memory (the reference), (2) through a .vpc over both
 files in tiles of ``--tile`` m with the filter's reach as buffer, (3) the same without buffer, and
 (4) on each file alone (what pdal_wrench's classify_ground does on a .vpc); the table gives the
-agreement with (1) for the points within 20 m of the seam and for all points.
+agreement with (1) for the points within 20 m of the seam and for all points. ``--buffers`` adds
+tiled runs with those buffers (m); ``csf-startz`` is CSF whose cloth falls from the merged cloud's
+lowest z in every run (``cloth_start_z``), as a tiled run could with the survey's lowest z.
 
 Scale, on a generated LAZ of N million points (blocks of the project's scene generator streamed to
 disk, so no whole cloud is in memory):
@@ -32,7 +34,7 @@ from _checkout import REPO  # noqa: E402 (puts this checkout's groundsieve on sy
 SEAM_Y = 629400.0
 
 
-def seams(filters, tile):
+def seams(filters, tile, buffers=()):
     import numpy as np
     import laspy
 
@@ -56,7 +58,11 @@ def seams(filters, tile):
         vpc = os.path.join(work, "bcts.vpc")
         write_vpc(vpc, [scan_header(p) for p in files], files)
         for name in filters:
-            algorithm = make_filter(name, None)
+            if name == "csf-startz":  # the cloth falls from the survey's lowest z in every tile
+                from groundsieve.core.filters.csf import CSF
+                algorithm = CSF(cloth_start_z=float(merged.z.min()))
+            else:
+                algorithm = make_filter(name, None)
             t = time.perf_counter()
             ref = classify_cloud(merged, algorithm).classification
             t_merged = time.perf_counter() - t
@@ -78,7 +84,16 @@ def seams(filters, tile):
             per_file = np.concatenate([classify_cloud(c, algorithm).classification for c in clouds])
             row.append(score(per_file))
             print(f"| {name} | {algorithm.reach_m:g} m | {row[0]} | {row[1]} | {row[2]} | "
-                  f"{t_merged:.1f} / {t_tiled:.1f} |")
+                  f"{t_merged:.1f} / {t_tiled:.1f} |", flush=True)
+            for buffer in buffers:  # larger buffers than the reach: what they buy
+                out = os.path.join(work, f"out_{name}_b{buffer:g}", "classified.vpc")
+                os.makedirs(os.path.dirname(out))
+                t = time.perf_counter()
+                run_ground_filter(vpc, out, algorithm,
+                                  options=FilterOptions(tiling=TileOptions(tile_size_m=tile, buffer_m=buffer)))
+                got = np.concatenate([np.asarray(laspy.read(f).classification) for f in read_vpc(out)])
+                print(f"| {name} | {buffer:g} m (given) | {score(got)} | | | - / {time.perf_counter() - t:.1f} |",
+                      flush=True)
 
 
 def generate(path, millions, density=10.0, block_points=2_000_000):
@@ -197,13 +212,15 @@ def main():
     s = sub.add_parser("seams")
     s.add_argument("--filters", nargs="+", default=["smrf"])
     s.add_argument("--tile", type=float, default=100.0)
+    s.add_argument("--buffers", type=float, nargs="*", default=[],
+                   help="also run the tiles with these buffers (m), e.g. larger than the filter's reach")
     g = sub.add_parser("scale")
     g.add_argument("--millions", type=float, default=20)
     g.add_argument("--keep", action="store_true", help="keep the generated LAZ")
     g.add_argument("--work", default=os.path.join(str(REPO), ".build", "bench-tiles"))
     args = parser.parse_args()
     if args.what == "seams":
-        seams(args.filters, args.tile)
+        seams(args.filters, args.tile, args.buffers)
     else:
         scale(args.millions, args.keep, args.work)
 

@@ -44,8 +44,8 @@ What GroundSieve does differently, each measured on the ISPRS samples in
   take the height of a point metres to the east, the cloth is pinned too low on slopes: over
   the 8 ISPRS samples here, with the paper's parameters, the mean total error is 18.6 % the
   library's way and 7.8 % with nearest-point heights (6.1 % with the outlier step below,
-  5.6 % with the rotating sweep too; published: 4.6 %). ``"cell"`` (with ``low_outlier_m=0``
-  and ``sweep_order="fixed"``) reproduces the library: 99.8-100 % of points classified the
+  5.6 % with the rotating sweep too; published: 4.6 %). ``"cell"`` (with ``low_outlier_m=0``,
+  ``sweep_order="fixed"`` and ``cloth_origin="cloud"``) reproduces the library: 99.8-100 % of points classified the
   same, on every sample.
 * ``low_outlier_m`` (default 5 m; 0 = off): before the cloth is made, a point lying more
   than this below the third lowest of the lowest points of the eight 5 m cells around its
@@ -63,6 +63,13 @@ What GroundSieve does differently, each measured on the ISPRS samples in
   than 8 x 5 mm since the previous cycle): 5.58 / 5.42 / 5.44 / 5.75 %, per-sample ranges
   4 times narrower; on 5 million generated points 1.00 % error against 1.09 %; about 1.3
   times the run time. ``"fixed"`` is the reference's order.
+* ``cloth_origin="grid"`` (default): the particles sit on multiples of the cloth resolution
+  (the first column at or below the lowest x, minus the two-particle border), as do the 5 m
+  cells of the low-outlier step, so a tile of a survey and the whole survey share their
+  particles; ``"cloud"`` starts them at the cloud's lowest corner, as the reference does. The
+  cloth stays one global simulation: a tile's cloth differs from the whole cloud's near the
+  tile's edges and where the tile's lowest point (where the free fall first touches) is not the
+  survey's (see docs/BENCHMARKS.md, "Seams of EVC, CSF and PTD").
 * Speed, not results: the free fall before the first contact is computed for one particle
   (bit-for-bit the same); pinned particles whose 16 neighbours are pinned are skipped (nothing
   can move them or be moved by them); the scan-line fill is linear in the number of particles.
@@ -97,6 +104,7 @@ from __future__ import annotations
 
 import functools
 import math
+from typing import Optional
 from dataclasses import dataclass
 
 import numpy as np
@@ -119,6 +127,9 @@ DOUBLE_MOVE = {1: 0.3, 2: 0.42, 3: 0.468}
 
 #: Cell of the low-outlier test (m).
 LOW_OUTLIER_CELL_M = 5.0
+#: "grid": particles (and the low-outlier cells) on multiples of their spacing, shared by a tile
+#: and the whole survey; "cloud": from the cloud's lowest corner, as the reference does
+CLOTH_ORIGINS = ("grid", "cloud")
 #: Square rings of particles searched for the nearest point; particles farther than this from
 #: any point take the intersection height of the nearest particle that found one.
 NEAREST_MAX_RING = 8
@@ -187,7 +198,8 @@ class CSF:
     slope smoothing on). Zhang et al. (2016) use 0.5 m on the ISPRS samples. The last four
     choose between the reference's behaviour, GroundSieve's changes (the defaults) and the
     authors' 2016 code (see the module docstring); ``intersection_height="cell",
-    low_outlier_m=0, sweep_order="fixed"`` is the reference library's behaviour."""
+    low_outlier_m=0, sweep_order="fixed", cloth_origin="cloud"`` is the reference library's
+    behaviour."""
     cloth_resolution_m: float = 1.0
     rigidness: int = 3
     time_step: float = 0.65
@@ -199,6 +211,11 @@ class CSF:
     low_outlier_m: float = 5.0
     constraint_scheme: str = "library"
     sweep_order: str = "rotating"
+    cloth_origin: str = "grid"
+    #: height (z, m) at or below which the cloth starts (None: the lowest point's, the
+    #: reference); a tiled run may pass the survey's lowest z so that every tile's cloth falls
+    #: from the height the whole survey's does
+    cloth_start_z: Optional[float] = None
 
     name = "csf"
 
@@ -226,6 +243,15 @@ class CSF:
         check_choice(self, "intersection_height", INTERSECTION_HEIGHTS)
         check_choice(self, "sweep_order", SWEEP_ORDERS)
         check_choice(self, "constraint_scheme", CONSTRAINT_SCHEMES)
+        check_choice(self, "cloth_origin", CLOTH_ORIGINS)
+        if isinstance(self.cloth_start_z, str):  # the command line gives the optional height as text
+            try:
+                object.__setattr__(self, "cloth_start_z", float(self.cloth_start_z))
+            except ValueError:
+                pass  # refused just below, in the same words
+        _require(self.cloth_start_z is None or (isinstance(self.cloth_start_z, (int, float, np.floating))
+                                                and math.isfinite(self.cloth_start_z)),
+                 f"cloth_start_z must be a height in metres or None (got {self.cloth_start_z!r})")
 
     @property
     def gravity_step_m(self) -> float:
@@ -242,6 +268,14 @@ class CSF:
         rigidness, whichever is larger; a measured, not a proven, reach (see docs/BENCHMARKS.md)."""
         return max(30.0, 10.0 * self.rigidness * self.cloth_resolution_m)
 
+    def _origin(self, xmin: float, ymin: float, cell: float) -> tuple:
+        """Where a grid of ``cell`` m starts: on the multiple of ``cell`` at or below the lowest
+        point ("grid": a tile and the whole survey share their particles) or on the lowest point
+        itself ("cloud", the reference)."""
+        if self.cloth_origin == "cloud":
+            return xmin, ymin
+        return math.floor(xmin / cell) * cell, math.floor(ymin / cell) * cell
+
     def __call__(self, xyz: np.ndarray, steps: Steps | None = None) -> np.ndarray:
         """Boolean ground mask of the points ``xyz`` (n, 3)."""
         return self.run(xyz, steps).ground
@@ -257,7 +291,7 @@ class CSF:
 
         low = np.zeros(n, dtype=np.bool_)
         if self.low_outlier_m > 0:
-            x0, y0 = float(x.min()), float(y.min())
+            x0, y0 = self._origin(float(x.min()), float(y.min()), LOW_OUTLIER_CELL_M)
             ncols = int((float(x.max()) - x0) / LOW_OUTLIER_CELL_M) + 1
             nrows = int((float(y.max()) - y0) / LOW_OUTLIER_CELL_M) + 1
             # Two float64 grids (the lowest z per cell and its reference): refused before allocating
@@ -273,6 +307,7 @@ class CSF:
         # The cloth: the reference's geometry, from the bounding box of the points it sees.
         xmin, xmax = float(xu.min()), float(xu.max())
         ymin, ymax = float(yu.min()), float(yu.max())
+        xmin, ymin = self._origin(xmin, ymin, res)  # the first particle column and row
         ox = xmin - CLOTH_BUFFER * res
         oy = ymin - CLOTH_BUFFER * res
         W = int(math.floor((xmax - xmin) / res)) + 2 * CLOTH_BUFFER
@@ -300,7 +335,8 @@ class CSF:
         steps.report(0.1)
 
         # The simulation.
-        pos = np.full(W * H, -float(zu.min()) + CLOTH_START_M)
+        lowest = float(zu.min()) if self.cloth_start_z is None else min(float(zu.min()), float(self.cloth_start_z))
+        pos = np.full(W * H, -lowest + CLOTH_START_M)
         old = pos.copy()
         movable = np.ones(W * H, dtype=np.bool_)
         quiet = np.zeros(W * H, dtype=np.bool_)

@@ -24,6 +24,11 @@ cell still left with fewer than two values gets no EVC and its points are called
 boundary (not ground). Large cells are never empty where a small cell has points, except at
 the rim when the scales are not multiples; those take the nearest large cell's mean.
 
+Cells sit on multiples of their size (``cell_origin="grid"``, the default) and each point's cell
+is found from its own coordinate, so a tile of a survey and the whole survey share their cells
+and a tiled run classifies as the whole cloud; ``"cloud"`` starts them at the cloud's lowest
+corner, the paper's virtual grid (measured in docs/BENCHMARKS.md).
+
 ``ground_offset_m`` (default 0 = the paper) is our one departure, offered as an option: the
 coefficient of variation is unstable where the mean difference is near zero, which is the case
 on open ground far from vegetation (the difference is then only noise, of random sign, and
@@ -41,12 +46,14 @@ from typing import Optional
 import numpy as np
 
 from ..errors import InvalidParameterError
-from ..grids.spec import GridSpec
+from ..grids.spec import MAX_CELLS, GridSpec, check_memory
 from ..progress import Steps
-from ..grids.rasterize import cell_mean
 from ..validate import check_choice, check_number, validate_xyz
 
 DIFFERENCES = ("large_minus_small", "small_minus_large")
+#: "grid": cells on multiples of their size (a tile and the whole survey share them);
+#: "cloud": cells from the cloud's lowest corner (the paper's virtual grid)
+CELL_ORIGINS = ("grid", "cloud")
 #: class codes of the class raster
 EMPTY, GROUND, VEGETATION_AREA, VEGETATION_BOUNDARY = 0, 1, 2, 3
 
@@ -77,6 +84,7 @@ class EVC:
     min_cells: int = 3
     max_radius: int = 5
     ground_offset_m: float = 0.0
+    cell_origin: str = "grid"
 
     name = "evc"
 
@@ -103,6 +111,7 @@ class EVC:
         if not (math.isfinite(self.ground_offset_m) and self.ground_offset_m >= 0):
             raise InvalidParameterError(f"ground_offset_m must be >= 0 (got {self.ground_offset_m})")
         check_choice(self, "difference", DIFFERENCES)
+        check_choice(self, "cell_origin", CELL_ORIGINS)
 
     @property
     def reach_m(self) -> float:
@@ -120,7 +129,6 @@ class EVC:
         from scipy.ndimage import distance_transform_edt
 
         from ._evc_kernels import _focal_cv_kernel
-        from ..grids._kernels import _cell_lookup_kernel
         steps = steps or Steps()
         xyz = validate_xyz(xyz)
         x, y, z = (np.ascontiguousarray(xyz[:, i]) for i in range(3))
@@ -131,19 +139,25 @@ class EVC:
                 f"({span:.2f} m across): the large-scale grid would be a single cell")
         # Per small cell: the mean surface and its count, the difference, its windowed mean and
         # standard deviation, the EVC and the classes (about eight 8-byte grids).
-        small = GridSpec.covering(x, y, self.small_scale_m, what="EVC small-scale grid", bytes_per_cell=64)
-        large = GridSpec.covering(x, y, self.large_scale_m, what="EVC large-scale grid", bytes_per_cell=16)
-        small_mean, _ = cell_mean(x, y, z, small)
-        large_mean, _ = cell_mean(x, y, z, large)
+        small, cell_s, (gx0_s, gy1_s) = _cells(x, y, self.small_scale_m, self.cell_origin,
+                                               "EVC small-scale grid", 64)
+        large, cell_l, (gx0_l, gy1_l) = _cells(x, y, self.large_scale_m, self.cell_origin,
+                                               "EVC large-scale grid", 16)
+        small_mean = _mean_by_cell(cell_s, z, small.shape)
+        large_mean = _mean_by_cell(cell_l, z, large.shape)
+        del cell_l
         steps.report(0.3)
         filled = large_mean
         if np.isnan(large_mean).any():
             idx = distance_transform_edt(np.isnan(large_mean), return_distances=False, return_indices=True)
             filled = large_mean[tuple(idx)]
-        # The large cell holding each small cell's centre.
-        xs, ys = small.centers()
-        cols = large.col_of(xs)
-        rows = large.row_of(ys)
+        # The large cell holding each small cell's centre, counted in whole cells from the origin:
+        # the same integers in a tile and in the whole cloud.
+        ratio = self.small_scale_m / self.large_scale_m
+        small_gx = gx0_s + np.arange(small.ncols)
+        small_gy = gy1_s - np.arange(small.nrows)          # row 0 = the northern row
+        cols = np.clip(np.floor((small_gx + 0.5) * ratio).astype(np.int64) - gx0_l, 0, large.ncols - 1)
+        rows = np.clip(gy1_l - (np.ceil((small_gy + 0.5) * ratio).astype(np.int64) - 1), 0, large.nrows - 1)
         large_on_small = filled[rows[:, None], cols[None, :]]
         if self.difference == "large_minus_small":
             difference = large_on_small - small_mean
@@ -167,8 +181,7 @@ class EVC:
             classes[evc <= 0] = VEGETATION_AREA
             classes[(evc > 0) & (evc <= threshold)] = GROUND
         classes[np.isnan(small_mean)] = EMPTY
-        cls_at_point = np.empty(x.shape[0], dtype=np.uint8)
-        _cell_lookup_kernel(x, y, classes, small.x0, small.top, small.cell, cls_at_point)
+        cls_at_point = classes.ravel()[cell_s]
         steps.report(1.0)
         ground = cls_at_point == GROUND
         return EVCResult(ground, small, large, small_mean, large_mean, difference, evc, classes, threshold,
@@ -186,6 +199,41 @@ class EVC:
                     "'Ground offset added to the mean difference (m)' in QGIS), which makes a smooth surface ground")
         return (f"no cell has an EVC in (0, {threshold:g}] (the threshold): raise the threshold, or set the ground "
                 "offset (e.g. 0.1 m), or check the scales against the point spacing")
+
+
+def _cells(x, y, cell, origin, what, bytes_per_cell):
+    """The grid of ``cell`` m covering the points and each point's cell in it (row-major index).
+
+    Each point's cell is ``floor((x - o) / cell)`` counted from the origin ``o`` (0 for "grid",
+    the cloud's lowest corner for "cloud"): with the "grid" origin the same float expression on
+    the same coordinate, so a tile and the whole survey put every point, also one lying exactly
+    on a cell edge, in the same cell. (``floor((x - x0) / cell)`` with ``x0`` a multiple of 0.2 m
+    that binary cannot hold exactly puts a point on an edge on either side depending on ``x0``;
+    with coordinates in 1 cm steps that is one point in ten.) As in ``GridSpec``, a cell holds its
+    western and its northern edge; rows count from the north."""
+    ox, oy = (0.0, 0.0) if origin == "grid" else (float(x.min()), float(y.min()))
+    gx = np.floor((x - ox) / cell).astype(np.int64)
+    gy = np.ceil((y - oy) / cell).astype(np.int64) - 1    # rows hold their northern edge
+    gx0, gx1, gy0, gy1 = int(gx.min()), int(gx.max()), int(gy.min()), int(gy.max())
+    nrows, ncols = gy1 - gy0 + 1, gx1 - gx0 + 1
+    check_memory(nrows * ncols * float(bytes_per_cell), what=what, shape=(nrows, ncols), cell=cell, x=x, y=y)
+    if nrows * ncols > MAX_CELLS:
+        raise InvalidParameterError(f"{what}: a cell size of {cell:g} m needs {nrows} x {ncols} = "
+                                    f"{nrows * ncols:,} cells (limit {MAX_CELLS:,}); use a larger cell size")
+    grid = GridSpec(ox + gx0 * cell, oy + (gy1 + 1) * cell, float(cell), nrows, ncols)
+    gx -= gx0
+    np.subtract(gy1, gy, out=gy)
+    gy *= ncols
+    gy += gx
+    return grid, gy, (gx0, gy1)
+
+
+def _mean_by_cell(flat, z, shape):
+    """Mean z per cell (NaN where empty) from each point's row-major cell index."""
+    count = np.bincount(flat, minlength=shape[0] * shape[1])
+    total = np.bincount(flat, weights=z, minlength=shape[0] * shape[1])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(count > 0, total / np.maximum(count, 1), np.nan).reshape(shape)
 
 
 def natural_break(evc: np.ndarray, max_values: int = 200_000, upper_percentile: float = 95.0) -> float:

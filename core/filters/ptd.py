@@ -56,6 +56,16 @@ on TerraScan and LP360 ground parameters):
 * ``mirror`` off: on the ISPRS samples it let the TIN climb onto large objects joined to
   sloping ground (mean total error 9.9 % instead of 5.2 %).
 
+Seed cells sit on multiples of ``seed_cell_m`` (``seed_origin="grid"``, the default), so a tile
+of a survey and the whole survey pick the same seeds away from the tile's border; with it the
+low-outlier test's fine grid is the seed cell halved a whole number of times and its radius a
+whole number of metres (both are derived from the density, which differs a little per tile);
+``"cloud"`` starts them at the cloud's lowest corner (the paper's grid). What still differs in a
+tile: the ring of virtual vertices at its border, and the order in which a round's accepted
+points are inserted (the order of the triangle list, which is numbered differently in a tile; a
+point whose triangle an earlier insertion changed is tested again), so a few points anywhere
+(0.04 % on a generated scene, docs/BENCHMARKS.md, "Seams of EVC, CSF and PTD").
+
 The angle, distance, seed cell and offset were chosen among literature values with the 8 ISPRS
 samples at hand (docs/BENCHMARKS.md), so the ISPRS figures of these defaults are optimistic.
 
@@ -75,7 +85,7 @@ import numpy as np
 
 from ..errors import InvalidParameterError
 from ..progress import Steps
-from ..validate import check_number, validate_xyz
+from ..validate import check_choice, check_number, validate_xyz
 
 #: Largest seed grid accepted (cells): a guard against a seed cell far too small.
 MAX_SEED_CELLS = 50_000_000
@@ -92,6 +102,9 @@ _MAX_SEED_TRIES = 32
 #: _THIN_M square takes part in the densification (see the module's docstring).
 _THIN_M = 1.0
 _THIN_MIN_DENSITY = 2.0
+#: "grid": seed cells on multiples of ``seed_cell_m`` (a tile and the whole survey share them);
+#: "cloud": from the cloud's lowest corner, as the paper's grid
+SEED_ORIGINS = ("grid", "cloud")
 #: Rounds at most (a guard; densification stops long before).
 _MAX_ROUNDS = 1_000_000
 #: Virtual vertices move when their extrapolated height changes by more than this (m).
@@ -127,6 +140,7 @@ class PTD:
     offset_m: float = 0.2
     mirror: bool = False
     low_outlier_check: bool = True
+    seed_origin: str = "grid"
 
     name = "ptd"
 
@@ -154,6 +168,7 @@ class PTD:
         for name in ("mirror", "low_outlier_check"):
             value = getattr(self, name)
             _require(isinstance(value, (bool, np.bool_)), f"{name} must be True or False (got {value!r})")
+        check_choice(self, "seed_origin", SEED_ORIGINS)
 
     @property
     def reach_m(self) -> float:
@@ -179,8 +194,12 @@ class PTD:
             raise InvalidParameterError(f"PTD handles at most {2 ** 30:,} points at once (got {n:,}); "
                                         "process the cloud in tiles")
         x0, y0 = float(xyz[:, 0].min()), float(xyz[:, 1].min())
-        xr, yr = float(xyz[:, 0].max()) - x0, float(xyz[:, 1].max()) - y0
         seed_cell = float(self.seed_cell_m)
+        if self.seed_origin == "grid":
+            # Seed cells (and the 1 m thinning squares, when the seed cell is a whole number of
+            # metres) on multiples of the seed cell: a tile and the whole survey share them.
+            x0, y0 = math.floor(x0 / seed_cell) * seed_cell, math.floor(y0 / seed_cell) * seed_cell
+        xr, yr = float(xyz[:, 0].max()) - x0, float(xyz[:, 1].max()) - y0
         scols, srows = int(xr // seed_cell) + 1, int(yr // seed_cell) + 1
         if scols * srows > MAX_SEED_CELLS:
             raise InvalidParameterError(
@@ -189,8 +208,14 @@ class PTD:
 
         # 1. The points sorted along a fine grid (near in space = near in memory), in coordinates
         # relative to the data's corner, with room for the virtual vertices at the end.
-        area = max(xr * yr, 1e-6)
+        area = max((float(xyz[:, 0].max()) - float(xyz[:, 0].min()))
+                   * (float(xyz[:, 1].max()) - float(xyz[:, 1].min())), 1e-6)  # the data's, for its density
         cell = max(math.sqrt(_POINTS_PER_FINE_CELL * area / n), max(xr, yr) / n, 1e-3)
+        if self.seed_origin == "grid":
+            # The seed cell halved a whole number of times (the nearest such size): the fine grid of
+            # the low-outlier test then also sits on the seed cells' multiples, and a tile whose
+            # density is near the survey's gets the same fine cells.
+            cell = seed_cell / 2 ** max(0, round(math.log2(seed_cell / cell)))
         ncols, nrows = int(xr // cell) + 1, int(yr // cell) + 1
         block = 32
         nkeys = ((nrows + block - 1) // block) * ((ncols + block - 1) // block) * block * block
@@ -213,6 +238,8 @@ class PTD:
         seed_of_cell = np.empty(scols * srows, dtype=np.int64)
         spacing = math.sqrt(area / n)
         radius = max(_SUPPORT_SPACINGS * spacing, _SUPPORT_MIN_RADIUS_M)
+        if self.seed_origin == "grid":  # whole metres: the same in a tile of about the same density
+            radius = float(math.ceil(radius))
         tan_angle = math.tan(math.radians(self.max_angle_deg))
         zmin_fine = np.empty(nkeys)
         K.cell_min_kernel(vz, cell_start, zmin_fine)

@@ -56,12 +56,31 @@ def test_box_on_plane_is_object_and_plane_is_ground(tilt):
 
 
 def test_box_larger_than_the_seed_cell_needs_a_larger_cell():
-    """A 45 m building holds a whole 30 m seed cell: its roof gets a seed. With the seed cell
-    at the building's size (as Axelsson asks) it is found."""
+    """A 45 m building holds a whole 30 m seed cell (seed cells from the scene's corner, the
+    paper's grid): its roof gets a seed. With the seed cell at the building's size (as Axelsson
+    asks) it is found."""
     box = (15.0, 60.0, 15.0, 60.0)
     xyz, truth = plane_scene(seed=3, size=100.0, density=1.0, box=box)
-    assert (PTD()(xyz) & ~truth).any()
-    np.testing.assert_array_equal(PTD(seed_cell_m=60.0)(xyz), truth)
+    assert (PTD(seed_origin="cloud")(xyz) & ~truth).any()
+    np.testing.assert_array_equal(PTD(seed_cell_m=60.0, seed_origin="cloud")(xyz), truth)
+
+
+@pytest.mark.parametrize("origin", ["grid", "cloud"])
+def test_seed_cells_sit_on_multiples_of_the_cell_or_on_the_cloud_corner(origin):
+    """On a plane rising to the north-east the seeds are the lowest (south-west) point of each
+    seed cell: cells on multiples of 30 m ("grid", shared by a tile and the whole survey) or
+    from the cloud's lowest corner ("cloud", the paper's). The scene's corner is not on a
+    multiple of 30 m, so the two give different seeds."""
+    xyz, _ = plane_scene(tilt=(0.1, 0.05))
+    res = PTD(seed_origin=origin).run(xyz)
+    x, y, z = xyz.T
+    ox, oy = (0.0, 0.0) if origin == "grid" else (x.min(), y.min())
+    key = np.floor((x - ox) / 30.0) * 1e6 + np.floor((y - oy) / 30.0)
+    order = np.lexsort((z, key))
+    first = order[np.r_[True, key[order][1:] != key[order][:-1]]]  # the lowest point per cell
+    assert set(np.flatnonzero(res.seed)) == set(first)
+    other = PTD(seed_origin="cloud" if origin == "grid" else "grid").run(xyz)
+    assert set(np.flatnonzero(other.seed)) != set(first)
 
 
 def test_low_building_is_found():
@@ -129,14 +148,14 @@ def test_without_low_outlier_check_a_low_seed_spoils_its_cell():
 
 def test_result_fields():
     xyz, truth = plane_scene(box=BOX)
-    res = PTD().run(xyz)
+    res = PTD(seed_origin="cloud").run(xyz)
     assert isinstance(res, PTDResult)
-    np.testing.assert_array_equal(res.ground, PTD()(xyz))
+    np.testing.assert_array_equal(res.ground, PTD(seed_origin="cloud")(xyz))
     for mask in (res.seed, res.tin_vertex, res.low_outlier):
         assert mask.dtype == bool and mask.shape == res.ground.shape
     assert not (res.seed & ~res.tin_vertex).any()
     assert not (res.tin_vertex & ~res.ground).any()
-    # one seed in each 30 m cell of the 80 m square (3 x 3), none on the box
+    # one seed in each 30 m cell of the 80 m square (3 x 3 from its corner), none on the box
     assert res.seed.sum() == 9 and not (res.seed & ~truth).any()
     # every vertex but the seeds was added in a round; the rounds may add ground besides
     assert res.tin_vertex.sum() - res.seed.sum() <= sum(res.added) <= res.ground.sum() - res.seed.sum()
