@@ -194,6 +194,10 @@ SEARCH: Dict[str, Dict[str, tuple]] = {
     "evc": {"SMALL_SCALE": (0.1, 1.0), "LARGE_SCALE": (1.0, 10.0), "RADIUS": (1, 2, 3), "THRESHOLD": (0.3, 3.0)},
 }
 
+#: Parameters that only change a filter's last step (the point test against its surface): the
+#: search re-scores them on one filter run (engine/tune.py), so they cost no budget.
+CHEAP: Dict[str, Tuple[str, ...]] = {"smrf": ("THRESHOLD", "SCALAR")}
+
 
 def by_name(name: str) -> Dict[str, Param]:
     """The filter's dialog parameters by Processing name."""

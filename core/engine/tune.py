@@ -228,6 +228,7 @@ class TuneResult:
     budget: int
     stopped: str = ""           #: why the search stopped early ("time limit", ...), "" = budget spent
     default_trial: int = 0      #: index of the starting set (defaults or the starting preset)
+    runs: int = 0               #: filter runs (the budget's unit; re-scored sets cost none)
 
     @property
     def cv(self) -> GroundAccuracy:
@@ -293,12 +294,41 @@ def _pattern_search(start: Dict[str, object], start_loss: float, dims: Sequence[
                 return
 
 
+def _smrf_surface(algorithm, xyz, steps):
+    """SMRF's provisional surface and its slope: what the point test (threshold, scalar) reads."""
+    detail = algorithm.run(xyz, steps)
+    zpro = detail.provisional_surface
+    gy, gx = np.gradient(zpro, algorithm.cell_size_m) if min(zpro.shape) > 1 else (
+        np.zeros_like(zpro), np.zeros_like(zpro))
+    return detail.grid, zpro, np.sqrt(gx * gx + gy * gy)
+
+
+def _smrf_ground(surface, xyz, values):
+    """SMRF's last step (filters/smrf.py step 5) with another threshold and scalar; the tests check
+    it against the whole filter, bit for bit."""
+    from ..filters._smrf_kernels import _classify_against_surface_kernel
+    grid, zpro, slope_grid = surface
+    x, y, z = (np.ascontiguousarray(xyz[:, i]) for i in range(3))
+    ground = np.empty(x.shape[0], dtype=np.bool_)
+    _classify_against_surface_kernel(x, y, z, zpro, slope_grid, grid.x0, grid.top, grid.cell,
+                                     float(values["elevation_threshold_m"]), float(values["elevation_scalar"]),
+                                     ground)
+    return ground
+
+
+#: filter -> (one run: the surface, re-score: ground of a set from the surface); see parameters.CHEAP
+RESCORE = {"smrf": (_smrf_surface, _smrf_ground)}
+CHEAP_STEPS = 5  #: values per cheap parameter tried on every filter run of the design
+
+
 def tune(cloud, name: str, options: TuneOptions = TuneOptions(), *, base: Optional[Mapping[str, object]] = None,
          progress: Optional[Callable[[float], None]] = None, is_cancelled: Optional[Callable[[], bool]] = None,
          log: Optional[Callable[[str], None]] = None) -> TuneResult:
     """Search filter ``name``'s parameters on the labelled patch ``cloud`` (a PointCloud or a
     path). ``base``: field -> value the search starts from (a preset's; default: the filter's
-    defaults); the searched parameters move, the others stay."""
+    defaults); the searched parameters move, the others stay. The budget counts filter runs:
+    parameters of ``parameters.CHEAP`` (SMRF's threshold and scalar) are re-scored on a run's
+    surface, several values per run, at no cost to the budget."""
     from .workflow import call_filter
     if name not in P.FILTERS:
         raise InvalidParameterError(f"unknown filter {name!r} (one of {', '.join(P.FILTERS)})")
@@ -316,33 +346,55 @@ def tune(cloud, name: str, options: TuneOptions = TuneOptions(), *, base: Option
                          f"(at least {50 * k})")
     block, grid = spatial_blocks(cloud.x[idx], cloud.y[idx], k)
     dims = search_space(name)
+    rescore = RESCORE.get(name)
+    cheap = {d.field for d in dims if rescore and d.name in P.CHEAP.get(name, ())}
+    costly_dims = [d for d in dims if d.field not in cheap]
+    cheap_dims = [d for d in dims if d.field in cheap]
     fixed = {f.name: f.default for f in P.filter_fields(name)}
     fixed.update(base or {})
     cls = P.filter_class(name)
+    xyz = cloud.xyz[idx] if rescore else None
     trials: List[Trial] = []
     seen: Dict[tuple, int] = {}
+    surfaces: Dict[tuple, object] = {}   # costly part of a set -> its surface (rescore only)
+    runs = [0]
     t0 = time.monotonic()
     stopped = [""]
 
     def out_of_budget() -> bool:
-        if len(trials) >= options.budget:
+        if runs[0] >= options.budget:
             return True
         if options.seconds and time.monotonic() - t0 > options.seconds:
             stopped[0] = f"time limit of {options.seconds:g} s"
             return True
         return False
 
-    def evaluate(values: Dict[str, object], phase: str, track: int = -1) -> int:
+    def evaluate(values: Dict[str, object], phase: str, track: int = -1) -> Optional[int]:
+        """Index of the set's trial; None when it needs a filter run and none is left."""
         key = _key(values)
         if key in seen:
             return seen[key]
-        steps.report(len(trials) / options.budget)
-        t = time.monotonic()
         args = dict(fixed)
         args.update(values)
+        costly = _key({f: v for f, v in args.items() if f not in cheap})
+        needs_run = not rescore or costly not in surfaces
+        if needs_run and out_of_budget():
+            return None
+        t = time.monotonic()
         try:
             algorithm = cls(**args)
-            ground, _detail = call_filter(algorithm, cloud, idx, Steps(None, steps.is_cancelled), log)
+            if rescore:
+                if needs_run:
+                    steps.report(runs[0] / options.budget)
+                    runs[0] += 1
+                    if len(surfaces) >= 64:
+                        surfaces.pop(next(iter(surfaces)))
+                    surfaces[costly] = rescore[0](algorithm, xyz, Steps(None, steps.is_cancelled))
+                ground = rescore[1](surfaces[costly], xyz, args)
+            else:
+                steps.report(runs[0] / options.budget)
+                runs[0] += 1
+                ground, _detail = call_filter(algorithm, cloud, idx, Steps(None, steps.is_cancelled), log)
             counts, err = block_counts(ref, ground, block, k), ""
         except Cancelled:
             raise
@@ -353,14 +405,31 @@ def tune(cloud, name: str, options: TuneOptions = TuneOptions(), *, base: Option
         seen[key] = len(trials) - 1
         return len(trials) - 1
 
+    def cheap_grid():
+        if not cheap_dims:
+            return [{}]
+        out = [{}]
+        for d in cheap_dims:
+            vals = d.values or [d.clip(d.low + d.span * i / (CHEAP_STEPS - 1)) for i in range(CHEAP_STEPS)]
+            out = [dict(o, **{d.field: v}) for o in out for v in vals]
+        return out
+
     searched = {d.field for d in dims}
     start = {f: fixed[f] for f in searched}
     start_index = evaluate(start, "start")
     n_design = max(1, int(round(options.budget * options.design_share)) - 1)
-    for values in design(dims, n_design):
+    for costly_values in design(costly_dims, n_design):
+        for cheap_values in cheap_grid():
+            values = dict(start)
+            values.update(costly_values)
+            values.update(cheap_values)
+            if evaluate(values, "design") is None:
+                break
         if out_of_budget():
             break
-        evaluate(values, "design")
+    if cheap_dims:  # the start's own run re-scored on the cheap grid too
+        for cheap_values in cheap_grid():
+            evaluate(dict(start, **cheap_values), "design")
     pool_design = list(range(len(trials)))
     metric = options.metric
     all_blocks = list(range(k))
@@ -376,14 +445,15 @@ def tune(cloud, name: str, options: TuneOptions = TuneOptions(), *, base: Option
         b = best_of(pools[t], t)
         searches[t] = _pattern_search(trials[b].values, trials[b].loss(metric, train[t]), dims)
     pending = {t: next(searches[t], None) for t in tracks}
-    while any(v is not None for v in pending.values()) and not out_of_budget():
+    while any(v is not None for v in pending.values()):
         for t in tracks:
             cand = pending[t]
             if cand is None:
                 continue
-            if out_of_budget():
-                break
             i = evaluate(cand, "refine", t)
+            if i is None:  # budget spent
+                pending = {t: None for t in tracks}
+                break
             if i not in pools[t]:
                 pools[t].append(i)
             try:
@@ -402,7 +472,7 @@ def tune(cloud, name: str, options: TuneOptions = TuneOptions(), *, base: Option
                       trials=trials, best=best, folds=folds, block_grid=grid,
                       block_sizes=[int(v) for v in np.bincount(block, minlength=k)],
                       seconds=time.monotonic() - t0, budget=options.budget, stopped=stopped[0],
-                      default_trial=start_index)
+                      default_trial=start_index, runs=runs[0])
 
 
 def preset_values(result: TuneResult) -> Dict[str, object]:
