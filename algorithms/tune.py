@@ -88,8 +88,8 @@ sensitivity) and every set tried.</p>""")
         self.addParameter(QgsProcessingParameterEnum(self.METRIC, "Score", options=list(METRIC_LABELS),
                                                      defaultValue=0))
         self.addParameter(QgsProcessingParameterNumber(
-            self.BUDGET, "Search budget (parameter sets; one filter run each)",
-            type=QgsProcessingParameterNumber.Type.Integer, defaultValue=120, minValue=4, maxValue=100000))
+            self.BUDGET, "Search budget (filter runs; SMRF re-scores threshold and scalar on each run for free)",
+            type=QgsProcessingParameterNumber.Type.Integer, defaultValue=60, minValue=4, maxValue=100000))
         advanced = [
             QgsProcessingParameterNumber(self.BLOCKS, "Spatial blocks of the cross-validation",
                                          type=QgsProcessingParameterNumber.Type.Integer, defaultValue=4,

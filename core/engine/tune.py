@@ -41,7 +41,7 @@ METRIC_LABELS = {"total": "total error", "kappa": "Cohen's kappa", "f1": "F1 of 
 @dataclass(frozen=True)
 class TuneOptions:
     metric: str = "total"       #: what to optimise: total error (lower), kappa or F1 (higher)
-    budget: int = 120           #: filter runs (parameter sets tried), the design's included
+    budget: int = 60            #: filter runs (sets differing only in parameters.CHEAP cost none)
     blocks: int = 4             #: spatial blocks of the cross-validation (2-16)
     seconds: float = 0.0        #: stop starting new sets after this long (0 = no limit)
     design_share: float = 0.4   #: share of the budget spent on the space-filling design
@@ -194,8 +194,9 @@ class Trial:
     counts: Optional[np.ndarray]  #: (blocks, 4) tp fn fp tn; None = the set failed
     seconds: float
     phase: str                  #: "start", "design" or "refine"
-    track: int = -1             #: refinement: -1 = on all blocks, b = with block b held out
+    track: int = -1             #: refinement: -1 = on all blocks, b = with block b held out (first proposer)
     error: str = ""
+    proposed_by: set = field(default_factory=set)  #: refinement tracks that proposed this set
 
     def loss(self, metric: str, blocks: Optional[Sequence[int]] = None) -> float:
         if self.counts is None:
@@ -454,6 +455,7 @@ def tune(cloud, name: str, options: TuneOptions = TuneOptions(), *, base: Option
             if i is None:  # budget spent
                 pending = {t: None for t in tracks}
                 break
+            trials[i].proposed_by.add(t)
             if i not in pools[t]:
                 pools[t].append(i)
             try:

@@ -150,7 +150,7 @@ td {{ text-align: right; }} th {{ background: #f0f0f0; }} .err {{ color: #b00; }
 .big {{ font-size: 1.15em; }} tr.best td {{ background: #fde2e2; }}
 </style></head><body>
 <h1>Tuning of {html.escape(cls_name)} on {html.escape(result.patch)}</h1>
-<p>{result.points:,} labelled points, {len(result.trials)} parameter sets tried (budget {result.budget}) in
+<p>{result.points:,} labelled points, {len(result.trials)} parameter sets tried ({result.runs} filter runs, budget {result.budget}) in
 {result.seconds:.0f} s, optimising the {html.escape(label)}; {len(result.folds)} spatial blocks
 ({result.block_grid[0]} x {result.block_grid[1]}, {", ".join(f"{s:,}" for s in result.block_sizes)} points)
 for the cross-validation.{" Stopped early: " + html.escape(result.stopped) + "." if result.stopped else ""}</p>
@@ -200,11 +200,15 @@ f"; the starting set (filter defaults or starting preset): {_pct(start.total)}"}
         parts.append(f"<tr><td>{f.block + 1}</td><td>{result.block_sizes[f.block]:,}</td>"
                      f"<td style='text-align:left'>#{f.chosen + 1}: {vals}</td><td>{_pct(f.held_out.total)}</td>"
                      f"<td>{_pct(f.held_out.kappa)}</td></tr>")
-    parts.append("</table><h2>Every set tried</h2><table><tr><th>#</th><th>phase</th>"
+    shown = 300
+    parts.append(f"</table><h2>Sets tried{f' (the best {shown} of {len(result.trials)})' if len(result.trials) > shown else ''}"
+                 f"</h2><p class='small'>{result.runs} filter runs; sets differing only in "
+                 f"{', '.join(P.CHEAP.get(result.filter, ())) or 'nothing'} re-scored on a run's surface.</p>"
+                 "<table><tr><th>#</th><th>phase</th>"
                  + "".join(f"<th>{d.name}</th>" for d in result.dims)
                  + "<th>total error</th><th>kappa</th><th>F1</th><th>seconds</th></tr>")
     order = sorted(range(len(result.trials)), key=lambda i: (result.trials[i].loss(metric), i))
-    for i in order:
+    for i in order[:shown]:
         t = result.trials[i]
         cells = "".join(f"<td>{_fmt(t.values[d.field])}</td>" for d in result.dims)
         if t.counts is None:
