@@ -129,7 +129,10 @@ def preset_from_dict(data, where: str, expected_filter: Optional[str] = None) ->
     if not isinstance(params, dict):
         raise PresetError(f"{where}: \"parameters\" must be an object of name: value")
     fields = P.preset_names(name)
-    values = {fields[key]: check_value(name, key, value, where) for key, value in params.items()}
+    values = {}
+    for key, value in params.items():
+        value = check_value(name, key, value, where)  # an unknown name is refused here
+        values[fields[key]] = value
     preset = Preset(filter=name, values=values, path=where, description=str(data.get("description", "")),
                     source=data.get("source") if isinstance(data.get("source"), dict) else {},
                     groundsieve=str(data.get("groundsieve", "")))
