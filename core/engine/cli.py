@@ -126,7 +126,8 @@ def _add_tune(sub) -> None:
     parser.add_argument("--metric", choices=list(METRICS), default=d["metric"],
                         help="total = total error (ISPRS), kappa, f1 = F1 of ground (default %(default)s)")
     parser.add_argument("--budget", type=int, default=d["budget"], metavar="N",
-                        help="filter runs to spend (SMRF re-scores threshold and scalar on each run for free; default %(default)s)")
+                        help="filter runs to spend (SMRF re-scores threshold and scalar on each run for "
+                             "free; default %(default)s)")
     parser.add_argument("--blocks", type=int, default=d["blocks"], metavar="K",
                         help="spatial blocks of the cross-validation (default %(default)s)")
     parser.add_argument("--seconds", type=float, default=d["seconds"], metavar="S",

@@ -150,7 +150,8 @@ td {{ text-align: right; }} th {{ background: #f0f0f0; }} .err {{ color: #b00; }
 .big {{ font-size: 1.15em; }} tr.best td {{ background: #fde2e2; }}
 </style></head><body>
 <h1>Tuning of {html.escape(cls_name)} on {html.escape(result.patch)}</h1>
-<p>{result.points:,} labelled points, {len(result.trials)} parameter sets tried ({result.runs} filter runs, budget {result.budget}) in
+<p>{result.points:,} labelled points, {len(result.trials)} parameter sets tried
+({result.runs} filter runs, budget {result.budget}) in
 {result.seconds:.0f} s, optimising the {html.escape(label)}; {len(result.folds)} spatial blocks
 ({result.block_grid[0]} x {result.block_grid[1]}, {", ".join(f"{s:,}" for s in result.block_sizes)} points)
 for the cross-validation.{" Stopped early: " + html.escape(result.stopped) + "." if result.stopped else ""}</p>
@@ -201,7 +202,8 @@ f"; the starting set (filter defaults or starting preset): {_pct(start.total)}"}
                      f"<td style='text-align:left'>#{f.chosen + 1}: {vals}</td><td>{_pct(f.held_out.total)}</td>"
                      f"<td>{_pct(f.held_out.kappa)}</td></tr>")
     shown = 300
-    parts.append(f"</table><h2>Sets tried{f' (the best {shown} of {len(result.trials)})' if len(result.trials) > shown else ''}"
+    best_of = f" (the best {shown} of {len(result.trials)})" if len(result.trials) > shown else ""
+    parts.append(f"</table><h2>Sets tried{best_of}"
                  f"</h2><p class='small'>{result.runs} filter runs; sets differing only in "
                  f"{', '.join(P.CHEAP.get(result.filter, ())) or 'nothing'} re-scored on a run's surface.</p>"
                  "<table><tr><th>#</th><th>phase</th>"

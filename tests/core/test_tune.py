@@ -14,7 +14,7 @@ from groundsieve.core.engine.tune_report import report_html, write_report
 from groundsieve.core.errors import Cancelled, InputError, InvalidParameterError
 from groundsieve.core.filters.smrf import SMRF
 from groundsieve.core.io.clouds import PointCloud
-from groundsieve.tests.core.scenes import X0, Y0, add_trees, plane_scene
+from groundsieve.tests.core.scenes import add_trees, plane_scene
 
 #: a 40 x 40 m building: larger than SMRF's default window (18 m radius covers it, but the
 #: default threshold and a 5 m window miss it); two smaller ones and trees
