@@ -14,9 +14,10 @@ from ..algorithms.pmf import PMFAlgorithm
 from ..algorithms.ptd import PTDAlgorithm
 from ..algorithms.rf import RFClassifyAlgorithm, RFTrainAlgorithm
 from ..algorithms.smrf import SMRFAlgorithm
+from ..algorithms.tune import TuneAlgorithm
 
 ALGORITHMS = (SMRFAlgorithm, EchoGridAlgorithm, EVCAlgorithm, EVCRastersAlgorithm, PMFAlgorithm, CSFAlgorithm,
-              PTDAlgorithm, HybridAlgorithm, FeaturesAlgorithm, RFTrainAlgorithm, RFClassifyAlgorithm)
+              PTDAlgorithm, HybridAlgorithm, FeaturesAlgorithm, RFTrainAlgorithm, RFClassifyAlgorithm, TuneAlgorithm)
 
 _ROOT = os.path.dirname(os.path.dirname(__file__))
 

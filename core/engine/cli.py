@@ -5,6 +5,11 @@ algorithms' parameters under the same names (``DTM_CELL`` -> ``--dtm-cell``), de
 units, made from one definition (``parameters.py`` and the core's option dataclasses); the
 filters' finer settings the dialog does not show are offered too. ``--scheduler`` sends the
 tiles to a Dask cluster (``local:N`` or ``tcp://host:port``; engine/cluster.py).
+
+``--preset FILE`` (every filter) takes a preset (engine/presets.py): it replaces the filter's
+defaults; options given with a value other than the default win over it.
+``python -m groundsieve tune --input patch.laz --filter smrf --preset-out smrf.json --report
+tune.html`` tunes a filter on a labelled patch (engine/tune.py).
 """
 from __future__ import annotations
 
@@ -68,6 +73,9 @@ def _add_filter(sub, name: str) -> None:
     parser = sub.add_parser(name, help=summary, description=f"{summary}. Lengths in the unit of the cloud's CRS.")
     _add_common(parser)
     group = parser.add_argument_group(f"{name} parameters (as in the Processing dialog)")
+    group.add_argument("--preset", metavar="FILE",
+                       help="a preset file of this filter (groundsieve tune, or a shipped preset's name): it "
+                            "replaces the defaults; options set to other values than the defaults win")
     for p in P.params(name):
         _add_param(group, name, p.field, p.option, p.title() + (
             " (" + " | ".join(f"{v} = {label}" for v, label in zip(p.choices, p.choice_labels)) + ")"
@@ -102,12 +110,76 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(title="filters", metavar="FILTER", required=True)
     for name in P.FILTERS:
         _add_filter(sub, name)
+    _add_tune(sub)
     return parser
+
+
+def _add_tune(sub) -> None:
+    from .tune import METRICS, TuneOptions
+    d = _defaults(TuneOptions)
+    parser = sub.add_parser("tune", help="tune a filter on a labelled patch: a preset file and an HTML report",
+                            description="Search a filter's parameters on a labelled patch (class 2 = ground, or "
+                                        "ISPRS text label 0 = ground) with spatial-block cross-validation; write "
+                                        "the best set as a preset (--preset of every filter) and an HTML report.")
+    parser.add_argument("--input", required=True, metavar="PATH", help="labelled LAS/LAZ or ISPRS .txt patch")
+    parser.add_argument("--filter", required=True, choices=list(P.FILTERS), dest="tune_filter")
+    parser.add_argument("--metric", choices=list(METRICS), default=d["metric"],
+                        help="total = total error (ISPRS), kappa, f1 = F1 of ground (default %(default)s)")
+    parser.add_argument("--budget", type=int, default=d["budget"], metavar="N",
+                        help="filter runs to spend (SMRF re-scores threshold and scalar on each run for "
+                             "free; default %(default)s)")
+    parser.add_argument("--blocks", type=int, default=d["blocks"], metavar="K",
+                        help="spatial blocks of the cross-validation (default %(default)s)")
+    parser.add_argument("--seconds", type=float, default=d["seconds"], metavar="S",
+                        help="stop starting new sets after this long (0 = no limit; default %(default)s)")
+    parser.add_argument("--start", metavar="FILE", help="a preset to start from (its other parameters are kept)")
+    parser.add_argument("--preset-out", metavar="PATH", help="the preset file to write (.json)")
+    parser.add_argument("--report", metavar="PATH", help="the HTML report to write")
+    parser.set_defaults(filter="tune")
+
+
+def run_tune(args, out) -> int:
+    from .presets import load_preset, write_preset
+    from .tune import TuneOptions, preset_source, preset_values, tune
+    from .tune_report import write_report
+    if not args.preset_out and not args.report:
+        print("groundsieve: give --preset-out and/or --report", file=out)
+        return 2
+    base = load_preset(args.start, args.tune_filter).values if args.start else None
+    result = tune(args.input, args.tune_filter,
+                  TuneOptions(metric=args.metric, budget=args.budget, blocks=args.blocks, seconds=args.seconds),
+                  base=base, progress=_progress_printer(out), log=lambda msg: print(msg, file=out, flush=True))
+    if args.preset_out:
+        write_preset(args.preset_out, args.tune_filter, preset_values(result), source=preset_source(result),
+                     description=f"tuned on {result.patch} ({result.metric}, {len(result.trials)} sets)")
+    if args.report:
+        write_report(args.report, result)
+    table = P.by_name(args.tune_filter)
+    best = ", ".join(f"{table[dim.name].option} {result.best_values[dim.field]}" for dim in result.dims)
+    print(f"{len(result.trials)} sets in {result.seconds:.0f} s; cross-validated total error "
+          f"{100 * result.cv.total:.2f} % (kappa {100 * result.cv.kappa:.2f} %); chosen: {best}", file=out)
+    return 0
+
+
+def _progress_printer(out):
+    last = [0.0]
+
+    def progress(fraction):
+        now = time.monotonic()
+        if now - last[0] > 5 or fraction >= 1:
+            last[0] = now
+            print(f"{100 * fraction:5.1f} %", file=out, flush=True)
+    return progress
 
 
 def options_from(args):
     """(algorithm, FilterOptions, DTMOptions) from parsed arguments."""
-    algorithm = P.filter_class(args.filter)(**{k[2:]: v for k, v in vars(args).items() if k.startswith("f_")})
+    given = {k[2:]: v for k, v in vars(args).items() if k.startswith("f_")}
+    if getattr(args, "preset", None):
+        from .presets import load_preset
+        algorithm = load_preset(args.preset, args.filter).build(given)
+    else:
+        algorithm = P.filter_class(args.filter)(**given)
     tiling = TileOptions(tile_size_m=args.tile_size, buffer_m=None if args.tile_buffer < 0 else args.tile_buffer,
                          memory_budget_mb=args.memory_budget, workers=args.workers,
                          work_dir=args.work_folder or None, scheduler=args.scheduler or "")
@@ -121,16 +193,19 @@ def main(argv: Optional[List[str]] = None, out=None) -> int:
     from .workflow import run_ground_filter
     out = out or sys.stderr
     args = build_parser().parse_args(argv)
+    if args.filter == "tune":
+        try:
+            return run_tune(args, out)
+        except KeyboardInterrupt:
+            print("groundsieve: interrupted", file=out)
+            return 1
+        except GroundSieveError as err:
+            print(f"groundsieve: {err}", file=out)
+            return 1
     if not args.output and not args.dtm:
         print("groundsieve: give --output and/or --dtm", file=out)
         return 2
-    last = [0.0]
-
-    def progress(fraction):
-        now = time.monotonic()
-        if now - last[0] > 5 or fraction >= 1:
-            last[0] = now
-            print(f"{100 * fraction:5.1f} %", file=out, flush=True)
+    progress = _progress_printer(out)
     try:
         algorithm, options, dtm = options_from(args)
         run = run_ground_filter(args.input, args.output, algorithm, options=options, dtm_path=args.dtm, dtm=dtm,

@@ -173,3 +173,42 @@ def source_defaults(name: str) -> Dict[str, object]:
             return {stmt.target.id: ast.literal_eval(stmt.value) for stmt in node.body
                     if isinstance(stmt, ast.AnnAssign) and isinstance(stmt.target, ast.Name) and stmt.value is not None}
     raise KeyError(f"no class {cls} in {path}")
+
+
+#: What ``groundsieve:tune`` searches, per filter: a parameter's Processing name -> its range
+#: ``(low, high)`` (numbers; an int default makes it an integer) or a tuple of allowed values
+#: (choices, on/off). The ranges are those the papers explored: SMRF the span of Pingel's
+#: per-sample ISPRS optimum (isprs_smrf_settings.txt: slope .05-.45, window 3-49 m, threshold
+#: .1-1.1 m, scalar 0-3.8); PMF Zhang et al.'s and PDAL's (slope, windows to 50 m, distances);
+#: PTD Axelsson's angles and distances and building sizes; CSF the cloth resolutions and class
+#: thresholds of Zhang et al. 2016 and the three scene rigidnesses; EchoGrid Matrone et al. 2024's
+#: kernel and dz grid; EVC Fan et al. 2023's scale study (small 0.1-1 m, large 1-10 m, radius,
+#: threshold). Parameters not listed keep the preset's / filter's value (e.g. the cell of 1 m).
+SEARCH: Dict[str, Dict[str, tuple]] = {
+    "smrf": {"SLOPE": (0.05, 0.45), "WINDOW": (3.0, 49.0), "THRESHOLD": (0.1, 1.1), "SCALAR": (0.0, 3.8)},
+    "pmf": {"MAX_WINDOW": (5.0, 50.0), "SLOPE": (0.05, 1.5), "INITIAL_DISTANCE": (0.05, 1.0),
+            "MAX_DISTANCE": (0.5, 5.0)},
+    "ptd": {"SEED_CELL": (10.0, 60.0), "MAX_ANGLE": (4.0, 30.0), "MAX_DISTANCE": (0.5, 2.5)},
+    "csf": {"RESOLUTION": (0.3, 3.0), "RIGIDNESS": (1, 2, 3), "CLASS_THRESHOLD": (0.2, 1.0)},
+    "echogrid": {"KERNEL": (0.5, 8.0), "DZ": (0.1, 2.5)},
+    "evc": {"SMALL_SCALE": (0.1, 1.0), "LARGE_SCALE": (1.0, 10.0), "RADIUS": (1, 2, 3), "THRESHOLD": (0.3, 3.0)},
+}
+
+#: Parameters that only change a filter's last step (the point test against its surface): the
+#: search re-scores them on one filter run (engine/tune.py), so they cost no budget.
+CHEAP: Dict[str, Tuple[str, ...]] = {"smrf": ("THRESHOLD", "SCALAR")}
+
+
+def by_name(name: str) -> Dict[str, Param]:
+    """The filter's dialog parameters by Processing name."""
+    return {p.name: p for p in params(name)}
+
+
+def preset_names(name: str) -> Dict[str, str]:
+    """Every name a preset may give for the filter -> the dataclass field: the Processing names
+    of the dialog's parameters and, for the core's finer settings, the field in upper case
+    (``LOW_OUTLIER_SLOPE``), as on the command line."""
+    names = {p.name: p.field for p in params(name)}
+    for f in core_only_fields(name):
+        names.setdefault(f.name.upper(), f.name)
+    return names

@@ -96,3 +96,33 @@ def test_defaults_read_without_importing_the_filter_are_the_filter_s(name):
     algorithms); they must be the dataclass's."""
     assert P.source_defaults(name) == {f.name: f.default for f in P.filter_fields(name)}
     assert {p.field for p in P.params(name)} <= set(P.source_defaults(name))
+
+
+def test_tune_writes_a_preset_that_every_run_of_the_filter_takes(scene, tmp_path):
+    preset, report = str(tmp_path / "smrf.json"), str(tmp_path / "tune.html")
+    out = io.StringIO()
+    assert main(["tune", "--input", scene, "--filter", "smrf", "--budget", "4", "--blocks", "2",
+                 "--preset-out", preset, "--report", report], out=out) == 0, out.getvalue()
+    assert "cross-validated total error" in out.getvalue()
+    assert "<svg" in open(report, encoding="utf-8").read()
+    from groundsieve.core.engine.presets import load_preset
+    tuned = load_preset(preset, "smrf").build()
+    algorithm, _options, _dtm = options_from(build_parser().parse_args(
+        ["smrf", "--input", scene, "--output", "o.laz", "--preset", preset]))
+    assert algorithm == tuned
+    algorithm, _options, _dtm = options_from(build_parser().parse_args(
+        ["smrf", "--input", scene, "--output", "o.laz", "--preset", preset, "--threshold", "0.31"]))
+    assert algorithm == dataclasses.replace(tuned, elevation_threshold_m=0.31)  # a value given wins
+    out = io.StringIO()
+    assert main(["pmf", "--input", scene, "--output", str(tmp_path / "o.laz"), "--preset", preset], out=out) == 1
+    assert out.getvalue().strip() == f"groundsieve: {preset}: a preset for SMRF (smrf), not for PMF (pmf)"
+    assert not os.path.exists(tmp_path / "o.laz")
+
+
+def test_tune_refuses_a_patch_without_labels_in_one_line(tmp_path):
+    path = tmp_path / "unlabelled.txt"
+    path.write_text("".join(f"{i % 30} {i // 30} 100\n" for i in range(900)))
+    out = io.StringIO()
+    assert main(["tune", "--input", str(path), "--filter", "smrf", "--report", str(tmp_path / "r.html")],
+                out=out) == 1
+    assert out.getvalue().startswith(f"groundsieve: {path}: the tuning patch has no labels")

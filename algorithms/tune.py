@@ -1,0 +1,141 @@
+"""groundsieve:tune — Tune a ground filter on a labelled patch (core/engine/tune.py)."""
+import os
+
+from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException, QgsProcessingOutputNumber,
+                       QgsProcessingParameterDefinition, QgsProcessingParameterEnum, QgsProcessingParameterFile,
+                       QgsProcessingParameterFileDestination, QgsProcessingParameterNumber)
+from qgis.PyQt.QtGui import QIcon
+
+from .base import core_modules, dialog_help, feedback_callables
+from .discovery import COMMON_TAGS, FILTER_TAGS, Discoverable
+from .presets import PRESET_FILTER
+
+_ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
+#: the filters, in the order of core/engine/parameters.py FILTERS (read without importing numpy)
+FILTERS = ("smrf", "pmf", "ptd", "csf", "echogrid", "evc")
+FILTER_LABELS = ("SMRF (Pingel et al. 2013)", "PMF (Zhang et al. 2003)", "PTD (Axelsson 2000)",
+                 "CSF (Zhang et al. 2016)", "EchoGrid (Matrone et al. 2024)", "EVC (Fan et al. 2023)")
+METRICS = ("total", "kappa", "f1")
+METRIC_LABELS = ("total error (ISPRS)", "Cohen's kappa", "F1 of the ground class")
+
+
+class TuneAlgorithm(Discoverable, QgsProcessingAlgorithm):
+    INPUT = "INPUT"
+    FILTER = "FILTER"
+    METRIC = "METRIC"
+    BUDGET = "BUDGET"
+    BLOCKS = "BLOCKS"
+    SECONDS = "SECONDS"
+    START_PRESET = "START_PRESET"
+    OUTPUT_PRESET = "OUTPUT_PRESET"
+    OUTPUT_HTML = "OUTPUT_HTML"
+    CV_TOTAL_ERROR = "CV_TOTAL_ERROR"
+    CV_KAPPA = "CV_KAPPA"
+
+    def name(self):
+        return "tune"
+
+    def displayName(self):  # noqa: N802
+        return "Tune a ground filter on a labelled patch"
+
+    def group(self):
+        return "Ground filters"
+
+    def groupId(self):  # noqa: N802
+        return "groundfilters"
+
+    def icon(self):
+        return QIcon(os.path.join(_ICONS, "groundsieve.svg"))
+
+    def tags(self):
+        return list(COMMON_TAGS + FILTER_TAGS + ("tune", "tuning", "optimise", "optimize", "parameters", "preset",
+                                                 "calibrate", "cross-validation"))
+
+    def shortDescription(self):  # noqa: N802
+        return ("Finds a ground filter's best parameters on a labelled patch (cross-validated) and saves them "
+                "as a preset for the whole survey, with an HTML report.")
+
+    def createInstance(self):  # noqa: N802
+        return type(self)()
+
+    def shortHelpString(self):  # noqa: N802
+        return dialog_help("""<p>Searches the parameters of a ground filter on a small labelled patch of your
+survey and saves the best set as a <b>preset</b>: give that file as the <i>Preset</i> of the filter to
+filter the whole survey with it.</p>
+<p><b>Labelled patch</b>: a LAS/LAZ whose ground points are class 2 (every other class counts as
+non-ground, except noise 7 and 18 and withheld points, which are left out), or an ISPRS text file
+<code>x y z label</code> (label 0 = ground, 1 = object). It must hold both ground and non-ground
+points; a few hundred metres square of typical terrain is enough.</p>
+<p><b>Search</b>: the filter's defaults (or the <i>Starting preset</i>), then sets spread evenly over the
+ranges the papers explored, then a local refinement around the best, until the <i>Search budget</i>
+(number of sets; each is one run of the filter on the patch) or the time limit is spent.</p>
+<p><b>Honest figure</b>: the patch is cut into spatial blocks; each block is classified with the set
+chosen on the other blocks only (by a search of its own), and the errors of these held-out blocks give
+the <b>cross-validated error</b>, what to expect on similar data. The preset carries the set chosen on
+the whole patch.</p>
+<p><b>Score</b>: total error (ISPRS: misclassified / all), Cohen's kappa, or the F1 of the ground class.</p>
+<p><b>Report</b>: an HTML page (it opens in the results viewer) with the cross-validated error, the
+chosen parameters, the confusion matrices, a plot of the score against each parameter (its
+sensitivity) and every set tried.</p>""")
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.addParameter(QgsProcessingParameterFile(
+            self.INPUT, "Labelled patch (LAS/LAZ with ground = class 2, or ISPRS .txt)",
+            behavior=QgsProcessingParameterFile.Behavior.File,
+            fileFilter="Point clouds (*.las *.laz *.LAS *.LAZ);;ISPRS text (*.txt);;All files (*)"))
+        self.addParameter(QgsProcessingParameterEnum(self.FILTER, "Filter to tune", options=list(FILTER_LABELS),
+                                                     defaultValue=0))
+        self.addParameter(QgsProcessingParameterEnum(self.METRIC, "Score", options=list(METRIC_LABELS),
+                                                     defaultValue=0))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.BUDGET, "Search budget (filter runs; SMRF re-scores threshold and scalar on each run for free)",
+            type=QgsProcessingParameterNumber.Type.Integer, defaultValue=60, minValue=4, maxValue=100000))
+        advanced = [
+            QgsProcessingParameterNumber(self.BLOCKS, "Spatial blocks of the cross-validation",
+                                         type=QgsProcessingParameterNumber.Type.Integer, defaultValue=4,
+                                         minValue=2, maxValue=16),
+            QgsProcessingParameterNumber(self.SECONDS, "Time limit (s; 0 = none)",
+                                         type=QgsProcessingParameterNumber.Type.Double, defaultValue=0.0,
+                                         minValue=0.0),
+            QgsProcessingParameterFile(self.START_PRESET, "Starting preset (its other parameters are kept)",
+                                       behavior=QgsProcessingParameterFile.Behavior.File, fileFilter=PRESET_FILTER,
+                                       optional=True),
+        ]
+        for param in advanced:
+            param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
+            self.addParameter(param)
+        self.addParameter(QgsProcessingParameterFileDestination(self.OUTPUT_PRESET, "Preset",
+                                                                fileFilter="GroundSieve preset (*.json)"))
+        self.addParameter(QgsProcessingParameterFileDestination(self.OUTPUT_HTML, "Report",
+                                                                fileFilter="HTML (*.html)"))
+        self.addOutput(QgsProcessingOutputNumber(self.CV_TOTAL_ERROR, "Cross-validated total error (0-1)"))
+        self.addOutput(QgsProcessingOutputNumber(self.CV_KAPPA, "Cross-validated kappa"))
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        errors, _workflow = core_modules()
+        from ..core.engine import presets, tune
+        from ..core.engine.tune_report import write_report
+        name = FILTERS[self.parameterAsEnum(parameters, self.FILTER, context)]
+        preset_path = self.parameterAsFileOutput(parameters, self.OUTPUT_PRESET, context)
+        report_path = self.parameterAsFileOutput(parameters, self.OUTPUT_HTML, context)
+        try:
+            start = self.parameterAsFile(parameters, self.START_PRESET, context) \
+                if parameters.get(self.START_PRESET) else ""
+            base = presets.load_preset(start, name).values if start else None
+            options = tune.TuneOptions(metric=METRICS[self.parameterAsEnum(parameters, self.METRIC, context)],
+                                       budget=self.parameterAsInt(parameters, self.BUDGET, context),
+                                       blocks=self.parameterAsInt(parameters, self.BLOCKS, context),
+                                       seconds=self.parameterAsDouble(parameters, self.SECONDS, context))
+            result = tune.tune(self.parameterAsFile(parameters, self.INPUT, context), name, options, base=base,
+                               **feedback_callables(feedback))
+            presets.write_preset(preset_path, name, tune.preset_values(result), source=tune.preset_source(result),
+                                 description=f"tuned on {os.path.basename(result.patch)} ({result.metric}, "
+                                             f"{len(result.trials)} sets)")
+            write_report(report_path, result)
+        except errors.GroundSieveError as err:
+            raise QgsProcessingException(str(err)) from err
+        cv = result.cv
+        feedback.pushInfo(f"{len(result.trials)} sets in {result.seconds:.0f} s. Cross-validated: {cv.summary()}. "
+                          f"Chosen set on the whole patch: {result.best_accuracy.summary()}.")
+        return {self.OUTPUT_PRESET: preset_path, self.OUTPUT_HTML: report_path,
+                self.CV_TOTAL_ERROR: cv.total, self.CV_KAPPA: cv.kappa}

@@ -1,0 +1,153 @@
+"""groundsieve:tune's search (core/engine/tune.py) and its report (core/engine/tune_report.py) on
+generated labelled patches: the labels it accepts and refuses, the spatial blocks, SMRF's re-scored
+last step against the whole filter, the search (deterministic, within its budget, better than the
+defaults where they are wrong, honest folds) and the HTML report."""
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+
+from groundsieve.core.engine import tune as T
+from groundsieve.core.engine.tune_report import report_html, write_report
+from groundsieve.core.errors import Cancelled, InputError, InvalidParameterError
+from groundsieve.core.filters.smrf import SMRF
+from groundsieve.core.io.clouds import PointCloud
+from groundsieve.tests.core.scenes import add_trees, plane_scene
+
+#: a 40 x 40 m building: larger than SMRF's default window (18 m radius covers it, but the
+#: default threshold and a 5 m window miss it); two smaller ones and trees
+BIG = (5.0, 45.0, 10.0, 50.0)
+
+
+def patch_cloud(label=None, seed=1, path="patch.txt"):
+    xyz, truth = plane_scene(seed=seed, size=80.0, density=1.5, boxes=[BIG, (55.0, 70.0, 55.0, 72.0)],
+                             box_height=8.0, tilt=(0.05, 0.02))
+    xyz, truth = add_trees(xyz, truth, 600, seed + 10, size=80.0, tilt=(0.05, 0.02))
+    n = len(xyz)
+    lab = (~truth).astype(np.uint8) if label is None else label(truth)
+    ones = np.ones(n, dtype=np.uint8)
+    return PointCloud(path=path, x=xyz[:, 0], y=xyz[:, 1], z=xyz[:, 2], classification=np.zeros(n, np.uint8),
+                      return_number=ones, number_of_returns=ones.copy(), reference_label=lab)
+
+
+@pytest.fixture(scope="module")
+def result():
+    # a small window start: the defaults' 18 m is replaced by 4 m so that the search must move
+    return T.tune(patch_cloud(), "smrf", T.TuneOptions(budget=8, blocks=4), base={"window_m": 4.0})
+
+
+def test_a_patch_without_ground_or_without_objects_is_refused_naming_the_file():
+    with pytest.raises(InputError, match=r"nog\.txt: the tuning patch holds no ground points"):
+        T.tune(patch_cloud(lambda t: np.ones(len(t), np.uint8), path="nog.txt"), "smrf", T.TuneOptions(budget=4))
+    with pytest.raises(InputError, match=r"noobj\.txt: the tuning patch holds no non-ground points"):
+        T.tune(patch_cloud(lambda t: np.zeros(len(t), np.uint8), path="noobj.txt"), "smrf",
+               T.TuneOptions(budget=4))
+    cloud = patch_cloud(path="nolabel.txt")
+    cloud.reference_label = None
+    with pytest.raises(InputError, match=r"nolabel\.txt: the tuning patch has no labels"):
+        T.tune(cloud, "smrf", T.TuneOptions(budget=4))
+
+
+def test_options_are_checked():
+    for bad in (dict(metric="rmse"), dict(budget=2), dict(blocks=1), dict(blocks=40), dict(seconds=-1)):
+        with pytest.raises(InvalidParameterError):
+            T.TuneOptions(**bad)
+
+
+def test_spatial_blocks_have_equal_counts_and_follow_the_patch_shape():
+    rng = np.random.default_rng(0)
+    x, y = rng.uniform(0, 200, 4000), rng.uniform(0, 50, 4000)
+    block, (nx, ny) = T.spatial_blocks(x, y, 4)
+    assert (nx, ny) == (4, 1)  # a long strip is cut across its length
+    assert sorted(np.bincount(block)) == [1000] * 4
+    order = [x[block == b].mean() for b in range(4)]
+    assert order == sorted(order)
+    block, (nx, ny) = T.spatial_blocks(x, x.copy() * 1.0 + y, 6)
+    assert nx * ny == 6 and np.bincount(block).min() >= 666
+
+
+def test_smrf_last_step_rescored_on_one_run_equals_the_whole_filter():
+    cloud = patch_cloud()
+    xyz = cloud.xyz
+    surface = T._smrf_surface(SMRF(window_m=12.0, slope=0.2), xyz, None)
+    for thr, scalar in ((0.5, 1.25), (0.1, 0.0), (1.1, 3.8), (0.35, 2.2)):
+        fast = T._smrf_ground(surface, xyz, {"elevation_threshold_m": thr, "elevation_scalar": scalar})
+        full = SMRF(window_m=12.0, slope=0.2, elevation_threshold_m=thr, elevation_scalar=scalar)(xyz)
+        np.testing.assert_array_equal(fast, full)
+
+
+def test_the_search_stays_in_its_budget_and_beats_a_wrong_start(result):
+    assert result.runs <= 8
+    assert len(result.trials) > result.runs  # threshold and scalar re-scored on each run
+    start = result.start_accuracy.total
+    assert result.trials[result.default_trial].values["window_m"] == 4.0
+    # the 40 m building is kept as ground by a 4 m window: the search must find a larger one
+    assert result.best_values["window_m"] > 20.0
+    assert result.best_accuracy.total < 0.5 * start
+    assert result.cv.total < 0.5 * start
+    # every searched value inside its range
+    for d in result.dims:
+        v = result.best_values[d.field]
+        assert (v in d.values) if d.values else d.low <= v <= d.high
+
+
+def test_the_cross_validation_is_honest(result):
+    """Each block's set is chosen without that block: from the design (or the start) and the sets
+    the refinement that left the block out proposed itself, never from one that saw it; the CV confusion is the sum
+    of the held-out blocks' own counts, and covers every point once."""
+    assert [f.block for f in result.folds] == [0, 1, 2, 3]
+    for f in result.folds:
+        t = result.trials[f.chosen]
+        assert t.phase in ("start", "design") or f.block in t.proposed_by
+        held = T.accuracy(t.counts[f.block])
+        assert held == f.held_out
+        others = [b for b in range(4) if b != f.block]
+        pool = [i for i, u in enumerate(result.trials) if u.phase in ("start", "design") or f.block in u.proposed_by]
+        assert t.loss("total", others) == min(result.trials[i].loss("total", others) for i in pool)
+    assert result.cv.n == result.points
+    assert result.best == min(range(len(result.trials)), key=lambda i: (result.trials[i].loss("total"), i))
+
+
+def test_the_search_is_deterministic(result):
+    again = T.tune(patch_cloud(), "smrf", T.TuneOptions(budget=8, blocks=4), base={"window_m": 4.0})
+    assert [t.values for t in again.trials] == [t.values for t in result.trials]
+    assert again.best == result.best and again.cv == result.cv
+
+
+def test_kappa_and_f1_are_maximised():
+    r = T.tune(patch_cloud(), "smrf", T.TuneOptions(budget=5, metric="kappa"))
+    kappas = [T.accuracy(t.counts.sum(axis=0)).kappa for t in r.trials]
+    assert r.best_accuracy.kappa == max(kappas)
+
+
+def test_a_filter_without_rescoring_counts_one_run_per_set():
+    r = T.tune(patch_cloud(), "pmf", T.TuneOptions(budget=5, blocks=2))
+    assert r.runs == len(r.trials) <= 5
+    assert set(r.best_values) == {f for f in r.fixed}
+
+
+def test_cancel_stops_the_search():
+    calls = []
+
+    def cancelled():
+        calls.append(1)
+        return len(calls) > 3
+    with pytest.raises(Cancelled):
+        T.tune(patch_cloud(), "smrf", T.TuneOptions(budget=8), is_cancelled=cancelled)
+
+
+def test_the_report_is_self_contained_with_a_plot_per_parameter(result, tmp_path):
+    path = tmp_path / "tune.html"
+    write_report(str(path), result)
+    text = path.read_text(encoding="utf-8")
+    assert "Cross-validated total error" in text and "http://" not in text.replace(
+        'xmlns="http://www.w3.org/2000/svg"', "")
+    svgs = [text[i:text.index("</svg>", i) + 6] for i in range(len(text)) if text.startswith("<svg", i)]
+    assert len(svgs) == len(result.dims) + 1  # one per parameter, and the convergence
+    for svg in svgs:
+        root = ET.fromstring(svg)  # well-formed
+        assert len(root.findall("{http://www.w3.org/2000/svg}circle")) >= 5
+    assert f"{100 * result.cv.total:.2f} %" in text
+    assert report_html(result) == text.rstrip("\n") + "\n" or report_html(result) == text
