@@ -17,6 +17,7 @@ from qgis.PyQt.QtCore import QVariant
 from qgis.PyQt.QtGui import QIcon
 
 from .discovery import Discoverable
+from .presets import PRESET_HELP
 
 _ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
 
@@ -55,6 +56,7 @@ outputs on one file are refused before any work.</p>
 <p><b>Memory</b>: before a grid (the filter's or the DTM's) is allocated, its peak memory is estimated
 and the run is refused above 60 % of the memory available, with the estimate, the extent and the
 likely cause (e.g. one point kilometres away from the others: class it as noise or remove it).</p>
+""" + PRESET_HELP + """
 <h3>Surveys: buffered tiles</h3>
 <p>A folder, a .vpc, a set <i>Tile size</i>, or a cloud larger than the <i>Memory budget</i> runs in
 square tiles, each read with a buffer around it (the filter's own reach unless <i>Tile buffer</i> is set)
@@ -256,8 +258,14 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         return kwargs
 
     def buildFilter(self, parameters, context):  # noqa: N802
-        from ..core.engine import parameters as table
-        return table.filter_class(self.FILTER)(**self.filterArguments(parameters, context))
+        """The filter from the dialog's values over the PRESET's (algorithms/presets.py)."""
+        from .presets import build_filter
+        return build_filter(self, parameters, context)
+
+    def completeFilterArguments(self, kwargs):  # noqa: N802
+        """The filter's keyword arguments once the dialog's and the preset's are merged; a filter
+        whose parameters depend on each other completes them here."""
+        return kwargs
 
     def rasterOutputs(self, parameters, context):  # noqa: N802
         """More GeoTIFF outputs: {output name: (path, f(run) -> (values, grid))}; none by default."""
@@ -285,6 +293,9 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         beside the DTM (see addOutputParameters)."""
         self.addInputParameters()
         self.initFilterParameters()
+        if self.FILTER:  # a filter of the one table: its parameters may come from a preset file
+            from .presets import add_preset_parameter
+            add_preset_parameter(self)
         self.addSelectionParameters()
         self.addTileParameters()
         self.addOutputParameters()

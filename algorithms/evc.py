@@ -46,11 +46,9 @@ class EVCAlgorithm(GroundFilterAlgorithm):
         return dialog_help(EVC_HELP + COMMON_HELP)
 
 
-    def buildFilter(self, parameters, context):  # noqa: N802
-        from ..core.filters.evc import EVC
-        kwargs = self.filterArguments(parameters, context)
+    def completeFilterArguments(self, kwargs):  # noqa: N802
         kwargs["max_radius"] = max(kwargs["radius"], kwargs["max_radius"])  # a window grows from the radius
-        return EVC(**kwargs)
+        return kwargs
 
 class EVCRastersAlgorithm(EVCAlgorithm):
     SMALL_MEAN = "SMALL_MEAN"

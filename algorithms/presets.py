@@ -7,8 +7,8 @@ defaults; a dialog value set to something other than the filter's default wins o
 filter, another preset format version, an unknown or out-of-range parameter is refused with the
 file's name and the problem (core/engine/presets.py).
 
-Wiring (algorithms/base.py, GroundFilterAlgorithm): ``add_preset_parameter(self)`` at the end of
-``initFilterParameters``, and ``buildFilter`` returns ``build_filter(self, parameters, context)``.
+Used by algorithms/base.py (GroundFilterAlgorithm): ``add_preset_parameter`` right after the
+filter's own parameters, and ``buildFilter`` returns ``build_filter(self, parameters, context)``.
 """
 import os
 
@@ -37,18 +37,19 @@ def preset_path(algorithm, parameters, context) -> str:
 
 def build_filter(algorithm, parameters, context):
     """The filter of ``algorithm`` (a GroundFilterAlgorithm with FILTER set): the dialog's values,
-    over the preset's when a PRESET is given. Raises the core's PresetError / InvalidParameterError
+    over the preset's when a PRESET is given, then the algorithm's own completion of them
+    (``completeFilterArguments``). Raises the core's PresetError / InvalidParameterError
     (GroundSieveError: processAlgorithm turns it into a QgsProcessingException)."""
     from ..core.engine import parameters as table
-    from ..core.engine.presets import load_preset
+    from ..core.engine.presets import load_preset, merge
     kwargs = algorithm.filterArguments(parameters, context)
     path = preset_path(algorithm, parameters, context)
-    if not path:
-        return table.filter_class(algorithm.FILTER)(**kwargs)
-    return load_preset(path, algorithm.FILTER).build(kwargs)
+    if path:
+        kwargs = merge(algorithm.FILTER, load_preset(path, algorithm.FILTER).values, kwargs)
+    return table.filter_class(algorithm.FILTER)(**algorithm.completeFilterArguments(kwargs))
 
 
-PRESET_HELP = """<p><b>Preset</b> (optional): a parameters file written by <i>Tune a ground filter on a
+PRESET_HELP = """<p><b>Preset</b> (optional; every filter but the learned hybrid): a parameters file written by <i>Tune a ground filter on a
 labelled patch</i> (groundsieve:tune), or one shipped with the plugin (its <code>presets</code> folder).
 Its parameters replace the filter's defaults; a parameter you set in this dialog to a value other than
 its default wins over the preset. A preset for another filter, of another format version, or with an

@@ -1,5 +1,5 @@
-"""groundsieve:tune through processing.run (as the toolbox calls it), and the PRESET helpers of
-algorithms/presets.py on a filter algorithm (the lead wires them into algorithms/base.py)."""
+"""groundsieve:tune through processing.run (as the toolbox calls it), and the PRESET input of every
+ground filter of the parameter table (algorithms/presets.py, wired in algorithms/base.py)."""
 import json
 import os
 
@@ -43,25 +43,20 @@ def test_tune_refuses_a_patch_without_non_ground_naming_it(groundsieve_provider,
     assert not os.path.exists(tmp_path / "p.json")
 
 
-def test_preset_helpers_on_a_filter_algorithm(groundsieve_provider, tmp_path):
-    from qgis.core import QgsProcessingContext
+def test_every_table_filter_takes_a_preset_and_the_dialog_values_set_win(groundsieve_provider, tmp_path):
+    from qgis.core import QgsApplication, QgsProcessingContext
 
-    from groundsieve.algorithms import presets
-    from groundsieve.algorithms.smrf import SMRFAlgorithm
     from groundsieve.core.engine.presets import PresetError, write_preset
+    from groundsieve.core.filters.evc import EVC
     from groundsieve.core.filters.smrf import SMRF
 
-    class WithPreset(SMRFAlgorithm):  # what base.py does once wired
-        def initFilterParameters(self):  # noqa: N802
-            super().initFilterParameters()
-            presets.add_preset_parameter(self)
+    registry = QgsApplication.processingRegistry()
+    for name in ("smrf", "pmf", "csf", "ptd", "echogrid", "evc", "evcrasters"):
+        preset = registry.algorithmById(f"groundsieve:{name}").parameterDefinition("PRESET")
+        assert preset is not None and preset.flags() & preset.FlagOptional, name
+    assert registry.algorithmById("groundsieve:hybrid").parameterDefinition("PRESET") is None  # not a table filter
 
-        def buildFilter(self, parameters, context):  # noqa: N802
-            return presets.build_filter(self, parameters, context)
-
-    algorithm = WithPreset()
-    algorithm.initAlgorithm()
-    assert algorithm.parameterDefinition("PRESET").flags() & algorithm.parameterDefinition("PRESET").FlagOptional
+    algorithm = registry.algorithmById("groundsieve:smrf").create()
     context = QgsProcessingContext()
     path = str(tmp_path / "smrf.json")
     write_preset(path, "smrf", {"slope": 0.2, "window_m": 16.0, "elevation_threshold_m": 0.45})
@@ -75,3 +70,41 @@ def test_preset_helpers_on_a_filter_algorithm(groundsieve_provider, tmp_path):
     write_preset(other, "pmf", {"slope": 0.5})
     with pytest.raises(PresetError, match=r"pmf\.json: a preset for PMF \(pmf\), not for SMRF"):
         algorithm.buildFilter(dict(dialog, PRESET=other), context)
+
+    # EVC completes its arguments after the preset: a dialog radius above the preset's maximum grows it
+    evc = registry.algorithmById("groundsieve:evc").create()
+    evc_preset = str(tmp_path / "evc.json")
+    write_preset(evc_preset, "evc", {"radius": 2, "max_radius": 3, "threshold": 1.2})
+    built = evc.buildFilter({"PRESET": evc_preset, "RADIUS": 4}, context)
+    assert isinstance(built, EVC) and (built.radius, built.max_radius, built.threshold) == (4, 4, 1.2)
+
+
+def test_a_shipped_preset_runs_through_processing_and_a_foreign_one_is_refused(groundsieve_provider, patch,
+                                                                             tmp_path):
+    import laspy
+    import numpy as np
+    import processing
+    from qgis.core import QgsProcessingException
+
+    from groundsieve.algorithms.presets import shipped_folder
+    from groundsieve.core.engine.presets import load_preset, write_preset
+
+    forest = os.path.join(shipped_folder(), "forest-smrf.json")
+    values = load_preset(forest, "smrf").values
+    by_preset, by_hand = str(tmp_path / "preset.laz"), str(tmp_path / "hand.laz")
+    processing.run("groundsieve:smrf", {"INPUT": patch, "PRESET": forest, "OUTPUT": by_preset})
+    from groundsieve.core.engine import parameters as table
+    hand = {p.name: values[p.field] for p in table.params("smrf") if p.field in values}
+    processing.run("groundsieve:smrf", dict(hand, INPUT=patch, OUTPUT=by_hand))
+    a, b = laspy.read(by_preset).classification, laspy.read(by_hand).classification
+    assert np.array_equal(np.asarray(a), np.asarray(b))
+    default = str(tmp_path / "default.laz")
+    processing.run("groundsieve:smrf", {"INPUT": patch, "OUTPUT": default})
+    assert not np.array_equal(np.asarray(a), np.asarray(laspy.read(default).classification))  # the preset acts
+
+    pmf = str(tmp_path / "for-pmf.json")
+    write_preset(pmf, "pmf", {"slope": 0.5})
+    out = str(tmp_path / "refused.laz")
+    with pytest.raises(QgsProcessingException, match=r"for-pmf\.json: a preset for PMF"):
+        processing.run("groundsieve:csf", {"INPUT": patch, "PRESET": pmf, "OUTPUT": out})
+    assert not os.path.exists(out)
