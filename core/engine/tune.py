@@ -297,24 +297,19 @@ def _pattern_search(start: Dict[str, object], start_loss: float, dims: Sequence[
 
 def _smrf_surface(algorithm, xyz, steps):
     """SMRF's provisional surface and its slope: what the point test (threshold, scalar) reads."""
+    from ..filters.smrf import surface_slope
     detail = algorithm.run(xyz, steps)
     zpro = detail.provisional_surface
-    gy, gx = np.gradient(zpro, algorithm.cell_size_m) if min(zpro.shape) > 1 else (
-        np.zeros_like(zpro), np.zeros_like(zpro))
-    return detail.grid, zpro, np.sqrt(gx * gx + gy * gy)
+    return detail.grid, zpro, surface_slope(zpro, algorithm.cell_size_m)
 
 
 def _smrf_ground(surface, xyz, values):
-    """SMRF's last step (filters/smrf.py step 5) with another threshold and scalar; the tests check
-    it against the whole filter, bit for bit."""
-    from ..filters._smrf_kernels import _classify_against_surface_kernel
+    """SMRF's last step (filters/smrf.py) with another threshold and scalar; the tests check it
+    against the whole filter, bit for bit."""
+    from ..filters.smrf import ground_against_surface
     grid, zpro, slope_grid = surface
-    x, y, z = (np.ascontiguousarray(xyz[:, i]) for i in range(3))
-    ground = np.empty(x.shape[0], dtype=np.bool_)
-    _classify_against_surface_kernel(x, y, z, zpro, slope_grid, grid.x0, grid.top, grid.cell,
-                                     float(values["elevation_threshold_m"]), float(values["elevation_scalar"]),
-                                     ground)
-    return ground
+    return ground_against_surface(xyz[:, 0], xyz[:, 1], xyz[:, 2], zpro, slope_grid, grid,
+                                  values["elevation_threshold_m"], values["elevation_scalar"])
 
 
 #: filter -> (one run: the surface, re-score: ground of a set from the surface); see parameters.CHEAP

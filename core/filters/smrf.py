@@ -97,7 +97,6 @@ class SMRF:
         return self.run(xyz, steps).ground
 
     def run(self, xyz: np.ndarray, steps: Steps | None = None) -> SMRFResult:
-        from ._smrf_kernels import _classify_against_surface_kernel
         steps = steps or Steps()
         xyz = validate_xyz(xyz)
         x, y, z = (np.ascontiguousarray(xyz[:, i]) for i in range(3))
@@ -126,17 +125,33 @@ class SMRF:
             zpro = cell_min(x, y, z, grid)
         zpro = inpaint_harmonic(zpro)
         steps.report(0.85)
-        gy, gx = np.gradient(zpro, self.cell_size_m) if min(zpro.shape) > 1 else (
-            np.zeros_like(zpro), np.zeros_like(zpro))
-        slope_grid = np.sqrt(gx * gx + gy * gy)
-        ground = np.empty(x.shape[0], dtype=np.bool_)
-        # Point by point and independent: in slices, with progress and a cancel check between them.
-        n = x.shape[0]
-        for i in range(0, n, POINTS_PER_SLICE):
-            j = min(i + POINTS_PER_SLICE, n)
-            _classify_against_surface_kernel(x[i:j], y[i:j], z[i:j], zpro, slope_grid, grid.x0, grid.top, grid.cell,
-                                             float(self.elevation_threshold_m), float(self.elevation_scalar),
-                                             ground[i:j])
-            steps.report(0.85 + 0.15 * j / n)
+        ground = ground_against_surface(x, y, z, zpro, surface_slope(zpro, self.cell_size_m), grid,
+                                        self.elevation_threshold_m, self.elevation_scalar, steps.sub(0.85, 1.0))
         steps.report(1.0)
         return SMRFResult(ground, grid, zpro, objects)
+
+
+def surface_slope(surface: np.ndarray, cell_m: float) -> np.ndarray:
+    """The slope (rise/run) of a surface grid, as SMRF's last step reads it."""
+    gy, gx = np.gradient(surface, cell_m) if min(surface.shape) > 1 else (
+        np.zeros_like(surface), np.zeros_like(surface))
+    return np.sqrt(gx * gx + gy * gy)
+
+
+def ground_against_surface(x, y, z, surface: np.ndarray, slope_grid: np.ndarray, grid: GridSpec,
+                           threshold_m: float, scalar: float, steps: Steps | None = None) -> np.ndarray:
+    """SMRF's last step: a point is ground when it lies within ``threshold_m + scalar x slope`` of
+    the surface (interpolated at the point). Used by SMRF itself and by tuning, which re-scores
+    thresholds on one run's surface. Point by point and independent: in slices, with progress and
+    a cancel check between them."""
+    from ._smrf_kernels import _classify_against_surface_kernel
+    steps = steps or Steps()
+    x, y, z = (np.ascontiguousarray(a, dtype=np.float64) for a in (x, y, z))
+    ground = np.empty(x.shape[0], dtype=np.bool_)
+    n = x.shape[0]
+    for i in range(0, n, POINTS_PER_SLICE):
+        j = min(i + POINTS_PER_SLICE, n)
+        _classify_against_surface_kernel(x[i:j], y[i:j], z[i:j], surface, slope_grid, grid.x0, grid.top, grid.cell,
+                                         float(threshold_m), float(scalar), ground[i:j])
+        steps.report(j / n)
+    return ground
