@@ -238,7 +238,7 @@ def run_jobs(scheduler: str, function, jobs: List[dict], record: Callable[[objec
         distributed = import_distributed()
         client = cluster.client
         n = check_workers(client, paths, writable)
-        log(f"{len(jobs)} tile(s) on the Dask cluster's {n} worker(s) ({client.scheduler.address}).")
+        log(f"{len(jobs)} job(s) on the Dask cluster's {n} worker(s) ({client.scheduler.address}).")
         futures = {}
         for job in jobs:
             fut = client.submit(no_retry(function), job, retries=RETRIES, pure=False,

@@ -321,13 +321,20 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         total = sum(i.count for i in infos)
         done_points = 0
         bin_steps = steps.sub(0.0, 0.3)
-        for k, info in enumerate(infos):
-            if info.count == 0:
-                continue
-            for key, part in bin_file(info.path, k, grid, work, check=steps.check).items():
-                tiles.setdefault(key, []).append(part)
-            done_points += info.count
+        binned_parts = {}
+
+        def record_bin(result):
+            nonlocal done_points
+            binned_parts[result["file_index"]] = result["parts"]
+            done_points += infos[result["file_index"]].count
             bin_steps.report(done_points / total)
+        # one job per input file, on the workers (each file's parts have their own names)
+        _map_files(_bin_job, [dict(key=("bin", k), path=info.path, file_index=k, grid=grid, work=work)
+                              for k, info in enumerate(infos) if info.count],
+                   record_bin, tiling, steps, log, paths=[info.path for info in infos] + [work], writable=[work])
+        for k in sorted(binned_parts):  # in file order, whatever order the jobs finished in
+            for key, part in binned_parts[k].items():
+                tiles.setdefault(key, []).append(part)
         classes = [np.lib.format.open_memmap(os.path.join(work, f"f{k:05d}.cls.npy"), mode="w+", dtype=np.uint8,
                                              shape=(max(info.count, 1),)) for k, info in enumerate(infos)]
         for c in classes:
@@ -424,7 +431,6 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                 for fut in futures:
                     fut.cancel()
                 raise
-    classes = [np.load(path, mmap_mode="r") for path in class_paths]
     for k, info in enumerate(infos):
         if assigned[k] != info.count:
             raise InputError(f"{info.path}: {assigned[k]:,} of {info.count:,} points were classified; "
@@ -432,11 +438,21 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     log(f"Filtered {len(keys)} tile(s) in {time.perf_counter() - t_tiles:.1f} s.")
     # 3. write the outputs: every classified file to a temporary name first (atomic_path), then the vpc
     write_steps = steps.sub(0.85, 1.0)
-    for k, (info, out) in enumerate(zip(infos, outs)):
+    t_write = time.perf_counter()
+    written = []
+    for out in outs:
         if out:
             os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
-            write_classified_stream(info.path, out, classes[k][:info.count], check=steps.check)
-        write_steps.report((k + 1) / (len(infos) + 1))
+
+    def record_write(result):
+        written.append(result)
+        write_steps.report(len(written) / (len(infos) + 1))
+    # one job per input file, on the workers: each streams its file into its classified copy
+    _map_files(_write_job, [dict(key=("write", k), path=info.path, out=out, class_path=class_paths[k],
+                                 count=info.count) for k, (info, out) in enumerate(zip(infos, outs)) if out],
+               record_write, tiling, steps, log, paths=[info.path for info in infos] + [work],
+               writable=sorted({os.path.dirname(os.path.abspath(o)) for o in outs if o}))
+    log(f"Wrote {len(written)} classified file(s) in {time.perf_counter() - t_write:.1f} s.")
     if output_path and _ext(output_path) == VPC_EXTENSION:
         write_vpc(output_path, [scan_header(o) for o in outs], outs)
     if dtm_writer is not None:
@@ -445,6 +461,59 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     log(f"Done in {time.perf_counter() - t_start:.1f} s.")
     return TiledRun(inputs, [o for o in outs if o], sum(i.count for i in infos), ground_total, crs_wkt,
                     grid.size, grid.buffer, len(tile_log), dtm_path, tile_log=tile_log)
+
+
+def _bin_job(job) -> dict:
+    """Bin one input file into its tile parts (a pure function of its job: same parts, same names)."""
+    parts = bin_file(job["path"], job["file_index"], job["grid"], job["work"], check=job.get("check"))
+    return dict(file_index=job["file_index"], parts=parts)
+
+
+def _write_job(job) -> dict:
+    """Stream one input file into its classified copy, with the classes the tiles wrote (atomic)."""
+    classes = np.load(job["class_path"], mmap_mode="r")
+    write_classified_stream(job["path"], job["out"], classes[:job["count"]], check=job.get("check"))
+    return dict(out=job["out"])
+
+
+def _map_files(function, jobs, record, tiling, steps, log, *, paths, writable) -> None:
+    """Run one job per input file (binning, writing) on the run's workers: the Dask cluster, worker
+    processes or threads as for the tiles, ``record``-ing each result in the client as it comes."""
+    if not jobs:
+        return
+    workers = max(1, min(tiling.worker_count, len(jobs)))
+    mode = tiling.parallel if tiling.parallel != "auto" else _auto_parallel()
+    if tiling.scheduler:
+        from .cluster import run_jobs
+        run_jobs(tiling.scheduler, function, jobs, record, is_cancelled=steps.is_cancelled, paths=paths,
+                 writable=writable, log=log, names=lambda job: os.path.basename(job["path"]))
+        return
+    if workers == 1 or mode != "processes":
+        jobs = [dict(job, check=steps.check) for job in jobs]  # cancellation inside the file's pass
+    if workers == 1:
+        for job in jobs:
+            steps.check()
+            record(function(job))
+        return
+    if mode == "processes":
+        import multiprocessing
+        ctx = multiprocessing.get_context("spawn")
+        exe = _python_executable()
+        if exe:
+            ctx.set_executable(exe)
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+    else:
+        pool = ThreadPoolExecutor(max_workers=workers)
+    with pool:
+        futures = [pool.submit(function, job) for job in jobs]
+        try:
+            for fut in as_completed(futures):
+                steps.check()
+                record(fut.result())
+        except BaseException:
+            for fut in futures:
+                fut.cancel()
+            raise
 
 
 def _tile_job(job) -> Optional[dict]:

@@ -17,7 +17,7 @@ from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..errors import InputError, OutputError, UnsupportedFormatError
+from ..errors import GroundSieveError, InputError, OutputError, UnsupportedFormatError
 from .clouds import PointCloud, read_cloud
 from .outputs import LAS_EXTENSIONS, _ext, atomic_path
 
@@ -315,6 +315,11 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
     except OSError as err:
         raise OutputError(f"{work_dir}: cannot write the temporary tiles of {path} ({err}); "
                           "point the working folder at a disk with more room") from err
+    except GroundSieveError:
+        raise
+    except Exception as err:  # laspy / lazrs on a damaged or truncated file
+        raise InputError(f"{path}: cannot read its points ({type(err).__name__}: {err}); "
+                         "the file is damaged or truncated") from err
     finally:
         for w in writers.values():
             w.close()
@@ -370,6 +375,11 @@ def write_classified_stream(src: str, dst: str, classification: np.ndarray, *,
                         start += n
     except OSError as err:
         raise OutputError(f"{dst}: cannot be written ({err})") from err
+    except GroundSieveError:
+        raise
+    except Exception as err:  # laspy / lazrs on a damaged or truncated input
+        raise InputError(f"{src}: cannot read its points ({type(err).__name__}: {err}); "
+                         "the file is damaged or truncated") from err
 
 
 def iter_chunks(path: str, chunk_points: int = CHUNK_POINTS) -> Iterable:

@@ -183,6 +183,8 @@ def test_a_deliberate_error_in_a_tile_fails_at_once_without_retry(survey, tmp_pa
         damaged = []
 
         def damage_one_tile_then_run(scheduler, function, jobs, *args, **kw):
+            if "parts" not in jobs[0]:  # the binning and writing jobs (one per file)
+                return real_run_jobs(scheduler, function, jobs, *args, cluster=c, **kw)
             job = jobs[len(jobs) // 2]
             with open(job["parts"][0].index_path, "r+b") as f:
                 f.truncate(8)
