@@ -90,8 +90,8 @@ def run(survey, out, scheduler, workers, tile, algorithm):
     def phase(pattern):
         return next((float(m.group(1)) for line in lines for m in [re.match(pattern, line)] if m), float("nan"))
     filtered = phase(r"Filtered \d+ tile\(s\) in ([\d.]+) s")
-    print(f"    binning {phase(r'Binned into .* in ([\d.]+) s'):.1f} s, "
-          f"writing {phase(r'Wrote .* in ([\d.]+) s'):.1f} s, load {os.getloadavg()[0]:.1f}", flush=True)
+    binned, wrote = phase(r"Binned into .* in ([\d.]+) s"), phase(r"Wrote .* in ([\d.]+) s")
+    print(f"    binning {binned:.1f} s, writing {wrote:.1f} s, load {os.getloadavg()[0]:.1f}", flush=True)
     return done, wall, filtered
 
 
