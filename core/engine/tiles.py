@@ -52,6 +52,9 @@ BYTES_PER_POINT = 330
 SPARSE_AREA_M2 = 1e8
 
 
+#: a single input file is binned in pieces of at least this many points, one per worker
+BIN_PIECE_POINTS = 4 * CHUNK_POINTS
+
 #: a tile holding fewer points than this, buffer included, is not filtered (isolated points)
 MIN_TILE_POINTS = 50
 
@@ -272,9 +275,13 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     else:
         _check_disk(parent, infos, buffer_m, size)
         os.makedirs(work)
+    cluster = None
     try:
+        if tiling.scheduler:  # one connection (one LocalCluster) for the binning, the tiles and the writing
+            from .cluster import Cluster
+            cluster = Cluster(tiling.scheduler, log)
         run = _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling,
-                   steps, log, workflow)
+                   steps, log, workflow, cluster=cluster)
     except BaseException:
         # Kept for a restart when the user chose the working folder; removed otherwise.
         if not tiling.work_dir:
@@ -282,6 +289,9 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
         else:
             log(f"The tiles done so far are kept in {work}: run again to resume, or delete it.")
         raise
+    finally:
+        if cluster is not None:
+            cluster.close()
     shutil.rmtree(work, ignore_errors=True)
     return run
 
@@ -303,7 +313,7 @@ def _save_json(path, doc) -> None:
 
 
 def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling, steps, log,
-         workflow) -> TiledRun:
+         workflow, cluster=None) -> TiledRun:
     t_start = time.perf_counter()
     import json as _json
     from ..io.lasfiles import TilePart
@@ -325,14 +335,25 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
 
         def record_bin(result):
             nonlocal done_points
-            binned_parts[result["file_index"]] = result["parts"]
-            done_points += infos[result["file_index"]].count
+            binned_parts[(result["file_index"], result["first"])] = result["parts"]
+            done_points += result["points"]
             bin_steps.report(done_points / total)
-        # one job per input file, on the workers (each file's parts have their own names)
-        _map_files(_bin_job, [dict(key=("bin", k), path=info.path, file_index=k, grid=grid, work=work)
-                              for k, info in enumerate(infos) if info.count],
-                   record_bin, tiling, steps, log, paths=[info.path for info in infos] + [work], writable=[work])
-        for k in sorted(binned_parts):  # in file order, whatever order the jobs finished in
+        # one job per input file, on the workers (each file's parts have their own names); a big file
+        # in pieces of consecutive points, one per worker (LAZ seeks through its chunk table)
+        bin_jobs = []
+        for k, info in enumerate(infos):
+            if not info.count:
+                continue
+            pieces = min(tiling.worker_count, info.count // BIN_PIECE_POINTS) if len(infos) == 1 else 1
+            if pieces <= 1:
+                bin_jobs.append(dict(key=("bin", k), path=info.path, file_index=k, grid=grid, work=work))
+                continue
+            cuts = [info.count * p // pieces for p in range(pieces + 1)]
+            bin_jobs += [dict(key=("bin", k, p), path=info.path, file_index=k, grid=grid, work=work, first=cuts[p],
+                              stop=cuts[p + 1], piece=p) for p in range(pieces)]
+        _map_files(_bin_job, bin_jobs, record_bin, tiling, steps, log,
+                   paths=[info.path for info in infos] + [work], writable=[work], cluster=cluster)
+        for k in sorted(binned_parts):  # in file (and piece) order, whatever order the jobs finished in
             for key, part in binned_parts[k].items():
                 tiles.setdefault(key, []).append(part)
         classes = [np.lib.format.open_memmap(os.path.join(work, f"f{k:05d}.cls.npy"), mode="w+", dtype=np.uint8,
@@ -407,7 +428,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         from .cluster import run_jobs
         run_jobs(tiling.scheduler, _tile_job, jobs, record, is_cancelled=steps.is_cancelled,
                  paths=[info.path for info in infos] + [work], writable=[done_dir], log=log,
-                 names=lambda job: job_name(job["bounds"], job["names"]))
+                 names=lambda job: job_name(job["bounds"], job["names"]),
+                 **({"cluster": cluster} if cluster is not None else {}))
     elif workers == 1:
         for job in jobs:
             steps.check()
@@ -451,7 +473,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     _map_files(_write_job, [dict(key=("write", k), path=info.path, out=out, class_path=class_paths[k],
                                  count=info.count) for k, (info, out) in enumerate(zip(infos, outs)) if out],
                record_write, tiling, steps, log, paths=[info.path for info in infos] + [work],
-               writable=sorted({os.path.dirname(os.path.abspath(o)) for o in outs if o}))
+               writable=sorted({os.path.dirname(os.path.abspath(o)) for o in outs if o}), cluster=cluster)
     log(f"Wrote {len(written)} classified file(s) in {time.perf_counter() - t_write:.1f} s.")
     if output_path and _ext(output_path) == VPC_EXTENSION:
         write_vpc(output_path, [scan_header(o) for o in outs], outs)
@@ -465,8 +487,11 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
 
 def _bin_job(job) -> dict:
     """Bin one input file into its tile parts (a pure function of its job: same parts, same names)."""
-    parts = bin_file(job["path"], job["file_index"], job["grid"], job["work"], check=job.get("check"))
-    return dict(file_index=job["file_index"], parts=parts)
+    first, stop = job.get("first", 0), job.get("stop")
+    parts = bin_file(job["path"], job["file_index"], job["grid"], job["work"], check=job.get("check"),
+                     first=first, stop=stop, piece=job.get("piece"))
+    points = (stop if stop is not None else scan_header(job["path"]).count) - first
+    return dict(file_index=job["file_index"], first=first, parts=parts, points=points)
 
 
 def _write_job(job) -> dict:
@@ -476,7 +501,7 @@ def _write_job(job) -> dict:
     return dict(out=job["out"])
 
 
-def _map_files(function, jobs, record, tiling, steps, log, *, paths, writable) -> None:
+def _map_files(function, jobs, record, tiling, steps, log, *, paths, writable, cluster=None) -> None:
     """Run one job per input file (binning, writing) on the run's workers: the Dask cluster, worker
     processes or threads as for the tiles, ``record``-ing each result in the client as it comes."""
     if not jobs:
@@ -486,7 +511,8 @@ def _map_files(function, jobs, record, tiling, steps, log, *, paths, writable) -
     if tiling.scheduler:
         from .cluster import run_jobs
         run_jobs(tiling.scheduler, function, jobs, record, is_cancelled=steps.is_cancelled, paths=paths,
-                 writable=writable, log=log, names=lambda job: os.path.basename(job["path"]))
+                 writable=writable, log=log, names=lambda job: os.path.basename(job["path"]),
+                 **({"cluster": cluster} if cluster is not None else {}))
         return
     if workers == 1 or mode != "processes":
         jobs = [dict(job, check=steps.check) for job in jobs]  # cancellation inside the file's pass

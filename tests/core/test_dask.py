@@ -99,7 +99,7 @@ def test_a_killed_worker_changes_nothing(survey, tmp_path):
         real_run_jobs = cl.run_jobs
 
         def on_this_cluster(*args, **kw):
-            return real_run_jobs(*args, cluster=c, **kw)
+            return real_run_jobs(*args, **{**kw, "cluster": c})
         try:
             cl.run_jobs = on_this_cluster
             logs = []
@@ -184,12 +184,12 @@ def test_a_deliberate_error_in_a_tile_fails_at_once_without_retry(survey, tmp_pa
 
         def damage_one_tile_then_run(scheduler, function, jobs, *args, **kw):
             if "parts" not in jobs[0]:  # the binning and writing jobs (one per file)
-                return real_run_jobs(scheduler, function, jobs, *args, cluster=c, **kw)
+                return real_run_jobs(scheduler, function, jobs, *args, **{**kw, "cluster": c})
             job = jobs[len(jobs) // 2]
             with open(job["parts"][0].index_path, "r+b") as f:
                 f.truncate(8)
             damaged.append(job)
-            return real_run_jobs(scheduler, function, jobs, *args, cluster=c, **kw)
+            return real_run_jobs(scheduler, function, jobs, *args, **{**kw, "cluster": c})
         try:
             cl.run_jobs = damage_one_tile_then_run
             with pytest.raises(InputError) as caught:

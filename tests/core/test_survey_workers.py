@@ -80,3 +80,34 @@ def test_a_damaged_file_fails_the_parallel_binning_with_its_name(survey, tmp_pat
     with pytest.raises(InputError, match=r"c\.laz: cannot read its points .*damaged or truncated"):
         run_ground_filter(str(folder), str(tmp_path / "out.vpc"), SMRF(), options=opts)
     assert not (tmp_path / "out.vpc").exists()
+
+
+def test_one_big_file_is_binned_in_pieces_on_the_workers_with_the_serial_outputs(survey, tmp_path, monkeypatch):
+    """A single input binned in 2 pieces of consecutive points (one per worker process; the second
+    piece starts by seeking in the LAZ) gives the serial run's classes and DTM."""
+    from groundsieve.core.engine import tiles
+    whole = os.path.join(os.path.dirname(survey), "whole.laz")
+
+    def run(out, workers):
+        out.mkdir()
+        opts = FilterOptions(tiling=TileOptions(tile_size_m=30.0, buffer_m=10.0, workers=workers,
+                                                parallel="processes"))
+        done = run_ground_filter(whole, str(out / "c.laz"), SMRF(), options=opts,
+                                 dtm_path=str(out / "dtm.tif"), dtm=DTMOptions(cell_size_m=1.0))
+        from osgeo import gdal
+        ds = gdal.Open(str(out / "dtm.tif"))  # kept: its band dies with it
+        return (done.ground_count, np.asarray(laspy.read(out / "c.laz").classification).tobytes(),
+                ds.GetRasterBand(1).ReadAsArray().tobytes())
+    ref = run(tmp_path / "serial", 1)
+    monkeypatch.setattr(tiles, "BIN_PIECE_POINTS", 5000)
+    bin_jobs = []
+    real_map = tiles._map_files
+
+    def spy(function, jobs, *args, **kw):
+        if function is tiles._bin_job:
+            bin_jobs.extend(jobs)
+        return real_map(function, jobs, *args, **kw)
+    monkeypatch.setattr(tiles, "_map_files", spy)
+    got = run(tmp_path / "pieces", 2)
+    assert [j.get("piece") for j in bin_jobs] == [0, 1] and bin_jobs[1]["first"] > 0
+    assert got == ref
