@@ -276,13 +276,16 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
         _check_disk(parent, infos, buffer_m, size)
         os.makedirs(work)
     cluster = None
+    rasters = []  # the DTM writer, released at once if the run fails
     try:
         if tiling.scheduler:  # one connection (one LocalCluster) for the binning, the tiles and the writing
             from .cluster import Cluster
             cluster = Cluster(tiling.scheduler, log)
         run = _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling,
-                   steps, log, workflow, cluster=cluster)
+                   steps, log, workflow, cluster=cluster, rasters=rasters)
     except BaseException:
+        for writer in rasters:
+            _release_raster(writer)
         # Kept for a restart when the user chose the working folder; removed otherwise.
         if not tiling.work_dir:
             shutil.rmtree(work, ignore_errors=True)
@@ -294,6 +297,14 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
             cluster.close()
     shutil.rmtree(work, ignore_errors=True)
     return run
+
+
+def _release_raster(writer) -> None:
+    """Close a ``BlockGeoTIFF`` left open by a failed run, band before dataset: left to the garbage
+    collector (a traceback keeps it alive), GDAL may free them in the wrong order and crash."""
+    with writer._lock:
+        writer._band = None
+        writer._ds = None
 
 
 def _fingerprint(infos, grid, algorithm, options, dtm) -> str:
@@ -313,7 +324,7 @@ def _save_json(path, doc) -> None:
 
 
 def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling, steps, log,
-         workflow, cluster=None) -> TiledRun:
+         workflow, cluster=None, rasters=None) -> TiledRun:
     t_start = time.perf_counter()
     import json as _json
     from ..io.lasfiles import TilePart
@@ -377,6 +388,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         ys = np.array([v for i in infos if i.count for v in (i.mins[1], i.maxs[1])])
         dtm_grid = GridSpec.covering(xs, ys, dtm.cell_size_m, what="DTM")
         dtm_writer = BlockGeoTIFF(os.path.join(work, "dtm.tif"), dtm_grid, crs_wkt=crs_wkt)
+        if rasters is not None:
+            rasters.append(dtm_writer)
     tile_log = []
     ground_total = 0
     filter_steps = steps.sub(0.3, 0.85)
