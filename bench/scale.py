@@ -137,6 +137,7 @@ def assembly(work, side_m=2000.0, cell=0.25, block_m=100.0):
           f"{time.perf_counter() - t:.1f} s, peak RSS {rss1:.0f} MB (before: {rss0:.0f} MB), "
           f"output {os.path.getsize(out) / 1e6:.0f} MB, load {load():.1f}")
     os.remove(out)
+    os.remove(os.path.join(work, "assembly_tmp.tif"))  # the work raster (the engine's is in its working folder)
 
 
 def main():
