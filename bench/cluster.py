@@ -2,8 +2,11 @@
 workers and the scheduler's cost per tile, all measured in the same run.
 
     .venv/bin/python bench/cluster.py [--millions 2] [--files 64] [--tile 50] [--filter smrf]
+    .venv/bin/python bench/cluster.py --blocks --millions 100 --files 50 --tile 0 --dir /big/disk
 
 A generated scene of about N million points is cut into a grid of ``--files`` LAZ files (a survey);
+with ``--blocks``, each file is its own generated scene block of N/files million points, side by side
+(streamed: no whole survey in memory, for 100 M points and more);
 then SMRF with a 1 m DTM runs over the folder four ways: in this process one tile after the other
 (no Dask: the reference), on a LocalCluster of 1 worker process, of 2 worker processes, and with
 local worker processes (no Dask, 2 workers). From the "Filtered N tile(s) in X s" log line (the
@@ -51,6 +54,29 @@ def make_survey(folder, millions, files):
     return survey, len(las.points), k * k
 
 
+def make_blocks(folder, millions, files):
+    """``files`` LAZ files, each a generated scene block of about millions/files M points, on a grid."""
+    import math
+
+    import laspy
+    import numpy as np
+    from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+    per_file = millions * 1e6 / files
+    spec = SceneSpec.for_points(int(per_file), density_per_m2=10.0)
+    per_row = int(math.ceil(math.sqrt(files)))
+    survey = os.path.join(folder, "survey")
+    os.makedirs(survey)
+    total = 0
+    for k in range(files):
+        scene = make_scene(SceneSpec(size_m=spec.size_m, density_per_m2=10.0, seed=k))
+        i, j = divmod(k, per_row)
+        scene.x[:] = scene.x - scene.x.min() + 500000.0 + i * spec.size_m
+        scene.y[:] = scene.y - scene.y.min() + 5400000.0 + j * spec.size_m
+        write_scene(scene, os.path.join(survey, f"f{i:02d}_{j:02d}.laz"))
+        total += len(scene)
+    return survey, total, files
+
+
 def run(survey, out, scheduler, workers, tile, algorithm):
     from groundsieve.core.engine.tiles import TileOptions
     from groundsieve.core.engine.workflow import DTMOptions, FilterOptions, run_ground_filter
@@ -61,8 +87,11 @@ def run(survey, out, scheduler, workers, tile, algorithm):
                                                                       parallel="processes", scheduler=scheduler)),
                              dtm_path=os.path.join(out, "dtm.tif"), dtm=DTMOptions(cell_size_m=1.0), log=lines.append)
     wall = time.perf_counter() - t0
-    filtered = next(float(m.group(1)) for line in lines for m in [re.match(r"Filtered \d+ tile\(s\) in ([\d.]+) s", line)]
-                    if m)
+    def phase(pattern):
+        return next((float(m.group(1)) for line in lines for m in [re.match(pattern, line)] if m), float("nan"))
+    filtered = phase(r"Filtered \d+ tile\(s\) in ([\d.]+) s")
+    binned, wrote = phase(r"Binned into .* in ([\d.]+) s"), phase(r"Wrote .* in ([\d.]+) s")
+    print(f"    binning {binned:.1f} s, writing {wrote:.1f} s, load {os.getloadavg()[0]:.1f}", flush=True)
     return done, wall, filtered
 
 
@@ -85,6 +114,7 @@ def main():
     ap.add_argument("--files", type=int, default=64)
     ap.add_argument("--tile", type=float, default=50.0)
     ap.add_argument("--filter", default="smrf")
+    ap.add_argument("--blocks", action="store_true", help="one generated scene block per file (streamed)")
     ap.add_argument("--dir", default=None, help="working folder (default: a temporary one)")
     args = ap.parse_args()
     from groundsieve.core.engine import parameters
@@ -92,7 +122,7 @@ def main():
     base = tempfile.mkdtemp(prefix="gs-cluster-", dir=args.dir)
     try:
         t0 = time.perf_counter()
-        survey, points, files = make_survey(base, args.millions, args.files)
+        survey, points, files = (make_blocks if args.blocks else make_survey)(base, args.millions, args.files)
         print(f"survey: {points:,} points in {files} files ({time.perf_counter() - t0:.0f} s to make)", flush=True)
         rows = []
         for label, scheduler, workers in (("in process, 1 tile at a time", "", 1),

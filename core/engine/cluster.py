@@ -12,7 +12,10 @@ On a cluster each job writes only its own tile's files (its classes and done mar
 working folder) and returns its DTM block; the client applies the classes to the per-file arrays
 and writes the blocks into the one GeoTIFF. A worker that dies mid-tile loses nothing shared: the
 scheduler gives the tile to another worker (Dask's ``allowed-failures``), and a tile that raised an
-unexpected error is retried (``retries``); the outputs are those of a run without the failure.
+unexpected error is retried (``retries``); the outputs are those of a run without the failure. A
+deliberate error of the core (a ``GroundSieveError``: a damaged file, a bad parameter) is the same on
+every try: the job returns it as a :class:`Failed` instead of raising, Dask does not retry it, and the
+run stops at once with its message (which names the tile's bounds and files).
 
 Workers must see the inputs and the working folder at the same paths as the client (a shared
 file system: NFS, Lustre, GPFS, CephFS...): checked on every worker before any tile is sent, along
@@ -31,6 +34,35 @@ PIP_HINT = 'python -m pip install "dask[distributed]"'
 CONNECT_TIMEOUT_S = 10
 #: a tile that raised an unexpected error is tried this many times more
 RETRIES = 2
+
+
+class Failed:
+    """A job's deliberate error, returned (not raised) so that Dask does not retry it."""
+
+    def __init__(self, error: GroundSieveError):
+        self.error = error
+
+
+def no_retry(function):
+    """``function`` for a cluster job: its deliberate errors (a ``GroundSieveError`` raised by the core
+    on purpose, i.e. not wrapping an unexpected exception) come back as :class:`Failed`."""
+    return _NoRetry(function)
+
+
+class _NoRetry:
+    def __init__(self, function):
+        self.function = function
+
+    def __call__(self, job):
+        try:
+            return self.function(job)
+        except Cancelled:
+            raise
+        except GroundSieveError as err:
+            cause = err.__cause__
+            if cause is None or isinstance(cause, GroundSieveError):
+                return Failed(err)
+            raise
 
 
 class ClusterError(GroundSieveError):
@@ -206,10 +238,10 @@ def run_jobs(scheduler: str, function, jobs: List[dict], record: Callable[[objec
         distributed = import_distributed()
         client = cluster.client
         n = check_workers(client, paths, writable)
-        log(f"{len(jobs)} tile(s) on the Dask cluster's {n} worker(s) ({client.scheduler.address}).")
+        log(f"{len(jobs)} job(s) on the Dask cluster's {n} worker(s) ({client.scheduler.address}).")
         futures = {}
         for job in jobs:
-            fut = client.submit(function, job, retries=RETRIES, pure=False,
+            fut = client.submit(no_retry(function), job, retries=RETRIES, pure=False,
                                 key=f"groundsieve-tile-{job['key'][0]}_{job['key'][1]}-{os.urandom(4).hex()}")
             futures[fut] = job
         pending = set(futures)
@@ -233,6 +265,8 @@ def run_jobs(scheduler: str, function, jobs: List[dict], record: Callable[[objec
                     except Exception as err:
                         raise ClusterError(f"{names(futures[fut])} failed on the Dask cluster: "
                                            f"{type(err).__name__}: {err}") from err
+                    if isinstance(result, Failed):
+                        raise result.error
                     record(result)
         except BaseException:
             client.cancel(list(pending))

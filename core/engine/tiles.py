@@ -52,6 +52,9 @@ BYTES_PER_POINT = 330
 SPARSE_AREA_M2 = 1e8
 
 
+#: a single input file is binned in pieces of at least this many points, one per worker
+BIN_PIECE_POINTS = 4 * CHUNK_POINTS
+
 #: a tile holding fewer points than this, buffer included, is not filtered (isolated points)
 MIN_TILE_POINTS = 50
 
@@ -272,18 +275,36 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     else:
         _check_disk(parent, infos, buffer_m, size)
         os.makedirs(work)
+    cluster = None
+    rasters = []  # the DTM writer, released at once if the run fails
     try:
+        if tiling.scheduler:  # one connection (one LocalCluster) for the binning, the tiles and the writing
+            from .cluster import Cluster
+            cluster = Cluster(tiling.scheduler, log)
         run = _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling,
-                   steps, log, workflow)
+                   steps, log, workflow, cluster=cluster, rasters=rasters)
     except BaseException:
+        for writer in rasters:
+            _release_raster(writer)
         # Kept for a restart when the user chose the working folder; removed otherwise.
         if not tiling.work_dir:
             shutil.rmtree(work, ignore_errors=True)
         else:
             log(f"The tiles done so far are kept in {work}: run again to resume, or delete it.")
         raise
+    finally:
+        if cluster is not None:
+            cluster.close()
     shutil.rmtree(work, ignore_errors=True)
     return run
+
+
+def _release_raster(writer) -> None:
+    """Close a ``BlockGeoTIFF`` left open by a failed run, band before dataset: left to the garbage
+    collector (a traceback keeps it alive), GDAL may free them in the wrong order and crash."""
+    with writer._lock:
+        writer._band = None
+        writer._ds = None
 
 
 def _fingerprint(infos, grid, algorithm, options, dtm) -> str:
@@ -303,7 +324,7 @@ def _save_json(path, doc) -> None:
 
 
 def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling, steps, log,
-         workflow) -> TiledRun:
+         workflow, cluster=None, rasters=None) -> TiledRun:
     t_start = time.perf_counter()
     import json as _json
     from ..io.lasfiles import TilePart
@@ -321,13 +342,31 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         total = sum(i.count for i in infos)
         done_points = 0
         bin_steps = steps.sub(0.0, 0.3)
-        for k, info in enumerate(infos):
-            if info.count == 0:
-                continue
-            for key, part in bin_file(info.path, k, grid, work, check=steps.check).items():
-                tiles.setdefault(key, []).append(part)
-            done_points += info.count
+        binned_parts = {}
+
+        def record_bin(result):
+            nonlocal done_points
+            binned_parts[(result["file_index"], result["first"])] = result["parts"]
+            done_points += result["points"]
             bin_steps.report(done_points / total)
+        # one job per input file, on the workers (each file's parts have their own names); a big file
+        # in pieces of consecutive points, one per worker (LAZ seeks through its chunk table)
+        bin_jobs = []
+        for k, info in enumerate(infos):
+            if not info.count:
+                continue
+            pieces = min(tiling.worker_count, info.count // BIN_PIECE_POINTS) if len(infos) == 1 else 1
+            if pieces <= 1:
+                bin_jobs.append(dict(key=("bin", k), path=info.path, file_index=k, grid=grid, work=work))
+                continue
+            cuts = [info.count * p // pieces for p in range(pieces + 1)]
+            bin_jobs += [dict(key=("bin", k, p), path=info.path, file_index=k, grid=grid, work=work, first=cuts[p],
+                              stop=cuts[p + 1], piece=p) for p in range(pieces)]
+        _map_files(_bin_job, bin_jobs, record_bin, tiling, steps, log,
+                   paths=[info.path for info in infos] + [work], writable=[work], cluster=cluster)
+        for k in sorted(binned_parts):  # in file (and piece) order, whatever order the jobs finished in
+            for key, part in binned_parts[k].items():
+                tiles.setdefault(key, []).append(part)
         classes = [np.lib.format.open_memmap(os.path.join(work, f"f{k:05d}.cls.npy"), mode="w+", dtype=np.uint8,
                                              shape=(max(info.count, 1),)) for k, info in enumerate(infos)]
         for c in classes:
@@ -349,6 +388,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         ys = np.array([v for i in infos if i.count for v in (i.mins[1], i.maxs[1])])
         dtm_grid = GridSpec.covering(xs, ys, dtm.cell_size_m, what="DTM")
         dtm_writer = BlockGeoTIFF(os.path.join(work, "dtm.tif"), dtm_grid, crs_wkt=crs_wkt)
+        if rasters is not None:
+            rasters.append(dtm_writer)
     tile_log = []
     ground_total = 0
     filter_steps = steps.sub(0.3, 0.85)
@@ -400,7 +441,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         from .cluster import run_jobs
         run_jobs(tiling.scheduler, _tile_job, jobs, record, is_cancelled=steps.is_cancelled,
                  paths=[info.path for info in infos] + [work], writable=[done_dir], log=log,
-                 names=lambda job: job_name(job["bounds"], job["names"]))
+                 names=lambda job: job_name(job["bounds"], job["names"]),
+                 **({"cluster": cluster} if cluster is not None else {}))
     elif workers == 1:
         for job in jobs:
             steps.check()
@@ -424,7 +466,6 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                 for fut in futures:
                     fut.cancel()
                 raise
-    classes = [np.load(path, mmap_mode="r") for path in class_paths]
     for k, info in enumerate(infos):
         if assigned[k] != info.count:
             raise InputError(f"{info.path}: {assigned[k]:,} of {info.count:,} points were classified; "
@@ -432,11 +473,21 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     log(f"Filtered {len(keys)} tile(s) in {time.perf_counter() - t_tiles:.1f} s.")
     # 3. write the outputs: every classified file to a temporary name first (atomic_path), then the vpc
     write_steps = steps.sub(0.85, 1.0)
-    for k, (info, out) in enumerate(zip(infos, outs)):
+    t_write = time.perf_counter()
+    written = []
+    for out in outs:
         if out:
             os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
-            write_classified_stream(info.path, out, classes[k][:info.count], check=steps.check)
-        write_steps.report((k + 1) / (len(infos) + 1))
+
+    def record_write(result):
+        written.append(result)
+        write_steps.report(len(written) / (len(infos) + 1))
+    # one job per input file, on the workers: each streams its file into its classified copy
+    _map_files(_write_job, [dict(key=("write", k), path=info.path, out=out, class_path=class_paths[k],
+                                 count=info.count) for k, (info, out) in enumerate(zip(infos, outs)) if out],
+               record_write, tiling, steps, log, paths=[info.path for info in infos] + [work],
+               writable=sorted({os.path.dirname(os.path.abspath(o)) for o in outs if o}), cluster=cluster)
+    log(f"Wrote {len(written)} classified file(s) in {time.perf_counter() - t_write:.1f} s.")
     if output_path and _ext(output_path) == VPC_EXTENSION:
         write_vpc(output_path, [scan_header(o) for o in outs], outs)
     if dtm_writer is not None:
@@ -445,6 +496,63 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     log(f"Done in {time.perf_counter() - t_start:.1f} s.")
     return TiledRun(inputs, [o for o in outs if o], sum(i.count for i in infos), ground_total, crs_wkt,
                     grid.size, grid.buffer, len(tile_log), dtm_path, tile_log=tile_log)
+
+
+def _bin_job(job) -> dict:
+    """Bin one input file into its tile parts (a pure function of its job: same parts, same names)."""
+    first, stop = job.get("first", 0), job.get("stop")
+    parts = bin_file(job["path"], job["file_index"], job["grid"], job["work"], check=job.get("check"),
+                     first=first, stop=stop, piece=job.get("piece"))
+    points = (stop if stop is not None else scan_header(job["path"]).count) - first
+    return dict(file_index=job["file_index"], first=first, parts=parts, points=points)
+
+
+def _write_job(job) -> dict:
+    """Stream one input file into its classified copy, with the classes the tiles wrote (atomic)."""
+    classes = np.load(job["class_path"], mmap_mode="r")
+    write_classified_stream(job["path"], job["out"], classes[:job["count"]], check=job.get("check"))
+    return dict(out=job["out"])
+
+
+def _map_files(function, jobs, record, tiling, steps, log, *, paths, writable, cluster=None) -> None:
+    """Run one job per input file (binning, writing) on the run's workers: the Dask cluster, worker
+    processes or threads as for the tiles, ``record``-ing each result in the client as it comes."""
+    if not jobs:
+        return
+    workers = max(1, min(tiling.worker_count, len(jobs)))
+    mode = tiling.parallel if tiling.parallel != "auto" else _auto_parallel()
+    if tiling.scheduler:
+        from .cluster import run_jobs
+        run_jobs(tiling.scheduler, function, jobs, record, is_cancelled=steps.is_cancelled, paths=paths,
+                 writable=writable, log=log, names=lambda job: os.path.basename(job["path"]),
+                 **({"cluster": cluster} if cluster is not None else {}))
+        return
+    if workers == 1 or mode != "processes":
+        jobs = [dict(job, check=steps.check) for job in jobs]  # cancellation inside the file's pass
+    if workers == 1:
+        for job in jobs:
+            steps.check()
+            record(function(job))
+        return
+    if mode == "processes":
+        import multiprocessing
+        ctx = multiprocessing.get_context("spawn")
+        exe = _python_executable()
+        if exe:
+            ctx.set_executable(exe)
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+    else:
+        pool = ThreadPoolExecutor(max_workers=workers)
+    with pool:
+        futures = [pool.submit(function, job) for job in jobs]
+        try:
+            for fut in as_completed(futures):
+                steps.check()
+                record(fut.result())
+        except BaseException:
+            for fut in futures:
+                fut.cancel()
+            raise
 
 
 def _tile_job(job) -> Optional[dict]:

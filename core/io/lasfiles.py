@@ -17,7 +17,7 @@ from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..errors import InputError, OutputError, UnsupportedFormatError
+from ..errors import GroundSieveError, InputError, OutputError, UnsupportedFormatError
 from .clouds import PointCloud, read_cloud
 from .outputs import LAS_EXTENSIONS, _ext, atomic_path
 
@@ -243,20 +243,40 @@ class TilePart:
     own_count: int = 0      #: points of the tile itself (the rest is buffer)
 
 
+def _chunks(reader, first: int, stop: Optional[int], chunk_points: int):
+    """The reader's points ``first`` to ``stop`` (None: the end), ``chunk_points`` at a time."""
+    if first == 0 and stop is None:
+        yield from reader.chunk_iterator(chunk_points)
+        return
+    stop = int(reader.header.point_count) if stop is None else stop
+    if first:
+        reader.seek(first)  # LAZ: from the chunk table, decoding only the chunk it lands in
+    pos = first
+    while pos < stop:
+        chunk = reader.read_points(min(chunk_points, stop - pos))
+        if len(chunk) == 0:
+            raise InputError(f"{reader.header.point_count:,} points announced but the file ends at {pos:,}")
+        pos += len(chunk)
+        yield chunk
+
+
 def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk_points: int = CHUNK_POINTS,
-             check=None) -> Dict[tuple, TilePart]:
+             check=None, first: int = 0, stop: Optional[int] = None, piece: Optional[int] = None
+             ) -> Dict[tuple, TilePart]:
     """Stream ``path`` once (laspy chunks) and write, for every tile its points or buffer touch,
-    the part of the file that tile needs into ``work_dir``. Tiles exist only where points are."""
+    the part of the file that tile needs into ``work_dir``. Tiles exist only where points are.
+    ``first``/``stop`` bin only those points of the file (one ``piece`` of it, named in the parts'
+    file names): pieces binned in parallel, their parts taken in file order, give the whole file's."""
     import laspy
     parts: Dict[tuple, TilePart] = {}
     writers = {}
     index_files = {}
     m = int(math.ceil(grid.buffer / grid.size)) if grid.buffer > 0 else 0
-    stem = f"f{file_index:05d}"
+    stem = f"f{file_index:05d}" + (f"p{piece:04d}" if piece is not None else "")
     try:
         with laspy.open(path) as reader:
-            start = 0
-            for chunk in reader.chunk_iterator(chunk_points):
+            start = first
+            for chunk in _chunks(reader, first, stop, chunk_points):
                 if check is not None:
                     check()
                 n = len(chunk)
@@ -315,6 +335,11 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
     except OSError as err:
         raise OutputError(f"{work_dir}: cannot write the temporary tiles of {path} ({err}); "
                           "point the working folder at a disk with more room") from err
+    except GroundSieveError:
+        raise
+    except Exception as err:  # laspy / lazrs on a damaged or truncated file
+        raise InputError(f"{path}: cannot read its points ({type(err).__name__}: {err}); "
+                         "the file is damaged or truncated") from err
     finally:
         for w in writers.values():
             w.close()
@@ -370,6 +395,11 @@ def write_classified_stream(src: str, dst: str, classification: np.ndarray, *,
                         start += n
     except OSError as err:
         raise OutputError(f"{dst}: cannot be written ({err})") from err
+    except GroundSieveError:
+        raise
+    except Exception as err:  # laspy / lazrs on a damaged or truncated input
+        raise InputError(f"{src}: cannot read its points ({type(err).__name__}: {err}); "
+                         "the file is damaged or truncated") from err
 
 
 def iter_chunks(path: str, chunk_points: int = CHUNK_POINTS) -> Iterable:

@@ -99,7 +99,7 @@ def test_a_killed_worker_changes_nothing(survey, tmp_path):
         real_run_jobs = cl.run_jobs
 
         def on_this_cluster(*args, **kw):
-            return real_run_jobs(*args, cluster=c, **kw)
+            return real_run_jobs(*args, **{**kw, "cluster": c})
         try:
             cl.run_jobs = on_this_cluster
             logs = []
@@ -169,3 +169,41 @@ def test_cancel_stops_the_cluster_run_and_leaves_nothing(survey, tmp_path):
                           is_cancelled=lambda: len(tiles_logged) >= 3, log=log)
     assert 3 <= len(tiles_logged) < 60
     assert sorted(os.listdir(tmp_path)) == []  # no output, no working folder
+
+
+@needs_dask
+def test_a_deliberate_error_in_a_tile_fails_at_once_without_retry(survey, tmp_path):
+    """A damaged tile part (its index file cut short: an InputError of read_part, the same on every
+    try) stops the run with the error naming the tile's bounds and file; Dask runs it once (no
+    retry, unlike a worker death), and no output is left."""
+    from groundsieve.core.engine import cluster as cl
+    from groundsieve.core.errors import InputError
+    with cl.Cluster("local:1") as c:
+        real_run_jobs = cl.run_jobs
+        damaged = []
+
+        def damage_one_tile_then_run(scheduler, function, jobs, *args, **kw):
+            if "parts" not in jobs[0]:  # the binning and writing jobs (one per file)
+                return real_run_jobs(scheduler, function, jobs, *args, **{**kw, "cluster": c})
+            job = jobs[len(jobs) // 2]
+            with open(job["parts"][0].index_path, "r+b") as f:
+                f.truncate(8)
+            damaged.append(job)
+            return real_run_jobs(scheduler, function, jobs, *args, **{**kw, "cluster": c})
+        try:
+            cl.run_jobs = damage_one_tile_then_run
+            with pytest.raises(InputError) as caught:
+                run_ground_filter(survey, str(tmp_path / "x.laz"), SMRF(), options=options("local:1"),
+                                  dtm_path=str(tmp_path / "x.tif"), dtm=DTMOptions(cell_size_m=1.0))
+        finally:
+            cl.run_jobs = real_run_jobs
+        x0, y0, x1, y1 = damaged[0]["bounds"]
+        assert f"tile {x0:.0f},{y0:.0f} - {x1:.0f},{y1:.0f} of scene.laz" in str(caught.value)
+        assert "indices" in str(caught.value)
+        prefix = f"groundsieve-tile-{damaged[0]['key'][0]}_{damaged[0]['key'][1]}-"
+
+        def times_started(dask_scheduler):
+            return sum(1 for t in dask_scheduler.transition_log
+                       if str(t[0]).startswith(prefix) and t[2] == "processing")
+        assert c.client.run_on_scheduler(times_started) == 1
+    assert sorted(os.listdir(tmp_path)) == []

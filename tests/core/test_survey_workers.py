@@ -1,0 +1,113 @@
+"""A survey of several files: binning into tiles and writing the classified files run one file per
+job on the workers (processes or threads, engine/tiles.py ``_map_files``); the outputs are those of
+the serial path (one worker), byte for byte."""
+from __future__ import annotations
+
+import hashlib
+import os
+
+import laspy
+import numpy as np
+import pytest
+
+from groundsieve.core.engine.tiles import TileOptions
+from groundsieve.core.engine.workflow import DTMOptions, FilterOptions, run_ground_filter
+from groundsieve.core.errors import InputError
+from groundsieve.core.filters.smrf import SMRF
+from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+
+
+@pytest.fixture(scope="module")
+def survey(tmp_path_factory):
+    """A 120 m scene cut into 4 files of 60 x 60 m (tiles of 30 m with a 10 m buffer cross them)."""
+    root = tmp_path_factory.mktemp("survey")
+    whole = root / "whole.laz"
+    write_scene(make_scene(SceneSpec(size_m=120.0, density_per_m2=2.0, seed=5)), whole)
+    las = laspy.read(whole)
+    folder = root / "in"
+    folder.mkdir()
+    x0, y0 = las.header.mins[:2]
+    qx, qy = np.asarray(las.x) >= x0 + 60.0, np.asarray(las.y) >= y0 + 60.0
+    for name, sel in (("a", ~qx & ~qy), ("b", qx & ~qy), ("c", ~qx & qy), ("d", qx & qy)):
+        part = laspy.LasData(las.header)
+        part.points = las.points[sel]
+        part.write(folder / f"{name}.laz")
+    return str(folder)
+
+
+def _digest(folder):
+    h = hashlib.sha256()
+    for name in sorted(os.listdir(folder)):
+        path = os.path.join(folder, name)
+        h.update(name.encode())
+        h.update(np.asarray(laspy.read(path).classification).tobytes())
+    return h.hexdigest()
+
+
+def _run(survey, out, workers, parallel):
+    opts = FilterOptions(tiling=TileOptions(tile_size_m=30.0, buffer_m=10.0, workers=workers, parallel=parallel))
+    logs = []
+    run = run_ground_filter(survey, str(out / "classified.vpc"), SMRF(), options=opts,
+                            dtm_path=str(out / "dtm.tif"), dtm=DTMOptions(cell_size_m=1.0), log=logs.append)
+    from osgeo import gdal
+    ds = gdal.Open(str(out / "dtm.tif"))
+    return run, _digest(out / "classified"), ds.GetRasterBand(1).ReadAsArray().tobytes(), logs
+
+
+@pytest.mark.parametrize("parallel", ["processes", "threads"])
+def test_binning_and_writing_on_workers_give_the_serial_outputs(survey, tmp_path, parallel):
+    (tmp_path / "serial").mkdir()
+    (tmp_path / "par").mkdir()
+    ref, ref_cls, ref_dtm, _ = _run(survey, tmp_path / "serial", 1, parallel)
+    run, cls, dtm, logs = _run(survey, tmp_path / "par", 2, parallel)
+    assert ref.tiles == run.tiles >= 16 and ref.ground_count == run.ground_count > 0
+    assert cls == ref_cls and dtm == ref_dtm
+    assert any(line.startswith("Wrote 4 classified file(s)") for line in logs)
+    # every input point is classified once, in its own file, with the input's other fields kept
+    for name in "abcd":
+        a, b = laspy.read(os.path.join(survey, f"{name}.laz")), laspy.read(tmp_path / "par" / "classified" / f"{name}.laz")
+        assert len(a.points) == len(b.points) and np.array_equal(a.x, b.x) and np.array_equal(a.gps_time, b.gps_time)
+
+
+def test_a_damaged_file_fails_the_parallel_binning_with_its_name(survey, tmp_path):
+    import shutil
+    folder = tmp_path / "in"
+    shutil.copytree(survey, folder)
+    with open(folder / "c.laz", "r+b") as f:
+        f.seek(os.path.getsize(folder / "c.laz") // 2)
+        f.truncate()
+    opts = FilterOptions(tiling=TileOptions(tile_size_m=30.0, buffer_m=10.0, workers=2, parallel="processes"))
+    with pytest.raises(InputError, match=r"c\.laz: cannot read its points .*damaged or truncated"):
+        run_ground_filter(str(folder), str(tmp_path / "out.vpc"), SMRF(), options=opts)
+    assert not (tmp_path / "out.vpc").exists()
+
+
+def test_one_big_file_is_binned_in_pieces_on_the_workers_with_the_serial_outputs(survey, tmp_path, monkeypatch):
+    """A single input binned in 2 pieces of consecutive points (one per worker process; the second
+    piece starts by seeking in the LAZ) gives the serial run's classes and DTM."""
+    from groundsieve.core.engine import tiles
+    whole = os.path.join(os.path.dirname(survey), "whole.laz")
+
+    def run(out, workers):
+        out.mkdir()
+        opts = FilterOptions(tiling=TileOptions(tile_size_m=30.0, buffer_m=10.0, workers=workers,
+                                                parallel="processes"))
+        done = run_ground_filter(whole, str(out / "c.laz"), SMRF(), options=opts,
+                                 dtm_path=str(out / "dtm.tif"), dtm=DTMOptions(cell_size_m=1.0))
+        from osgeo import gdal
+        ds = gdal.Open(str(out / "dtm.tif"))  # kept: its band dies with it
+        return (done.ground_count, np.asarray(laspy.read(out / "c.laz").classification).tobytes(),
+                ds.GetRasterBand(1).ReadAsArray().tobytes())
+    ref = run(tmp_path / "serial", 1)
+    monkeypatch.setattr(tiles, "BIN_PIECE_POINTS", 5000)
+    bin_jobs = []
+    real_map = tiles._map_files
+
+    def spy(function, jobs, *args, **kw):
+        if function is tiles._bin_job:
+            bin_jobs.extend(jobs)
+        return real_map(function, jobs, *args, **kw)
+    monkeypatch.setattr(tiles, "_map_files", spy)
+    got = run(tmp_path / "pieces", 2)
+    assert [j.get("piece") for j in bin_jobs] == [0, 1] and bin_jobs[1]["first"] > 0
+    assert got == ref
