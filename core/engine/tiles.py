@@ -284,8 +284,8 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
         run = _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling,
                    steps, log, workflow, cluster=cluster, rasters=rasters)
     except BaseException:
-        for writer in rasters:
-            _release_raster(writer)
+        for writer in rasters:  # closed at once, not by the garbage collector (GDAL may crash then)
+            writer.close()
         # Kept for a restart when the user chose the working folder; removed otherwise.
         if not tiling.work_dir:
             shutil.rmtree(work, ignore_errors=True)
@@ -297,14 +297,6 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
             cluster.close()
     shutil.rmtree(work, ignore_errors=True)
     return run
-
-
-def _release_raster(writer) -> None:
-    """Close a ``BlockGeoTIFF`` left open by a failed run, band before dataset: left to the garbage
-    collector (a traceback keeps it alive), GDAL may free them in the wrong order and crash."""
-    with writer._lock:
-        writer._band = None
-        writer._ds = None
 
 
 def _fingerprint(infos, grid, algorithm, options, dtm) -> str:
@@ -489,7 +481,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                writable=sorted({os.path.dirname(os.path.abspath(o)) for o in outs if o}), cluster=cluster)
     log(f"Wrote {len(written)} classified file(s) in {time.perf_counter() - t_write:.1f} s.")
     if output_path and _ext(output_path) == VPC_EXTENSION:
-        write_vpc(output_path, [scan_header(o) for o in outs], outs)
+        from ..raster.crs import lonlat_box
+        write_vpc(output_path, [scan_header(o) for o in outs], outs, lonlat=lonlat_box)
     if dtm_writer is not None:
         dtm_writer.finish(dtm_path)
     steps.report(1.0)

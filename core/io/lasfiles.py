@@ -137,9 +137,13 @@ def check_survey(infos: Sequence[LasInfo]) -> None:
         raise InputError(f"the input files have different CRS ({listing}); reproject them to one first")
 
 
-def write_vpc(path: str, infos: Sequence[LasInfo], files: Sequence[str]) -> None:
+def write_vpc(path: str, infos: Sequence[LasInfo], files: Sequence[str], *, lonlat=None) -> None:
     """Write a virtual point cloud (STAC ItemCollection as QGIS's "Build virtual point cloud"
-    writes it) referencing ``files`` (relative to the .vpc when below its folder), atomically."""
+    writes it) referencing ``files`` (relative to the .vpc when below its folder), atomically.
+    GeoJSON's ``bbox`` and ``geometry`` are in WGS 84: ``lonlat(x0, y0, x1, y1, crs_wkt)`` gives a
+    file's box in longitude/latitude (core/raster/crs.py lonlat_box; the io layer has no PROJ);
+    the native box is in ``proj:bbox``, which QGIS reads first. Without it, or without a CRS, the
+    native box stands in (QGIS's vpc provider then reads an infinite extent)."""
     folder = os.path.dirname(os.path.abspath(path))
     features = []
     for info, file in zip(infos, files):
@@ -150,16 +154,16 @@ def write_vpc(path: str, infos: Sequence[LasInfo], files: Sequence[str]) -> None
                  "pc:encoding": "?", "pc:schemas": [], "proj:bbox": [x0, y0, z0, x1, y1, z1]}
         if info.crs_wkt:
             props["proj:wkt2"] = info.crs_wkt
-        ring = [[x0, y0, z0], [x1, y0, z0], [x1, y1, z0], [x0, y1, z0], [x0, y0, z0]]
+        box = lonlat(x0, y0, x1, y1, info.crs_wkt) if lonlat is not None else None
+        g0, h0, g1, h1 = box if box is not None else (x0, y0, x1, y1)
+        ring = [[g0, h0, z0], [g1, h0, z0], [g1, h1, z0], [g0, h1, z0], [g0, h0, z0]]
         features.append({
             "type": "Feature", "stac_version": "1.0.0",
             "stac_extensions": ["https://stac-extensions.github.io/pointcloud/v1.0.0/schema.json",
                                 "https://stac-extensions.github.io/projection/v1.1.0/schema.json"],
             "id": os.path.splitext(os.path.basename(file))[0],
-            # GeoJSON wants WGS 84 here; without PROJ in the core the native box is given in proj:bbox
-            # (which QGIS reads first) and the geometry repeats it.
             "geometry": {"type": "Polygon", "coordinates": [ring]},
-            "bbox": [x0, y0, z0, x1, y1, z1], "properties": props, "links": [],
+            "bbox": [g0, h0, z0, g1, h1, z1], "properties": props, "links": [],
             "assets": {"data": {"href": href, "roles": ["data"]}}})
     doc = {"type": "FeatureCollection", "features": features}
     try:

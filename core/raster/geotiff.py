@@ -82,14 +82,20 @@ class BlockGeoTIFF:
         with self._lock:
             self._band.WriteArray(data, xoff=int(col0), yoff=int(row0))
 
+    def close(self) -> None:
+        """Close the work raster, band before dataset (left to the garbage collector, e.g. kept
+        alive by a traceback, GDAL may free them in the wrong order and crash). Idempotent."""
+        with self._lock:
+            if self._band is not None:
+                self._band.FlushCache()
+            self._band = None
+            self._ds = None
+
     def finish(self, path: str) -> None:
         """Close the work raster and write the COG to ``path`` (atomically)."""
         from osgeo import gdal
         path = check_raster_path(path)
-        with self._lock:
-            self._band.FlushCache()
-            self._band = None
-            self._ds = None
+        self.close()
         try:
             with atomic_path(path) as tmp:
                 gdal.Translate(tmp, self.work_path, format="COG",

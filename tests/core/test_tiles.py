@@ -184,6 +184,10 @@ def test_folder_and_vpc_inputs_make_one_seamless_survey(scene_laz, tmp_path):
         got = np.concatenate([by_name["west.laz"], by_name["east.laz"]])
         assert agreement(got, whole) >= 0.999
         assert run.point_count == len(whole)
+        for feature in json.load(open(out, encoding="utf-8"))["features"]:  # GeoJSON's box in WGS 84
+            lon0, lat0, _z0, lon1, lat1, _z1 = feature["bbox"]
+            assert -180 <= lon0 < lon1 <= 180 and -90 <= lat0 < lat1 <= 90
+            assert feature["properties"]["proj:bbox"][0] > 1000  # the native box beside it
 
 
 def test_a_stray_point_far_away_makes_a_tiny_tile(scene_laz, tmp_path):

@@ -184,21 +184,23 @@ def test_no_input_at_all_is_refused_by_its_label(groundsieve_provider, tmp_path)
     assert "Input point cloud" in str(err.value) and "or a loaded point-cloud layer" in str(err.value)
 
 
-@pytest.mark.xfail(strict=True, reason="core/io/lasfiles.py write_vpc puts the cloud's own coordinates in the "
-                   "STAC 'bbox' and 'geometry', which QGIS's vpc provider reads as WGS 84 (lon/lat): the layer's "
-                   "extent is inf; with bbox/geometry in EPSG:4326 (proj:bbox native, as PDAL wrench writes) it is "
-                   "the survey's. Owned by engineer scale; remove this xfail when fixed.")
 def test_loaded_vpc_has_the_survey_extent(groundsieve_provider, scene_laz, tmp_path):
     import math
     from qgis.core import QgsPointCloudLayer
     from groundsieve.algorithms import pointclouds
     from groundsieve.core.io.lasfiles import scan_header, write_vpc
+    from groundsieve.core.raster.crs import lonlat_box
     from .test_survey_inputs import _split
     if not pointclouds.providers_opening("x.vpc"):
         pytest.skip("this QGIS has no point-cloud provider for .vpc (QGIS < 3.32)")
     src, _scene = scene_laz
     files = _split(src, tmp_path / "in")
     vpc = tmp_path / "in" / "survey.vpc"
-    write_vpc(str(vpc), [scan_header(f) for f in files], files)
+    write_vpc(str(vpc), [scan_header(f) for f in files], files, lonlat=lonlat_box)  # as the engine writes it
     extent = QgsPointCloudLayer(str(vpc), "survey", "vpc").extent()
     assert math.isfinite(extent.xMinimum()) and math.isfinite(extent.yMaximum())
+    infos = [scan_header(f) for f in files]
+    native = (min(i.mins[0] for i in infos), min(i.mins[1] for i in infos),
+              max(i.maxs[0] for i in infos), max(i.maxs[1] for i in infos))
+    got = (extent.xMinimum(), extent.yMinimum(), extent.xMaximum(), extent.yMaximum())
+    assert all(abs(a - b) < 1.0 for a, b in zip(got, native)), (got, native)

@@ -1,0 +1,27 @@
+"""Coordinates in WGS 84 (longitude, latitude), where a format asks for them (GeoJSON/STAC)."""
+from __future__ import annotations
+
+from typing import Optional, Tuple
+
+
+def lonlat_box(x0: float, y0: float, x1: float, y1: float, crs_wkt: Optional[str]) -> Optional[Tuple[float, ...]]:
+    """The box (lon0, lat0, lon1, lat1) in WGS 84 covering the box (x0, y0, x1, y1) in ``crs_wkt``
+    (its corners and edge midpoints transformed); None without a CRS or where PROJ cannot do it."""
+    if not crs_wkt:
+        return None
+    from osgeo import osr
+    source, target = osr.SpatialReference(), osr.SpatialReference()
+    try:
+        if source.ImportFromWkt(crs_wkt) != 0:
+            return None
+        target.ImportFromEPSG(4326)
+        for ref in (source, target):
+            ref.SetAxisMappingStrategy(osr.OAMS_TRADITIONAL_GIS_ORDER)  # x = longitude, as GeoJSON
+        transform = osr.CoordinateTransformation(source, target)
+        xm, ym = (x0 + x1) / 2, (y0 + y1) / 2
+        points = [(x, y) for x in (x0, xm, x1) for y in (y0, ym, y1)]
+        lonlat = [transform.TransformPoint(float(x), float(y))[:2] for x, y in points]
+    except RuntimeError:
+        return None
+    lons, lats = [p[0] for p in lonlat], [p[1] for p in lonlat]
+    return min(lons), min(lats), max(lons), max(lats)
