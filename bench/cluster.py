@@ -116,7 +116,10 @@ def main():
     ap.add_argument("--filter", default="smrf")
     ap.add_argument("--blocks", action="store_true", help="one generated scene block per file (streamed)")
     ap.add_argument("--dir", default=None, help="working folder (default: a temporary one)")
+    ap.add_argument("--runs", default="serial,dask1,dask2,local2",
+                    help="which runs, comma-separated, of serial, dask1, dask2, local2 (default: all)")
     args = ap.parse_args()
+    wanted = args.runs.split(",")
     from groundsieve.core.engine import parameters
     algorithm = parameters.filter_class(args.filter)()
     base = tempfile.mkdtemp(prefix="gs-cluster-", dir=args.dir)
@@ -124,24 +127,30 @@ def main():
         t0 = time.perf_counter()
         survey, points, files = (make_blocks if args.blocks else make_survey)(base, args.millions, args.files)
         print(f"survey: {points:,} points in {files} files ({time.perf_counter() - t0:.0f} s to make)", flush=True)
-        rows = []
-        for label, scheduler, workers in (("in process, 1 tile at a time", "", 1),
-                                          ("Dask LocalCluster, 1 worker", "local:1", 1),
-                                          ("Dask LocalCluster, 2 workers", "local:2", 2),
-                                          ("local processes, 2 workers (no Dask)", "", 2)):
-            out = os.path.join(base, f"out{len(rows)}")
+        rows = {}
+        for key, label, scheduler, workers in (("serial", "in process, 1 tile at a time", "", 1),
+                                               ("dask1", "Dask LocalCluster, 1 worker", "local:1", 1),
+                                               ("dask2", "Dask LocalCluster, 2 workers", "local:2", 2),
+                                               ("local2", "local processes, 2 workers (no Dask)", "", 2)):
+            if key not in wanted:
+                continue
+            out = os.path.join(base, f"out-{key}")
             os.makedirs(out)
+            t_load = os.getloadavg()[0]
             done, wall, filtered = run(survey, out, scheduler, workers, args.tile, algorithm)
-            rows.append((label, done.tiles, wall, filtered, digest(out)))
-            print(f"{label:40s} tiles {done.tiles:4d}  tile phase {filtered:7.1f} s  whole run {wall:7.1f} s",
-                  flush=True)
-        tiles = rows[0][1]
-        print(f"identical outputs: {len({r[4] for r in rows}) == 1}")
-        print(f"scheduler cost per tile: ({rows[1][3]:.1f} - {rows[0][3]:.1f}) s / {tiles} = "
-              f"{(rows[1][3] - rows[0][3]) / tiles * 1000:.0f} ms")
-        print(f"scaling efficiency 1 -> 2 Dask workers: ({rows[1][3]:.1f} / {rows[2][3]:.1f}) / 2 = "
-              f"{rows[1][3] / rows[2][3] / 2:.2f}")
-        print(f"per tile, 1 worker: {rows[1][3] / tiles:.2f} s ({points / tiles:,.0f} points a tile)")
+            rows[key] = (label, done.tiles, wall, filtered, digest(out))
+            print(f"{label:40s} tiles {done.tiles:4d}  tile phase {filtered:7.1f} s  whole run {wall:7.1f} s  "
+                  f"(load before {t_load:.1f}, after {os.getloadavg()[0]:.1f})", flush=True)
+        print(f"identical outputs: {len({r[4] for r in rows.values()}) == 1}")
+        if "serial" in rows and "dask1" in rows:
+            tiles = rows["serial"][1]
+            print(f"scheduler cost per tile: ({rows['dask1'][3]:.1f} - {rows['serial'][3]:.1f}) s / {tiles} = "
+                  f"{(rows['dask1'][3] - rows['serial'][3]) / tiles * 1000:.0f} ms")
+        if "dask1" in rows and "dask2" in rows:
+            one, two = rows["dask1"], rows["dask2"]
+            print(f"scaling efficiency 1 -> 2 Dask workers, tile phase: ({one[3]:.1f} / {two[3]:.1f}) / 2 = "
+                  f"{one[3] / two[3] / 2:.2f}; whole run: ({one[2]:.1f} / {two[2]:.1f}) / 2 = {one[2] / two[2] / 2:.2f}")
+            print(f"per tile, 1 worker: {one[3] / one[1]:.2f} s ({points / one[1]:,.0f} points a tile)")
     finally:
         shutil.rmtree(base, ignore_errors=True)
 
