@@ -440,16 +440,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             steps.check()
             record(_tile_job(job))
     else:
-        if use_processes:
-            import multiprocessing
-            ctx = multiprocessing.get_context("spawn")
-            exe = _python_executable()
-            if exe:
-                ctx.set_executable(exe)
-            pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
-        else:
-            pool = ThreadPoolExecutor(max_workers=workers)
-        with pool:
+        with _worker_pool(workers, use_processes) as pool:
             futures = [pool.submit(_tile_job, job) for job in jobs]
             try:
                 for fut in as_completed(futures):
@@ -507,6 +498,19 @@ def _write_job(job) -> dict:
     return dict(out=job["out"])
 
 
+def _worker_pool(workers: int, use_processes: bool):
+    """The pool the tiles and the per-file jobs run on: spawned worker processes (with this QGIS's
+    Python when it is not sys.executable) or threads."""
+    if not use_processes:
+        return ThreadPoolExecutor(max_workers=workers)
+    import multiprocessing
+    ctx = multiprocessing.get_context("spawn")
+    exe = _python_executable()
+    if exe:
+        ctx.set_executable(exe)
+    return ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+
+
 def _map_files(function, jobs, record, tiling, steps, log, *, paths, writable, cluster=None) -> None:
     """Run one job per input file (binning, writing) on the run's workers: the Dask cluster, worker
     processes or threads as for the tiles, ``record``-ing each result in the client as it comes."""
@@ -527,16 +531,7 @@ def _map_files(function, jobs, record, tiling, steps, log, *, paths, writable, c
             steps.check()
             record(function(job))
         return
-    if mode == "processes":
-        import multiprocessing
-        ctx = multiprocessing.get_context("spawn")
-        exe = _python_executable()
-        if exe:
-            ctx.set_executable(exe)
-        pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
-    else:
-        pool = ThreadPoolExecutor(max_workers=workers)
-    with pool:
+    with _worker_pool(workers, mode == "processes") as pool:
         futures = [pool.submit(function, job) for job in jobs]
         try:
             for fut in as_completed(futures):
