@@ -42,12 +42,8 @@ def _ticks(lo: float, hi: float, n: int = 5) -> List[float]:
     return out
 
 
-def scatter_svg(points: Sequence[Tuple[float, float, str]], xlabel: str, ylabel: str,
-                categories: Sequence[str] = ()) -> str:
-    """An SVG scatter plot; points (x, y, css class: "", "best" or "start"); with ``categories``
-    x is the category's index."""
-    xs = [p[0] for p in points]
-    ys = [p[1] for p in points]
+def _frame(xs, ys, categories: Sequence[str] = ()):
+    """The plot's data ranges (padded) and its plot area in pixels: x0, x1, y0, y1, width, height."""
     if categories:
         x0, x1 = -0.5, len(categories) - 0.5
     else:
@@ -60,8 +56,16 @@ def scatter_svg(points: Sequence[Tuple[float, float, str]], xlabel: str, ylabel:
     if y1 == y0:
         y0, y1 = y0 - 0.5, y1 + 0.5
     pad = 0.05 * (y1 - y0)
-    y0, y1 = y0 - pad, y1 + pad
-    pw, ph = W - PAD_L - PAD_R, H - PAD_T - PAD_B
+    return x0, x1, y0 - pad, y1 + pad, W - PAD_L - PAD_R, H - PAD_T - PAD_B
+
+
+def scatter_svg(points: Sequence[Tuple[float, float, str]], xlabel: str, ylabel: str,
+                categories: Sequence[str] = ()) -> str:
+    """An SVG scatter plot; points (x, y, css class: "", "best" or "start"); with ``categories``
+    x is the category's index."""
+    xs = [p[0] for p in points]
+    ys = [p[1] for p in points]
+    x0, x1, y0, y1, pw, ph = _frame(xs, ys, categories)
 
     def px(x):
         return PAD_L + (x - x0) / (x1 - x0) * pw
@@ -99,19 +103,9 @@ def scatter_svg(points: Sequence[Tuple[float, float, str]], xlabel: str, ylabel:
 def line_svg(ys: Sequence[float], running: Sequence[float], xlabel: str, ylabel: str) -> str:
     """Score per set (dots) and the best so far (line)."""
     svg = scatter_svg([(i + 1, y, "") for i, y in enumerate(ys)], xlabel, ylabel)
-    # the running best as a polyline in the same frame: recompute the frame as scatter_svg does
+    # the running best as a polyline in the same frame as the dots
     xs = list(range(1, len(ys) + 1))
-    x0, x1 = min(xs), max(xs)
-    if x1 == x0:
-        x0, x1 = x0 - 1, x1 + 1
-    pad = 0.03 * (x1 - x0)
-    x0, x1 = x0 - pad, x1 + pad
-    y0, y1 = min(ys), max(ys)
-    if y1 == y0:
-        y0, y1 = y0 - 0.5, y1 + 0.5
-    pad = 0.05 * (y1 - y0)
-    y0, y1 = y0 - pad, y1 + pad
-    pw, ph = W - PAD_L - PAD_R, H - PAD_T - PAD_B
+    x0, x1, y0, y1, pw, ph = _frame(xs, ys)
     pts = " ".join(f"{PAD_L + (x - x0) / (x1 - x0) * pw:.1f},{PAD_T + (1 - (y - y0) / (y1 - y0)) * ph:.1f}"
                    for x, y in zip(xs, running))
     return svg.replace("</svg>", f'<polyline points="{pts}" fill="none" stroke="#d62728" stroke-width="1.5"/></svg>')
