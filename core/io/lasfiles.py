@@ -292,20 +292,9 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
                 targets_k, targets_p, targets_own = [], [], []
                 local = np.arange(n, dtype=np.int64)
                 for dx in range(-m, m + 1):
-                    # distance from the point to the tile kx+dx along x (0 inside it)
-                    if dx < 0:
-                        inx = fx + (-dx - 1) * grid.size < grid.buffer
-                    elif dx > 0:
-                        inx = (grid.size - fx) + (dx - 1) * grid.size <= grid.buffer
-                    else:
-                        inx = np.ones(n, dtype=bool)
+                    inx = _in_buffer(fx, dx, grid)
                     for dy in range(-m, m + 1):
-                        if dy < 0:
-                            iny = fy + (-dy - 1) * grid.size < grid.buffer
-                        elif dy > 0:
-                            iny = (grid.size - fy) + (dy - 1) * grid.size <= grid.buffer
-                        else:
-                            iny = np.ones(n, dtype=bool)
+                        iny = _in_buffer(fy, dy, grid)
                         sel = local[inx & iny]
                         if sel.size == 0:
                             continue
@@ -350,6 +339,16 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
         for f in index_files.values():
             f.close()
     return parts
+
+
+def _in_buffer(f: np.ndarray, d: int, grid: TileGrid) -> np.ndarray:
+    """Whether points at ``f`` (their position inside their own tile, [0, size), along x or y) lie
+    within the buffer of the tile ``d`` tiles away along that axis (all of them for d = 0)."""
+    if d < 0:
+        return f + (-d - 1) * grid.size < grid.buffer
+    if d > 0:
+        return (grid.size - f) + (d - 1) * grid.size <= grid.buffer
+    return np.ones(f.shape[0], dtype=bool)
 
 
 def _split_key(k: int) -> tuple:
