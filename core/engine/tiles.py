@@ -387,6 +387,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     filter_steps = steps.sub(0.3, 0.85)
     t_tiles = time.perf_counter()
     class_paths = [os.path.join(work, f"f{k:05d}.cls.npy") for k in range(len(infos))]
+    class_parts: List[list] = [[] for _ in infos]  # on a cluster: each tile's classes, per file
     # the jobs open the memmaps themselves (in threads or in worker processes)
     workers = max(1, min(tiling.worker_count, len(keys)))
     mode = tiling.parallel if tiling.parallel != "auto" else _auto_parallel()
@@ -409,8 +410,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         if result is None:
             return
         steps.check()
-        if result.get("classes_file"):  # a cluster worker's tile: the client applies its classes
-            _apply_classes(result["classes_file"], class_paths)
+        for k, part in (result.get("class_parts") or {}).items():  # a cluster tile: its write job applies it
+            class_parts[int(k)].append(part)
         for k, count in result["assigned"].items():
             assigned[int(k)] += count
         if result["block"] is not None:
@@ -467,6 +468,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         write_steps.report(len(written) / (len(infos) + 1))
     # one job per input file, on the workers: each streams its file into its classified copy
     _map_files(_write_job, [dict(key=("write", k), path=info.path, out=out, class_path=class_paths[k],
+                                 class_parts=sorted(class_parts[k]),
                                  count=info.count) for k, (info, out) in enumerate(zip(infos, outs)) if out],
                record_write, tiling, steps, log, paths=[info.path for info in infos] + [work],
                writable=sorted({os.path.dirname(os.path.abspath(o)) for o in outs if o}), cluster=cluster)
@@ -492,9 +494,16 @@ def _bin_job(job) -> dict:
 
 
 def _write_job(job) -> dict:
-    """Stream one input file into its classified copy, with the classes the tiles wrote (atomic)."""
-    classes = np.load(job["class_path"], mmap_mode="r")
-    write_classified_stream(job["path"], job["out"], classes[:job["count"]], check=job.get("check"))
+    """Stream one input file into its classified copy, with the classes the tiles wrote (atomic):
+    in the per-file memmap, or on a cluster in one part per tile that held points of the file,
+    applied here on the worker (so that the client never handles points)."""
+    classes = np.load(job["class_path"], mmap_mode="r")[:job["count"]]
+    if job.get("class_parts"):  # (a resumed run may have tiles of both kinds)
+        classes = np.array(classes)
+        for part in job["class_parts"]:
+            with np.load(part) as saved:
+                classes[saved["index"]] = saved["cls"]
+    write_classified_stream(job["path"], job["out"], classes, check=job.get("check"))
     return dict(out=job["out"])
 
 
@@ -573,12 +582,15 @@ def _tile_job(job) -> Optional[dict]:
             cls, ground = done.classification, done.ground
         else:  # nothing to filter here (all noise): the points keep their classes
             cls, ground = cloud.classification, np.zeros(len(cloud), dtype=bool)
-        assigned, classes_file = {}, None
-        if job.get("own_classes"):  # on a cluster: only this tile's own file; the client applies it
-            classes_file = _done_name(job["done_dir"], job["key"]) + ".cls.npz"
-            _save_classes(classes_file, file_of[own], index[own], cls[own])
-            assigned = {int(k): int(c) for k, c in zip(*np.unique(file_of[own], return_counts=True))}
-        for k in ([] if classes_file else np.unique(file_of[own])):
+        assigned, class_parts = {}, None
+        if job.get("own_classes"):  # on a cluster: this tile's own files, one per input file
+            class_parts = {}
+            for k in np.unique(file_of[own]):
+                sel = own & (file_of == k)
+                class_parts[int(k)] = _done_name(job["done_dir"], job["key"]) + f".f{int(k):05d}.cls.npz"
+                _save_classes(class_parts[int(k)], index[sel], cls[sel])
+                assigned[int(k)] = int(sel.sum())
+        for k in ([] if class_parts is not None else np.unique(file_of[own])):
             sel = own & (file_of == k)
             classes = np.load(job["class_paths"][k], mmap_mode="r+")
             classes[index[sel]] = cls[sel]
@@ -589,7 +601,7 @@ def _tile_job(job) -> Optional[dict]:
         if job["dtm"] is not None:
             block = _dtm_block(cloud, ground, job["dtm"], job["dtm_grid"], job["bounds"], job["buffer"])
         result = dict(key=list(job["key"]), own=int(own.sum()), read=len(cloud), ground=int(ground[own].sum()),
-                      assigned=assigned, block=block, classes_file=classes_file)
+                      assigned=assigned, block=block, class_parts=class_parts)
         _save_done(job["done_dir"], result)
         return result
     except Cancelled:
@@ -605,24 +617,13 @@ def job_name(bounds, names) -> str:
     return f"tile {x0:.0f},{y0:.0f} - {x1:.0f},{y1:.0f} of {', '.join(names)}"
 
 
-def _save_classes(path, file_of, index, cls) -> None:
-    """A tile's own points' classes (file, index in the file, class), written atomically: a worker
-    killed mid-write leaves no file, and a retried tile writes the same bytes."""
+def _save_classes(path, index, cls) -> None:
+    """A tile's own points' classes in one input file (index in the file, class), written
+    atomically: a worker killed mid-write leaves no file, and a retried tile writes the same bytes."""
     tmp = f"{path}.{os.getpid()}.part"
     with open(tmp, "wb") as f:
-        np.savez(f, file_index=file_of.astype(np.int32), index=index.astype(np.int64), cls=cls.astype(np.uint8))
+        np.savez(f, index=index.astype(np.int64), cls=cls.astype(np.uint8))
     os.replace(tmp, path)
-
-
-def _apply_classes(path, class_paths) -> None:
-    with np.load(path) as saved:
-        file_of, index, cls = saved["file_index"], saved["index"], saved["cls"]
-    for k in np.unique(file_of):
-        sel = file_of == k
-        classes = np.load(class_paths[k], mmap_mode="r+")
-        classes[index[sel]] = cls[sel]
-        classes.flush()
-        del classes
 
 
 def _done_name(done_dir, key) -> str:
