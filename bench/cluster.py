@@ -9,8 +9,9 @@ with ``--blocks``, each file is its own generated scene block of N/files million
 (streamed: no whole survey in memory, for 100 M points and more);
 then SMRF with a 1 m DTM runs over the folder four ways: in this process one tile after the other
 (no Dask: the reference), on a LocalCluster of 1 worker process, of 2 worker processes, and with
-local worker processes (no Dask, 2 workers). From the "Filtered N tile(s) in X s" log line (the
-tile phase alone; binning and writing run on the client either way):
+local worker processes (no Dask, 2 workers). From the engine's log lines: the tile phase alone
+("Filtered N tile(s) in X s"), the binning and writing phases (one job per file, on the workers);
+and this process's CPU time (the client, with a LocalCluster's scheduler, which runs in it):
 
 * scheduler cost per tile = (Dask 1 worker - in process) / tiles;
 * scaling efficiency = (Dask 1 worker / Dask 2 workers) / 2.
@@ -80,18 +81,23 @@ def make_blocks(folder, millions, files):
 def run(survey, out, scheduler, workers, tile, algorithm):
     from groundsieve.core.engine.tiles import TileOptions
     from groundsieve.core.engine.workflow import DTMOptions, FilterOptions, run_ground_filter
+    import resource
     lines = []
     t0 = time.perf_counter()
+    cpu0 = resource.getrusage(resource.RUSAGE_SELF)
     done = run_ground_filter(survey, os.path.join(out, "c.vpc"), algorithm,
                              options=FilterOptions(tiling=TileOptions(tile_size_m=tile, workers=workers,
                                                                       parallel="processes", scheduler=scheduler)),
                              dtm_path=os.path.join(out, "dtm.tif"), dtm=DTMOptions(cell_size_m=1.0), log=lines.append)
     wall = time.perf_counter() - t0
+    cpu1 = resource.getrusage(resource.RUSAGE_SELF)
+    client_cpu = (cpu1.ru_utime - cpu0.ru_utime) + (cpu1.ru_stime - cpu0.ru_stime)
     def phase(pattern):
         return next((float(m.group(1)) for line in lines for m in [re.match(pattern, line)] if m), float("nan"))
     filtered = phase(r"Filtered \d+ tile\(s\) in ([\d.]+) s")
     binned, wrote = phase(r"Binned into .* in ([\d.]+) s"), phase(r"Wrote .* in ([\d.]+) s")
-    print(f"    binning {binned:.1f} s, writing {wrote:.1f} s, load {os.getloadavg()[0]:.1f}", flush=True)
+    print(f"    binning {binned:.1f} s, writing {wrote:.1f} s, this process's CPU {client_cpu:.1f} s "
+          f"(the client, and on a LocalCluster its scheduler), load {os.getloadavg()[0]:.1f}", flush=True)
     return done, wall, filtered
 
 

@@ -187,9 +187,17 @@ class Cluster:
         self.local = None
         try:
             if kind == "local":
+                import dask
+
+                from .tiles import worker_thread_environ
                 _set_spawn_executable()
-                self.local = distributed.LocalCluster(n_workers=value, threads_per_worker=1, processes=True,
-                                                      dashboard_address=None, silence_logs=40)
+                # One thread per worker, as Dask itself does for OpenMP/MKL (its nanny sets
+                # OMP_NUM_THREADS=1): numba's and lazrs's thread pools too.
+                environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}),
+                               **worker_thread_environ(1))
+                with dask.config.set({"distributed.nanny.pre-spawn-environ": environ}):
+                    self.local = distributed.LocalCluster(n_workers=value, threads_per_worker=1, processes=True,
+                                                          dashboard_address=None, silence_logs=40)
                 self.client = distributed.Client(self.local, timeout=f"{CONNECT_TIMEOUT_S}s")
                 log(f"Started a local Dask cluster of {value} worker process(es).")
             else:

@@ -286,17 +286,32 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     except BaseException:
         for writer in rasters:  # closed at once, not by the garbage collector (GDAL may crash then)
             writer.close()
+        if cluster is not None:  # first: a LocalCluster's workers still running a tile stop writing
+            cluster.close()
+            cluster = None
         # Kept for a restart when the user chose the working folder; removed otherwise.
         if not tiling.work_dir:
-            shutil.rmtree(work, ignore_errors=True)
+            _remove_tree(work)
         else:
             log(f"The tiles done so far are kept in {work}: run again to resume, or delete it.")
         raise
     finally:
         if cluster is not None:
             cluster.close()
-    shutil.rmtree(work, ignore_errors=True)
+    _remove_tree(work)
     return run
+
+
+def _remove_tree(path: str, patience_s: float = 3.0) -> None:
+    """Remove the working folder, again while a worker (of a remote cluster, whose tasks a cancel
+    does not stop) is still writing a tile's last files into it; a worker that writes after the
+    folder is gone fails on the missing folder, which nothing recreates."""
+    deadline = time.monotonic() + patience_s
+    while True:
+        shutil.rmtree(path, ignore_errors=True)
+        if not os.path.exists(path) or time.monotonic() > deadline:
+            return
+        time.sleep(0.1)
 
 
 def _fingerprint(infos, grid, algorithm, options, dtm) -> str:
@@ -507,9 +522,21 @@ def _write_job(job) -> dict:
     return dict(out=job["out"])
 
 
+def worker_thread_environ(threads: int) -> Dict[str, str]:
+    """The environment that holds a worker process to ``threads`` threads of its own: numba's
+    parallel kernels (NUMBA_NUM_THREADS) and lazrs's LAZ (de)compression (RAYON_NUM_THREADS; laspy
+    uses lazrs's parallel backend when it can). Without it every worker would start one thread per
+    core of the machine, and N workers on N cores would run N x N threads."""
+    return {"NUMBA_NUM_THREADS": str(max(1, threads)), "RAYON_NUM_THREADS": str(max(1, threads))}
+
+
+def _init_worker(environ: Dict[str, str]) -> None:
+    os.environ.update(environ)  # before the job imports numba or starts lazrs's thread pool
+
+
 def _worker_pool(workers: int, use_processes: bool):
     """The pool the tiles and the per-file jobs run on: spawned worker processes (with this QGIS's
-    Python when it is not sys.executable) or threads."""
+    Python when it is not sys.executable), each with its share of the cores, or threads."""
     if not use_processes:
         return ThreadPoolExecutor(max_workers=workers)
     import multiprocessing
@@ -517,7 +544,9 @@ def _worker_pool(workers: int, use_processes: bool):
     exe = _python_executable()
     if exe:
         ctx.set_executable(exe)
-    return ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+    share = max(1, (os.cpu_count() or 1) // workers)
+    return ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
+                               initargs=(worker_thread_environ(share),))
 
 
 def _map_files(function, jobs, record, tiling, steps, log, *, paths, writable, cluster=None) -> None:

@@ -207,3 +207,19 @@ def test_a_deliberate_error_in_a_tile_fails_at_once_without_retry(survey, tmp_pa
                        if str(t[0]).startswith(prefix) and t[2] == "processing")
         assert c.client.run_on_scheduler(times_started) == 1
     assert sorted(os.listdir(tmp_path)) == []
+
+
+def _thread_limits():
+    import numba
+    return os.environ.get("RAYON_NUM_THREADS"), numba.get_num_threads()
+
+
+@needs_dask
+def test_local_cluster_workers_run_one_thread_each():
+    """A worker of a LocalCluster is one core (threads_per_worker=1): numba's parallel kernels and
+    lazrs's LAZ threads must not start one thread per core of the machine in every worker."""
+    from groundsieve.core.engine.cluster import Cluster
+    with Cluster("local:2") as cluster:
+        limits = cluster.client.run(_thread_limits)
+    assert len(limits) == 2
+    assert set(limits.values()) == {("1", 1)}

@@ -111,3 +111,17 @@ def test_one_big_file_is_binned_in_pieces_on_the_workers_with_the_serial_outputs
     got = run(tmp_path / "pieces", 2)
     assert [j.get("piece") for j in bin_jobs] == [0, 1] and bin_jobs[1]["first"] > 0
     assert got == ref
+
+
+def _thread_limits(_job=None):
+    import numba
+    return os.environ.get("RAYON_NUM_THREADS"), numba.get_num_threads()
+
+
+def test_worker_processes_share_the_cores():
+    """Each of N spawned worker processes gets cores // N threads for numba and lazrs."""
+    from groundsieve.core.engine.tiles import _worker_pool
+    share = max(1, (os.cpu_count() or 1) // 2)
+    with _worker_pool(2, True) as pool:
+        limits = [f.result() for f in [pool.submit(_thread_limits) for _ in range(4)]]
+    assert set(limits) == {(str(share), share)}
