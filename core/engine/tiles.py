@@ -729,7 +729,9 @@ def _dtm_block(cloud, ground, dtm, full, bounds, buffer_m):
     row1 = min(full.nrows, int(round((full.top - y0) / c)))
     if col1 <= col0 or row1 <= row0 or not ground.any():
         return None
-    pad = int(math.ceil(buffer_m / c))
+    # one cell more than the buffer: a point on the buffer's outer edge still falls in the grid (the
+    # thinning's one-pass kernel needs every point inside; same points kept, same surface)
+    pad = int(math.ceil(buffer_m / c)) + 1
     ext = GridSpec(full.x0 + (col0 - pad) * c, full.top - (row0 - pad) * c, c,
                    row1 - row0 + 2 * pad, col1 - col0 + 2 * pad)
     g = ground
