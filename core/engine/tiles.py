@@ -58,6 +58,12 @@ BIN_PIECE_POINTS = 4 * CHUNK_POINTS
 #: a tile holding fewer points than this, buffer included, is not filtered (isolated points)
 MIN_TILE_POINTS = 50
 
+#: below this many points in a run, "auto" runs the workers as threads even where worker processes
+#: could be spawned: starting them (the core's imports and numba caches, per process) cost more than
+#: they gave back (1 M points in 8 files, 2 workers: threads 1.8-2.0 s, processes 3.5 s; 10 M points
+#: in 20 files: about equal, 16.0-18.6 s against 17.9-18.7 s; docs/BENCHMARKS.md)
+PROCESS_MIN_POINTS = 10_000_000
+
 def machine_memory_bytes() -> int:
     try:
         return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
@@ -369,7 +375,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             cuts = [info.count * p // pieces for p in range(pieces + 1)]
             bin_jobs += [dict(key=("bin", k, p), path=info.path, file_index=k, grid=grid, work=work, first=cuts[p],
                               stop=cuts[p + 1], piece=p) for p in range(pieces)]
-        _map_files(_bin_job, bin_jobs, record_bin, tiling, steps, log,
+        _map_files(_bin_job, bin_jobs, record_bin, tiling, steps, log, points=total,
                    paths=[info.path for info in infos] + [work], writable=[work], cluster=cluster)
         for k in sorted(binned_parts):  # in file (and piece) order, whatever order the jobs finished in
             for key, part in binned_parts[k].items():
@@ -405,7 +411,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     class_parts: List[list] = [[] for _ in infos]  # on a cluster: each tile's classes, per file
     # the jobs open the memmaps themselves (in threads or in worker processes)
     workers = max(1, min(tiling.worker_count, len(keys)))
-    mode = tiling.parallel if tiling.parallel != "auto" else _auto_parallel()
+    mode = tiling.parallel if tiling.parallel != "auto" else _auto_parallel(sum(i.count for i in infos))
     use_processes = workers > 1 and mode == "processes"
     done_before = [_load_done(done_dir, key) for key in keys]
     if any(d is not None for d in done_before):
@@ -482,10 +488,11 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         written.append(result)
         write_steps.report(len(written) / (len(infos) + 1))
     # one job per input file, on the workers: each streams its file into its classified copy
-    _map_files(_write_job, [dict(key=("write", k), path=info.path, out=out, class_path=class_paths[k],
-                                 class_parts=sorted(class_parts[k]),
-                                 count=info.count) for k, (info, out) in enumerate(zip(infos, outs)) if out],
-               record_write, tiling, steps, log, paths=[info.path for info in infos] + [work],
+    write_jobs = [dict(key=("write", k), path=info.path, out=out, class_path=class_paths[k],
+                       class_parts=sorted(class_parts[k]), count=info.count)
+                  for k, (info, out) in enumerate(zip(infos, outs)) if out]
+    _map_files(_write_job, write_jobs, record_write, tiling, steps, log, points=sum(i.count for i in infos),
+               paths=[info.path for info in infos] + [work],
                writable=sorted({os.path.dirname(os.path.abspath(o)) for o in outs if o}), cluster=cluster)
     log(f"Wrote {len(written)} classified file(s) in {time.perf_counter() - t_write:.1f} s.")
     if output_path and _ext(output_path) == VPC_EXTENSION:
@@ -549,13 +556,14 @@ def _worker_pool(workers: int, use_processes: bool):
                                initargs=(worker_thread_environ(share),))
 
 
-def _map_files(function, jobs, record, tiling, steps, log, *, paths, writable, cluster=None) -> None:
+def _map_files(function, jobs, record, tiling, steps, log, *, paths, writable, points, cluster=None) -> None:
     """Run one job per input file (binning, writing) on the run's workers: the Dask cluster, worker
-    processes or threads as for the tiles, ``record``-ing each result in the client as it comes."""
+    processes or threads as for the tiles (of a run of ``points`` points), ``record``-ing each result
+    in the client as it comes."""
     if not jobs:
         return
     workers = max(1, min(tiling.worker_count, len(jobs)))
-    mode = tiling.parallel if tiling.parallel != "auto" else _auto_parallel()
+    mode = tiling.parallel if tiling.parallel != "auto" else _auto_parallel(points)
     if tiling.scheduler:
         from .cluster import run_jobs
         run_jobs(tiling.scheduler, function, jobs, record, is_cancelled=steps.is_cancelled, paths=paths,
@@ -684,9 +692,12 @@ def _load_done(done_dir, key) -> Optional[dict]:
     return doc
 
 
-def _auto_parallel() -> str:
-    """Worker processes where this process is a Python interpreter or qgis_process; threads inside
-    the QGIS desktop, whose executable is QGIS itself (it cannot spawn Python workers)."""
+def _auto_parallel(points: int) -> str:
+    """Worker processes where this process is a Python interpreter or qgis_process and the run holds
+    at least :data:`PROCESS_MIN_POINTS` points; threads for smaller runs, and inside the QGIS
+    desktop, whose executable is QGIS itself (it cannot spawn Python workers)."""
+    if points < PROCESS_MIN_POINTS:
+        return "threads"
     try:
         exe = os.path.basename(os.path.realpath("/proc/self/exe")).lower()
     except OSError:

@@ -125,3 +125,11 @@ def test_worker_processes_share_the_cores():
     with _worker_pool(2, True) as pool:
         limits = [f.result() for f in [pool.submit(_thread_limits) for _ in range(4)]]
     assert set(limits) == {(str(share), share)}
+
+
+def test_auto_runs_small_surveys_in_threads_and_big_ones_in_processes():
+    """Spawning worker processes only pays on big runs (docs/BENCHMARKS.md): "auto" picks threads
+    below PROCESS_MIN_POINTS, processes from there (here, in a Python interpreter that can spawn)."""
+    from groundsieve.core.engine import tiles
+    assert tiles._auto_parallel(tiles.PROCESS_MIN_POINTS - 1) == "threads"
+    assert tiles._auto_parallel(tiles.PROCESS_MIN_POINTS) == "processes"
