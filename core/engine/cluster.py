@@ -195,9 +195,12 @@ class Cluster:
                 # OMP_NUM_THREADS=1): numba's and lazrs's thread pools too.
                 environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}),
                                **worker_thread_environ(1))
+                # Logs at CRITICAL only: a worker's failure reaches the client through its task (the
+                # error, or KilledWorker); what else the workers log at ERROR is the heartbeat of a
+                # worker outliving its scheduler at close, a traceback that means nothing to the user.
                 with dask.config.set({"distributed.nanny.pre-spawn-environ": environ}):
                     self.local = distributed.LocalCluster(n_workers=value, threads_per_worker=1, processes=True,
-                                                          dashboard_address=None, silence_logs=40)
+                                                          dashboard_address=None, silence_logs=50)
                 self.client = distributed.Client(self.local, timeout=f"{CONNECT_TIMEOUT_S}s")
                 log(f"Started a local Dask cluster of {value} worker process(es).")
             else:
