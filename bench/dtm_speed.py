@@ -2,6 +2,7 @@
 triangulation against scipy's qhull, on the truth ground points of generated scenes.
 
     .venv/bin/python bench/dtm_speed.py [--millions 2 5 20] [--cells 0.5 1] [--ppc 4]
+    .venv/bin/python bench/dtm_speed.py --millions 20 --methods sweep strips [--threads 2]
 
 Per scene size (all points, before keeping the ground) and cell size, in one process: the time
 of thinning (thin_for_grid), of the triangulation by each method, and of rasterizing each
@@ -9,6 +10,11 @@ triangulation; the sweep / qhull ratio of the triangulation and of the whole DTM
 mean absolute difference of the two rasters; and the error of each against the scene's true
 terrain at the cell centres (RMSE, and the 99th percentile of |error|) over the cells inside
 the ground hull. The numba kernels are compiled on a small cloud first.
+
+``strips`` is tin_dtm's parallel path (``threads`` > 1): vertical strips of the grid triangulated and
+rasterised in threads, each with a buffer (its time is in the triangulate column, rasterising
+included). Against ``sweep`` (one triangulation) the notes give the cells that differ by more than
+1e-9 m and how far the farthest of them lies from the ground hull's border (NaN cells or grid edge).
 """
 import argparse
 import time
@@ -18,8 +24,10 @@ import numpy as np
 from _checkout import REPO  # noqa: E402,F401 (puts this checkout's groundsieve on sys.path)
 
 
-def run(millions, cells, ppc, seed, methods):
-    from groundsieve.core.grids.rasterize import rasterize_tin, thin_for_grid, tin_dtm
+def run(millions, cells, ppc, seed, methods, threads):
+    from scipy.ndimage import distance_transform_edt
+
+    from groundsieve.core.grids.rasterize import _strips_tin, rasterize_tin, thin_for_grid, tin_dtm
     from groundsieve.core.grids.spec import GridSpec
     from groundsieve.core.grids.triangulate import delaunay
     from groundsieve.core.synthetic import SceneSpec, make_scene
@@ -53,14 +61,19 @@ def run(millions, cells, ppc, seed, methods):
             del CX, CY
             rasters, totals = {}, {}
             for method in methods:
-                t0 = time.perf_counter()
-                tri = delaunay(xs, ys, method=method)
-                t_tri = time.perf_counter() - t0
                 out = np.full(grid.shape, np.nan)
-                t0 = time.perf_counter()
-                rasterize_tin(xs, ys, zs, tri, grid, out)
-                t_ras = time.perf_counter() - t0
-                del tri
+                if method == "strips":
+                    t0 = time.perf_counter()
+                    _strips_tin(xs, ys, zs, grid, threads, out)
+                    t_tri, t_ras = time.perf_counter() - t0, 0.0
+                else:
+                    t0 = time.perf_counter()
+                    tri = delaunay(xs, ys, method=method)
+                    t_tri = time.perf_counter() - t0
+                    t0 = time.perf_counter()
+                    rasterize_tin(xs, ys, zs, tri, grid, out)
+                    t_ras = time.perf_counter() - t0
+                    del tri
                 err = (out - truth)[np.isfinite(out)]
                 totals[method] = (t_thin + t_tri + t_ras, t_tri)
                 rasters[method] = out
@@ -71,6 +84,11 @@ def run(millions, cells, ppc, seed, methods):
                 a, b = rasters[methods[0]], rasters[methods[1]]
                 both = np.isfinite(a) & np.isfinite(b)
                 d = np.abs(a - b)[both]
+                differ = both & (np.abs(a - b) > 1e-9)
+                inside = distance_transform_edt(np.pad(np.isfinite(a), 1))[1:-1, 1:-1] * cell
+                far = f"{inside[differ].max():.1f} m" if differ.any() else "-"
+                notes.append(f"{n_all / 1e6:.1f} M, {cell:g} m: cells differing by > 1e-9 m: {int(differ.sum())} "
+                             f"of {int(both.sum())}, the farthest {far} from the hull's border")
                 notes.append(f"{n_all / 1e6:.1f} M, {cell:g} m: triangulation {methods[0]}/{methods[1]} = "
                              f"{totals[methods[0]][1] / totals[methods[1]][1]:.3f}, whole DTM "
                              f"{totals[methods[0]][0] / totals[methods[1]][0]:.3f}; raster difference max "
@@ -88,9 +106,10 @@ def main():
     ap.add_argument("--cells", type=float, nargs="+", default=[0.5, 1.0])
     ap.add_argument("--ppc", type=int, default=4, help="points_per_cell of the thinning (0 = all)")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--methods", nargs="+", default=["sweep", "qhull"])
+    ap.add_argument("--methods", nargs="+", default=["sweep", "qhull"], help="sweep, qhull, strips")
+    ap.add_argument("--threads", type=int, default=2, help="threads of the strips method")
     args = ap.parse_args()
-    run(args.millions, args.cells, args.ppc, args.seed, args.methods)
+    run(args.millions, args.cells, args.ppc, args.seed, args.methods, args.threads)
 
 
 if __name__ == "__main__":

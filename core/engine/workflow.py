@@ -232,8 +232,10 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions, why_none: str = "
         raise InvalidParameterError((f"{path}: " if path else "")
                                     + "the filter found no ground point: no DTM can be made"
                                     + (f". Why: {why_none}" if why_none else ""))
+    # threads=None: the whole cloud's DTM in strips on numba's threads (a tile's, in the tiled
+    # engine, runs on one core: its workers run the tiles in parallel)
     dtm = tin_dtm(x[ground], y[ground], z[ground], grid, fill_outside=options.fill_outside_hull,
-                  points_per_cell=options.points_per_cell, steps=steps, log=log)
+                  points_per_cell=options.points_per_cell, threads=None, steps=steps, log=log)
     return grid, dtm
 
 

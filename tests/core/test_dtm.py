@@ -207,3 +207,43 @@ def test_parallel_rasterization_equals_serial(band):
     banded = rasterize_tin(x, y, z, tri, grid, np.full(grid.shape, np.nan), parallel=True, band_rows=band)
     assert np.isfinite(serial).mean() > 0.9
     np.testing.assert_array_equal(banded, serial)
+
+
+def _scene_ground(seed=3):
+    from groundsieve.core.synthetic import SceneSpec, make_scene
+    scene = make_scene(SceneSpec(size_m=120, density_per_m2=6, seed=seed))
+    g = scene.ground
+    return scene.x[g], scene.y[g], scene.z[g]
+
+
+@pytest.mark.parametrize("threads", [2, 3])
+def test_strips_in_threads_give_the_single_triangulation_away_from_the_border(monkeypatch, threads):
+    """tin_dtm's parallel path (vertical strips, each with a buffer, in threads) on a generated
+    scene (ground with holes under buildings): NaN at the same cells, and every cell more than the
+    strip buffer from the hull's border equal to the single triangulation's (to 1e-9 m); near the
+    border the strips' long hull triangles may differ, by little."""
+    from scipy.ndimage import distance_transform_edt
+
+    from groundsieve.core.grids import rasterize
+    monkeypatch.setattr(rasterize, "STRIP_MIN_POINTS", 1000)  # a small scene takes the path too
+    monkeypatch.setattr(rasterize, "STRIP_BUFFER_M", 10.0)
+    x, y, z = _scene_ground()
+    grid = GridSpec.covering(x, y, 0.5)
+    one = tin_dtm(x, y, z, grid, threads=1)
+    logs = []
+    strips = tin_dtm(x, y, z, grid, threads=threads, log=logs.append)
+    assert any(f"{2 * threads} strips triangulated in {threads} threads" in line for line in logs)
+    assert np.array_equal(np.isnan(one), np.isnan(strips))
+    border = distance_transform_edt(np.pad(np.isfinite(one), 1))[1:-1, 1:-1] * grid.cell
+    inner = border > 10.0
+    assert inner.sum() > 0.5 * np.isfinite(one).sum()
+    assert np.nanmax(np.abs(one - strips)[inner]) < 1e-9
+    assert np.nanmax(np.abs(one - strips)) < 0.05
+
+
+def test_strip_cuts_share_the_points_evenly():
+    from groundsieve.core.grids.rasterize import strip_cuts
+    cols = np.repeat(np.arange(10), [100, 0, 0, 0, 0, 0, 0, 0, 0, 100])
+    assert strip_cuts(cols, 10, 2) == [0, 1, 10]
+    assert strip_cuts(np.arange(100) % 50, 50, 4) == [0, 13, 25, 38, 50]
+    assert strip_cuts(np.zeros(5, dtype=np.int64), 1, 3) == [0, 1]
