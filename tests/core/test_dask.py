@@ -137,6 +137,21 @@ def test_a_worker_that_cannot_see_the_path_is_named(tmp_path):
         assert check_workers(c.client, [str(tmp_path)]) == 1
 
 
+def _lose_lazrs():
+    import sys
+    sys.modules["lazrs"] = None  # what a worker without lazrs sees: ``import lazrs`` fails
+
+
+@needs_dask
+def test_a_worker_without_the_core_dependencies_is_refused(tmp_path):
+    from groundsieve.core.engine.cluster import Cluster, ClusterError, check_workers
+    with Cluster("local:1") as c:
+        c.client.run(_lose_lazrs)
+        with pytest.raises(ClusterError, match=r"Dask worker tcp://.* lacks the Python package\(s\) lazrs "
+                                               r"that GroundSieve needs; install them there"):
+            check_workers(c.client, [str(tmp_path)])
+
+
 @needs_dask
 def test_a_worker_with_another_groundsieve_version_is_refused(tmp_path, monkeypatch):
     from groundsieve.core.engine import cluster as cl
