@@ -22,13 +22,14 @@ same for a whole file and for each tile of a survey:
 from __future__ import annotations
 
 import contextlib
+import os
 import math
 from dataclasses import dataclass
 from typing import Callable, Optional
 
 import numpy as np
 
-from ..errors import InvalidParameterError
+from ..errors import InputError, InvalidParameterError
 from ..grids.spec import MAX_CELL_M, GridSpec, memory_budget
 from ..io import (CLASS_GROUND, CLASS_UNCLASSIFIED, NOISE_CLASSES, PointCloud, atomic_path, check_output_path,
                  read_cloud, write_classified)
@@ -325,6 +326,8 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
                                         "in memory only, not in a tiled run; leave those outputs empty")
         return run_tiled(input_path, output_path, algorithm, options=options, dtm_path=dtm_path, dtm=dtm,
                          steps=steps, log=log)
+    if not os.path.exists(input_path):  # before the outputs: a mistyped input explains the rest
+        raise InputError(f"{input_path}: no such file or folder")
     check_outputs(input_path, output_path, [dtm_path, *rasters])
     steps.check()
     w_read, w_filter, w_dtm, _w_write = stage_weights(input_path, output_path, algorithm, bool(dtm_path),

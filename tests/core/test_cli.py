@@ -126,3 +126,14 @@ def test_tune_refuses_a_patch_without_labels_in_one_line(tmp_path):
     assert main(["tune", "--input", str(path), "--filter", "smrf", "--report", str(tmp_path / "r.html")],
                 out=out) == 1
     assert out.getvalue().startswith(f"groundsieve: {path}: the tuning patch has no labels")
+
+
+def test_a_mistyped_input_is_named_before_the_outputs(tmp_path):
+    """A missing input given with a .vpc output: the error is the missing input, not the output's
+    extension (which only follows from the input not being found)."""
+    out = io.StringIO()
+    (tmp_path / "out").mkdir()
+    assert main(["smrf", "--input", str(tmp_path / "survey_typo"), "--output",
+                 str(tmp_path / "out" / "classified.vpc")], out=out) == 1
+    assert f"{tmp_path / 'survey_typo'}: no such file or folder" in out.getvalue()
+    assert ".vpc" not in out.getvalue()
