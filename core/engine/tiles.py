@@ -18,8 +18,8 @@ buffer=)``):
 4. **write** each input once more, streamed, with the new classes (atomic), and for several
    inputs a ``.vpc`` referencing the classified files.
 
-Tiles run concurrently: in worker processes under ``qgis_process`` and plain Python, in threads
-inside the QGIS desktop (whose executable is QGIS itself: it cannot spawn Python workers; the numba
+Tiles run concurrently: in worker processes under ``qgis_process`` and plain Python for runs of
+:data:`PROCESS_MIN_POINTS` points or more, in threads below that and inside the QGIS desktop (whose executable is QGIS itself: it cannot spawn Python workers; the numba
 kernels release the GIL). Each tile is a pure function of its job (``_tile_job``), writing its
 classes into per-file memmaps and returning its DTM block; the working folder is removed at the end.
 """
@@ -89,7 +89,8 @@ class TileOptions:
     workers: int = 0
     #: where the temporary tiles go (removed at the end); None = beside the output
     work_dir: Optional[str] = None
-    #: "auto" (worker processes under qgis_process and Python, threads in the QGIS desktop),
+    #: "auto" (worker processes under qgis_process and Python from PROCESS_MIN_POINTS points on,
+    #: threads below that and in the QGIS desktop),
     #: "threads" or "processes"
     parallel: str = "auto"
     #: Dask scheduler: "" = this machine (the above), "local:N" = a LocalCluster of N worker
