@@ -35,6 +35,10 @@ SCENES = {
                    relief_m=8.0, slope_pct=8.0),
     "uav-lidar": dict(size_m=36.0, density_per_m2=50.0, trees_per_ha=60.0, shrub_fraction=0.15, buildings_per_ha=2.0,
                       relief_m=3.0, slope_pct=3.0),
+    # UAV photogrammetry over low vegetation (fan2023): the first return of each pulse only (the surface
+    # image matching sees from above: no ground under the shrubs), 3 cm of matching noise, no returns
+    "uav-photo": dict(size_m=40.0, density_per_m2=60.0, trees_per_ha=0.0, shrub_fraction=0.35,
+                      buildings_per_ha=0.0, relief_m=2.0, slope_pct=3.0),
     "steep": dict(size_m=60.0, density_per_m2=8.0, trees_per_ha=100.0, shrub_fraction=0.2, buildings_per_ha=0.0,
                   relief_m=25.0, slope_pct=35.0),
 }
@@ -58,6 +62,12 @@ PRESETS = {
                                     "scene:steep:3"]),
     "forest-smrf": ("smrf", "Forest ALS: dense canopy and undergrowth on hilly ground (generated scenes; "
                     "tuned on seed 100)", "scene:forest:100", ["scene:forest:1", "scene:forest:2", "scene:forest:3"]),
+    "uav-photogrammetry-evc": ("evc", "UAV photogrammetry over low vegetation: surface points only, no returns "
+                               "(fan2023's setting; generated scenes; tuned on seed 100)", "scene:uav-photo:100",
+                               ["scene:uav-photo:1", "scene:uav-photo:2", "scene:uav-photo:3"]),
+    "uav-photogrammetry-smrf": ("smrf", "UAV photogrammetry over low vegetation: surface points only, no "
+                                "returns (fan2023's setting; generated scenes; tuned on seed 100)",
+                                "scene:uav-photo:100", ["scene:uav-photo:1", "scene:uav-photo:2", "scene:uav-photo:3"]),
     "uav-lidar-smrf": ("smrf", "UAV LiDAR: dense, multi-return (generated scenes; tuned on seed 100)",
                        "scene:uav-lidar:100", ["scene:uav-lidar:1", "scene:uav-lidar:2", "scene:uav-lidar:3"]),
 }
@@ -69,8 +79,16 @@ def load(source: str, data: str) -> PointCloud:
         return read_cloud(os.path.join(data, rest + ".txt"))
     name, _, seed = rest.partition(":")
     s = make_scene(SceneSpec(seed=int(seed), **SCENES[name]))
-    n = len(s.x)
     ground = np.asarray(s.classification) == 2
+    if name == "uav-photo":
+        top = np.asarray(s.return_number) == 1
+        x, y, z, ground = s.x[top], s.y[top], s.z[top], ground[top]
+        z = z + np.random.default_rng(int(seed)).normal(0.0, 0.03, z.size)
+        n = x.size
+        return PointCloud(path=source, x=x, y=y, z=z, classification=np.zeros(n, np.uint8),
+                          return_number=np.ones(n, np.uint8), number_of_returns=np.ones(n, np.uint8),
+                          has_return_info=False, reference_label=(~ground).astype(np.uint8))
+    n = len(s.x)
     return PointCloud(path=source, x=s.x, y=s.y, z=s.z, classification=np.zeros(n, np.uint8),
                       return_number=np.asarray(s.return_number), number_of_returns=np.asarray(s.number_of_returns),
                       has_return_info=True, reference_label=(~ground).astype(np.uint8))
