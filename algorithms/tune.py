@@ -92,7 +92,7 @@ sensitivity) and every set tried.</p>""")
             type=QgsProcessingParameterNumber.Type.Integer, defaultValue=60, minValue=4, maxValue=100000))
         advanced = [
             QgsProcessingParameterNumber(self.BLOCKS, "Spatial blocks of the cross-validation",
-                                         type=QgsProcessingParameterNumber.Type.Integer, defaultValue=4,
+                                         type=QgsProcessingParameterNumber.Type.Integer, defaultValue=8,
                                          minValue=2, maxValue=16),
             QgsProcessingParameterNumber(self.SECONDS, "Time limit (s; 0 = none)",
                                          type=QgsProcessingParameterNumber.Type.Double, defaultValue=0.0,

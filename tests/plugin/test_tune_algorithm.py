@@ -108,3 +108,15 @@ def test_a_shipped_preset_runs_through_processing_and_a_foreign_one_is_refused(g
     with pytest.raises(QgsProcessingException, match=r"for-pmf\.json: a preset for PMF"):
         processing.run("groundsieve:csf", {"INPUT": patch, "PRESET": pmf, "OUTPUT": out})
     assert not os.path.exists(out)
+
+
+def test_the_dialog_defaults_are_the_core_defaults(groundsieve_provider):
+    """The dialog's defaults are written out (the plugin loads without the core's packages); they
+    must stay those of core.engine.tune.TuneOptions."""
+    from qgis.core import QgsApplication
+
+    from groundsieve.core.engine.tune import TuneOptions
+    algorithm = QgsApplication.processingRegistry().algorithmById("groundsieve:tune")
+    assert algorithm.parameterDefinition("BLOCKS").defaultValue() == TuneOptions.blocks
+    assert algorithm.parameterDefinition("BUDGET").defaultValue() == TuneOptions.budget
+    assert algorithm.parameterDefinition("SECONDS").defaultValue() == TuneOptions.seconds
