@@ -192,13 +192,14 @@ class Cluster:
                 from .tiles import worker_thread_environ
                 _set_spawn_executable()
                 # One thread per worker, as Dask itself does for OpenMP/MKL (its nanny sets
-                # OMP_NUM_THREADS=1): numba's and lazrs's thread pools too.
-                environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}),
-                               **worker_thread_environ(1))
+                # OMP_NUM_THREADS=1): numba's and lazrs's thread pools too. Set in each worker process
+                # as it starts ("environ"), before it imports numba or starts a LAZ thread pool; not by
+                # "pre-spawn-environ", which the nanny writes into this (the client's) process for good.
+                environ = dict(dask.config.get("distributed.nanny.environ", {}) or {}, **worker_thread_environ(1))
                 # Logs at CRITICAL only: a worker's failure reaches the client through its task (the
                 # error, or KilledWorker); what else the workers log at ERROR is the heartbeat of a
                 # worker outliving its scheduler at close, a traceback that means nothing to the user.
-                with dask.config.set({"distributed.nanny.pre-spawn-environ": environ}):
+                with dask.config.set({"distributed.nanny.environ": environ}):
                     self.local = distributed.LocalCluster(n_workers=value, threads_per_worker=1, processes=True,
                                                           dashboard_address=None, silence_logs=50)
                 self.client = distributed.Client(self.local, timeout=f"{CONNECT_TIMEOUT_S}s")

@@ -234,7 +234,11 @@ def test_local_cluster_workers_run_one_thread_each():
     """A worker of a LocalCluster is one core (threads_per_worker=1): numba's parallel kernels and
     lazrs's LAZ threads must not start one thread per core of the machine in every worker."""
     from groundsieve.core.engine.cluster import Cluster
+    before = {k: os.environ.get(k) for k in ("NUMBA_NUM_THREADS", "RAYON_NUM_THREADS")}
     with Cluster("local:2") as cluster:
         limits = cluster.client.run(_thread_limits)
+        # ...and this process (the client: the QGIS desktop, or this test run) keeps its own: numba
+        # refuses to run once its thread count has changed under it
+        assert {k: os.environ.get(k) for k in before} == before
     assert len(limits) == 2
     assert set(limits.values()) == {("1", 1)}
