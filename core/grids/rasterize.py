@@ -30,6 +30,9 @@ STRIP_POINTS = 2_500_000
 #: strips run at once per thread asked for: the system balances them over the cores (20 M point
 #: scene, 0.5 m DTM, 2 cores: 4 strips 2 at a time 7.5-8.6 s, all 4 at once 6.8 s)
 STRIPS_PER_THREAD = 2
+#: a strip with cells of the hull that none of its certified triangles holds is triangulated again
+#: with a buffer this many times wider (then what is still missing comes from one triangulation)
+STRIP_WIDEN = 4
 
 
 def _xyz(x, y, z):
@@ -136,34 +139,99 @@ def strip_cuts(cols: np.ndarray, ncols: int, strips: int) -> list:
     return cuts
 
 
-def _strips_tin(xs, ys, zs, grid: GridSpec, threads: int, out: np.ndarray) -> int:
+def convex_hull_spans(x, y, grid: GridSpec, shrink: float = 1e-7):
+    """Per row of ``grid``, the x-interval (absolute) of the points' convex hull on the row's centre
+    line, shrunk by ``shrink`` metres at both ends (an empty interval, lo > hi, where it misses)."""
+    from ._strip_kernels import hull_candidates_kernel, hull_row_spans_kernel, monotone_hull_kernel
+    ox, oy = grid.x0, grid.top
+    rx, ry = np.ascontiguousarray(x - ox), np.ascontiguousarray(y - oy)
+    cand = hull_candidates_kernel(rx, ry)
+    cand = cand[np.lexsort((ry[cand], rx[cand]))]
+    hull = cand[monotone_hull_kernel(rx[cand], ry[cand])]
+    centres = -(np.arange(grid.nrows) + 0.5) * grid.cell
+    lo, hi = hull_row_spans_kernel(rx[hull], ry[hull], centres, shrink)
+    return lo + ox, hi + ox
+
+
+def _strips_tin(xs, ys, zs, grid: GridSpec, threads: int, out: np.ndarray) -> tuple:
     """Rasterise the TIN of the points into ``out`` strip by strip, for ``threads`` cores: each
     strip of columns (:data:`STRIPS_PER_THREAD` per thread, or one per :data:`STRIP_POINTS` points if
     more) is triangulated from its points and those within the strip buffer beyond its edges, and
-    gives only its own columns. Returns the number of strips."""
+    gives only its own columns, and there only from triangles of the single triangulation of all
+    the points: those whose circumcircle holds no point outside the strip's (certified exactly,
+    :func:`._strip_kernels.certify_kernel`). A cell of the points' convex hull that no such triangle
+    holds (a hole or a concavity wider than the buffer next to the strip's edge) is taken from the
+    strip triangulated again with a buffer :data:`STRIP_WIDEN` times wider, and what is still
+    missing then from one triangulation of all the points. The DTM is therefore the single
+    triangulation's (up to the choice between cocircular points' triangles). Returns the numbers
+    of strips, of strips triangulated again, and of cells taken from the single triangulation."""
     from concurrent.futures import ThreadPoolExecutor
 
+    from ._strip_kernels import bin_points_kernel, certify_kernel
     from .triangulate import delaunay
     pool_size = STRIPS_PER_THREAD * threads
     cuts = strip_cuts(grid.col_of(xs), grid.ncols, max(pool_size, int(math.ceil(xs.size / STRIP_POINTS))))
     buffer = max(STRIP_BUFFER_M, STRIP_BUFFER_CELLS * grid.cell)
+    ox, oy = float(xs.min()), float(ys.min())  # the bins' origin: all relative coordinates >= 0
+    size = buffer / 2.0
+
+    def binned():
+        rx, ry = xs - ox, ys - oy
+        nbx, nby = int(rx.max() / size) + 1, int(ry.max() / size) + 1
+        return (rx, ry) + bin_points_kernel(rx, ry, size, nbx, nby) + (nbx, nby)
+
+    widened = []
+
+    def certified(c0, c1, lo, hi, block):
+        """Triangulate the points in [lo, hi) and rasterise into ``block`` (columns c0..c1) its
+        certified triangles."""
+        sel = np.flatnonzero((xs >= lo) & (xs < hi))
+        sx, sy, sz = xs[sel], ys[sel], zs[sel]
+        triangles = delaunay(sx, sy)  # the numba kernels release the GIL: the strips run at once
+        if triangles.size:
+            rx, ry, start, order, nbx, nby = bins.result()
+            ok = certify_kernel(rx[sel], ry[sel], triangles, lo - ox, hi - ox, grid.x0 + c0 * grid.cell - ox,
+                                grid.x0 + c1 * grid.cell - ox, rx, ry, start, order, size, nbx, nby)
+            rasterize_tin(sx, sy, sz, triangles[ok], GridSpec(grid.x0 + c0 * grid.cell, grid.top, grid.cell,
+                                                              grid.nrows, c1 - c0), block)
+        return block
+
+    def pending(c0, c1, block):
+        span_lo, span_hi = spans.result()
+        centres = grid.x0 + (np.arange(c0, c1) + 0.5) * grid.cell
+        inside = (centres[None, :] >= span_lo[:, None]) & (centres[None, :] <= span_hi[:, None])
+        return inside & np.isnan(block)
 
     def one(k):
         c0, c1 = cuts[k], cuts[k + 1]
-        lo, hi = grid.x0 + c0 * grid.cell - buffer, grid.x0 + c1 * grid.cell + buffer
-        sel = np.flatnonzero((xs >= lo) & (xs < hi))
-        sx, sy, sz = xs[sel], ys[sel], zs[sel]
-        triangles = delaunay(sx, sy)  # the numba kernel releases the GIL: the strips run at once
-        block = np.full((grid.nrows, c1 - c0), np.nan)
-        if triangles.size:
-            rasterize_tin(sx, sy, sz, triangles, GridSpec(grid.x0 + c0 * grid.cell, grid.top, grid.cell,
-                                                          grid.nrows, c1 - c0), block)
-        return c0, c1, block
+        lo, hi = grid.x0 + c0 * grid.cell, grid.x0 + c1 * grid.cell
+        block = certified(c0, c1, lo - buffer, hi + buffer, np.full((grid.nrows, c1 - c0), np.nan))
+        missing = pending(c0, c1, block)
+        if missing.any():
+            widened.append(k)
+            wide = STRIP_WIDEN * buffer
+            again = certified(c0, c1, lo - wide, hi + wide, np.full_like(block, np.nan))
+            block[missing] = again[missing]
+            missing &= np.isnan(again)
+        return c0, c1, block, missing
 
-    with ThreadPoolExecutor(max_workers=pool_size) as pool:
-        for c0, c1, block in pool.map(one, range(len(cuts) - 1)):
+    left = np.zeros(grid.shape, dtype=bool)
+    # All at once, the system balances them; the bins and the hull are made beside the first
+    # triangulations, which need them only once done.
+    with ThreadPoolExecutor(max_workers=len(cuts) + 1) as pool:
+        bins = pool.submit(binned)
+        spans = pool.submit(convex_hull_spans, xs, ys, grid)
+        for c0, c1, block, missing in pool.map(one, range(len(cuts) - 1)):
             out[:, c0:c1] = block
-    return len(cuts) - 1
+            left[:, c0:c1] = missing
+    rest = int(left.sum())
+    if rest:
+        triangles = delaunay(xs, ys)
+        whole = np.full(grid.shape, np.nan)
+        if triangles.size:
+            rasterize_tin(xs, ys, zs, triangles, grid, whole)
+        out[left] = whole[left]
+    return len(cuts) - 1, len(widened), rest
 
 
 def tin_dtm(x, y, z, grid: GridSpec, *, fill_outside: bool = False, points_per_cell: int = 4,
@@ -187,9 +255,9 @@ def tin_dtm(x, y, z, grid: GridSpec, *, fill_outside: bool = False, points_per_c
 
     ``threads`` > 1 (None: numba's thread count) triangulates and rasterises vertical strips of the
     grid in that many threads when at least :data:`STRIP_MIN_POINTS` points are triangulated (sweep
-    only): each strip from its own points and those within a buffer beyond its edges. Away from the
-    hull's border the strips' triangles are the single triangulation's, so is the surface; near it,
-    long border triangles can differ (measured in docs/BENCHMARKS.md "Fast DTM").
+    only): each strip from its own points and those within a buffer beyond its edges, keeping only
+    the triangles that are the single triangulation's (their circumcircle holds no other point), the
+    rest of the hull from wider strips (:func:`_strips_tin`): the same surface as one triangulation.
 
     ``steps`` gets the progress of the thinning, the triangulation and the rasterisation, and a
     cancel is honoured within a twentieth of a second in each (:func:`..progress.run_cancellable`);
@@ -226,10 +294,14 @@ def tin_dtm(x, y, z, grid: GridSpec, *, fill_outside: bool = False, points_per_c
         import numba
         threads = numba.get_num_threads()
     if threads > 1 and triangulator == "sweep" and xs.size >= STRIP_MIN_POINTS:
-        strips = run_cancellable(lambda: _strips_tin(xs, ys, zs, grid, threads, out), steps=steps.sub(0.1, 0.95),
-                                 expected_s=(rate * xs.size + RASTER_S_PER_CELL * out.size) / threads)
+        strips, again, rest = run_cancellable(lambda: _strips_tin(xs, ys, zs, grid, threads, out),
+                                              steps=steps.sub(0.1, 0.95),
+                                              expected_s=(rate * xs.size + RASTER_S_PER_CELL * out.size) / threads)
         if log is not None:
-            log(f"DTM: {strips} strips triangulated in {threads} threads.")
+            log(f"DTM: {strips} strips triangulated in {threads} threads"
+                + (f", {again} again with a wider buffer (holes or concave borders wider than the buffer)"
+                   if again else "")
+                + (f", {rest:,} cells from one triangulation of all points" if rest else "") + ".")
     else:
         triangles = run_cancellable(lambda: delaunay(xs, ys, method=triangulator), steps=steps.sub(0.1, 0.75),
                                     expected_s=rate * xs.size)  # (0, 3) when collinear
