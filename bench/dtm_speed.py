@@ -2,7 +2,7 @@
 triangulation against scipy's qhull, on the truth ground points of generated scenes.
 
     .venv/bin/python bench/dtm_speed.py [--millions 2 5 20] [--cells 0.5 1] [--ppc 4]
-    .venv/bin/python bench/dtm_speed.py --millions 20 --methods sweep strips [--threads 2]
+    .venv/bin/python bench/dtm_speed.py --millions 20 --methods sweep strips [--threads 2] [--hole 100]
 
 Per scene size (all points, before keeping the ground) and cell size, in one process: the time
 of thinning (thin_for_grid), of the triangulation by each method, and of rasterizing each
@@ -15,6 +15,9 @@ the ground hull. The numba kernels are compiled on a small cloud first.
 rasterised in threads, each with a buffer (its time is in the triangulate column, rasterising
 included). Against ``sweep`` (one triangulation) the notes give the cells that differ by more than
 1e-9 m and how far the farthest of them lies from the ground hull's border (NaN cells or grid edge).
+``--hole D`` removes the ground points within a disc of D metres across centred on the ground's median
+x and y (with an even number of strips, their middle cut): a lake wider than the strips' buffer, so
+that strips are triangulated again (tin_dtm's log says how many).
 """
 import argparse
 import time
@@ -24,7 +27,7 @@ import numpy as np
 from _checkout import REPO  # noqa: E402,F401 (puts this checkout's groundsieve on sys.path)
 
 
-def run(millions, cells, ppc, seed, methods, threads):
+def run(millions, cells, ppc, seed, methods, threads, hole=0.0):
     from scipy.ndimage import distance_transform_edt
 
     from groundsieve.core.grids.rasterize import _strips_tin, rasterize_tin, thin_for_grid, tin_dtm
@@ -48,6 +51,10 @@ def run(millions, cells, ppc, seed, methods, threads):
         t_gen = time.perf_counter() - t0
         g = scene.ground
         x, y, z = scene.x[g], scene.y[g], scene.z[g]
+        if hole:
+            cx, cy = np.median(x), np.median(y)
+            dry = (x - cx) ** 2 + (y - cy) ** 2 > (hole / 2) ** 2
+            x, y, z = x[dry], y[dry], z[dry]
         n_all = len(scene)
         terrain = scene.terrain
         del scene
@@ -66,7 +73,9 @@ def run(millions, cells, ppc, seed, methods, threads):
                 out = np.full(grid.shape, np.nan)
                 if method == "strips":
                     t0 = time.perf_counter()
-                    _strips_tin(xs, ys, zs, grid, threads, out)
+                    counts = _strips_tin(xs, ys, zs, grid, threads, out)
+                    notes.append(f"{n_all / 1e6:.1f} M, {cell:g} m: strips, strips triangulated again, cells from "
+                                 f"one triangulation: {counts}")
                     t_tri, t_ras = time.perf_counter() - t0, 0.0
                 else:
                     t0 = time.perf_counter()
@@ -110,8 +119,9 @@ def main():
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--methods", nargs="+", default=["sweep", "qhull"], help="sweep, qhull, strips")
     ap.add_argument("--threads", type=int, default=2, help="threads of the strips method")
+    ap.add_argument("--hole", type=float, default=0.0, help="metres across a ground hole on a strip cut (0: none)")
     args = ap.parse_args()
-    run(args.millions, args.cells, args.ppc, args.seed, args.methods, args.threads)
+    run(args.millions, args.cells, args.ppc, args.seed, args.methods, args.threads, args.hole)
 
 
 if __name__ == "__main__":

@@ -30,9 +30,9 @@ def bin_points_kernel(x, y, size, nbx, nby):
 
 
 @njit(cache=True, nogil=True)
-def certify_kernel(px, py, simplices, lo, hi, own_lo, own_hi, ax, ay, start, order, size, nbx, nby):
+def certify_kernel(px, py, simplices, lo, hi, blo, bhi, own_lo, own_hi, ax, ay, start, order, size, nbx, nby):
     """For each triangle of a strip's triangulation (points ``px, py``, all the cloud's points with
-    ``lo <= x < hi``): True when it may be rasterised into the strip's own columns
+    ``lo <= x < hi`` and ``blo <= y < bhi``): True when it may be rasterised into the strip's own columns
     ``[own_lo, own_hi]``, i.e. it reaches them and it is a triangle of the whole cloud's Delaunay
     triangulation too: no point of the cloud (``ax, ay``, binned by :func:`bin_points_kernel`) outside
     the strip lies inside its circumcircle (inside the strip none does, it is Delaunay there).
@@ -59,7 +59,7 @@ def certify_kernel(px, py, simplices, lo, hi, own_lo, own_hi, ax, ay, start, ord
         r2 = ux * ux + uy * uy
         r = math.sqrt(r2)
         ox, oy = xa + ux, ya + uy
-        if ox - r >= lo and ox + r < hi:
+        if ox - r >= lo and ox + r < hi and oy - r >= blo and oy + r < bhi:
             ok[t] = True  # the circle holds no point outside the strip
             continue
         lim = r2 * (1.0 - 1e-10)
@@ -72,10 +72,11 @@ def certify_kernel(px, py, simplices, lo, hi, own_lo, own_hi, ax, ay, start, ord
             if not empty:
                 break
             y0 = row * size
+            rows_in = y0 >= blo and y0 + size < bhi and row < nby - 1
             dy = max(y0 - oy, max(0.0, oy - (y0 + size)))
             for col in range(c_lo, c_hi + 1):
                 x0 = col * size
-                if x0 >= lo and x0 + size < hi and col < nbx - 1:
+                if rows_in and x0 >= lo and x0 + size < hi and col < nbx - 1:
                     continue  # a bin inside the strip (the last bin also holds points beyond it)
                 dx = max(x0 - ox, max(0.0, ox - (x0 + size)))
                 if dx * dx + dy * dy >= r2 and col < nbx - 1 and row < nby - 1:
@@ -84,9 +85,10 @@ def certify_kernel(px, py, simplices, lo, hi, own_lo, own_hi, ax, ay, start, ord
                 for s in range(start[k], start[k + 1]):
                     j = order[s]
                     qx = ax[j]
-                    if lo <= qx < hi:
+                    qy = ay[j]
+                    if lo <= qx < hi and blo <= qy < bhi:
                         continue
-                    ex, ey = qx - ox, ay[j] - oy
+                    ex, ey = qx - ox, qy - oy
                     if ex * ex + ey * ey < lim:
                         empty = False
                         break

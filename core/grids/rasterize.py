@@ -161,10 +161,11 @@ def _strips_tin(xs, ys, zs, grid: GridSpec, threads: int, out: np.ndarray) -> tu
     the points: those whose circumcircle holds no point outside the strip's (certified exactly,
     :func:`._strip_kernels.certify_kernel`). A cell of the points' convex hull that no such triangle
     holds (a hole or a concavity wider than the buffer next to the strip's edge) is taken from the
-    strip triangulated again with a buffer :data:`STRIP_WIDEN` times wider, and what is still
-    missing then from one triangulation of all the points. The DTM is therefore the single
-    triangulation's (up to the choice between cocircular points' triangles). Returns the numbers
-    of strips, of strips triangulated again, and of cells taken from the single triangulation."""
+    points around the strip's missing cells triangulated again, with a buffer :data:`STRIP_WIDEN`
+    times wider, and what is still missing then from one triangulation of all the points. The DTM
+    is therefore the single triangulation's (up to the choice between cocircular points'
+    triangles). Returns the numbers of strips, of strips triangulated again, and of cells taken
+    from the single triangulation."""
     from concurrent.futures import ThreadPoolExecutor
 
     from ._strip_kernels import bin_points_kernel, certify_kernel
@@ -182,15 +183,18 @@ def _strips_tin(xs, ys, zs, grid: GridSpec, threads: int, out: np.ndarray) -> tu
 
     widened = []
 
-    def certified(c0, c1, lo, hi, block):
-        """Triangulate the points in [lo, hi) and rasterise into ``block`` (columns c0..c1) its
-        certified triangles."""
-        sel = np.flatnonzero((xs >= lo) & (xs < hi))
+    def certified(c0, c1, lo, hi, block, blo=-np.inf, bhi=np.inf):
+        """Triangulate the points in [lo, hi) x [blo, bhi) and rasterise into ``block`` (columns
+        c0..c1) its certified triangles."""
+        inside = (xs >= lo) & (xs < hi)
+        if np.isfinite(blo) or np.isfinite(bhi):
+            inside &= (ys >= blo) & (ys < bhi)
+        sel = np.flatnonzero(inside)
         sx, sy, sz = xs[sel], ys[sel], zs[sel]
         triangles = delaunay(sx, sy)  # the numba kernels release the GIL: the strips run at once
         if triangles.size:
             rx, ry, start, order, nbx, nby = bins.result()
-            ok = certify_kernel(rx[sel], ry[sel], triangles, lo - ox, hi - ox, grid.x0 + c0 * grid.cell - ox,
+            ok = certify_kernel(rx[sel], ry[sel], triangles, lo - ox, hi - ox, blo - oy, bhi - oy, grid.x0 + c0 * grid.cell - ox,
                                 grid.x0 + c1 * grid.cell - ox, rx, ry, start, order, size, nbx, nby)
             rasterize_tin(sx, sy, sz, triangles[ok], GridSpec(grid.x0 + c0 * grid.cell, grid.top, grid.cell,
                                                               grid.nrows, c1 - c0), block)
@@ -208,9 +212,13 @@ def _strips_tin(xs, ys, zs, grid: GridSpec, threads: int, out: np.ndarray) -> tu
         block = certified(c0, c1, lo - buffer, hi + buffer, np.full((grid.nrows, c1 - c0), np.nan))
         missing = pending(c0, c1, block)
         if missing.any():
+            # Again around the missing cells only, with a wider buffer.
             widened.append(k)
             wide = STRIP_WIDEN * buffer
-            again = certified(c0, c1, lo - wide, hi + wide, np.full_like(block, np.nan))
+            rows, cols = np.flatnonzero(missing.any(axis=1)), np.flatnonzero(missing.any(axis=0))
+            again = certified(c0, c1, lo + cols[0] * grid.cell - wide, lo + (cols[-1] + 1) * grid.cell + wide,
+                              np.full_like(block, np.nan), grid.top - (rows[-1] + 1) * grid.cell - wide,
+                              grid.top - rows[0] * grid.cell + wide)
             block[missing] = again[missing]
             missing &= np.isnan(again)
         return c0, c1, block, missing
