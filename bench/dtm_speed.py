@@ -37,8 +37,8 @@ def run(millions, cells, ppc, seed, methods, threads, hole=0.0):
 
     warm = make_scene(SceneSpec.for_points(20_000, seed=1))
     g = warm.ground
-    tin_dtm(warm.x[g], warm.y[g], warm.z[g], GridSpec.covering(warm.x, warm.y, 1.0))
-    wgrid = GridSpec.covering(warm.x, warm.y, 1.0)  # and the strips' kernels (bins, hull, certification)
+    wgrid = GridSpec.covering(warm.x, warm.y, 1.0)
+    tin_dtm(warm.x[g], warm.y[g], warm.z[g], wgrid)  # and the strips' kernels (bins, hull, certification):
     _strips_tin(warm.x[g], warm.y[g], warm.z[g], wgrid, threads, np.full(wgrid.shape, np.nan))
 
     print("| points | ground | cell | thinned | thin s | method | triangulate s | rasterize s | DTM s "

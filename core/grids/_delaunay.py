@@ -41,7 +41,8 @@ def _in_circle(ax, ay, bx, by, cx, cy, px, py):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _circumradius2(ax, ay, bx, by, cx, cy):
+def _circumcentre_offset(ax, ay, bx, by, cx, cy):
+    """The circumcentre of a, b, c minus a (infinite when they are on a line)."""
     dx = bx - ax
     dy = by - ay
     ex = cx - ax
@@ -50,10 +51,14 @@ def _circumradius2(ax, ay, bx, by, cx, cy):
     cl = ex * ex + ey * ey
     d = dx * ey - dy * ex
     if d == 0.0:
-        return np.inf
+        return np.inf, np.inf
     d = 0.5 / d
-    x = (ey * bl - dy * cl) * d
-    y = (dx * cl - ex * bl) * d
+    return (ey * bl - dy * cl) * d, (dx * cl - ex * bl) * d
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _circumradius2(ax, ay, bx, by, cx, cy):
+    x, y = _circumcentre_offset(ax, ay, bx, by, cx, cy)
     return x * x + y * y
 
 
@@ -242,14 +247,9 @@ def delaunay_kernel(px, py, stack_size=1024):
     if _orient(px[i0], py[i0], px[i1], py[i1], px[i2], py[i2]) < 0.0:
         i1, i2 = i2, i1
     # Circumcentre of the seed triangle.
-    ax, ay = px[i0], py[i0]
-    dx, dy = px[i1] - ax, py[i1] - ay
-    ex, ey = px[i2] - ax, py[i2] - ay
-    bl = dx * dx + dy * dy
-    cl = ex * ex + ey * ey
-    dd = 0.5 / (dx * ey - dy * ex)
-    cx = ax + (ey * bl - dy * cl) * dd
-    cy = ay + (dx * cl - ex * bl) * dd
+    ux, uy = _circumcentre_offset(px[i0], py[i0], px[i1], py[i1], px[i2], py[i2])
+    cx = px[i0] + ux
+    cy = py[i0] + uy
 
     dist = np.empty(n, dtype=np.float64)
     for i in range(n):

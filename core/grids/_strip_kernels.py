@@ -1,10 +1,13 @@
 """Numba kernels of the strip-parallel TIN (``rasterize._strips_tin``): which of a strip's triangles
 are triangles of the whole cloud's Delaunay triangulation, and which cells the whole cloud's convex
-hull holds. Coordinates are relative to a common origin (precision)."""
+hull holds. The certification works on coordinates relative to its bins' origin; the hull's tests
+take differences of coordinates only, so absolute ones do."""
 import math
 
 import numpy as np
 from numba import njit
+
+from ._delaunay import _circumcentre_offset, _orient
 
 
 @njit(cache=True, nogil=True)
@@ -46,16 +49,10 @@ def certify_kernel(px, py, simplices, lo, hi, blo, bhi, own_lo, own_hi, ax, ay, 
         xc, yc = px[i2], py[i2]
         if max(xa, max(xb, xc)) < own_lo or min(xa, min(xb, xc)) > own_hi:
             continue  # does not reach the strip's own columns
-        bx, by = xb - xa, yb - ya
-        cx, cy = xc - xa, yc - ya
-        d = 2.0 * (bx * cy - by * cx)
-        if d == 0.0:
+        ux, uy = _circumcentre_offset(xa, ya, xb, yb, xc, yc)
+        if not np.isfinite(ux):
             ok[t] = True  # flat: holds no cell centre
             continue
-        b2 = bx * bx + by * by
-        c2 = cx * cx + cy * cy
-        ux = (cy * b2 - by * c2) / d
-        uy = (bx * c2 - cx * b2) / d
         r2 = ux * ux + uy * uy
         r = math.sqrt(r2)
         ox, oy = xa + ux, ya + uy
@@ -99,11 +96,6 @@ def certify_kernel(px, py, simplices, lo, hi, blo, bhi, own_lo, own_hi, ax, ay, 
 
 
 @njit(cache=True, nogil=True)
-def _cross(ox, oy, ax, ay, bx, by):
-    return (ax - ox) * (by - oy) - (ay - oy) * (bx - ox)
-
-
-@njit(cache=True, nogil=True)
 def hull_candidates_kernel(x, y):
     """Indices of the points that may be vertices of the convex hull: all but those strictly inside
     the polygon of the extreme points in eight directions (Akl-Toussaint)."""
@@ -135,7 +127,7 @@ def hull_candidates_kernel(x, y):
             if x[a] == x[b] and y[a] == y[b]:
                 continue
             edges += 1
-            if _cross(x[a], y[a], x[b], y[b], x[i], y[i]) <= 0.0:
+            if _orient(x[a], y[a], x[b], y[b], x[i], y[i]) <= 0.0:
                 inside = False
                 break
         keep[i] = not inside or edges < 3
@@ -149,13 +141,13 @@ def monotone_hull_kernel(x, y):
     hull = np.empty(2 * n + 1, dtype=np.int64)
     k = 0
     for i in range(n):
-        while k >= 2 and _cross(x[hull[k - 2]], y[hull[k - 2]], x[hull[k - 1]], y[hull[k - 1]], x[i], y[i]) <= 0.0:
+        while k >= 2 and _orient(x[hull[k - 2]], y[hull[k - 2]], x[hull[k - 1]], y[hull[k - 1]], x[i], y[i]) <= 0.0:
             k -= 1
         hull[k] = i
         k += 1
     lower = k + 1
     for i in range(n - 2, -1, -1):
-        while k >= lower and _cross(x[hull[k - 2]], y[hull[k - 2]], x[hull[k - 1]], y[hull[k - 1]], x[i], y[i]) <= 0.0:
+        while k >= lower and _orient(x[hull[k - 2]], y[hull[k - 2]], x[hull[k - 1]], y[hull[k - 1]], x[i], y[i]) <= 0.0:
             k -= 1
         hull[k] = i
         k += 1

@@ -27,8 +27,8 @@ STRIP_BUFFER_M = 25.0
 STRIP_BUFFER_CELLS = 50
 #: and at least one strip per this many points (smaller triangulations run faster per point)
 STRIP_POINTS = 2_500_000
-#: strips run at once per thread asked for: the system balances them over the cores (20 M point
-#: scene, 0.5 m DTM, 2 cores: 4 strips 2 at a time 7.5-8.6 s, all 4 at once 6.8 s)
+#: strips per thread asked for, all run at once: the system balances them over the cores (20 M
+#: point scene, 0.5 m DTM, 2 cores: 4 strips 2 at a time 7.5-8.6 s, all 4 at once 6.8 s)
 STRIPS_PER_THREAD = 2
 #: a strip with cells of the hull that none of its certified triangles holds is triangulated again
 #: with a buffer this many times wider (then what is still missing comes from one triangulation)
@@ -143,14 +143,11 @@ def convex_hull_spans(x, y, grid: GridSpec, shrink: float = 1e-7):
     """Per row of ``grid``, the x-interval (absolute) of the points' convex hull on the row's centre
     line, shrunk by ``shrink`` metres at both ends (an empty interval, lo > hi, where it misses)."""
     from ._strip_kernels import hull_candidates_kernel, hull_row_spans_kernel, monotone_hull_kernel
-    ox, oy = grid.x0, grid.top
-    rx, ry = np.ascontiguousarray(x - ox), np.ascontiguousarray(y - oy)
-    cand = hull_candidates_kernel(rx, ry)
-    cand = cand[np.lexsort((ry[cand], rx[cand]))]
-    hull = cand[monotone_hull_kernel(rx[cand], ry[cand])]
-    centres = -(np.arange(grid.nrows) + 0.5) * grid.cell
-    lo, hi = hull_row_spans_kernel(rx[hull], ry[hull], centres, shrink)
-    return lo + ox, hi + ox
+    x, y = np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(y, dtype=np.float64)
+    cand = hull_candidates_kernel(x, y)
+    cand = cand[np.lexsort((y[cand], x[cand]))]
+    hull = cand[monotone_hull_kernel(x[cand], y[cand])]
+    return hull_row_spans_kernel(x[hull], y[hull], grid.top - (np.arange(grid.nrows) + 0.5) * grid.cell, shrink)
 
 
 def _strips_tin(xs, ys, zs, grid: GridSpec, threads: int, out: np.ndarray) -> tuple:
@@ -181,8 +178,6 @@ def _strips_tin(xs, ys, zs, grid: GridSpec, threads: int, out: np.ndarray) -> tu
         nbx, nby = int(rx.max() / size) + 1, int(ry.max() / size) + 1
         return (rx, ry) + bin_points_kernel(rx, ry, size, nbx, nby) + (nbx, nby)
 
-    widened = []
-
     def certified(c0, c1, lo, hi, block, blo=-np.inf, bhi=np.inf):
         """Triangulate the points in [lo, hi) x [blo, bhi) and rasterise into ``block`` (columns
         c0..c1) its certified triangles."""
@@ -211,27 +206,28 @@ def _strips_tin(xs, ys, zs, grid: GridSpec, threads: int, out: np.ndarray) -> tu
         lo, hi = grid.x0 + c0 * grid.cell, grid.x0 + c1 * grid.cell
         block = certified(c0, c1, lo - buffer, hi + buffer, np.full((grid.nrows, c1 - c0), np.nan))
         missing = pending(c0, c1, block)
-        if missing.any():
-            # Again around the missing cells only, with a wider buffer.
-            widened.append(k)
+        again = missing.any()
+        if again:  # triangulated again around the missing cells only, with a wider buffer
             wide = STRIP_WIDEN * buffer
             rows, cols = np.flatnonzero(missing.any(axis=1)), np.flatnonzero(missing.any(axis=0))
-            again = certified(c0, c1, lo + cols[0] * grid.cell - wide, lo + (cols[-1] + 1) * grid.cell + wide,
+            wider = certified(c0, c1, lo + cols[0] * grid.cell - wide, lo + (cols[-1] + 1) * grid.cell + wide,
                               np.full_like(block, np.nan), grid.top - (rows[-1] + 1) * grid.cell - wide,
                               grid.top - rows[0] * grid.cell + wide)
-            block[missing] = again[missing]
-            missing &= np.isnan(again)
-        return c0, c1, block, missing
+            block[missing] = wider[missing]
+            missing &= np.isnan(wider)
+        return c0, c1, block, missing, again
 
     left = np.zeros(grid.shape, dtype=bool)
+    widened = 0
     # All at once, the system balances them; the bins and the hull are made beside the first
     # triangulations, which need them only once done.
     with ThreadPoolExecutor(max_workers=len(cuts) + 1) as pool:
         bins = pool.submit(binned)
         spans = pool.submit(convex_hull_spans, xs, ys, grid)
-        for c0, c1, block, missing in pool.map(one, range(len(cuts) - 1)):
+        for c0, c1, block, missing, again in pool.map(one, range(len(cuts) - 1)):
             out[:, c0:c1] = block
             left[:, c0:c1] = missing
+            widened += again
     rest = int(left.sum())
     if rest:
         triangles = delaunay(xs, ys)
@@ -239,7 +235,7 @@ def _strips_tin(xs, ys, zs, grid: GridSpec, threads: int, out: np.ndarray) -> tu
         if triangles.size:
             rasterize_tin(xs, ys, zs, triangles, grid, whole)
         out[left] = whole[left]
-    return len(cuts) - 1, len(widened), rest
+    return len(cuts) - 1, widened, rest
 
 
 def tin_dtm(x, y, z, grid: GridSpec, *, fill_outside: bool = False, points_per_cell: int = 4,
