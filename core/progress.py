@@ -61,6 +61,14 @@ class Steps:
         return self._is_cancelled
 
 
+def _estimated_share(t: float) -> float:
+    """The share of a kernel's work shown after ``t`` times its expected duration: 56 % at the
+    expected time, 75 % at twice, 89 % at four times, 96 % at eight, never 100 %. The tail is
+    long (a power of the time, not an exponential), so that on a machine several times slower
+    than expected the bar still moves: an exponential stood still for seconds in whole percent."""
+    return 1.0 - 1.0 / (1.0 + 0.5 * max(t, 0.0)) ** 2
+
+
 def run_cancellable(fn, *args, steps: Optional[Steps] = None, expected_s: float = 0.0, poll_s: float = 0.05):
     """``fn(*args)`` (a numba kernel that releases the GIL) in a worker thread, while this thread
     checks cancellation every ``poll_s`` seconds: a cancel raises :class:`Cancelled` at once,
@@ -88,9 +96,7 @@ def run_cancellable(fn, *args, steps: Optional[Steps] = None, expected_s: float 
         if not worker.is_alive():
             break
         if expected_s > 0:
-            # 63 % at the expected time, then ever slower: still moving on a machine slower than
-            # expected, never at 100 % before the kernel ends
-            steps.report(0.98 * (1.0 - math.exp(-(time.perf_counter() - start) / expected_s)))
+            steps.report(0.98 * _estimated_share((time.perf_counter() - start) / expected_s))
         else:
             steps.check()
     if "error" in box:

@@ -37,21 +37,30 @@ def main() -> int:
                       progress=lambda f: events.append((time.perf_counter() - t0, f, None)),
                       log=lambda m: events.append((time.perf_counter() - t0, None, m)))
     total = time.perf_counter() - t0
-    last, stall, stall_at, prev = 0.0, 0.0, 0.0, -1.0
     for t, f, msg in events:
         if msg is not None:
             print(f"{t:7.2f} s  log  {msg}")
-            continue
-        if f > prev:
+        else:
+            print(f"{t:7.2f} s  {100 * f:5.1f} %")
+    values = [(t, f) for t, f, msg in events if msg is None]
+    for name, shown in (("value", lambda f: f), ("whole percent (what the dialog's bar shows)", lambda f: int(100 * f))):
+        stall, stall_at = stand_still(values, total, shown)
+        print(f"total {total:.2f} s; longest stand-still of the {name}: {stall:.2f} s "
+              f"({100 * stall / total:.1f} % of the run) from {stall_at:.2f} s")
+    return 0
+
+
+def stand_still(values, total, shown):
+    """The longest time ``shown(value)`` did not change, and when it began."""
+    last, stall, stall_at, prev = 0.0, 0.0, 0.0, None
+    for t, f in values:
+        if prev is None or shown(f) > prev:
             if t - last > stall:
                 stall, stall_at = t - last, last
-            last, prev = t, f
-            print(f"{t:7.2f} s  {100 * f:5.1f} %")
+            last, prev = t, shown(f)
     if total - last > stall:
         stall, stall_at = total - last, last
-    print(f"total {total:.2f} s; longest stand-still {stall:.2f} s ({100 * stall / total:.1f} % of the run) "
-          f"from {stall_at:.2f} s")
-    return 0
+    return stall, stall_at
 
 
 if __name__ == "__main__":

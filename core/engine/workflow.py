@@ -287,7 +287,7 @@ READ_S = {".laz": 4.9e-7, ".las": 1.0e-7}
 WRITE_S = {".laz": 2.8e-7, ".las": 6.0e-8}
 FILTER_S = {"SMRF": 5.5e-7, "CSF": 1.2e-6, "PMF": 5.5e-7}
 FILTER_S_DEFAULT = 1.0e-6
-DTM_S = 2.4e-7           #: per point of the cloud (two thirds ground, thinned to 4 per cell of 1 m)
+DTM_S = 4.5e-7           #: per point of the cloud (two thirds ground, thinned to 4 per cell of 1 m; strips)
 
 
 def stage_weights(input_path: str, output_path: Optional[str], algorithm, dtm: bool, n_rasters: int):

@@ -14,6 +14,9 @@ from .spec import GridSpec
 #: for the progress shown while a kernel runs: thinning, triangulation, rasterisation per cell
 THIN_S_PER_POINT = 2e-8
 SWEEP_S_PER_POINT = 6e-7
+#: seconds per point and thread of the DTM in strips (triangulation, certification, rasterisation):
+#: 1.35 M points in 2 threads took 2.2-3.4 s under a load of 3-4 (scripts/desktop_profile.py)
+STRIP_S_PER_POINT = 2.5e-6
 QHULL_S_PER_POINT = 1e-5
 RASTER_S_PER_CELL = 2e-8
 
@@ -300,7 +303,8 @@ def tin_dtm(x, y, z, grid: GridSpec, *, fill_outside: bool = False, points_per_c
     if threads > 1 and triangulator == "sweep" and xs.size >= STRIP_MIN_POINTS:
         strips, again, rest = run_cancellable(lambda: _strips_tin(xs, ys, zs, grid, threads, out),
                                               steps=steps.sub(0.1, 0.95),
-                                              expected_s=(rate * xs.size + RASTER_S_PER_CELL * out.size) / threads)
+                                              expected_s=(STRIP_S_PER_POINT * xs.size
+                                                          + RASTER_S_PER_CELL * out.size) / threads)
         if log is not None:
             log(f"DTM: {strips} strips triangulated in {threads} threads"
                 + (f", {again} again with a wider buffer (holes or concave borders wider than the buffer)"
