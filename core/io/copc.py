@@ -180,9 +180,28 @@ def _read_hierarchy(f, path: str, size: int, offset: int, nbytes: int) -> np.nda
 
 # -- reading nodes ----------------------------------------------------------------------------------
 
-def _read_nodes(index: CopcIndex, sel: np.ndarray):
+#: the LAZ layers a tile cloud needs (``_cloud``): x, y, returns, z, class, flags (withheld),
+#: intensity; GPS time, scan angle, user data, point source, colours and extra bytes stay
+#: compressed (about a tenth of the decompression time on format 6)
+TILE_LAYERS = ("XY_RETURNS_CHANNEL", "Z", "CLASSIFICATION", "FLAGS", "INTENSITY")
+#: the layers the planning needs: x and y
+XY_LAYERS = ("XY_RETURNS_CHANNEL",)
+
+
+def _selection(layers):
+    import lazrs
+    if layers is None:
+        return None
+    bits = 0
+    for name in layers:
+        bits |= getattr(lazrs, "SELECTIVE_DECOMPRESS_" + name)
+    return lazrs.DecompressionSelection(bits)
+
+
+def _read_nodes(index: CopcIndex, sel: np.ndarray, layers=None):
     """The point records of the nodes ``sel`` (indices into ``index.nodes``, increasing: file
-    order) and their indices in the file."""
+    order) and their indices in the file; only the LAZ ``layers`` given (None: all) are
+    decompressed, the other fields hold meaningless values."""
     import laspy
     import lazrs
     nodes = index.nodes[sel]
@@ -207,7 +226,7 @@ def _read_nodes(index: CopcIndex, sel: np.ndarray):
                         raise _damaged(index.path, "the file ends inside its point data")
                     pos, k = pos + n, j + 1
             table = [(int(c), int(b)) for c, b in zip(nodes["point_count"], nodes["byte_size"])]
-            lazrs.decompress_points_with_chunk_table(data, index.laszip, out, table)
+            lazrs.decompress_points_with_chunk_table(data, index.laszip, out, table, _selection(layers))
         except GroundSieveError:
             raise
         except Exception as err:  # lazrs on a damaged chunk
@@ -275,7 +294,7 @@ def read_tile(source: CopcSource) -> Tuple[PointCloud, np.ndarray, int]:
     x0, y0, x1, y1 = i * s - b, j * s - b, (i + 1) * s + b, (j + 1) * s + b
     nx0, ny0, nx1, ny1 = index.node_boxes()
     sel = np.flatnonzero((nx0 <= x1) & (nx1 >= x0) & (ny0 <= y1) & (ny1 >= y0))
-    points, file_index = _read_nodes(index, sel)
+    points, file_index = _read_nodes(index, sel, TILE_LAYERS)
     x = np.asarray(points.x, dtype=np.float64)
     y = np.asarray(points.y, dtype=np.float64)
     keep, own = _tile_selection(x, y, source.key, s, b)
@@ -308,7 +327,7 @@ def plan_tiles(infos: Sequence, size: float, buffer: float) -> Dict[Tuple[int, i
         for a, b, c, d in set(zip(lo_i.tolist(), hi_i.tolist(), lo_j.tolist(), hi_j.tolist())):
             keys.update((ii, jj) for ii in range(a, b + 1) for jj in range(c, d + 1))
         if coarse.any():
-            points, _ = _read_nodes(index, np.flatnonzero(coarse))
+            points, _ = _read_nodes(index, np.flatnonzero(coarse), XY_LAYERS)
             kx = np.floor(np.asarray(points.x, dtype=np.float64) / size).astype(np.int64)
             ky = np.floor(np.asarray(points.y, dtype=np.float64) / size).astype(np.int64)
             keys.update(zip(kx.tolist(), ky.tolist()))
@@ -344,7 +363,7 @@ def sample_density(path: str, sample_points: int = 50_000) -> float:
     levels = index.nodes["level"]
     counts = np.bincount(levels, weights=index.nodes["point_count"].astype(np.float64))
     upto = int(np.searchsorted(np.cumsum(counts), min(sample_points, float(counts.sum()))))
-    points, _ = _read_nodes(index, np.flatnonzero(levels <= upto))
+    points, _ = _read_nodes(index, np.flatnonzero(levels <= upto), XY_LAYERS)
     x, y = np.asarray(points.x), np.asarray(points.y)
     if x.size == 0:
         return 1.0
