@@ -82,6 +82,7 @@ class CopcIndex:
     halfsize: float
     nodes: np.ndarray         #: ENTRY records of the nodes holding points, in file-offset order
     first: np.ndarray         #: each node's first point index in the file's order
+    token: tuple = ()         #: (real path, size, modification time): the file as indexed
 
     @property
     def side(self) -> np.ndarray:
@@ -153,7 +154,7 @@ def _open_index(real: str, size: int, mtime_ns: int, path: str) -> CopcIndex:
             crs_wkt = None
     center = np.asarray(info.center, dtype=np.float64)
     return CopcIndex(path, header, bytes(laszip.record_data), crs_wkt, center - float(info.halfsize),
-                     float(info.halfsize), nodes, np.cumsum(counts) - counts)
+                     float(info.halfsize), nodes, np.cumsum(counts) - counts, (real, size, mtime_ns))
 
 
 def _read_hierarchy(f, path: str, size: int, offset: int, nbytes: int) -> np.ndarray:
@@ -202,13 +203,26 @@ def _read_nodes(index: CopcIndex, sel: np.ndarray, layers=None):
     """The point records of the nodes ``sel`` (indices into ``index.nodes``, increasing: file
     order) and their indices in the file; only the LAZ ``layers`` given (None: all) are
     decompressed, the other fields hold meaningless values."""
+    return _records(index, sel, _decompress(index, sel, layers))
+
+
+def _records(index: CopcIndex, sel: np.ndarray, raw: np.ndarray):
     import laspy
-    import lazrs
-    nodes = index.nodes[sel]
-    counts = nodes["point_count"].astype(np.int64)
+    counts = index.nodes["point_count"][sel].astype(np.int64)
     total = int(counts.sum())
     fmt = index.header.point_format
-    out = np.zeros(total * fmt.size, dtype=np.uint8)
+    record = laspy.PackedPointRecord.from_buffer(raw, fmt, count=total)
+    first = index.first[sel]
+    file_index = np.repeat(first - np.r_[0, np.cumsum(counts)[:-1]], counts) + np.arange(total, dtype=np.int64)
+    return laspy.ScaleAwarePointRecord(record.array, fmt, index.header.scales, index.header.offsets), file_index
+
+
+def _decompress(index: CopcIndex, sel: np.ndarray, layers) -> np.ndarray:
+    """The raw point records (bytes) of the nodes ``sel``, one after the other."""
+    import lazrs
+    nodes = index.nodes[sel]
+    total = int(nodes["point_count"].astype(np.int64).sum())
+    out = np.zeros(total * index.header.point_format.size, dtype=np.uint8)
     if total:
         data = bytearray(int(nodes["byte_size"].astype(np.int64).sum()))
         view = memoryview(data)
@@ -231,10 +245,66 @@ def _read_nodes(index: CopcIndex, sel: np.ndarray, layers=None):
             raise
         except Exception as err:  # lazrs on a damaged chunk
             raise _damaged(index.path, f"a chunk cannot be decompressed: {type(err).__name__}: {err}") from err
-    record = laspy.PackedPointRecord.from_buffer(out, fmt, count=total)
-    first = index.first[sel]
-    file_index = np.repeat(first - np.r_[0, np.cumsum(counts)[:-1]], counts) + np.arange(total, dtype=np.int64)
-    return laspy.ScaleAwarePointRecord(record.array, fmt, index.header.scales, index.header.offsets), file_index
+    return out
+
+
+#: decompressed nodes a process keeps for its next tiles (bytes; shared by its threads): the upper
+#: nodes, which every tile reads, and the nodes of the buffer strip the next tile shares
+NODE_CACHE_BYTES = 64 << 20
+
+
+class _NodeCache:
+    """Least recently used decompressed nodes (their raw records), thread-safe."""
+
+    def __init__(self, max_bytes: int):
+        import collections
+        import threading
+        self.max_bytes, self.bytes = max_bytes, 0
+        self.items = collections.OrderedDict()
+        self.lock = threading.Lock()
+
+    def get(self, key):
+        with self.lock:
+            value = self.items.get(key)
+            if value is not None:
+                self.items.move_to_end(key)
+            return value
+
+    def put(self, key, value: np.ndarray) -> None:
+        if value.nbytes > self.max_bytes:
+            return
+        with self.lock:
+            if key in self.items:
+                return
+            self.items[key] = value
+            self.bytes += value.nbytes
+            while self.bytes > self.max_bytes:
+                _, old = self.items.popitem(last=False)
+                self.bytes -= old.nbytes
+
+
+_CACHE = _NodeCache(NODE_CACHE_BYTES)
+
+
+def _read_nodes_cached(index: CopcIndex, sel: np.ndarray, layers, cache: _NodeCache):
+    """:func:`_read_nodes` through ``cache``: only the nodes it does not hold are decompressed
+    (their number of points is returned third)."""
+    size = index.header.point_format.size
+    counts = index.nodes["point_count"][sel].astype(np.int64)
+    keys = [(index.token, layers, int(o)) for o in index.nodes["offset"][sel]]
+    held = [cache.get(k) for k in keys]
+    missing = np.array([s for s, h in zip(sel, held) if h is None], dtype=np.int64)
+    fresh = _decompress(index, missing, layers) if missing.size else np.zeros(0, dtype=np.uint8)
+    pos, parts = 0, []
+    for key, h, n in zip(keys, held, counts):
+        if h is None:
+            h = fresh[pos:pos + n * size].copy()
+            pos += n * size
+            cache.put(key, h)
+        parts.append(h)
+    raw = np.concatenate(parts) if parts else np.zeros(0, dtype=np.uint8)
+    points, file_index = _records(index, sel, raw)
+    return points, file_index, int(index.nodes["point_count"][missing].astype(np.int64).sum())
 
 
 def _cloud(index: CopcIndex, points) -> PointCloud:
@@ -287,19 +357,19 @@ def _within(f, d, size, buffer):
 def read_tile(source: CopcSource) -> Tuple[PointCloud, np.ndarray, int]:
     """The points of ``source``'s tile and buffer (in file order), their indices in the file
     (``>= 0`` the tile's own, ``-1 - index`` a buffer point, as in a tile part) and how many points
-    were decompressed for them."""
+    were decompressed for them (the nodes in this process's cache are not decompressed again)."""
     index = open_index(source.path)
     i, j = source.key
     s, b = source.size, source.buffer
     x0, y0, x1, y1 = i * s - b, j * s - b, (i + 1) * s + b, (j + 1) * s + b
     nx0, ny0, nx1, ny1 = index.node_boxes()
     sel = np.flatnonzero((nx0 <= x1) & (nx1 >= x0) & (ny0 <= y1) & (ny1 >= y0))
-    points, file_index = _read_nodes(index, sel, TILE_LAYERS)
+    points, file_index, decompressed = _read_nodes_cached(index, sel, TILE_LAYERS, _CACHE)
     x = np.asarray(points.x, dtype=np.float64)
     y = np.asarray(points.y, dtype=np.float64)
     keep, own = _tile_selection(x, y, source.key, s, b)
     idx = np.where(own, file_index, -1 - file_index)[keep]
-    return _cloud(index, points[keep]), idx, int(file_index.size)
+    return _cloud(index, points[keep]), idx, decompressed
 
 
 def plan_tiles(infos: Sequence, size: float, buffer: float) -> Dict[Tuple[int, int], List[CopcSource]]:

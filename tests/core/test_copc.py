@@ -174,7 +174,8 @@ def test_tile_cloud_has_every_field_read_cloud_gives(files):
 @pytest.fixture(scope="module")
 def runs(files, tmp_path_factory):
     """The same tiled SMRF run with a 1 m DTM on the COPC file and on the plain LAZ; which files
-    the binning pass was given."""
+    the binning pass was given. Without the node cache, so that each tile decompresses every node
+    it reads (the cache is tested on its own, and by the folder and resume tests)."""
     copc, plain = files
     folder = tmp_path_factory.mktemp("runs")
     binned = []
@@ -184,6 +185,7 @@ def runs(files, tmp_path_factory):
         binned.append(path)
         return real(path, *args, **kwargs)
     tiles_module.bin_file = spy
+    cache, copc_io._CACHE = copc_io._CACHE, copc_io._NodeCache(0)
     try:
         out = {}
         for name, src in (("copc", copc), ("plain", plain)):
@@ -192,6 +194,7 @@ def runs(files, tmp_path_factory):
             out[name] = run
     finally:
         tiles_module.bin_file = real
+        copc_io._CACHE = cache
     return out, binned, folder
 
 
@@ -213,10 +216,31 @@ def test_each_tile_decompresses_a_bounded_share_of_the_file(runs):
     # and the upper nodes are read by every tile
     print(f"decompressed per tile: max {max(reads) / count:.1%}, mean {np.mean(reads) / count:.1%} of the "
           f"file; in all {sum(reads) / count:.2f} times the file")
-    # measured: max 18.6 %, mean 12.5 % (10.1 times the file in all, over 64 tiles: the price of
-    # small tiles, whose buffered box meets 3 or 4 of the 70 m leaf nodes each way)
+    # measured: max 18.6 %, mean 12.5 % (10.1 times the file in all, over 81 tiles, without the
+    # node cache: the price of small tiles, whose buffered box meets 3 or 4 of the 70 m leaf
+    # nodes each way, and of the upper nodes every tile reads)
     assert max(reads) < 0.25 * count and np.mean(reads) < 0.15 * count
     assert all(t["read"] <= t["copc_read"] for t in run.tile_log)
+
+
+def test_node_cache_spares_decompressing_a_node_twice(files):
+    copc, _ = files
+    info = scan_header(copc)
+    cache, copc_io._CACHE = copc_io._CACHE, copc_io._NodeCache(64 << 20)
+    try:
+        key = (int(np.floor(info.mins[0] / TILE)) + 2, int(np.floor(info.mins[1] / TILE)) + 2)
+        first = copc_io.read_tile(copc_io.CopcSource(0, copc, key, TILE, 38.0))
+        again = copc_io.read_tile(copc_io.CopcSource(0, copc, key, TILE, 38.0))
+        assert first[2] > 0 and again[2] == 0
+        assert np.array_equal(first[1], again[1]) and np.array_equal(first[0].z, again[0].z)
+        assert np.array_equal(first[0].intensity, again[0].intensity)
+        beside = copc_io.read_tile(copc_io.CopcSource(0, copc, (key[0], key[1] + 1), TILE, 38.0))
+        copc_io._CACHE = copc_io._NodeCache(0)
+        alone = copc_io.read_tile(copc_io.CopcSource(0, copc, (key[0], key[1] + 1), TILE, 38.0))
+        assert 0 < beside[2] < 0.7 * alone[2]  # the upper nodes and the shared strip were held
+        assert np.array_equal(beside[1], alone[1]) and np.array_equal(beside[0].x, alone[0].x)
+    finally:
+        copc_io._CACHE = cache
 
 
 def test_copc_run_classifies_exactly_as_the_plain_laz_run(runs, files):
