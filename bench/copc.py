@@ -3,8 +3,8 @@
     .venv/bin/python bench/copc.py [--millions 3] [--tile 250] [--workers 2] [--keep DIR]
 
 Generates a scene of about N million points (core/synthetic.py), writes it as COPC with copclib
-(the octree of tests/core/test_copc.py: one point per 64 x 64 cell of each node, the rest deeper,
-nodes in random order) and the same points in the same order as a plain LAZ, then runs on each the
+(the octree of tests/core/test_copc.py: one point per ``--grid`` x ``--grid`` cell of each node, the
+rest deeper, nodes in random order) and the same points in the same order as a plain LAZ, then runs on each the
 same tiled SMRF with a 1 m DTM (``--tile`` m tiles, SMRF's reach as buffer, ``--workers`` threads)
 and prints the time of each phase as the engine logs it: planning and binning (the plain LAZ is
 binned into tile parts; the COPC is not, its tiles' candidates come from its hierarchy), the tiles
@@ -39,6 +39,8 @@ def main():
     ap.add_argument("--millions", type=float, default=3.0)
     ap.add_argument("--tile", type=float, default=250.0)
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--grid", type=int, default=128,
+                    help="cells along a node's side (an octree level keeps one point per cell; PDAL's writers.copc: 128)")
     ap.add_argument("--keep", default=None, help="folder for the files (kept); default a temporary one")
     args = ap.parse_args()
     import laspy
@@ -59,10 +61,14 @@ def main():
         scene = make_scene(SceneSpec.for_points(int(args.millions * 1e6), density_per_m2=4.0, seed=1))
         las = scene_las(scene)
         del scene
-        nodes = write_copc(copc, las)
+        nodes = write_copc(copc, las, grid=args.grid)
         del las
         plain_copy(copc, plain)
         print(f"made the files in {time.perf_counter() - t:.0f} s ({nodes} COPC nodes)")
+    import numpy as _np
+    from groundsieve.core.io.copc import open_index
+    counts = open_index(copc).nodes["point_count"]
+    print(f"COPC: {counts.size} nodes, points per node: median {int(_np.median(counts))}, max {int(counts.max())}")
     sizes = {p: os.path.getsize(p) / 1e6 for p in (copc, plain)}
     options = FilterOptions(tiling=TileOptions(tile_size_m=args.tile, workers=args.workers, parallel="threads"))
     results = {}
