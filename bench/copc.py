@@ -40,7 +40,7 @@ def main():
     ap.add_argument("--tile", type=float, default=250.0)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--grid", type=int, default=128,
-                    help="cells along a node's side (an octree level keeps one point per cell; PDAL's writers.copc: 128)")
+                    help="cells along a node's side (an octree level keeps one point per cell)")
     ap.add_argument("--keep", default=None, help="folder for the files (kept); default a temporary one")
     args = ap.parse_args()
     import laspy
