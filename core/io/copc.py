@@ -54,11 +54,13 @@ def is_copc_header(header) -> bool:
 
 def plain_header(header):
     """A copy of ``header`` for a file that is not COPC (e.g. our classified copy, whose LAZ
-    chunks are no longer the octree's nodes): the COPC records (info, extents) dropped, the rest
-    kept. The hierarchy EVLR is dropped by :func:`plain_evlrs`."""
+    chunks are no longer the octree's nodes): the COPC records (info, extents, hierarchy) dropped,
+    the other VLRs and EVLRs kept."""
     from laspy.vlrs.vlrlist import VLRList
     h = copy.deepcopy(header)
     h.vlrs = VLRList([v for v in h.vlrs if not _is_copc_record(v)])
+    if getattr(h, "evlrs", None) is not None:
+        h.evlrs = plain_evlrs(h)
     return h
 
 

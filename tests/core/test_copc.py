@@ -370,3 +370,17 @@ def test_an_interrupted_copc_run_resumes(tmp_path):
     clean = tmp_path / "clean.laz"
     run_ground_filter(str(copc), str(clean), SMRF(), options=tiled())
     assert np.array_equal(laspy.read(out).classification, laspy.read(clean).classification)
+
+
+def test_a_copc_run_as_one_cloud_writes_a_plain_laz(tmp_path):
+    """A COPC small enough for one cloud (no tiling) goes through read_cloud and write_classified:
+    its copy is written (laspy writes no COPC record) as a plain LAZ with every point."""
+    copc = tmp_path / "small.copc.laz"
+    write_copc(copc, scene_las(make_scene(SMALL)))
+    out = tmp_path / "out.laz"
+    run = run_ground_filter(str(copc), str(out), SMRF())
+    assert run.cloud is not None  # the whole-cloud run, not tiles
+    assert not scan_header(str(out)).copc and scan_header(str(out)).crs_wkt == scan_header(str(copc)).crs_wkt
+    a, b = laspy.read(copc), laspy.read(out)
+    assert np.array_equal(a.gps_time, b.gps_time) and np.array_equal(a.X, b.X)
+    assert np.array_equal(b.classification, classify_cloud(read_cloud(str(copc)), SMRF()).classification)
