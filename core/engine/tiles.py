@@ -427,7 +427,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         log(f"{sum(d is not None for d in done_before)} of {len(keys)} tile(s) were done before; skipping them.")
     jobs = [dict(key=key, parts=tiles.get(key, []), copc=copc_tiles.get(key, []), bounds=grid.bounds(key),
                  buffer=grid.buffer, done_dir=done_dir,
-                 names=sorted({os.path.basename(inputs[p.file_index]) for p in tiles.get(key, []) + copc_tiles.get(key, [])}),
+                 names=sorted({os.path.basename(inputs[p.file_index])
+                               for p in tiles.get(key, []) + copc_tiles.get(key, [])}),
                  class_paths=class_paths, algorithm=algorithm, options=options, dtm=dtm if dtm_path else None,
                  dtm_grid=dtm_writer.grid if dtm_writer is not None else None,
                  is_cancelled=None if use_processes or tiling.scheduler else steps.is_cancelled,
