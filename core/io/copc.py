@@ -9,8 +9,9 @@ where each node's chunk is and how many points it holds, so sorting its entries 
 summing the counts gives each node's first index; no pass over the points is needed.
 
 A tile's points are chosen exactly as ``bin_file`` chooses them (same own tile, same buffer test on
-the same floating-point values), in file order, so a tiled run on a COPC file gives the same tile
-clouds, hence the same classes, as on the same points in a plain LAZ of the same order.
+the same floating-point values), in file order (a tile part groups them by the tile they come from
+instead): tests/core/test_copc.py checks the same points tile by tile, and the same classes and DTM
+as a tiled run on the same points in a plain LAZ.
 
 Only laspy's public reading API (``LasHeader.read_from``, ``PackedPointRecord``) and lazrs's
 ``decompress_points_with_chunk_table`` are used; the hierarchy pages are parsed here (32-byte
