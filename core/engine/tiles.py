@@ -154,6 +154,9 @@ def needs_tiling(input_path: str, tiling: TileOptions) -> bool:
 def sample_density(path: str, chunk_points: int = CHUNK_POINTS, cell_m: float = 10.0) -> float:
     """Points per m² where the points are: the first chunk over the 10 m cells it occupies (a stray
     point far away does not dilute it, as the header's bounding box would)."""
+    if scan_header(path).copc:  # its first chunk is its root node: sparse points over the whole file
+        from ..io.copc import sample_density as copc_density
+        return copc_density(path)
     for chunk in iter_chunks(path, chunk_points):
         x, y = np.asarray(chunk.x), np.asarray(chunk.y)
         if x.size == 0:
@@ -194,6 +197,8 @@ class TiledRun:
     dtm_path: Optional[str] = None
     cloud: None = None  #: no cloud in memory (FilterRun has one)
     tile_log: List[dict] = field(default_factory=list)
+    #: the COPC inputs, read by bounds by each tile instead of binned (io/copc.py)
+    copc_inputs: List[str] = field(default_factory=list)
 
 
 def output_files(inputs: Sequence[str], output_path: Optional[str]) -> List[Optional[str]]:
@@ -280,7 +285,7 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     if os.path.isdir(work):
         log(f"Resuming the interrupted run in {work}.")
     else:
-        _check_disk(parent, infos, buffer_m, size)
+        _check_disk(parent, [i for i in infos if not i.copc], buffer_m, size)  # COPC files are not binned
         os.makedirs(work)
     cluster = None
     rasters = []  # the DTM writer, released at once if the run fails
@@ -367,7 +372,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         # in pieces of consecutive points, one per worker (LAZ seeks through its chunk table)
         bin_jobs = []
         for k, info in enumerate(infos):
-            if not info.count:
+            if not info.count or info.copc:  # a COPC file is read by bounds by its tiles
                 continue
             pieces = min(tiling.worker_count, info.count // BIN_PIECE_POINTS) if len(infos) == 1 else 1
             if pieces <= 1:
@@ -390,6 +395,9 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         _save_json(binned, [dict(key=list(k), parts=[dataclasses.asdict(p) for p in v]) for k, v in tiles.items()])
     # a tile with buffer points only (its own area empty) is no tile
     keys = sorted(k for k, parts in tiles.items() if sum(p.own_count for p in parts))
+    from ..io.copc import plan_tiles
+    copc_tiles = plan_tiles(infos, grid.size, grid.buffer)  # the tiles COPC inputs may have points in
+    keys = sorted(set(keys) | set(copc_tiles))
     log(f"Binned into {len(keys)} tile(s) in {time.perf_counter() - t_start:.1f} s.")
     assigned = [0] * len(infos)
     crs_wkt = infos[0].crs_wkt
@@ -417,8 +425,10 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     done_before = [_load_done(done_dir, key) for key in keys]
     if any(d is not None for d in done_before):
         log(f"{sum(d is not None for d in done_before)} of {len(keys)} tile(s) were done before; skipping them.")
-    jobs = [dict(key=key, parts=tiles[key], bounds=grid.bounds(key), buffer=grid.buffer, done_dir=done_dir,
-                 names=sorted({os.path.basename(inputs[p.file_index]) for p in tiles[key]}),
+    jobs = [dict(key=key, parts=tiles.get(key, []), copc=copc_tiles.get(key, []), bounds=grid.bounds(key),
+                 buffer=grid.buffer, done_dir=done_dir,
+                 names=sorted({os.path.basename(inputs[p.file_index])
+                               for p in tiles.get(key, []) + copc_tiles.get(key, [])}),
                  class_paths=class_paths, algorithm=algorithm, options=options, dtm=dtm if dtm_path else None,
                  dtm_grid=dtm_writer.grid if dtm_writer is not None else None,
                  is_cancelled=None if use_processes or tiling.scheduler else steps.is_cancelled,
@@ -440,7 +450,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             dtm_writer.write_block(*result["block"])
         ground_total += result["ground"]
         tile_log.append(dict(key=tuple(result["key"]), points=result["own"], read=result["read"],
-                             ground=result["ground"]))
+                             ground=result["ground"], copc_read=result.get("copc_read", 0)))
         elapsed = time.perf_counter() - t_tiles
         done_frac = len(tile_log) / len(keys)
         x0, y0 = grid.bounds(tuple(result["key"]))[:2]
@@ -504,7 +514,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     steps.report(1.0)
     log(f"Done in {time.perf_counter() - t_start:.1f} s.")
     return TiledRun(inputs, [o for o in outs if o], sum(i.count for i in infos), ground_total, crs_wkt,
-                    grid.size, grid.buffer, len(tile_log), dtm_path, tile_log=tile_log)
+                    grid.size, grid.buffer, len(tile_log), dtm_path, tile_log=tile_log,
+                    copc_inputs=[i.path for i in infos if i.copc])
 
 
 def _bin_job(job) -> dict:
@@ -598,12 +609,15 @@ def _tile_job(job) -> Optional[dict]:
     where = job_name(job["bounds"], job["names"])
     options = job["options"]
     try:
+        from ..io.copc import tile_sources
         clouds, indices, files = [], [], []
-        for p in job["parts"]:
-            c, idx = read_part(p)
+        sources, copc_read = tile_sources(job["parts"], job.get("copc", ()), read_part)  # in file order
+        if not sources:  # a COPC tile whose area holds no point
+            return None
+        for file_index, c, idx in sources:
             clouds.append(c)
             indices.append(idx)
-            files.append(np.full(idx.size, p.file_index, dtype=np.int32))
+            files.append(np.full(idx.size, file_index, dtype=np.int32))
         index = np.concatenate(indices)
         file_of = np.concatenate(files)
         own = index >= 0
@@ -639,7 +653,7 @@ def _tile_job(job) -> Optional[dict]:
         if job["dtm"] is not None:
             block = _dtm_block(cloud, ground, job["dtm"], job["dtm_grid"], job["bounds"], job["buffer"])
         result = dict(key=list(job["key"]), own=int(own.sum()), read=len(cloud), ground=int(ground[own].sum()),
-                      assigned=assigned, block=block, class_parts=class_parts)
+                      assigned=assigned, block=block, class_parts=class_parts, copc_read=copc_read)
         _save_done(job["done_dir"], result)
         return result
     except Cancelled:

@@ -353,6 +353,10 @@ def write_classified(cloud: PointCloud, classification: np.ndarray, path: str, *
         raise OutputError(f"{path}: classification has {classification.shape} values for {len(cloud)} points")
     if cloud.las is not None:
         las = cloud.las
+        from .copc import is_copc_header, plain_header
+        if is_copc_header(las.header):  # laspy writes no COPC; nor would the copy be one (its chunks)
+            import laspy
+            las = laspy.LasData(header=plain_header(las.header), points=las.points)
         if las.point_format.id < 6 and classification.max(initial=0) > 31:
             raise OutputError(f"{path}: point format {las.point_format.id} stores classes 0-31 only")
         original = np.array(las.classification)

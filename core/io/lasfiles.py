@@ -36,6 +36,7 @@ class LasInfo:
     point_format: int
     version: str
     crs_wkt: Optional[str]
+    copc: bool = False  #: a COPC file (the COPC info VLR): its tiles read it by bounds (io/copc.py)
 
     @property
     def area_m2(self) -> float:
@@ -45,6 +46,7 @@ class LasInfo:
 def scan_header(path: str) -> LasInfo:
     """The header of ``path``: point count, bounds, point format, version, CRS."""
     import laspy
+    from .copc import is_copc_header
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise InputError(f"{path}: no such file")
@@ -62,7 +64,8 @@ def scan_header(path: str) -> LasInfo:
                 except Exception:
                     crs_wkt = None
             return LasInfo(path, int(h.point_count), tuple(float(v) for v in h.mins),
-                           tuple(float(v) for v in h.maxs), int(h.point_format.id), str(h.version), crs_wkt)
+                           tuple(float(v) for v in h.maxs), int(h.point_format.id), str(h.version), crs_wkt,
+                           copc=is_copc_header(h))
     except (InputError, UnsupportedFormatError):
         raise
     except Exception as err:  # laspy raises many types for damaged files
@@ -382,6 +385,7 @@ def write_classified_stream(src: str, dst: str, classification: np.ndarray, *,
     point, in file order; a memmap is fine) in one streamed pass, every other dimension, the VLRs
     and the CRS kept. Atomic: ``dst`` appears only when complete."""
     import laspy
+    from .copc import plain_evlrs, plain_header
     classification = np.asarray(classification)
     try:
         with laspy.open(src) as reader:
@@ -391,7 +395,8 @@ def write_classified_stream(src: str, dst: str, classification: np.ndarray, *,
             if reader.header.point_format.id < 6 and n_total and int(classification.max()) > 31:
                 raise OutputError(f"{dst}: point format {reader.header.point_format.id} stores classes 0-31 only")
             with atomic_path(dst) as tmp:
-                with laspy.open(tmp, mode="w", header=copy.deepcopy(reader.header),
+                # Not COPC any more (the LAZ chunks are not the octree's nodes): no COPC records.
+                with laspy.open(tmp, mode="w", header=plain_header(reader.header),
                                 do_compress=_ext(dst) == ".laz") as writer:
                     start = 0
                     for chunk in reader.chunk_iterator(chunk_points):
@@ -401,6 +406,8 @@ def write_classified_stream(src: str, dst: str, classification: np.ndarray, *,
                         chunk.classification = classification[start:start + n]
                         writer.write_points(chunk)
                         start += n
+                    if reader.header.version.minor >= 4 and plain_evlrs(reader.header):
+                        writer.write_evlrs(plain_evlrs(reader.header))
     except OSError as err:
         raise OutputError(f"{dst}: cannot be written ({err})") from err
     except GroundSieveError:
