@@ -302,7 +302,8 @@ def _smrf_surface(algorithm, xyz, steps, shared: Optional[dict] = None):
     """SMRF's provisional surface and its slope: what the point test (threshold, scalar) reads.
     ``shared``: a dict kept over one search; SMRF's minimum surface (filled, low outliers refilled),
     which the searched slope and window do not change, is made once per cell and low-outlier
-    setting there and reused (two of the three harmonic fills of a run)."""
+    setting there and reused (two of the three harmonic fills of a run), with the progressive
+    opening's drops per radius (SMRFMinimum.drops: the openings are then made once per search)."""
     from ..filters.smrf import surface_slope
     minimum = None
     if shared is not None:
@@ -311,7 +312,7 @@ def _smrf_surface(algorithm, xyz, steps, shared: Optional[dict] = None):
         if minimum is None:
             if len(shared) >= 4:
                 shared.pop(next(iter(shared)))
-            minimum = shared[key] = algorithm.minimum_surface(xyz, steps)
+            minimum = shared[key] = algorithm.minimum_surface(xyz, steps, keep_openings=True)
     grid, zpro, _objects = algorithm.surface(xyz, steps, minimum)
     return grid, zpro, surface_slope(zpro, algorithm.cell_size_m)
 

@@ -23,8 +23,8 @@ kd-tree fill) and measures worse on ISPRS; it is not followed here.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Tuple
+from dataclasses import dataclass, field
+from typing import List, Optional, Tuple
 
 import numpy as np
 
@@ -39,6 +39,8 @@ from ..validate import _require, check_number, validate_xyz
 
 #: points classified against the final surface per kernel call (progress and cancel between)
 POINTS_PER_SLICE = 500_000
+#: at most this much memory for the progressive opening's drops kept over a search (one grid per radius)
+KEEP_OPENINGS_BYTES = 256 * 2 ** 20
 
 
 @dataclass(frozen=True)
@@ -60,6 +62,29 @@ class SMRFMinimum:
     empty: np.ndarray           #: cells no point falls in
     low: np.ndarray             #: low-outlier cells
     key: tuple
+    #: kept drops of the progressive opening (see :meth:`drops`); None = not kept
+    openings: Optional[list] = field(default=None, compare=False, repr=False)
+
+    def drops(self, radius: int) -> Optional[List[np.ndarray]]:
+        """The progressive opening's drops ``last - opening(last, r)`` for r = 1..``radius`` (cells),
+        ``last`` starting at ``zmin``: they depend on neither the slope nor the window, which only
+        compare them with ``slope * r * cell`` and choose where to stop. Made once and kept (a
+        search over slope and window then opens the surface once per radius, not once per run).
+        None when they are not kept or would take more than :data:`KEEP_OPENINGS_BYTES`."""
+        from ..grids.morphology import opening
+        state = self.openings
+        if state is None or radius * self.zmin.nbytes > KEEP_OPENINGS_BYTES:
+            return None
+        if not state:
+            state.extend([self.zmin, []])
+        last, drops = state
+        while len(drops) < radius:
+            opened = opening(last, len(drops) + 1)
+            drop = last - opened
+            drop.flags.writeable = False
+            drops.append(drop)
+            last = state[0] = opened
+        return drops[:radius]
 
 
 @dataclass(frozen=True)
@@ -117,9 +142,12 @@ class SMRF:
         SMRF with the same key serves this one (tuning and the hybrid features reuse it)."""
         return (float(self.cell_size_m), float(self.low_outlier_slope), bool(self.low_outlier_fill))
 
-    def minimum_surface(self, xyz: np.ndarray, steps: Steps | None = None) -> SMRFMinimum:
+    def minimum_surface(self, xyz: np.ndarray, steps: Steps | None = None,
+                        keep_openings: bool = False) -> SMRFMinimum:
         """Steps 1 and 2: the filled minimum surface with the low outliers found (and, with
-        ``low_outlier_fill``, removed and refilled). Independent of slope, window and thresholds."""
+        ``low_outlier_fill``, removed and refilled). Independent of slope, window and thresholds.
+        ``keep_openings``: keep the progressive opening's drops as runs make them
+        (:meth:`SMRFMinimum.drops`; one grid per radius) for the next :meth:`surface` calls."""
         steps = steps or Steps()
         xyz = validate_xyz(xyz)
         x, y, z = (np.ascontiguousarray(xyz[:, i]) for i in range(3))
@@ -140,7 +168,7 @@ class SMRF:
         steps.report(1.0)
         for a in (raw, zmin, empty, low):
             a.flags.writeable = False  # shared between runs: nobody may change it
-        return SMRFMinimum(grid, raw, zmin, empty, low, self.minimum_key)
+        return SMRFMinimum(grid, raw, zmin, empty, low, self.minimum_key, [] if keep_openings else None)
 
     def surface(self, xyz: np.ndarray, steps: Steps | None = None,
                 minimum: SMRFMinimum | None = None) -> Tuple[GridSpec, np.ndarray, np.ndarray]:
@@ -154,8 +182,14 @@ class SMRF:
             raise InvalidParameterError(f"this minimum surface was made for cell, low-outlier slope and refill "
                                         f"{minimum.key}, not {self.minimum_key}")
         steps.report(0.2)
-        objects = progressive_filter(minimum.zmin, self.radii, self.cell_size_m, self.slope,
-                                     steps=steps.sub(0.2, 0.8))
+        drops = minimum.drops(len(self.radii))
+        if drops is None:
+            objects = progressive_filter(minimum.zmin, self.radii, self.cell_size_m, self.slope,
+                                         steps=steps.sub(0.2, 0.8))
+        else:  # progressive_filter's test on the kept drops, the same comparisons
+            objects = np.zeros(minimum.zmin.shape, dtype=bool)
+            for radius, drop in zip(self.radii, drops):
+                objects |= drop > self.slope * radius * self.cell_size_m
         objects |= minimum.empty | minimum.low
         if objects.all():
             # Nothing survived as ground: fall back to the minimum surface itself.
