@@ -148,9 +148,12 @@ class SMRF:
         ``low_outlier_fill``, removed and refilled). Independent of slope, window and thresholds.
         ``keep_openings``: keep the progressive opening's drops as runs make them
         (:meth:`SMRFMinimum.drops`; one grid per radius) for the next :meth:`surface` calls."""
-        steps = steps or Steps()
         xyz = validate_xyz(xyz)
-        x, y, z = (np.ascontiguousarray(xyz[:, i]) for i in range(3))
+        return self._minimum(*(np.ascontiguousarray(xyz[:, i]) for i in range(3)), steps, keep_openings)
+
+    def _minimum(self, x, y, z, steps: Steps | None, keep_openings: bool) -> SMRFMinimum:
+        """:meth:`minimum_surface` of validated contiguous coordinates."""
+        steps = steps or Steps()
         # Peak per cell: about ten float64 grids at once (minimum surface, its fill, the openings,
         # the gradient); every cell no point reaches costs the harmonic fill on top.
         grid = GridSpec.covering(x, y, self.cell_size_m, what="SMRF grid", bytes_per_cell=96,
@@ -178,7 +181,10 @@ class SMRF:
         steps = steps or Steps()
         if minimum is None:
             minimum = self.minimum_surface(xyz, steps.sub(0.0, 0.2))
-        elif minimum.key != self.minimum_key:
+        return self._surface(minimum, steps)
+
+    def _surface(self, minimum: SMRFMinimum, steps: Steps) -> Tuple[GridSpec, np.ndarray, np.ndarray]:
+        if minimum.key != self.minimum_key:
             raise InvalidParameterError(f"this minimum surface was made for cell, low-outlier slope and refill "
                                         f"{minimum.key}, not {self.minimum_key}")
         steps.report(0.2)
@@ -206,7 +212,9 @@ class SMRF:
         steps = steps or Steps()
         xyz = validate_xyz(xyz)
         x, y, z = (np.ascontiguousarray(xyz[:, i]) for i in range(3))
-        grid, zpro, objects = self.surface(xyz, steps.sub(0.0, 0.85), minimum)
+        if minimum is None:
+            minimum = self._minimum(x, y, z, steps.sub(0.0, 0.17), False)
+        grid, zpro, objects = self._surface(minimum, steps.sub(0.17, 0.85))
         steps.report(0.85)
         ground = ground_against_surface(x, y, z, zpro, surface_slope(zpro, self.cell_size_m), grid,
                                         self.elevation_threshold_m, self.elevation_scalar, steps.sub(0.85, 1.0))
