@@ -65,7 +65,7 @@ class SMRFMinimum:
     #: kept drops of the progressive opening (see :meth:`drops`); None = not kept
     openings: Optional[list] = field(default=None, compare=False, repr=False)
 
-    def drops(self, radius: int) -> Optional[List[np.ndarray]]:
+    def drops(self, radius: int, steps: Steps | None = None) -> Optional[List[np.ndarray]]:
         """The progressive opening's drops ``last - opening(last, r)`` for r = 1..``radius`` (cells),
         ``last`` starting at ``zmin``: they depend on neither the slope nor the window, which only
         compare them with ``slope * r * cell`` and choose where to stop. Made once and kept (a
@@ -84,6 +84,8 @@ class SMRFMinimum:
             drop.flags.writeable = False
             drops.append(drop)
             last = state[0] = opened
+            if steps is not None:
+                steps.report(len(drops) / radius)  # progress, and a cancel check between openings
         return drops[:radius]
 
 
@@ -188,7 +190,7 @@ class SMRF:
             raise InvalidParameterError(f"this minimum surface was made for cell, low-outlier slope and refill "
                                         f"{minimum.key}, not {self.minimum_key}")
         steps.report(0.2)
-        drops = minimum.drops(len(self.radii))
+        drops = minimum.drops(len(self.radii), steps.sub(0.2, 0.8))
         if drops is None:
             objects = progressive_filter(minimum.zmin, self.radii, self.cell_size_m, self.slope,
                                          steps=steps.sub(0.2, 0.8))
