@@ -298,12 +298,23 @@ def _pattern_search(start: Dict[str, object], start_loss: float, dims: Sequence[
                 return
 
 
-def _smrf_surface(algorithm, xyz, steps):
-    """SMRF's provisional surface and its slope: what the point test (threshold, scalar) reads."""
+def _smrf_surface(algorithm, xyz, steps, shared: Optional[dict] = None):
+    """SMRF's provisional surface and its slope: what the point test (threshold, scalar) reads.
+    ``shared``: a dict kept over one search; SMRF's minimum surface (filled, low outliers refilled),
+    which the searched slope and window do not change, is made once per cell and low-outlier
+    setting there and reused (two of the three harmonic fills of a run), with the progressive
+    opening's drops per radius (SMRFMinimum.drops: the openings are then made once per search)."""
     from ..filters.smrf import surface_slope
-    detail = algorithm.run(xyz, steps)
-    zpro = detail.provisional_surface
-    return detail.grid, zpro, surface_slope(zpro, algorithm.cell_size_m)
+    minimum = None
+    if shared is not None:
+        key = algorithm.minimum_key
+        minimum = shared.get(key)
+        if minimum is None:
+            if len(shared) >= 4:
+                shared.pop(next(iter(shared)))
+            minimum = shared[key] = algorithm.minimum_surface(xyz, steps, keep_openings=True)
+    grid, zpro, _objects = algorithm.surface(xyz, steps, minimum)
+    return grid, zpro, surface_slope(zpro, algorithm.cell_size_m)
 
 
 def _smrf_ground(surface, xyz, values):
@@ -356,6 +367,7 @@ def tune(cloud, name: str, options: TuneOptions = TuneOptions(), *, base: Option
     trials: List[Trial] = []
     seen: Dict[tuple, int] = {}
     surfaces: Dict[tuple, object] = {}   # costly part of a set -> its surface (rescore only)
+    shared: dict = {}                    # what the rescore's runs share (SMRF: the minimum surface)
     runs = [0]
     t0 = time.monotonic()
     stopped = [""]
@@ -388,7 +400,7 @@ def tune(cloud, name: str, options: TuneOptions = TuneOptions(), *, base: Option
                     runs[0] += 1
                     if len(surfaces) >= 64:
                         surfaces.pop(next(iter(surfaces)))
-                    surfaces[costly] = rescore[0](algorithm, xyz, Steps(None, steps.is_cancelled))
+                    surfaces[costly] = rescore[0](algorithm, xyz, Steps(None, steps.is_cancelled), shared)
                 ground = rescore[1](surfaces[costly], xyz, args)
             else:
                 steps.report(runs[0] / options.budget)

@@ -23,10 +23,12 @@ kd-tree fill) and measures worse on ISPRS; it is not followed here.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import List, Optional, Tuple
 
 import numpy as np
 
+from ..errors import InvalidParameterError
 from ..grids.inpaint import inpaint_harmonic
 from ..grids.morphology import progressive_filter
 from ..grids.rasterize import cell_min
@@ -37,6 +39,8 @@ from ..validate import _require, check_number, validate_xyz
 
 #: points classified against the final surface per kernel call (progress and cancel between)
 POINTS_PER_SLICE = 500_000
+#: at most this much memory for the progressive opening's drops kept over a search (one grid per radius)
+KEEP_OPENINGS_BYTES = 256 * 2 ** 20
 
 
 @dataclass(frozen=True)
@@ -45,6 +49,44 @@ class SMRFResult:
     grid: GridSpec
     provisional_surface: np.ndarray  #: Zpro (row 0 north)
     object_cells: np.ndarray    #: empty, low-outlier or object cells
+
+
+@dataclass(frozen=True)
+class SMRFMinimum:
+    """SMRF's steps 1-2 on one cloud (read-only arrays): they depend only on the points, the cell
+    and the low-outlier settings (``key``, :attr:`SMRF.minimum_key`), so runs that differ in slope,
+    window or thresholds share them (tuning, the hybrid features)."""
+    grid: GridSpec
+    raw: np.ndarray             #: lowest z per cell, NaN where empty
+    zmin: np.ndarray            #: filled, low outliers removed and refilled (with ``low_outlier_fill``)
+    empty: np.ndarray           #: cells no point falls in
+    low: np.ndarray             #: low-outlier cells
+    key: tuple
+    #: kept drops of the progressive opening (see :meth:`drops`); None = not kept
+    openings: Optional[list] = field(default=None, compare=False, repr=False)
+
+    def drops(self, radius: int, steps: Steps | None = None) -> Optional[List[np.ndarray]]:
+        """The progressive opening's drops ``last - opening(last, r)`` for r = 1..``radius`` (cells),
+        ``last`` starting at ``zmin``: they depend on neither the slope nor the window, which only
+        compare them with ``slope * r * cell`` and choose where to stop. Made once and kept (a
+        search over slope and window then opens the surface once per radius, not once per run).
+        None when they are not kept or would take more than :data:`KEEP_OPENINGS_BYTES`."""
+        from ..grids.morphology import opening
+        state = self.openings
+        if state is None or radius * self.zmin.nbytes > KEEP_OPENINGS_BYTES:
+            return None
+        if not state:
+            state.extend([self.zmin, []])
+        last, drops = state
+        while len(drops) < radius:
+            opened = opening(last, len(drops) + 1)
+            drop = last - opened
+            drop.flags.writeable = False
+            drops.append(drop)
+            last = state[0] = opened
+            if steps is not None:
+                steps.report(len(drops) / radius)  # progress, and a cancel check between openings
+        return drops[:radius]
 
 
 @dataclass(frozen=True)
@@ -96,34 +138,85 @@ class SMRF:
         """Boolean ground mask of the points ``xyz`` (n, 3)."""
         return self.run(xyz, steps).ground
 
-    def run(self, xyz: np.ndarray, steps: Steps | None = None) -> SMRFResult:
-        steps = steps or Steps()
+    @property
+    def minimum_key(self) -> tuple:
+        """What :meth:`minimum_surface` depends on besides the points: a minimum surface made by an
+        SMRF with the same key serves this one (tuning and the hybrid features reuse it)."""
+        return (float(self.cell_size_m), float(self.low_outlier_slope), bool(self.low_outlier_fill))
+
+    def minimum_surface(self, xyz: np.ndarray, steps: Steps | None = None,
+                        keep_openings: bool = False) -> SMRFMinimum:
+        """Steps 1 and 2: the filled minimum surface with the low outliers found (and, with
+        ``low_outlier_fill``, removed and refilled). Independent of slope, window and thresholds.
+        ``keep_openings``: keep the progressive opening's drops as runs make them
+        (:meth:`SMRFMinimum.drops`; one grid per radius) for the next :meth:`surface` calls."""
         xyz = validate_xyz(xyz)
-        x, y, z = (np.ascontiguousarray(xyz[:, i]) for i in range(3))
+        return self._minimum(*(np.ascontiguousarray(xyz[:, i]) for i in range(3)), steps, keep_openings)
+
+    def _minimum(self, x, y, z, steps: Steps | None, keep_openings: bool) -> SMRFMinimum:
+        """:meth:`minimum_surface` of validated contiguous coordinates."""
+        steps = steps or Steps()
         # Peak per cell: about ten float64 grids at once (minimum surface, its fill, the openings,
-        # the gradient); every cell no point reaches costs the harmonic fill's sparse LU on top.
+        # the gradient); every cell no point reaches costs the harmonic fill on top.
         grid = GridSpec.covering(x, y, self.cell_size_m, what="SMRF grid", bytes_per_cell=96,
                                  bytes_per_empty_cell=FILL_BYTES_PER_EMPTY_CELL)
-        steps.report(0.02)
-        zmin = cell_min(x, y, z, grid, steps.sub(0.02, 0.05))
-        empty = np.isnan(zmin)
-        zmin = inpaint_harmonic(zmin)
         steps.report(0.1)
+        raw = cell_min(x, y, z, grid, steps.sub(0.1, 0.3))
+        empty = np.isnan(raw)
+        zmin = inpaint_harmonic(raw)
+        steps.report(0.6)
         low = progressive_filter(-zmin, [1], self.cell_size_m, self.low_outlier_slope)
-        steps.report(0.12)
+        steps.report(0.7)
         if self.low_outlier_fill and low.any():
             zmin[low] = np.nan
             zmin = inpaint_harmonic(zmin)
-        steps.report(0.15)
-        objects = progressive_filter(zmin, self.radii, self.cell_size_m, self.slope,
-                                     steps=steps.sub(0.15, 0.7))
-        objects |= empty | low
-        zpro = zmin
-        zpro[objects] = np.nan
+        steps.report(1.0)
+        for a in (raw, zmin, empty, low):
+            a.flags.writeable = False  # shared between runs: nobody may change it
+        return SMRFMinimum(grid, raw, zmin, empty, low, self.minimum_key, [] if keep_openings else None)
+
+    def surface(self, xyz: np.ndarray, steps: Steps | None = None,
+                minimum: SMRFMinimum | None = None) -> Tuple[GridSpec, np.ndarray, np.ndarray]:
+        """Steps 1-4 without the point test: (grid, provisional surface Zpro, object cells).
+        ``minimum``: this cloud's :meth:`minimum_surface` made earlier with the same
+        :attr:`minimum_key` (it is not changed)."""
+        steps = steps or Steps()
+        if minimum is None:
+            minimum = self.minimum_surface(xyz, steps.sub(0.0, 0.2))
+        return self._surface(minimum, steps)
+
+    def _surface(self, minimum: SMRFMinimum, steps: Steps) -> Tuple[GridSpec, np.ndarray, np.ndarray]:
+        if minimum.key != self.minimum_key:
+            raise InvalidParameterError(f"this minimum surface was made for cell, low-outlier slope and refill "
+                                        f"{minimum.key}, not {self.minimum_key}")
+        steps.report(0.2)
+        drops = minimum.drops(len(self.radii), steps.sub(0.2, 0.8))
+        if drops is None:
+            objects = progressive_filter(minimum.zmin, self.radii, self.cell_size_m, self.slope,
+                                         steps=steps.sub(0.2, 0.8))
+        else:  # progressive_filter's test on the kept drops, the same comparisons
+            objects = np.zeros(minimum.zmin.shape, dtype=bool)
+            for radius, drop in zip(self.radii, drops):
+                objects |= drop > self.slope * radius * self.cell_size_m
+        objects |= minimum.empty | minimum.low
         if objects.all():
             # Nothing survived as ground: fall back to the minimum surface itself.
-            zpro = cell_min(x, y, z, grid)
+            zpro = minimum.raw.copy()
+        else:
+            zpro = minimum.zmin.copy()
+            zpro[objects] = np.nan
         zpro = inpaint_harmonic(zpro)
+        steps.report(1.0)
+        return minimum.grid, zpro, objects
+
+    def run(self, xyz: np.ndarray, steps: Steps | None = None,
+            minimum: SMRFMinimum | None = None) -> SMRFResult:
+        steps = steps or Steps()
+        xyz = validate_xyz(xyz)
+        x, y, z = (np.ascontiguousarray(xyz[:, i]) for i in range(3))
+        if minimum is None:
+            minimum = self._minimum(x, y, z, steps.sub(0.0, 0.17), False)
+        grid, zpro, objects = self._surface(minimum, steps.sub(0.17, 0.85))
         steps.report(0.85)
         ground = ground_against_surface(x, y, z, zpro, surface_slope(zpro, self.cell_size_m), grid,
                                         self.elevation_threshold_m, self.elevation_scalar, steps.sub(0.85, 1.0))

@@ -36,6 +36,43 @@ def _cell_mean_kernel(x, y, z, x0, top, cell, nrows, ncols, total, count):
 
 
 @njit(cache=True, nogil=True)
+def _running_extremes(src, s, r, take_max, buf):
+    """buf[w, x] = extreme of src[s, x-w .. x+w] (cells outside the row ignored), w = 0..r."""
+    ncols = src.shape[1]
+    for x in range(ncols):
+        buf[0, x] = src[s, x]
+    for w in range(1, r + 1):
+        lo = min(w, ncols)
+        hi = max(ncols - w, lo)
+        if take_max:
+            for x in range(0, lo):  # left edge: no cell at x - w
+                v = buf[w - 1, x]
+                if x + w < ncols:
+                    v = max(v, src[s, x + w])
+                buf[w, x] = v
+            for x in range(lo, hi):
+                buf[w, x] = max(max(buf[w - 1, x], src[s, x - w]), src[s, x + w])
+            for x in range(hi, ncols):  # right edge: no cell at x + w
+                v = buf[w - 1, x]
+                if x - w >= 0:
+                    v = max(v, src[s, x - w])
+                buf[w, x] = v
+        else:
+            for x in range(0, lo):
+                v = buf[w - 1, x]
+                if x + w < ncols:
+                    v = min(v, src[s, x + w])
+                buf[w, x] = v
+            for x in range(lo, hi):
+                buf[w, x] = min(min(buf[w - 1, x], src[s, x - w]), src[s, x + w])
+            for x in range(hi, ncols):
+                v = buf[w - 1, x]
+                if x - w >= 0:
+                    v = min(v, src[s, x - w])
+                buf[w, x] = v
+
+
+@njit(cache=True, nogil=True)
 def _disk_extreme_rows(src, r, half, take_max, row_lo, row_hi, out):
     """Rows ``row_lo:row_hi`` of the erosion/dilation (see ``_disk_extreme_kernel``)."""
     nrows, ncols = src.shape
@@ -45,20 +82,7 @@ def _disk_extreme_rows(src, r, half, take_max, row_lo, row_hi, out):
             out[i, x] = fill
     buf = np.empty((r + 1, ncols), dtype=src.dtype)
     for s in range(max(row_lo - r, 0), min(row_hi + r, nrows)):
-        for x in range(ncols):
-            buf[0, x] = src[s, x]
-        for w in range(1, r + 1):
-            for x in range(ncols):
-                v = buf[w - 1, x]
-                if x - w >= 0:
-                    u = src[s, x - w]
-                    if (u > v) if take_max else (u < v):
-                        v = u
-                if x + w < ncols:
-                    u = src[s, x + w]
-                    if (u > v) if take_max else (u < v):
-                        v = u
-                buf[w, x] = v
+        _running_extremes(src, s, r, take_max, buf)
         for dy in range(-r, r + 1):
             i = s - dy
             if i < row_lo or i >= row_hi:
@@ -66,12 +90,10 @@ def _disk_extreme_rows(src, r, half, take_max, row_lo, row_hi, out):
             w = half[dy + r]
             if take_max:
                 for x in range(ncols):
-                    if buf[w, x] > out[i, x]:
-                        out[i, x] = buf[w, x]
+                    out[i, x] = max(out[i, x], buf[w, x])
             else:
                 for x in range(ncols):
-                    if buf[w, x] < out[i, x]:
-                        out[i, x] = buf[w, x]
+                    out[i, x] = min(out[i, x], buf[w, x])
 
 
 @njit(cache=True, nogil=True, parallel=True)

@@ -178,8 +178,7 @@ def hybrid_features(xyz: np.ndarray, names: Sequence[str], *, cell_size_m: float
 def _hybrid_features(xyz: np.ndarray, names: Sequence[str], *, cell_size_m: float = 1.0,
                      steps: Optional[Steps] = None) -> np.ndarray:
     from ..filters.smrf import SMRF
-    from ..grids.inpaint import inpaint_harmonic
-    from ..grids.morphology import opening, progressive_filter
+    from ..grids.morphology import opening
     from ..grids.rasterize import cell_min
     from ..grids.spec import GridSpec
     from ._hybrid_kernels import _point_features_kernel
@@ -195,8 +194,18 @@ def _hybrid_features(xyz: np.ndarray, names: Sequence[str], *, cell_size_m: floa
     xyz = validate_xyz(xyz)
     x, y, z = (np.ascontiguousarray(xyz[:, i]) for i in range(3))
     cell = float(cell_size_m)
-    grid = GridSpec.covering(x, y, cell, what="hybrid feature grid")
-    zmin_raw = cell_min(x, y, z, grid)
+    radii = sorted({opening_radius(n) for n in names if opening_radius(n) is not None})
+    uses_smrf = any(n in ("above_smrf", "smrf_slope", "smrf_curvature") for n in names)
+    smrf = SMRF(cell_size_m=cell)
+    minimum = None
+    if uses_smrf or radii:
+        # SMRF's steps 1-2 (its defaults: low outliers at slope 5 removed and refilled) once: the
+        # surface of SMRF and the openings below both start from this cleaned minimum surface.
+        minimum = smrf.minimum_surface(xyz, steps.sub(0.0, 0.1))
+        grid, zmin_raw = minimum.grid, minimum.raw
+    else:
+        grid = GridSpec.covering(x, y, cell, what="hybrid feature grid")
+        zmin_raw = cell_min(x, y, z, grid)
     surfaces: List[np.ndarray] = []
     modes: List[int] = []
     column: Dict[str, int] = {}
@@ -206,28 +215,24 @@ def _hybrid_features(xyz: np.ndarray, names: Sequence[str], *, cell_size_m: floa
         surfaces.append(np.ascontiguousarray(surface, dtype=np.float64))
         modes.append(1 if above else 0)
 
-    if any(n in ("above_smrf", "smrf_slope", "smrf_curvature") for n in names):
-        zpro = SMRF(cell_size_m=cell).run(xyz, steps.sub(0.0, 0.4)).provisional_surface
+    if uses_smrf:
+        _grid, zpro, _objects = smrf.surface(xyz, steps.sub(0.1, 0.4), minimum)
         slope, curvature = _slope(zpro, cell)
         add("above_smrf", zpro, True)
         add("smrf_slope", slope, False)
         add("smrf_curvature", curvature, False)
     steps.report(0.4)
-    radii = sorted({opening_radius(n) for n in names if opening_radius(n) is not None})
     if radii:
         # The minimum surface as SMRF cleans it: empty cells inpainted, low outliers removed.
-        zmin = inpaint_harmonic(zmin_raw)
-        low = progressive_filter(-zmin, [1], cell, 5.0)
-        if low.any():
-            zmin[low] = np.nan
-            zmin = inpaint_harmonic(zmin)
         for k, radius_m in enumerate(radii):
-            opened = opening(zmin, max(1, int(round(radius_m / cell))))
+            opened = opening(minimum.zmin, max(1, int(round(radius_m / cell))))
             add(next(n for n in names if opening_radius(n) == radius_m), opened, True)
             steps.report(0.4 + 0.3 * (k + 1) / len(radii))
     if not surfaces:  # the kernel wants at least one grid
         add("", zmin_raw, False)
-    zmax_raw = -cell_min(x, y, -z, grid)
+    # The cell's highest point only for the column features (else the kernel's columns for them are unused).
+    wants_column = any(n in ("above_cell_min", "cell_range", "column_rank") for n in names)
+    zmax_raw = -cell_min(x, y, -z, grid) if wants_column else zmin_raw
     out = np.empty((x.shape[0], len(surfaces) + 3), dtype=np.float32)
     _point_features_kernel(x, y, z, np.stack(surfaces), np.asarray(modes, dtype=np.int64), zmin_raw, zmax_raw,
                            grid.x0, grid.top, grid.cell, out)

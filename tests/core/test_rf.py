@@ -37,6 +37,32 @@ def test_array_forest_equals_scikit_learn(with_nan):
     np.testing.assert_array_equal(model.predict(Xt), forest.predict(Xt))
 
 
+@pytest.mark.parametrize("max_depth", [1, 4, 10, 12, 14])
+def test_shallow_forests_walked_as_complete_trees_equal_the_node_walk(max_depth):
+    """Trees at most MAX_COMPLETE_DEPTH deep (the hybrid filter's) run on complete trees without
+    branches; deeper ones node by node. Both give the same probabilities bit for bit, also with
+    missing values and values on the thresholds, and scikit-learn's (to its own order of summing the
+    impure leaves' probabilities)."""
+    from sklearn.ensemble import RandomForestClassifier
+    from groundsieve.core.learn import _rf_kernels as K
+    X, y = _data(n=6000)
+    X[np.random.default_rng(5).random(X.shape) < 0.05] = np.nan
+    forest = RandomForestClassifier(n_estimators=12, max_depth=max_depth, min_samples_leaf=2,
+                                    random_state=0).fit(X, y)
+    model = rf.from_sklearn(forest, ["a", "b", "c", "d"], forest.classes_, rf.Scaler(), {})
+    depth = K._max_depth(model.roots, model.left, model.right, K.MAX_COMPLETE_DEPTH)
+    assert (depth >= 0) == (max_depth <= K.MAX_COMPLETE_DEPTH)
+    Xt, _ = _data(1, n=5000)
+    Xt[np.random.default_rng(6).random(Xt.shape) < 0.05] = np.nan
+    Xt[:50] = X[:50]  # on the training values: some exactly on a threshold
+    proba = model.predict_proba(Xt)
+    np.testing.assert_allclose(proba, forest.predict_proba(Xt), rtol=0, atol=1e-15)
+    node_walk = np.empty_like(proba)
+    assert not K._forest_block(Xt, 0, len(Xt), model.roots, model.left, model.right, model.feature,
+                               model.threshold, model.missing_left, model.value, node_walk)
+    np.testing.assert_array_equal(proba, node_walk)
+
+
 @pytest.mark.parametrize("scaler", rf.SCALERS)
 @pytest.mark.parametrize("criterion", rf.CRITERIA)
 def test_trained_model_separates_and_round_trips(tmp_path, scaler, criterion):

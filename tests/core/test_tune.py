@@ -78,6 +78,34 @@ def test_smrf_last_step_rescored_on_one_run_equals_the_whole_filter():
         np.testing.assert_array_equal(fast, full)
 
 
+@pytest.mark.parametrize("keep_bytes", [None, 0])
+def test_runs_sharing_one_minimum_surface_equal_fresh_runs(monkeypatch, keep_bytes):
+    """The search makes SMRF's minimum surface once and reuses it for every slope and window, with the
+    progressive opening's drops per radius (unless they would take too much memory)."""
+    import groundsieve.core.filters.smrf as smrf_module
+    if keep_bytes is not None:
+        monkeypatch.setattr(smrf_module, "KEEP_OPENINGS_BYTES", keep_bytes)
+    xyz = patch_cloud().xyz
+    shared = {}
+    for slope, window in ((0.2, 12.0), (0.05, 30.0), (0.4, 3.0)):
+        algorithm = SMRF(window_m=window, slope=slope)
+        grid, zpro, slope_grid = T._smrf_surface(algorithm, xyz, None, shared)
+        fresh = algorithm.run(xyz)
+        np.testing.assert_array_equal(zpro, fresh.provisional_surface)
+        np.testing.assert_array_equal(T._smrf_ground((grid, zpro, slope_grid), xyz,
+                                                     {"elevation_threshold_m": 0.5, "elevation_scalar": 1.25}),
+                                      fresh.ground)
+    assert len(shared) == 1
+    minimum = next(iter(shared.values()))
+    if keep_bytes is None:
+        assert len(minimum.openings[1]) == 30  # the drops of radii 1..30 (the 30 m window), kept
+    else:
+        assert minimum.openings == []  # over the memory cap: nothing kept, progressive_filter as usual
+    assert not minimum.zmin.flags.writeable
+    with pytest.raises(InvalidParameterError, match="minimum surface"):
+        SMRF(cell_size_m=2.0).surface(xyz, None, minimum)
+
+
 def test_the_search_stays_in_its_budget_and_beats_a_wrong_start(result):
     assert result.runs <= 8
     assert len(result.trials) > result.runs  # threshold and scalar re-scored on each run
