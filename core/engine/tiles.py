@@ -713,7 +713,9 @@ def _tile_job(job) -> Optional[dict]:
             sel = own & (file_of == k)
             classes = np.load(job["class_paths"][k], mmap_mode="r+")
             classes[index[sel]] = cls[sel]
-            classes.flush()
+            # Unmapped without flush(): msync would wait for the disk (busy writing the binned parts
+            # back) for pages that every process on this machine sees in the page cache anyway
+            # (the write phase reads them there; a killed worker's writes stay too).
             del classes
             assigned[int(k)] = int(sel.sum())
         block = None
