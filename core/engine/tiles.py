@@ -290,14 +290,23 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
         _check_disk(parent, infos, buffer_m, size)
         os.makedirs(work)
     cluster = None
+    pool = None
     rasters = []  # the DTM writer, released at once if the run fails
     try:
         if tiling.scheduler:  # one connection (one LocalCluster) for the binning, the tiles and the writing
             from .cluster import Cluster
             cluster = Cluster(tiling.scheduler, log)
+        elif tiling.worker_count > 1 and (tiling.parallel if tiling.parallel != "auto"
+                                          else _auto_parallel(total)) == "processes":
+            # one pool of worker processes for the binning, the tiles and the writing (each
+            # process started once: its imports and numba caches loaded once)
+            pool = _worker_pool(tiling.worker_count, True)
         run = _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling,
-                   steps, log, workflow, cluster=cluster, rasters=rasters)
+                   steps, log, workflow, cluster=cluster, rasters=rasters, pool=pool)
     except BaseException:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+            pool = None
         for writer in rasters:  # closed at once, not by the garbage collector (GDAL may crash then)
             writer.close()
         if cluster is not None:  # first: a LocalCluster's workers still running a tile stop writing
@@ -312,6 +321,8 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     finally:
         if cluster is not None:
             cluster.close()
+        if pool is not None:
+            pool.shutdown(wait=True)
     _remove_tree(work)
     return run
 
@@ -345,7 +356,7 @@ def _save_json(path, doc) -> None:
 
 
 def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling, steps, log,
-         workflow, cluster=None, rasters=None) -> TiledRun:
+         workflow, cluster=None, rasters=None, pool=None) -> TiledRun:
     t_start = time.perf_counter()
     import json as _json
     from ..io.lasfiles import TilePart
@@ -386,7 +397,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             bin_jobs += [dict(key=("bin", k, p), path=info.path, file_index=k, grid=grid, work=work, first=cuts[p],
                               stop=cuts[p + 1], piece=p, records=records) for p in range(pieces)]
         _map_files(_bin_job, bin_jobs, record_bin, tiling, steps, log, points=total,
-                   paths=[info.path for info in infos] + [work], writable=[work], cluster=cluster)
+                   paths=[info.path for info in infos] + [work], writable=[work], cluster=cluster, pool=pool)
         for k in sorted(binned_parts):  # in file (and piece) order, whatever order the jobs finished in
             for key, part in binned_parts[k].items():
                 tiles.setdefault(key, []).append(part)
@@ -472,8 +483,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             steps.check()
             record(_tile_job(job))
     else:
-        with _worker_pool(workers, use_processes) as pool:
-            futures = [pool.submit(_tile_job, job) for job in jobs]
+        with _pool(workers, use_processes, pool) as tile_pool:
+            futures = [tile_pool.submit(_tile_job, job) for job in jobs]
             try:
                 for fut in as_completed(futures):
                     record(fut.result())
@@ -517,7 +528,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         write_steps.report(sum(map(len, pieces.values())) / total_jobs)
 
     _map_files(_write_piece_job, write_jobs, record_piece, tiling, steps, log, points=sum(i.count for i in infos),
-               paths=[info.path for info in infos] + [work], writable=[work], cluster=cluster)
+               paths=[info.path for info in infos] + [work], writable=[work], cluster=cluster, pool=pool)
 
     def record_write(result):
         written.append(result)
@@ -527,7 +538,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                      for k, info in enumerate(infos) if outs[k]]
     _map_files(_assemble_job, assemble_jobs, record_write, tiling, steps, log, points=sum(i.count for i in infos),
                paths=[info.path for info in infos] + [work],
-               writable=sorted({os.path.dirname(os.path.abspath(o)) for o in outs if o} | {work}), cluster=cluster)
+               writable=sorted({os.path.dirname(os.path.abspath(o)) for o in outs if o} | {work}), cluster=cluster,
+               pool=pool)
     log(f"Wrote {len(written)} classified file(s) in {time.perf_counter() - t_write:.1f} s.")
     if output_path and _ext(output_path) == VPC_EXTENSION:
         from ..raster.crs import lonlat_box
@@ -638,7 +650,16 @@ def _worker_pool(workers: int, use_processes: bool):
                                initargs=(worker_thread_environ(share),))
 
 
-def _map_files(function, jobs, record, tiling, steps, log, *, paths, writable, points, cluster=None) -> None:
+def _pool(workers: int, use_processes: bool, shared=None):
+    """The run's shared pool of worker processes (kept open), or a pool of its own."""
+    if use_processes and shared is not None:
+        import contextlib
+        return contextlib.nullcontext(shared)
+    return _worker_pool(workers, use_processes)
+
+
+def _map_files(function, jobs, record, tiling, steps, log, *, paths, writable, points, cluster=None,
+               pool=None) -> None:
     """Run one job per input file (binning, writing) on the run's workers: the Dask cluster, worker
     processes or threads as for the tiles (of a run of ``points`` points), ``record``-ing each result
     in the client as it comes."""
@@ -659,8 +680,8 @@ def _map_files(function, jobs, record, tiling, steps, log, *, paths, writable, p
             steps.check()
             record(function(job))
         return
-    with _worker_pool(workers, mode == "processes") as pool:
-        futures = [pool.submit(function, job) for job in jobs]
+    with _pool(workers, mode == "processes", pool) as file_pool:
+        futures = [file_pool.submit(function, job) for job in jobs]
         try:
             for fut in as_completed(futures):
                 steps.check()
