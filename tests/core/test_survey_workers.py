@@ -159,3 +159,33 @@ def test_the_classified_copy_in_pieces_is_the_streamed_copy_byte_for_byte(tmp_pa
     assemble_classified(src, str(tmp_path / f"got{ext}"), pieces[::-1])
     assert (tmp_path / f"got{ext}").read_bytes() == (tmp_path / f"ref{ext}").read_bytes()
     assert np.array_equal(laspy.read(tmp_path / f"got{ext}").classification, classes)
+
+
+def test_one_big_file_is_written_in_pieces_on_the_workers_with_the_serial_outputs(tmp_path, monkeypatch):
+    """A single input of more than two LAZ chunks, in worker processes: its classified copy is
+    compressed in 2 pieces (one per worker, cut on a LAZ chunk boundary) and put together; the
+    same bytes as the serial run's one piece."""
+    from groundsieve.core.engine import tiles
+    src = tmp_path / "big.laz"
+    write_scene(make_scene(SceneSpec(size_m=240.0, density_per_m2=2.0, seed=7)), src)
+
+    def run(out, workers):
+        out.mkdir()
+        opts = FilterOptions(tiling=TileOptions(tile_size_m=60.0, buffer_m=10.0, workers=workers,
+                                                parallel="processes"))
+        run_ground_filter(str(src), str(out / "c.laz"), SMRF(), options=opts)
+        return (out / "c.laz").read_bytes()
+    ref = run(tmp_path / "serial", 1)
+    monkeypatch.setattr(tiles, "WRITE_PIECE_POINTS", 5000)
+    write_jobs = []
+    real_map = tiles._map_files
+
+    def spy(function, jobs, *args, **kw):
+        if function is tiles._write_piece_job:
+            write_jobs.extend(jobs)
+        return real_map(function, jobs, *args, **kw)
+    monkeypatch.setattr(tiles, "_map_files", spy)
+    got = run(tmp_path / "pieces", 2)
+    assert [(j["first"], j["stop"] > j["first"]) for j in write_jobs][0] == (0, True) and len(write_jobs) == 2
+    assert write_jobs[1]["first"] % 50_000 == 0 and write_jobs[1]["first"] > 0
+    assert got == ref
