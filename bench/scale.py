@@ -9,7 +9,9 @@ laid out on the 200 M file's 10-block columns, so the smaller files are strips o
 Then for each size, in the same run: the floor (a plain streamed laspy decode + encode of the LAZ,
 laspy's default LAZ backend), and ``scripts/qgis-process run groundsieve:smrf`` with a 1 m DTM, each
 with wall time and the peak RSS of the whole process tree (workers included, from /proc every
-0.2 s), and the 1-minute load average before and after each measurement (the machine is shared):
+0.2 s), the 1-minute load average before and after each measurement (the machine is shared), and
+the CPU time (user + system) of each process tree, floor / run (ratio): a figure other engineers'
+load changes less than the wall time:
 
     .venv/bin/python bench/scale.py run --work /path/with/room --sizes 20 50 200
 
@@ -91,7 +93,7 @@ def run(work, sizes, workers):
             n = r.header.point_count
         floor_out = os.path.join(work, "floor.laz")
         l0 = load()
-        floor_s, floor_gb, _ = timed([sys.executable, "-c", FLOOR, src, floor_out])
+        floor_s, floor_gb, _, floor_cpu = timed([sys.executable, "-c", FLOOR, src, floor_out])
         l1 = load()
         os.remove(floor_out)
         out, dtm = os.path.join(work, "smrf.laz"), os.path.join(work, "dtm.tif")
@@ -99,14 +101,15 @@ def run(work, sizes, workers):
                f"--OUTPUT={out}", f"--DTM={dtm}", "--DTM_CELL=1"]
         if workers:
             cmd.append(f"--WORKERS={workers}")
-        run_s, run_gb, log = timed(cmd)
+        run_s, run_gb, log, run_cpu = timed(cmd)
         l2 = load()
         for line in log.splitlines():
             found = re.search(r"(Binned|Filtered|Wrote|Done in|file\(s\),|tile\(s\) on).*", line)
             if found:
                 print("   ", found.group(0))
         print(f"| {n / 1e6:.1f} M | {floor_s:.0f} s, {floor_gb:.2f} GB | {run_s:.0f} s, {run_gb:.2f} GB | "
-              f"{run_s / floor_s:.1f} | {n / run_s / 1e6:.2f} M/s | {l0:.1f} / {l1:.1f} / {l2:.1f} |", flush=True)
+              f"{run_s / floor_s:.2f} | {n / run_s / 1e6:.2f} M/s | {l0:.1f} / {l1:.1f} / {l2:.1f} | "
+              f"{floor_cpu:.0f} / {run_cpu:.0f} s ({run_cpu / floor_cpu:.2f}) |", flush=True)
         for p in (out, dtm):
             if os.path.exists(p):
                 os.remove(p)

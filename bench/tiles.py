@@ -162,7 +162,10 @@ def _tree_rss_kib(root):
 
 def timed(cmd):
     """Wall time and peak RSS of the whole process tree (sampled every 0.2 s; worker processes
-    included), and the command's stdout."""
+    included), the command's stdout, and the CPU time (user + system) of the tree (the command's and
+    that of every descendant it waited for: its worker processes)."""
+    import resource
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t = time.perf_counter()
     out = tempfile.TemporaryFile(mode="w+")
     proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, text=True)
@@ -171,11 +174,13 @@ def timed(cmd):
         peak = max(peak, _tree_rss_kib(proc.pid))
         time.sleep(0.2)
     wall = time.perf_counter() - t
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     out.seek(0)
     text = out.read()
     if proc.returncode:
         sys.exit(f"{' '.join(cmd)} failed:\n{text[-3000:]}")
-    return wall, peak / 1024 / 1024, text
+    return wall, peak / 1024 / 1024, text, cpu
 
 
 def scale(millions, keep, work):
@@ -189,12 +194,12 @@ def scale(millions, keep, work):
     with laspy.open(src) as r:
         n = r.header.point_count
     floor_out = os.path.join(work, "floor.laz")
-    floor_s, floor_gb, _ = timed([sys.executable, "-c", FLOOR, src, floor_out])
+    floor_s, floor_gb, _, _ = timed([sys.executable, "-c", FLOOR, src, floor_out])
     os.remove(floor_out)
     out, dtm = os.path.join(work, "smrf.laz"), os.path.join(work, "dtm.tif")
     cmd = [str(REPO / "scripts" / "qgis-process"), "run", "groundsieve:smrf", f"--INPUT={src}", f"--OUTPUT={out}",
            f"--DTM={dtm}", "--DTM_CELL=1"]
-    run_s, run_gb, log = timed(cmd)
+    run_s, run_gb, log, _ = timed(cmd)
     for line in log.splitlines():
         found = re.search(r"(Binned|Filtered|Done in|file\(s\),).*", line)
         if found:

@@ -9,14 +9,18 @@ buffer=)``):
    budget, or the user's;
 2. **bin**: one streamed pass over each file (laspy chunks) writes, into a working folder, the
    points each tile needs (its own and its buffer's) as uncompressed LAS parts with their indices
-   in the input; tiles exist only where points are (a stray point far away makes a tiny tile);
+   in the input, and the file's records once more in file order (``.rec``, for step 4); tiles exist
+   only where points are (a stray point far away makes a tiny tile);
 3. **filter** each tile: its parts become one ``PointCloud`` (``io.lasfiles.tile_cloud``, every
    field ``read_cloud`` gives), the unchanged filter runs through ``workflow.classify_cloud``,
    and only the tile's own points keep their class, written into a per-file ``uint8`` memmap;
    with a DTM, the tile's cells are interpolated from the ground of the tile and its buffer and
    written as one block of one GeoTIFF;
-4. **write** each input once more, streamed, with the new classes (atomic), and for several
-   inputs a ``.vpc`` referencing the classified files.
+4. **write** each input's classified copy from its kept records with the new classes, without
+   decoding the input again: in pieces compressed on the workers (a big single file: one per
+   worker, on LAZ chunk boundaries), then put together (atomic; the bytes of one streamed laspy
+   copy); for several inputs a ``.vpc`` referencing the classified files. The tile parts are
+   removed before (every tile is done by then).
 
 Tiles run concurrently: in worker processes under ``qgis_process`` and plain Python for runs of
 :data:`PROCESS_MIN_POINTS` points or more, in threads below that and inside the QGIS desktop (whose executable is QGIS itself: it cannot spawn Python workers; the numba
@@ -38,9 +42,9 @@ from typing import Callable, Dict, List, Optional, Sequence
 import numpy as np
 
 from ..errors import Cancelled, GroundSieveError, InputError, InvalidParameterError, OutputError
-from ..io.lasfiles import (CHUNK_POINTS, VPC_EXTENSION, LasInfo, TileGrid, bin_file, check_survey,
-                           expand_inputs, iter_chunks, read_part, scan_header, tile_cloud, write_classified_stream,
-                           write_vpc)
+from ..io.lasfiles import (CHUNK_POINTS, VPC_EXTENSION, LasInfo, TileGrid, assemble_classified, bin_file,
+                           check_survey, expand_inputs, iter_chunks, piece_cuts, read_part, scan_header, tile_cloud,
+                           write_classified_piece, write_classified_stream, write_vpc)
 from ..io.outputs import LAS_EXTENSIONS, _ext, check_output_path
 from ..progress import Steps
 
@@ -240,10 +244,13 @@ def check_tiled_outputs(inputs: Sequence[str], output_path: Optional[str], dtm_p
 
 
 def _check_disk(work_dir: str, infos: Sequence[LasInfo], buffer_m: float, size: float) -> None:
-    """Refuse before work when the working folder's disk cannot hold the temporary tiles."""
+    """Refuse before work when the working folder's disk cannot hold the temporary tiles: the tile
+    parts (records and indices, the buffer's points in several), each input's records once more
+    in file order (the classified copy is written from them) and the classes. The parts are
+    removed before the copy's pieces are written, and the pieces are at most the records' size."""
     record = {0: 20, 1: 28, 2: 26, 3: 34, 4: 57, 5: 63, 6: 30, 7: 36, 8: 38, 9: 59, 10: 67}
     overlap = ((size + 2 * buffer_m) / size) ** 2
-    need = sum(i.count * (record.get(i.point_format, 40) * overlap + 8 * overlap + 1) for i in infos)
+    need = sum(i.count * (record.get(i.point_format, 40) * (overlap + 1) + 8 * overlap + 1) for i in infos)
     free = shutil.disk_usage(work_dir).free
     if free < need:
         raise OutputError(f"{work_dir}: the working folder's disk has {free / 1e9:.1f} GB free, the temporary "
@@ -288,14 +295,23 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
         _check_disk(parent, [i for i in infos if not i.copc], buffer_m, size)  # COPC files are not binned
         os.makedirs(work)
     cluster = None
+    pool = None
     rasters = []  # the DTM writer, released at once if the run fails
     try:
         if tiling.scheduler:  # one connection (one LocalCluster) for the binning, the tiles and the writing
             from .cluster import Cluster
             cluster = Cluster(tiling.scheduler, log)
+        elif tiling.worker_count > 1 and (tiling.parallel if tiling.parallel != "auto"
+                                          else _auto_parallel(total)) == "processes":
+            # one pool of worker processes for the binning, the tiles and the writing (each
+            # process started once: its imports and numba caches loaded once)
+            pool = _worker_pool(tiling.worker_count, True)
         run = _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling,
-                   steps, log, workflow, cluster=cluster, rasters=rasters)
+                   steps, log, workflow, cluster=cluster, rasters=rasters, pool=pool)
     except BaseException:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+            pool = None
         for writer in rasters:  # closed at once, not by the garbage collector (GDAL may crash then)
             writer.close()
         if cluster is not None:  # first: a LocalCluster's workers still running a tile stop writing
@@ -310,6 +326,8 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     finally:
         if cluster is not None:
             cluster.close()
+        if pool is not None:
+            pool.shutdown(wait=True)
     _remove_tree(work)
     return run
 
@@ -343,7 +361,7 @@ def _save_json(path, doc) -> None:
 
 
 def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling, steps, log,
-         workflow, cluster=None, rasters=None) -> TiledRun:
+         workflow, cluster=None, rasters=None, pool=None) -> TiledRun:
     t_start = time.perf_counter()
     import json as _json
     from ..io.lasfiles import TilePart
@@ -375,14 +393,16 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             if not info.count or info.copc:  # a COPC file is read by bounds by its tiles
                 continue
             pieces = min(tiling.worker_count, info.count // BIN_PIECE_POINTS) if len(infos) == 1 else 1
+            records = _records_path(work, k)
             if pieces <= 1:
-                bin_jobs.append(dict(key=("bin", k), path=info.path, file_index=k, grid=grid, work=work))
+                bin_jobs.append(dict(key=("bin", k), path=info.path, file_index=k, grid=grid, work=work,
+                                     records=records))
                 continue
             cuts = [info.count * p // pieces for p in range(pieces + 1)]
             bin_jobs += [dict(key=("bin", k, p), path=info.path, file_index=k, grid=grid, work=work, first=cuts[p],
-                              stop=cuts[p + 1], piece=p) for p in range(pieces)]
+                              stop=cuts[p + 1], piece=p, records=records) for p in range(pieces)]
         _map_files(_bin_job, bin_jobs, record_bin, tiling, steps, log, points=total,
-                   paths=[info.path for info in infos] + [work], writable=[work], cluster=cluster)
+                   paths=[info.path for info in infos] + [work], writable=[work], cluster=cluster, pool=pool)
         for k in sorted(binned_parts):  # in file (and piece) order, whatever order the jobs finished in
             for key, part in binned_parts[k].items():
                 tiles.setdefault(key, []).append(part)
@@ -398,7 +418,10 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     from ..io.copc import plan_tiles
     copc_tiles = plan_tiles(infos, grid.size, grid.buffer)  # the tiles COPC inputs may have points in
     keys = sorted(set(keys) | set(copc_tiles))
-    log(f"Binned into {len(keys)} tile(s) in {time.perf_counter() - t_start:.1f} s.")
+    n_copc = sum(1 for i in infos if i.copc)
+    log(f"Binned into {len(keys)} tile(s) in {time.perf_counter() - t_start:.1f} s." if not n_copc else
+        f"Planned {len(keys)} tile(s) in {time.perf_counter() - t_start:.1f} s ({n_copc} COPC file(s) read by "
+        "bounds by each tile, not binned).")
     assigned = [0] * len(infos)
     crs_wkt = infos[0].crs_wkt
     # 2. the DTM's grid, over every file's header bounds, and its block writer
@@ -473,8 +496,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             steps.check()
             record(_tile_job(job))
     else:
-        with _worker_pool(workers, use_processes) as pool:
-            futures = [pool.submit(_tile_job, job) for job in jobs]
+        with _pool(workers, use_processes, pool) as tile_pool:
+            futures = [tile_pool.submit(_tile_job, job) for job in jobs]
             try:
                 for fut in as_completed(futures):
                     record(fut.result())
@@ -487,6 +510,12 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             raise InputError(f"{info.path}: {assigned[k]:,} of {info.count:,} points were classified; "
                              "the file's header and its points disagree")
     log(f"Filtered {len(keys)} tile(s) in {time.perf_counter() - t_tiles:.1f} s.")
+    # every tile is done (and marked so for a resumed run): its parts make room for the write's pieces
+    for parts in tiles.values():
+        for part in parts:
+            for name in (part.las_path, part.index_path):
+                if os.path.exists(name):
+                    os.remove(name)
     # 3. write the outputs: every classified file to a temporary name first (atomic_path), then the vpc
     write_steps = steps.sub(0.85, 1.0)
     t_write = time.perf_counter()
@@ -495,16 +524,35 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         if out:
             os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
 
+    # Each input's records were kept in file order by the binning: the classified copy is written
+    # from them without decoding the input again, in pieces of consecutive points (a big single
+    # file: one per worker, each on LAZ chunk boundaries) compressed on the workers, then put
+    # together (header, the pieces' chunks, one chunk table) by one job per file.
+    pieces_of = _write_pieces(infos, outs, tiling)
+    write_jobs = [dict(key=("write", k, p), path=info.path, records=_records_path(work, k), out=outs[k],
+                       piece_path=os.path.join(work, f"f{k:05d}w{p:04d}.piece"), first=a, stop=b,
+                       class_path=class_paths[k], class_parts=sorted(class_parts[k]), count=info.count)
+                  for k, info in enumerate(infos) if outs[k] for p, (a, b) in enumerate(pieces_of[k])]
+    pieces: Dict[int, list] = {}
+    total_jobs = len(write_jobs) + sum(1 for o in outs if o)
+
+    def record_piece(result):
+        pieces.setdefault(result["file_index"], []).append(result)
+        write_steps.report(sum(map(len, pieces.values())) / total_jobs)
+
+    _map_files(_write_piece_job, write_jobs, record_piece, tiling, steps, log, points=sum(i.count for i in infos),
+               paths=[info.path for info in infos] + [work], writable=[work], cluster=cluster, pool=pool)
+
     def record_write(result):
         written.append(result)
-        write_steps.report(len(written) / (len(infos) + 1))
-    # one job per input file, on the workers: each streams its file into its classified copy
-    write_jobs = [dict(key=("write", k), path=info.path, out=out, class_path=class_paths[k],
-                       class_parts=sorted(class_parts[k]), count=info.count)
-                  for k, (info, out) in enumerate(zip(infos, outs)) if out]
-    _map_files(_write_job, write_jobs, record_write, tiling, steps, log, points=sum(i.count for i in infos),
+        write_steps.report((len(write_jobs) + len(written)) / total_jobs)
+    assemble_jobs = [dict(key=("assemble", k), path=info.path, out=outs[k], pieces=pieces.get(k, []),
+                          class_path=class_paths[k], count=info.count)
+                     for k, info in enumerate(infos) if outs[k]]
+    _map_files(_assemble_job, assemble_jobs, record_write, tiling, steps, log, points=sum(i.count for i in infos),
                paths=[info.path for info in infos] + [work],
-               writable=sorted({os.path.dirname(os.path.abspath(o)) for o in outs if o}), cluster=cluster)
+               writable=sorted({os.path.dirname(os.path.abspath(o)) for o in outs if o} | {work}), cluster=cluster,
+               pool=pool)
     log(f"Wrote {len(written)} classified file(s) in {time.perf_counter() - t_write:.1f} s.")
     if output_path and _ext(output_path) == VPC_EXTENSION:
         from ..raster.crs import lonlat_box
@@ -522,22 +570,70 @@ def _bin_job(job) -> dict:
     """Bin one input file into its tile parts (a pure function of its job: same parts, same names)."""
     first, stop = job.get("first", 0), job.get("stop")
     parts = bin_file(job["path"], job["file_index"], job["grid"], job["work"], check=job.get("check"),
-                     first=first, stop=stop, piece=job.get("piece"))
+                     first=first, stop=stop, piece=job.get("piece"), records=job.get("records"))
     points = (stop if stop is not None else scan_header(job["path"]).count) - first
     return dict(file_index=job["file_index"], first=first, parts=parts, points=points)
 
 
-def _write_job(job) -> dict:
-    """Stream one input file into its classified copy, with the classes the tiles wrote (atomic):
-    in the per-file memmap, or on a cluster in one part per tile that held points of the file,
-    applied here on the worker (so that the client never handles points)."""
-    classes = np.load(job["class_path"], mmap_mode="r")[:job["count"]]
-    if job.get("class_parts"):  # (a resumed run may have tiles of both kinds)
-        classes = np.array(classes)
-        for part in job["class_parts"]:
-            with np.load(part) as saved:
-                classes[saved["index"]] = saved["cls"]
-    write_classified_stream(job["path"], job["out"], classes, check=job.get("check"))
+def _records_path(work: str, file_index: int) -> str:
+    """The input's records in file order, uncompressed, as the binning decoded them."""
+    return os.path.join(work, f"f{file_index:05d}.rec")
+
+
+#: a single input's classified copy is written in pieces of at least this many points, one per worker
+WRITE_PIECE_POINTS = BIN_PIECE_POINTS
+
+
+def _write_pieces(infos, outs, tiling) -> List[list]:
+    """Each input's pieces of the classified copy, as (first, stop): one piece per file, or for a
+    single big file one per worker (worker processes or a cluster: in threads, lazrs holds the GIL),
+    cut on LAZ chunk boundaries."""
+    from ..io.lasfiles import laz_chunk_points
+    mode = tiling.parallel if tiling.parallel != "auto" else _auto_parallel(sum(i.count for i in infos))
+    split = len(infos) == 1 and (mode == "processes" or bool(tiling.scheduler))
+    result = []
+    for info, out in zip(infos, outs):
+        if not out or not info.count or info.copc:  # a COPC input has no kept records: it is streamed
+            result.append([])
+            continue
+        pieces = min(tiling.worker_count, info.count // WRITE_PIECE_POINTS) if split else 1
+        if pieces > 1:
+            import laspy
+            with laspy.open(info.path) as reader:
+                cuts = piece_cuts(info.count, pieces, laz_chunk_points(reader.header.point_format))
+        else:
+            cuts = [0, info.count]
+        result.append(list(zip(cuts[:-1], cuts[1:])))
+    return result
+
+
+def _write_piece_job(job) -> dict:
+    """Points ``first`` to ``stop`` of one input's classified copy (a pure function of its job): the
+    records the binning kept, with the classes the tiles wrote (in the per-file memmap, or on a
+    cluster in one part per tile that held points of the file, applied here on the worker, so that
+    the client never handles points), compressed into a piece file of the working folder."""
+    first, stop = job["first"], job["stop"]
+    classes = np.array(np.load(job["class_path"], mmap_mode="r")[first:stop])
+    for part in job.get("class_parts") or ():  # (a resumed run may have tiles of both kinds)
+        with np.load(part) as saved:
+            index = saved["index"]
+            sel = (index >= first) & (index < stop)
+            classes[index[sel] - first] = saved["cls"][sel]
+    piece = write_classified_piece(job["path"], job["records"], classes, first, stop, job["piece_path"],
+                                   compress=_ext(job["out"]) == ".laz", check=job.get("check"))
+    piece["file_index"] = int(job["key"][1])
+    return piece
+
+
+def _assemble_job(job) -> dict:
+    """One input's classified copy (atomic) from its pieces; an input without points is streamed."""
+    if not job["pieces"]:
+        classes = np.load(job["class_path"], mmap_mode="r")[:job["count"]]
+        write_classified_stream(job["path"], job["out"], classes, check=job.get("check"))
+    else:
+        assemble_classified(job["path"], job["out"], job["pieces"])
+        for piece in job["pieces"]:
+            os.remove(piece["path"])
     return dict(out=job["out"])
 
 
@@ -568,7 +664,16 @@ def _worker_pool(workers: int, use_processes: bool):
                                initargs=(worker_thread_environ(share),))
 
 
-def _map_files(function, jobs, record, tiling, steps, log, *, paths, writable, points, cluster=None) -> None:
+def _pool(workers: int, use_processes: bool, shared=None):
+    """The run's shared pool of worker processes (kept open), or a pool of its own."""
+    if use_processes and shared is not None:
+        import contextlib
+        return contextlib.nullcontext(shared)
+    return _worker_pool(workers, use_processes)
+
+
+def _map_files(function, jobs, record, tiling, steps, log, *, paths, writable, points, cluster=None,
+               pool=None) -> None:
     """Run one job per input file (binning, writing) on the run's workers: the Dask cluster, worker
     processes or threads as for the tiles (of a run of ``points`` points), ``record``-ing each result
     in the client as it comes."""
@@ -589,8 +694,8 @@ def _map_files(function, jobs, record, tiling, steps, log, *, paths, writable, p
             steps.check()
             record(function(job))
         return
-    with _worker_pool(workers, mode == "processes") as pool:
-        futures = [pool.submit(function, job) for job in jobs]
+    with _pool(workers, mode == "processes", pool) as file_pool:
+        futures = [file_pool.submit(function, job) for job in jobs]
         try:
             for fut in as_completed(futures):
                 steps.check()
@@ -646,7 +751,9 @@ def _tile_job(job) -> Optional[dict]:
             sel = own & (file_of == k)
             classes = np.load(job["class_paths"][k], mmap_mode="r+")
             classes[index[sel]] = cls[sel]
-            classes.flush()
+            # Unmapped without flush(): msync would wait for the disk (busy writing the binned parts
+            # back) for pages that every process on this machine sees in the page cache anyway
+            # (the write phase reads them there; a killed worker's writes stay too).
             del classes
             assigned[int(k)] = int(sel.sum())
         block = None

@@ -268,18 +268,21 @@ def _chunks(reader, first: int, stop: Optional[int], chunk_points: int):
 
 
 def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk_points: int = CHUNK_POINTS,
-             check=None, first: int = 0, stop: Optional[int] = None, piece: Optional[int] = None
-             ) -> Dict[tuple, TilePart]:
+             check=None, first: int = 0, stop: Optional[int] = None, piece: Optional[int] = None,
+             records: Optional[str] = None) -> Dict[tuple, TilePart]:
     """Stream ``path`` once (laspy chunks) and write, for every tile its points or buffer touch,
     the part of the file that tile needs into ``work_dir``. Tiles exist only where points are.
     ``first``/``stop`` bin only those points of the file (one ``piece`` of it, named in the parts'
-    file names): pieces binned in parallel, their parts taken in file order, give the whole file's."""
+    file names): pieces binned in parallel, their parts taken in file order, give the whole file's.
+    ``records``: a file (created if missing) into which the decoded records are also written, at their place in file order, so that the classified copy is written from them
+    without decoding the input again (:func:`write_classified_piece`)."""
     import laspy
     parts: Dict[tuple, TilePart] = {}
     writers = {}
     index_files = {}
     m = int(math.ceil(grid.buffer / grid.size)) if grid.buffer > 0 else 0
     stem = f"f{file_index:05d}" + (f"p{piece:04d}" if piece is not None else "")
+    fd = os.open(records, os.O_WRONLY | os.O_CREAT, 0o644) if records is not None else None
     try:
         with laspy.open(path) as reader:
             start = first
@@ -287,6 +290,11 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
                 if check is not None:
                     check()
                 n = len(chunk)
+                if fd is not None:
+                    raw = memoryview(np.ascontiguousarray(chunk.array)).cast("B")
+                    done = 0
+                    while done < len(raw):  # (pwrite may write less than asked)
+                        done += os.pwrite(fd, raw[done:], start * chunk.array.dtype.itemsize + done)
                 x = np.asarray(chunk.x, dtype=np.float64)
                 y = np.asarray(chunk.y, dtype=np.float64)
                 kx, ky = grid.key_of(x, y)
@@ -327,8 +335,7 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
                         writers[tkey] = laspy.open(part.las_path, mode="w", header=_part_header(reader.header),
                                                    do_compress=False)
                         index_files[tkey] = open(part.index_path, "wb")
-                    writers[tkey].write_points(laspy.ScaleAwarePointRecord(
-                        gathered[lo:hi], chunk.point_format, chunk.scales, chunk.offsets))
+                    _write_part_records(writers[tkey], gathered[lo:hi], chunk.point_format)
                     parts[tkey].own_count += int(own[lo:hi].sum())
                     gidx = start + sel
                     index_files[tkey].write(np.where(own[lo:hi], gidx, -1 - gidx).astype(np.int64).tobytes())
@@ -346,7 +353,22 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
             w.close()
         for f in index_files.values():
             f.close()
+        if fd is not None:
+            os.close(fd)
     return parts
+
+
+def _write_part_records(writer, records: np.ndarray, point_format) -> None:
+    """Append raw records to a tile part's (uncompressed) laspy writer, its header growing by their
+    count and bounds only: laspy's ``write_points`` also counts the returns (``np.unique`` of every
+    record's return number), which no reader of a part uses (a third of the part writes' time)."""
+    import laspy
+    h = writer.header
+    writer.point_writer.write_points(laspy.PackedPointRecord(records, point_format))
+    h.point_count += records.shape[0]
+    ints = [records[name] for name in ("X", "Y", "Z")]
+    h.mins = np.minimum(h.mins, [v.min() * sc + off for v, sc, off in zip(ints, h.scales, h.offsets)])
+    h.maxs = np.maximum(h.maxs, [v.max() * sc + off for v, sc, off in zip(ints, h.scales, h.offsets)])
 
 
 def _in_buffer(f: np.ndarray, d: int, grid: TileGrid) -> np.ndarray:
@@ -415,6 +437,176 @@ def write_classified_stream(src: str, dst: str, classification: np.ndarray, *,
     except Exception as err:  # laspy / lazrs on a damaged or truncated input
         raise InputError(f"{src}: cannot read its points ({type(err).__name__}: {err}); "
                          "the file is damaged or truncated") from err
+
+
+# -- the classified copy in pieces, from the records the binning kept -------------------------------
+
+def laz_chunk_points(point_format) -> int:
+    """Points per LAZ chunk of the classified copy (lazrs's fixed chunk size, 50,000): a piece of a
+    LAZ copy starts on a multiple of it, so that the pieces' chunks are the whole file's."""
+    import lazrs
+    return int(lazrs.LazVlr.new_for_compression(point_format.id, point_format.num_extra_bytes).chunk_size())
+
+
+def piece_cuts(count: int, pieces: int, multiple: int) -> List[int]:
+    """Boundaries of at most ``pieces`` pieces of ``count`` points, each a multiple of ``multiple``
+    (but the last), none empty."""
+    pieces = max(1, min(pieces, -(-count // multiple)))
+    cuts = [min(count, (count * p // pieces) // multiple * multiple) for p in range(pieces)] + [count]
+    return sorted(set(cuts))
+
+
+def write_classified_piece(src: str, records: str, classification: np.ndarray, first: int, stop: int,
+                           piece_path: str, *, compress: bool, chunk_points: int = CHUNK_POINTS, check=None) -> dict:
+    """Points ``first`` to ``stop`` of the classified copy of ``src``: their records, read from
+    ``records`` (the input's records in file order, :func:`bin_file`), get ``classification`` (the
+    piece's classes) and go, LAZ-compressed (``first`` on a LAZ chunk boundary) or raw, into
+    ``piece_path``, without decoding ``src`` again (only its header is read). Returns what
+    :func:`assemble_classified` needs: the header statistics of these points, grown as laspy's
+    writer grows them, and the LAZ chunk table."""
+    import laspy
+    import lazrs
+    try:
+        with laspy.open(src) as reader:
+            header = copy.deepcopy(reader.header)
+        pf = header.point_format
+        if pf.id < 6 and classification.size and int(classification.max()) > 31:
+            raise OutputError(f"{src}: point format {pf.id} stores classes 0-31 only")
+        header.partial_reset()  # as laspy's writer does: the statistics come from the points written
+        dtype = pf.dtype()
+        vlr = lazrs.LazVlr.new_for_compression(pf.id, pf.num_extra_bytes) if compress else None
+        with open(records, "rb") as f_in, open(piece_path, "wb") as f_out:
+            compressor = lazrs.ParLasZipCompressor(f_out, vlr) if compress else None
+            pos = first
+            while pos < stop:
+                if check is not None:
+                    check()
+                n = min(chunk_points, stop - pos)
+                f_in.seek(pos * dtype.itemsize)
+                array = np.fromfile(f_in, dtype=dtype, count=n)
+                if array.shape[0] != n:
+                    raise InputError(f"{records}: holds {pos + array.shape[0]:,} records, {stop:,} expected; "
+                                     "the working folder was changed during the run")
+                points = laspy.PackedPointRecord(array, pf)
+                points.classification = classification[pos - first:pos - first + n]
+                header.grow(points)
+                if compressor is not None:
+                    compressor.compress_many(np.frombuffer(points.array, np.uint8))
+                else:
+                    f_out.write(points.array.tobytes())
+                pos += n
+            if compressor is not None:
+                compressor.done()
+        table = None
+        if compress:
+            with open(piece_path, "rb") as f:
+                table = [(int(c), int(b)) for c, b in lazrs.read_chunk_table(f, vlr)]
+    except OSError as err:
+        raise OutputError(f"{piece_path}: cannot be written ({err})") from err
+    return dict(path=piece_path, first=first, table=table, stats=_header_stats(header))
+
+
+def _header_stats(h) -> dict:
+    eb = [(s._raw_min().tolist(), s._raw_max().tolist())
+          for v in h.vlrs.get("ExtraBytesVlr")[:1] for s in v.extra_bytes_structs]
+    return dict(mins=[float(v) for v in h.mins], maxs=[float(v) for v in h.maxs], count=int(h.point_count),
+                min_gps=float(h.min_gps_time), max_gps=float(h.max_gps_time),
+                by_return=[int(v) for v in h.number_of_points_by_return], eb=eb)
+
+
+def _merge_stats(h, stats: Sequence[dict]) -> None:
+    """Set the header's statistics to those of all pieces together (minima, maxima and sums:
+    what laspy's writer would have grown from all their points)."""
+    h.mins = np.min([s["mins"] for s in stats], axis=0)
+    h.maxs = np.max([s["maxs"] for s in stats], axis=0)
+    h.min_gps_time = min(s["min_gps"] for s in stats)
+    h.max_gps_time = max(s["max_gps"] for s in stats)
+    h.point_count = sum(s["count"] for s in stats)
+    h.number_of_points_by_return = np.sum([s["by_return"] for s in stats], axis=0, dtype=np.uint64)
+    for v in h.vlrs.get("ExtraBytesVlr")[:1]:
+        for i, struct in enumerate(v.extra_bytes_structs):
+            lo, hi = struct._raw_min(), struct._raw_max()
+            lo[:] = np.min([s["eb"][i][0] for s in stats], axis=0).astype(lo.dtype)
+            hi[:] = np.max([s["eb"][i][1] for s in stats], axis=0).astype(hi.dtype)
+
+
+def _copy_bytes(src, dst, n: int, block: int = 16 << 20) -> None:
+    while n > 0:
+        data = src.read(min(block, n))
+        if not data:
+            raise OutputError(f"{getattr(src, 'name', '?')}: ends {n:,} bytes early; the working folder was changed")
+        dst.write(data)
+        n -= len(data)
+
+
+def _pieces_backend(pieces):
+    """A laspy LAZ backend whose writer takes the pieces' compressed chunks as they are (no point
+    goes through it): the 8-byte offset of the chunk table, the chunks, the whole chunk table."""
+    import struct
+
+    import lazrs
+    from laspy._compression.lazrsbackend import LazrsPointWriter
+    from laspy._pointwriter import IPointWriter
+    from laspy.vlrs.known import LasZipVlr
+
+    class Writer(LazrsPointWriter):
+        def write_initial_header_and_vlrs(self, header, encoding_errors):
+            header.vlrs.append(LasZipVlr(self.vlr.record_data()))
+            IPointWriter.write_initial_header_and_vlrs(self, header, encoding_errors)
+
+        def write_points(self, points):
+            raise NotImplementedError("the pieces are compressed already")
+
+        def done(self):
+            dest = self.dest
+            start = dest.tell()
+            dest.write(struct.pack("<q", -1))
+            table = []
+            for piece in pieces:
+                with open(piece["path"], "rb") as f:
+                    f.seek(8)
+                    _copy_bytes(f, dest, sum(b for _c, b in piece["table"]))
+                table += piece["table"]
+            at = dest.tell()
+            dest.flush()
+            lazrs.write_chunk_table(dest, table, self.vlr)
+            dest.flush()
+            end = dest.tell()
+            dest.seek(start)
+            dest.write(struct.pack("<q", at))
+            dest.seek(end)
+
+    class Backend:
+        def is_available(self):
+            return True
+
+        def create_writer(self, dest, header):
+            return Writer(dest, header.point_format, parallel=False)
+    return Backend()
+
+
+def assemble_classified(src: str, dst: str, pieces: Sequence[dict]) -> None:
+    """Write ``dst`` (LAZ when it ends in .laz; atomic) from the pieces of
+    :func:`write_classified_piece` (in file order, together every point of ``src``): ``src``'s
+    header and VLRs as laspy's writer writes them for a streamed copy, the pieces' records or LAZ
+    chunks, one chunk table. The same bytes as :func:`write_classified_stream`."""
+    import laspy
+    compress = _ext(dst) == ".laz"
+    pieces = sorted(pieces, key=lambda p: p["first"])
+    try:
+        with laspy.open(src) as reader:
+            header = copy.deepcopy(reader.header)
+        with atomic_path(dst) as tmp, open(tmp, "wb") as f:
+            writer = laspy.LasWriter(f, header=header, do_compress=compress, closefd=False,
+                                     laz_backend=_pieces_backend(pieces) if compress else None)
+            _merge_stats(writer.header, [p["stats"] for p in pieces])
+            if not compress:
+                for piece in pieces:
+                    with open(piece["path"], "rb") as g:
+                        _copy_bytes(g, f, os.path.getsize(piece["path"]))
+            writer.close()
+    except OSError as err:
+        raise OutputError(f"{dst}: cannot be written ({err})") from err
 
 
 def iter_chunks(path: str, chunk_points: int = CHUNK_POINTS) -> Iterable:

@@ -133,3 +133,59 @@ def test_auto_runs_small_surveys_in_threads_and_big_ones_in_processes():
     from groundsieve.core.engine import tiles
     assert tiles._auto_parallel(tiles.PROCESS_MIN_POINTS - 1) == "threads"
     assert tiles._auto_parallel(tiles.PROCESS_MIN_POINTS) == "processes"
+
+
+@pytest.mark.parametrize("ext", [".laz", ".las"])
+def test_the_classified_copy_in_pieces_is_the_streamed_copy_byte_for_byte(tmp_path, ext):
+    """The write phase: the binning keeps the records in file order (two binning pieces here), the
+    copy is written in 3 pieces on LAZ chunk boundaries (in reverse order) and put together: the
+    bytes of one streamed laspy pass over the input (header, VLRs, chunks and chunk table)."""
+    from groundsieve.core.io.lasfiles import (TileGrid, assemble_classified, bin_file, laz_chunk_points, piece_cuts,
+                                              write_classified_piece, write_classified_stream)
+    src = str(tmp_path / "s.laz")
+    write_scene(make_scene(SceneSpec(size_m=260.0, density_per_m2=2.0, seed=3)), src)
+    with laspy.open(src) as r:
+        n, pf = int(r.header.point_count), r.header.point_format
+    assert n > 3 * laz_chunk_points(pf) > 0
+    classes = np.random.default_rng(0).integers(0, 32, n).astype(np.uint8)
+    write_classified_stream(src, str(tmp_path / f"ref{ext}"), classes)
+    records = str(tmp_path / "s.rec")
+    bin_file(src, 0, TileGrid(100.0, 10.0), str(tmp_path), records=records, first=0, stop=n // 3, piece=0)
+    bin_file(src, 0, TileGrid(100.0, 10.0), str(tmp_path), records=records, first=n // 3, stop=n, piece=1)
+    cuts = piece_cuts(n, 3, laz_chunk_points(pf))
+    assert len(cuts) == 4 and all(c % laz_chunk_points(pf) == 0 for c in cuts[:-1])
+    pieces = [write_classified_piece(src, records, classes[a:b], a, b, str(tmp_path / f"p{i}"), compress=ext == ".laz")
+              for i, (a, b) in enumerate(zip(cuts[:-1], cuts[1:]))]
+    assemble_classified(src, str(tmp_path / f"got{ext}"), pieces[::-1])
+    assert (tmp_path / f"got{ext}").read_bytes() == (tmp_path / f"ref{ext}").read_bytes()
+    assert np.array_equal(laspy.read(tmp_path / f"got{ext}").classification, classes)
+
+
+def test_one_big_file_is_written_in_pieces_on_the_workers_with_the_serial_outputs(tmp_path, monkeypatch):
+    """A single input of more than two LAZ chunks, in worker processes: its classified copy is
+    compressed in 2 pieces (one per worker, cut on a LAZ chunk boundary) and put together; the
+    same bytes as the serial run's one piece."""
+    from groundsieve.core.engine import tiles
+    src = tmp_path / "big.laz"
+    write_scene(make_scene(SceneSpec(size_m=240.0, density_per_m2=2.0, seed=7)), src)
+
+    def run(out, workers):
+        out.mkdir()
+        opts = FilterOptions(tiling=TileOptions(tile_size_m=60.0, buffer_m=10.0, workers=workers,
+                                                parallel="processes"))
+        run_ground_filter(str(src), str(out / "c.laz"), SMRF(), options=opts)
+        return (out / "c.laz").read_bytes()
+    ref = run(tmp_path / "serial", 1)
+    monkeypatch.setattr(tiles, "WRITE_PIECE_POINTS", 5000)
+    write_jobs = []
+    real_map = tiles._map_files
+
+    def spy(function, jobs, *args, **kw):
+        if function is tiles._write_piece_job:
+            write_jobs.extend(jobs)
+        return real_map(function, jobs, *args, **kw)
+    monkeypatch.setattr(tiles, "_map_files", spy)
+    got = run(tmp_path / "pieces", 2)
+    assert [(j["first"], j["stop"] > j["first"]) for j in write_jobs][0] == (0, True) and len(write_jobs) == 2
+    assert write_jobs[1]["first"] % 50_000 == 0 and write_jobs[1]["first"] > 0
+    assert got == ref
