@@ -610,7 +610,14 @@ def assemble_classified(src: str, dst: str, pieces: Sequence[dict]) -> None:
 
 
 def iter_chunks(path: str, chunk_points: int = CHUNK_POINTS) -> Iterable:
-    """laspy point records of ``path``, ``chunk_points`` at a time."""
+    """laspy point records of ``path``, ``chunk_points`` at a time; a damaged or truncated file is an
+    :class:`InputError` naming it (laspy and lazrs raise many types)."""
     import laspy
-    with laspy.open(path) as reader:
-        yield from reader.chunk_iterator(chunk_points)
+    try:
+        with laspy.open(path) as reader:
+            yield from reader.chunk_iterator(chunk_points)
+    except GroundSieveError:
+        raise
+    except Exception as err:
+        raise InputError(f"{path}: cannot read its points ({type(err).__name__}: {err}); "
+                         "the file is damaged or truncated") from err

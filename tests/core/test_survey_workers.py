@@ -82,6 +82,20 @@ def test_a_damaged_file_fails_the_parallel_binning_with_its_name(survey, tmp_pat
     assert not (tmp_path / "out.vpc").exists()
 
 
+def test_a_truncated_single_file_is_named_before_the_tiles_are_planned(survey, tmp_path):
+    """The planner reads a sample chunk for the density first: a LAZ cut short (its chunk table
+    gone) was a raw lazrs traceback there, not a message naming the file."""
+    import shutil
+    cut = tmp_path / "cut.laz"
+    shutil.copy(os.path.join(survey, "a.laz"), cut)
+    with open(cut, "r+b") as f:
+        f.truncate(os.path.getsize(cut) // 2)
+    opts = FilterOptions(tiling=TileOptions(tile_size_m=30.0, buffer_m=10.0, workers=1))
+    with pytest.raises(InputError, match=r"cut\.laz: cannot read its points .*damaged or truncated"):
+        run_ground_filter(str(cut), str(tmp_path / "out.laz"), SMRF(), options=opts)
+    assert sorted(os.listdir(tmp_path)) == ["cut.laz"]
+
+
 def test_one_big_file_is_binned_in_pieces_on_the_workers_with_the_serial_outputs(survey, tmp_path, monkeypatch):
     """A single input binned in 2 pieces of consecutive points (one per worker process; the second
     piece starts by seeking in the LAZ) gives the serial run's classes and DTM."""
