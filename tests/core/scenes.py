@@ -57,3 +57,25 @@ def add_trees(xyz, truth, n, seed, size=60.0, tilt=(0.0, 0.0), heights=(4.0, 15.
                             100.0 + tilt[0] * crowns[:, 0] + tilt[1] * crowns[:, 1]
                             + rng.uniform(heights[0], heights[1], n)])
     return np.vstack([xyz, tree]), np.concatenate([truth, np.zeros(n, dtype=bool)])
+
+
+def flaky_smrf(budget: int = 3):
+    """A new class of SMRF look-alikes that fail (``RuntimeError("killed")``) after ``budget`` tiles
+    while its ``failing`` is set, counting its calls in ``calls``; its repr is the same either way,
+    so that a second run finds the first one's working folder (the interrupted-run tests)."""
+    from groundsieve.core.filters.smrf import SMRF
+
+    class Flaky:
+        reach_m = SMRF().reach_m
+        failing, calls = True, 0
+
+        def __repr__(self):
+            return "Flaky()"
+
+        def __call__(self, xyz, steps=None):
+            type(self).calls += 1
+            if type(self).failing and type(self).calls > budget:
+                raise RuntimeError("killed")
+            return SMRF()(xyz, steps)
+
+    return Flaky

@@ -27,6 +27,7 @@ from groundsieve.core.filters.smrf import SMRF
 from groundsieve.core.io import new_las, read_cloud
 from groundsieve.core.io import copc as copc_io
 from groundsieve.core.io.lasfiles import scan_header, tile_cloud, write_vpc
+from groundsieve.tests.core.scenes import flaky_smrf
 from groundsieve.core.synthetic import SceneSpec, make_scene, scene_crs_wkt
 
 TILE = 70.0
@@ -334,25 +335,10 @@ def test_copc_and_plain_laz_in_one_folder_and_vpc(tmp_path):
     assert np.mean(np.concatenate(list(want.values())) == whole) >= 0.999
 
 
-class _Flaky:
-    """SMRF that fails after ``budget`` tiles while ``failing`` is set (same repr either way, so a
-    second run finds the first one's working folder)."""
-    reach_m = SMRF().reach_m
-    failing, budget, calls = True, 3, 0
-
-    def __repr__(self):
-        return "Flaky()"
-
-    def __call__(self, xyz, steps=None):
-        type(self).calls += 1
-        if type(self).failing and type(self).calls > type(self).budget:
-            raise RuntimeError("killed")
-        return SMRF()(xyz, steps)
-
-
 def test_an_interrupted_copc_run_resumes(tmp_path):
     """The COPC tiles are planned again from the hierarchy on resuming: the tiles done are skipped,
     the others run, and the output is the uninterrupted run's."""
+    Flaky = flaky_smrf(budget=3)
     copc = tmp_path / "small.copc.laz"
     write_copc(copc, scene_las(make_scene(SMALL)))
     work = tmp_path / "work"
@@ -360,12 +346,12 @@ def test_an_interrupted_copc_run_resumes(tmp_path):
     options = FilterOptions(tiling=TileOptions(tile_size_m=TILE, workers=1, work_dir=str(work)))
     out = tmp_path / "out.laz"
     with pytest.raises(Exception, match="killed"):
-        run_ground_filter(str(copc), str(out), _Flaky(), options=options)
+        run_ground_filter(str(copc), str(out), Flaky(), options=options)
     assert not out.exists()
-    _Flaky.failing, _Flaky.calls = False, 0
+    Flaky.failing, Flaky.calls = False, 0
     messages = []
-    run = run_ground_filter(str(copc), str(out), _Flaky(), options=options, log=messages.append)
-    assert _Flaky.calls == run.tiles - 3 and any("3 of" in m and "skipping" in m for m in messages)
+    run = run_ground_filter(str(copc), str(out), Flaky(), options=options, log=messages.append)
+    assert Flaky.calls == run.tiles - 3 and any("3 of" in m and "skipping" in m for m in messages)
     clean = tmp_path / "clean.laz"
     run_ground_filter(str(copc), str(clean), SMRF(), options=tiled())
     assert np.array_equal(laspy.read(out).classification, laspy.read(clean).classification)

@@ -21,6 +21,7 @@ from groundsieve.core.filters.ptd import PTD
 from groundsieve.core.filters.smrf import SMRF
 from groundsieve.core.io import new_las, read_cloud, write_las
 from groundsieve.core.io.lasfiles import read_vpc, tile_cloud, write_vpc, scan_header
+from groundsieve.tests.core.scenes import flaky_smrf
 from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
 from groundsieve.tests.shared_data import shared_data_dir
 
@@ -301,38 +302,21 @@ def test_a_full_working_disk_is_refused_before_work(scene_laz, tmp_path, monkeyp
     assert os.listdir(tmp_path) == []
 
 
-class _Flaky:
-    """SMRF that fails after ``budget`` tiles while ``failing`` is set (same repr either way, so a
-    second run finds the first one's working folder)."""
-    reach_m = SMRF().reach_m
-    failing = True
-    budget = 3
-    calls = 0
-
-    def __repr__(self):
-        return "Flaky()"
-
-    def __call__(self, xyz, steps=None):
-        type(self).calls += 1
-        if type(self).failing and type(self).calls > type(self).budget:
-            raise RuntimeError("killed")
-        return SMRF()(xyz, steps)
-
-
 def test_an_interrupted_run_resumes_and_skips_the_tiles_done(scene_laz, tmp_path):
+    Flaky = flaky_smrf(budget=3)
     work = tmp_path / "work"
     work.mkdir()
     options = FilterOptions(tiling=TileOptions(tile_size_m=TILE, workers=1, work_dir=str(work)))
     out, dtm = tmp_path / "out.laz", tmp_path / "dtm.tif"
     with pytest.raises(GroundSieveError, match="killed"):
-        run_ground_filter(scene_laz, str(out), _Flaky(), options=options, dtm_path=str(dtm))
+        run_ground_filter(scene_laz, str(out), Flaky(), options=options, dtm_path=str(dtm))
     assert not out.exists() and not dtm.exists()
     kept = os.listdir(work)
     assert len(kept) == 1 and len(os.listdir(work / kept[0] / "done")) == 2 * 3  # json + DTM block each
-    _Flaky.failing, _Flaky.calls = False, 0
+    Flaky.failing, Flaky.calls = False, 0
     messages = []
-    run = run_ground_filter(scene_laz, str(out), _Flaky(), options=options, dtm_path=str(dtm), log=messages.append)
-    assert _Flaky.calls == run.tiles - 3
+    run = run_ground_filter(scene_laz, str(out), Flaky(), options=options, dtm_path=str(dtm), log=messages.append)
+    assert Flaky.calls == run.tiles - 3
     assert any("3 of" in m and "skipping" in m for m in messages)
     assert os.listdir(work) == []
     assert agreement(laspy.read(out).classification, whole_classes(scene_laz, SMRF())) >= 0.999
