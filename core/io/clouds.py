@@ -137,6 +137,18 @@ class PointCloud:
 CHUNK_POINTS = 500_000
 
 
+def header_crs_wkt(header) -> Optional[str]:
+    """The CRS of a laspy header as WKT (from its WKT or GeoTIFF records), or None when it has none
+    or none that can be parsed (a file without a usable CRS is still read)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            crs = header.parse_crs()
+            return crs.to_wkt() if crs is not None else None
+        except Exception:
+            return None
+
+
 def read_cloud(path: str, steps: Optional[Steps] = None) -> PointCloud:
     """Read a LAS/LAZ file or an ISPRS ``x y z [label]`` text file. A LAS/LAZ file is read in
     chunks of :data:`CHUNK_POINTS`, reporting progress to ``steps`` and checking cancellation
@@ -243,14 +255,7 @@ def _read_las(path: str, steps: Steps) -> PointCloud:
     if n != int(las.header.point_count):
         raise InputError(f"{path}: header announces {las.header.point_count} points but {n} could be read; "
                          "the file is truncated")
-    crs_wkt = None
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        try:
-            crs = las.header.parse_crs()
-            crs_wkt = crs.to_wkt() if crs is not None else None
-        except Exception:
-            crs_wkt = None
+    crs_wkt = header_crs_wkt(las.header)
     rn = np.asarray(las.return_number, dtype=np.uint8)
     nr = np.asarray(las.number_of_returns, dtype=np.uint8)
     withheld = np.asarray(las.withheld).astype(bool)

@@ -30,7 +30,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from ..errors import GroundSieveError, InputError
-from .clouds import PointCloud
+from .clouds import PointCloud, header_crs_wkt
 
 COPC_USER_ID = "copc"
 INFO_RECORD = 1           #: the COPC info VLR (its presence makes a file COPC)
@@ -114,7 +114,6 @@ def open_index(path: str) -> CopcIndex:
 
 @functools.lru_cache(maxsize=16)
 def _open_index(real: str, size: int, mtime_ns: int, path: str) -> CopcIndex:
-    import warnings
     import laspy
     try:
         with open(real, "rb") as f:
@@ -148,13 +147,7 @@ def _open_index(real: str, size: int, mtime_ns: int, path: str) -> CopcIndex:
     if int(counts.sum()) != int(header.point_count):
         raise _damaged(path, f"its hierarchy holds {int(counts.sum()):,} points, the header "
                              f"{int(header.point_count):,}")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        try:
-            crs = header.parse_crs()
-            crs_wkt = crs.to_wkt() if crs is not None else None
-        except Exception:
-            crs_wkt = None
+    crs_wkt = header_crs_wkt(header)
     center = np.asarray(info.center, dtype=np.float64)
     return CopcIndex(path, header, bytes(laszip.record_data), crs_wkt, center - float(info.halfsize),
                      float(info.halfsize), nodes, np.cumsum(counts) - counts, (real, size, mtime_ns))

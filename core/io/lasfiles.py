@@ -11,14 +11,13 @@ import dataclasses
 import json
 import math
 import os
-import warnings
 from dataclasses import dataclass
 from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from ..errors import GroundSieveError, InputError, OutputError, UnsupportedFormatError
-from .clouds import PointCloud, read_cloud
+from .clouds import PointCloud, header_crs_wkt, read_cloud
 from .outputs import LAS_EXTENSIONS, _ext, atomic_path
 
 VPC_EXTENSION = ".vpc"
@@ -55,16 +54,9 @@ def scan_header(path: str) -> LasInfo:
     try:
         with laspy.open(path) as reader:
             h = reader.header
-            crs_wkt = None
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                try:
-                    crs = h.parse_crs()
-                    crs_wkt = crs.to_wkt() if crs is not None else None
-                except Exception:
-                    crs_wkt = None
             return LasInfo(path, int(h.point_count), tuple(float(v) for v in h.mins),
-                           tuple(float(v) for v in h.maxs), int(h.point_format.id), str(h.version), crs_wkt,
+                           tuple(float(v) for v in h.maxs), int(h.point_format.id), str(h.version),
+                           header_crs_wkt(h),
                            copc=is_copc_header(h))
     except (InputError, UnsupportedFormatError):
         raise
