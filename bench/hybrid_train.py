@@ -5,13 +5,15 @@ it. Nothing is chosen on the sample being scored: the features and the forest's 
 in this file (a priori) and the decision threshold is 0.5.
 
     .venv/bin/python bench/hybrid_train.py --data ../shared/data/isprs \
-        [--model core/learn/models/hybrid_isprs.npz] [--no-loso] [--features NAME ...] [--scenes] [--ptd]
+        [--model core/learn/models/hybrid_isprs.npz] [--no-loso] [--features NAME ... | --ptd] \
+        [--scenes]
 
 ``--model`` writes the model trained on every sample (the shipped model is written with the
 default path). ``--features`` replaces the default feature set (for ablations: the LOSO figures of
 another set). ``--ptd``: the default features and the two PTD features (height above the surface
 of PTD's ground points, PTD at the fixed settings of core/learn/hybrid.py PTD_SETTINGS, and its
-slope): the second shipped model, core/learn/models/hybrid_isprs_ptd.npz. ``--scenes`` also scores the model on generated scenes beside SMRF.
+slope): the second shipped model, core/learn/models/hybrid_isprs_ptd.npz. ``--scenes`` also
+scores the model on generated scenes beside SMRF.
 Deterministic: the same data give the same model file, byte for byte.
 """
 from __future__ import annotations
