@@ -1,5 +1,5 @@
 """groundsieve:hybrid — Ground filter (learned hybrid): morphological features, a Random Forest."""
-from qgis.core import QgsProcessingParameterFile, QgsProcessingParameterNumber
+from qgis.core import QgsProcessingParameterEnum, QgsProcessingParameterFile, QgsProcessingParameterNumber
 
 from .base import COMMON_HELP, GroundFilterAlgorithm, dialog_help
 
@@ -8,6 +8,10 @@ Double = QgsProcessingParameterNumber.Type.Double
 
 class HybridAlgorithm(GroundFilterAlgorithm):
     MODEL = "MODEL"
+    SHIPPED = "SHIPPED"
+    #: the SHIPPED enum's values (core: Hybrid.shipped_model) and labels, in that order
+    SHIPPED_CHOICES = ("fast", "accurate")
+    SHIPPED_LABELS = ("fast (SMRF surfaces)", "accurate (SMRF + PTD surfaces, 2-3x slower)")
     PROBABILITY = "PROBABILITY"
 
     def name(self):
@@ -24,10 +28,15 @@ slope and curvature of that ground surface. Only x, y, z are needed. The feature
 metres and do not depend on the point density, so one model serves sparse airborne and dense UAV
 clouds.</p>
 <h3>Parameters</h3>
-<p><b>Model file</b> (optional): a model trained on the hybrid features (.npz); empty = the model
-shipped with the plugin, trained on the ISPRS filter-test samples 11, 21, 23, 31, 41, 51, 52 and 54
-(its leave-one-sample-out errors are in <a href="https://github.com/groundsieve/groundsieve/blob/main/docs/BENCHMARKS.md">the benchmarks</a>). A model trained on other features is
-refused.
+<p><b>Shipped model</b> (used when no model file is given): both are trained on the ISPRS
+filter-test samples 11, 21, 23, 31, 41, 51, 52 and 54 (their leave-one-sample-out errors are in
+<a href="https://github.com/groundsieve/groundsieve/blob/main/docs/BENCHMARKS.md">the benchmarks</a>).
+<i>fast</i> (the default): the features above. <i>accurate</i>: also the height of the point above
+the surface of the ground points of progressive TIN densification (PTD, Axelsson 2000, at fixed
+settings: 50 m seed cell, 30°, 1 m, offset 0.05 m) and that surface's slope; lower error on the
+ISPRS samples, 2-3x slower (it runs PTD).
+<b>Model file</b> (optional): a model trained on the hybrid features (.npz); empty = the shipped
+model chosen above. A model trained on other features is refused.
 <b>Ground probability threshold</b>: a point is ground when the forest gives it at least this
 probability of being ground (0.5); raise it for fewer non-ground points in the ground, lower it for
 fewer ground points lost.</p>
@@ -37,6 +46,9 @@ fewer ground points lost.</p>
         self.addParameter(QgsProcessingParameterFile(
             self.MODEL, "Model file (empty = the shipped model)",
             behavior=QgsProcessingParameterFile.Behavior.File, fileFilter="Model (*.npz)", optional=True))
+        self.addParameter(QgsProcessingParameterEnum(
+            self.SHIPPED, "Shipped model (when no model file is given)", options=list(self.SHIPPED_LABELS),
+            defaultValue=0))
         self.addParameter(QgsProcessingParameterNumber(
             self.PROBABILITY, "Ground probability threshold", type=Double, defaultValue=0.5,
             minValue=0.01, maxValue=0.99))
@@ -44,4 +56,5 @@ fewer ground points lost.</p>
     def buildFilter(self, parameters, context):  # noqa: N802
         from ..core.learn.hybrid import Hybrid
         return Hybrid(model_path=self.parameterAsFile(parameters, self.MODEL, context) or "",
-                      ground_probability=self.parameterAsDouble(parameters, self.PROBABILITY, context))
+                      ground_probability=self.parameterAsDouble(parameters, self.PROBABILITY, context),
+                      shipped_model=self.SHIPPED_CHOICES[self.parameterAsEnum(parameters, self.SHIPPED, context)])

@@ -106,6 +106,7 @@ FILTERS: Dict[str, Callable[[ParamsRow], Callable]] = {
     "ptd-nooffset": lambda row: make_ptd(row, offset_m=0.0),
     "ptd-terrascan": lambda row: make_ptd(row, seed_cell_m=60.0, max_angle_deg=6.0),
     "hybrid": make_hybrid,
+    "hybrid-accurate": lambda row: make_hybrid(row, shipped_model="accurate"),
 }
 
 

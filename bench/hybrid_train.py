@@ -5,11 +5,15 @@ it. Nothing is chosen on the sample being scored: the features and the forest's 
 in this file (a priori) and the decision threshold is 0.5.
 
     .venv/bin/python bench/hybrid_train.py --data ../shared/data/isprs \
-        [--model core/learn/models/hybrid_isprs.npz] [--no-loso] [--features NAME ...] [--scenes]
+        [--model core/learn/models/hybrid_isprs.npz] [--no-loso] [--features NAME ... | --ptd] \
+        [--scenes]
 
 ``--model`` writes the model trained on every sample (the shipped model is written with the
 default path). ``--features`` replaces the default feature set (for ablations: the LOSO figures of
-another set). ``--scenes`` also scores the model on generated scenes beside SMRF.
+another set). ``--ptd``: the default features and the two PTD features (height above the surface
+of PTD's ground points, PTD at the fixed settings of core/learn/hybrid.py PTD_SETTINGS, and its
+slope): the second shipped model, core/learn/models/hybrid_isprs_ptd.npz. ``--scenes`` also
+scores the model on generated scenes beside SMRF.
 Deterministic: the same data give the same model file, byte for byte.
 """
 from __future__ import annotations
@@ -26,7 +30,7 @@ import numpy as np  # noqa: E402
 
 from groundsieve.core.io import CLASS_GROUND, read_cloud  # noqa: E402
 from groundsieve.core.learn.hybrid import (CELL_KEY, DEFAULT_FEATURES, DEFAULT_MODEL,  # noqa: E402
-                                           hybrid_features)
+                                           PTD_FEATURES, PTD_MODEL, PTD_SETTINGS, hybrid_features)
 from groundsieve.core.learn.rf import ForestParams, train_forest  # noqa: E402
 from groundsieve.core.metrics import ground_accuracy  # noqa: E402
 
@@ -63,6 +67,8 @@ def train(samples, names, features, n_jobs=1):
     y = np.concatenate([samples[s][1] for s in names])
     meta = {CELL_KEY: CELL_SIZE_M, "trained_on_samples": list(names),
             "trained_by": "bench/hybrid_train.py"}
+    if any(f in PTD_FEATURES for f in features):
+        meta["hybrid_ptd_settings"] = dict(PTD_SETTINGS)
     # One job: scikit-learn's forest is then deterministic whatever the machine's cores.
     return train_forest(X, y, features, PARAMS, n_jobs=n_jobs, meta=meta)
 
@@ -145,10 +151,17 @@ def main():
     parser.add_argument("--data", default=os.path.join(REPO, "..", "shared", "data", "isprs"))
     parser.add_argument("--model", default=None, help=f"write the model trained on all samples here "
                         f"(the shipped one: {os.path.relpath(DEFAULT_MODEL, REPO)})")
-    parser.add_argument("--features", nargs="+", default=list(DEFAULT_FEATURES))
+    parser.add_argument("--features", nargs="+", default=None)
+    parser.add_argument("--ptd", action="store_true", help="the default features and the PTD features "
+                        f"{', '.join(PTD_FEATURES)} (the second shipped model: "
+                        f"{os.path.relpath(PTD_MODEL, REPO)})")
     parser.add_argument("--no-loso", action="store_true")
     parser.add_argument("--scenes", action="store_true", help="score the written model on generated scenes")
     args = parser.parse_args()
+    if args.features is None:
+        args.features = list(DEFAULT_FEATURES) + (list(PTD_FEATURES) if args.ptd else [])
+    elif args.ptd:
+        parser.error("--ptd and --features exclude each other")
     t0 = time.perf_counter()
     samples = load_samples(args.data, args.features)
     print(f"features of {len(samples)} samples: {time.perf_counter() - t0:.1f} s", file=sys.stderr)

@@ -88,6 +88,27 @@ def _add_filter(sub, name: str) -> None:
     parser.set_defaults(filter=name)
 
 
+def _add_hybrid(sub) -> None:
+    """The learned hybrid filter (core/learn/hybrid.py): its model, not parameters, decides; the
+    options are groundsieve:hybrid's (MODEL, SHIPPED, PROBABILITY)."""
+    from ..learn.hybrid import SHIPPED_MODELS, Hybrid
+    d = _defaults(Hybrid)
+    summary = "learned hybrid: a Random Forest on heights above SMRF's (and optionally PTD's) ground surfaces"
+    parser = sub.add_parser("hybrid", help=summary, description=f"{summary}. x, y, z only.")
+    _add_common(parser)
+    group = parser.add_argument_group("hybrid parameters (as in the Processing dialog)")
+    group.add_argument("--model", dest="f_model_path", default=d["model_path"], metavar="PATH",
+                       help="a model file trained on the hybrid features (.npz); empty = the shipped model "
+                            "chosen by --shipped")
+    group.add_argument("--shipped", dest="f_shipped_model", default=d["shipped_model"], choices=list(SHIPPED_MODELS),
+                       help="the shipped model used when no --model is given: fast = SMRF surfaces (the default), "
+                            "accurate = SMRF + PTD surfaces (lower error on the ISPRS samples, about 3x slower); "
+                            "default %(default)s")
+    group.add_argument("--probability", dest="f_ground_probability", type=float, default=d["ground_probability"],
+                       metavar="X", help="ground probability threshold; default %(default)s")
+    parser.set_defaults(filter="hybrid")
+
+
 def _add_param(group, name, field, option, title, choices) -> None:
     value = P.default(name, field)
     kind = P.field_type(name, field)
@@ -110,6 +131,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(title="filters", metavar="FILTER", required=True)
     for name in P.FILTERS:
         _add_filter(sub, name)
+    _add_hybrid(sub)
     _add_tune(sub)
     return parser
 
@@ -175,7 +197,10 @@ def _progress_printer(out):
 def options_from(args):
     """(algorithm, FilterOptions, DTMOptions) from parsed arguments."""
     given = {k[2:]: v for k, v in vars(args).items() if k.startswith("f_")}
-    if getattr(args, "preset", None):
+    if args.filter == "hybrid":
+        from ..learn.hybrid import Hybrid
+        algorithm = Hybrid(**given)
+    elif getattr(args, "preset", None):
         from .presets import load_preset
         algorithm = load_preset(args.preset, args.filter).build(given)
     else:

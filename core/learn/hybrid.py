@@ -19,7 +19,14 @@ feature                     value at the point
 ``above_cell_min``          z minus the lowest z of the point's own cell
 ``cell_range``              highest minus lowest z of the point's own cell
 ``column_rank``             (z - lowest) / (highest - lowest) in the cell (0 when flat)
+``above_ptd_ground``        z minus the surface of PTD's ground points (core/filters/ptd.py with
+                            the fixed settings :data:`PTD_SETTINGS`): the lowest PTD-ground point
+                            of each cell, empty cells inpainted harmonically, bilinear at the point
+``ptd_ground_slope``        gradient magnitude (rise/run) of that surface
 ==========================  ==================================================================
+
+The PTD features cost a PTD run (about 2-3x the time of the other features): they are computed
+only when a model asks for them (the shipped :data:`PTD_MODEL`, not the default).
 
 Every length is in metres, not in points, so the features mean the same on a 3 m-spacing
 airborne survey and on a 3 cm UAV cloud. Names made by ``core/learn/features.py``
@@ -47,6 +54,13 @@ from ..validate import _require, check_number, validate_xyz
 #: The shipped model (trained by bench/hybrid_train.py; see docs/BENCHMARKS.md).
 DEFAULT_MODEL = os.path.join(os.path.dirname(os.path.abspath(__file__)), "models", "hybrid_isprs.npz")
 
+#: The second shipped model: the default features and the two PTD features (slower, more accurate on
+#: the ISPRS samples; docs/BENCHMARKS.md "Learned hybrid filter").
+PTD_MODEL = os.path.join(os.path.dirname(os.path.abspath(__file__)), "models", "hybrid_isprs_ptd.npz")
+
+#: The shipped models by name (what a user may give instead of a file).
+SHIPPED_MODELS = {"fast": DEFAULT_MODEL, "accurate": PTD_MODEL}
+
 #: ASPRS class of the ground, the class whose probability the filter thresholds.
 GROUND_CLASS = 2
 
@@ -54,7 +68,17 @@ GROUND_CLASS = 2
 CELL_KEY = "hybrid_cell_size_m"
 
 #: Features computed from grids here (the opening radii are part of their names).
-GRID_FEATURES = ("above_smrf", "smrf_slope", "smrf_curvature", "above_cell_min", "cell_range", "column_rank")
+PTD_FEATURES = ("above_ptd_ground", "ptd_ground_slope")
+GRID_FEATURES = ("above_smrf", "smrf_slope", "smrf_curvature", "above_cell_min", "cell_range",
+                 "column_rank") + PTD_FEATURES
+
+#: PTD's settings for the PTD features, FIXED here and not the PTD filter's defaults: three of those
+#: defaults (seed cell 30 m, offset 0.2 m, mirror off) were chosen on the ISPRS samples the shipped
+#: models are trained and scored on, so features made with them would leak those samples into the
+#: leave-one-sample-out figures. These values are fixed from outside the ISPRS data (lasR's ``ptd``:
+#: 50 m seed cell ("res"), 30 degrees, 1 m, offset 0.05 m; mirror off as Axelsson's default).
+#: Changing them changes the features: a model trained with them would have to be retrained.
+PTD_SETTINGS = dict(seed_cell_m=50.0, max_angle_deg=30.0, max_distance_m=1.0, offset_m=0.05, mirror=False)
 _OPENING_RE = re.compile(r"^above_opening_r(?P<int>[0-9]+)(?:p(?P<frac>[0-9]+))?$")
 
 #: The default feature set: heights above ground surfaces and their shape only, nothing that
@@ -222,12 +246,18 @@ def _hybrid_features(xyz: np.ndarray, names: Sequence[str], *, cell_size_m: floa
         add("smrf_slope", slope, False)
         add("smrf_curvature", curvature, False)
     steps.report(0.4)
+    uses_ptd = any(n in PTD_FEATURES for n in names)
+    openings_end = 0.5 if uses_ptd else 0.7
     if radii:
         # The minimum surface as SMRF cleans it: empty cells inpainted, low outliers removed.
         for k, radius_m in enumerate(radii):
             opened = opening(minimum.zmin, max(1, int(round(radius_m / cell))))
             add(next(n for n in names if opening_radius(n) == radius_m), opened, True)
-            steps.report(0.4 + 0.3 * (k + 1) / len(radii))
+            steps.report(0.4 + (openings_end - 0.4) * (k + 1) / len(radii))
+    if uses_ptd:
+        ptd_surface = _ptd_ground_surface(x, y, z, grid, steps.sub(openings_end, 0.7))
+        add("above_ptd_ground", ptd_surface, True)
+        add("ptd_ground_slope", _slope(ptd_surface, cell)[0], False)
     if not surfaces:  # the kernel wants at least one grid
         add("", zmin_raw, False)
     # The cell's highest point only for the column features (else the kernel's columns for them are unused).
@@ -254,6 +284,19 @@ def _hybrid_features(xyz: np.ndarray, names: Sequence[str], *, cell_size_m: floa
     return result
 
 
+def _ptd_ground_surface(x, y, z, grid, steps: Steps) -> np.ndarray:
+    """The surface of PTD's ground points (:data:`PTD_SETTINGS`) on ``grid``: the lowest ground
+    point of each cell, empty cells inpainted harmonically. With fewer than 3 ground points (a
+    scrap of a cloud), the lowest point of every cell instead."""
+    from ..filters.ptd import PTD
+    from ..grids.inpaint import inpaint_harmonic
+    from ..grids.rasterize import cell_min
+    ground = PTD(**PTD_SETTINGS)(np.column_stack([x, y, z]), steps)
+    if np.count_nonzero(ground) < 3:
+        ground = np.ones(len(x), dtype=bool)
+    return inpaint_harmonic(cell_min(x[ground], y[ground], z[ground], grid))
+
+
 # -- the model ------------------------------------------------------------------------------------
 
 _MODELS: Dict[Tuple[str, float, int], object] = {}
@@ -265,7 +308,7 @@ def load_hybrid_model(path: Optional[str] = None):
     from .model_file import load_model
     path = os.fspath(path) if path else DEFAULT_MODEL
     if not os.path.isfile(path):
-        if path == DEFAULT_MODEL:
+        if path in SHIPPED_MODELS.values():
             raise InputError(f"{path}: the shipped hybrid model is missing from this installation; "
                              "reinstall the plugin or give a model file")
         raise InputError(f"{path}: no such model file")
@@ -282,6 +325,10 @@ def load_hybrid_model(path: Optional[str] = None):
     if GROUND_CLASS not in [int(c) for c in model.classes]:
         raise InputError(f"{path}: this model has no ground class (2) (its classes: "
                          f"{', '.join(str(int(c)) for c in model.classes)}); the hybrid filter needs one")
+    settings = model.meta.get("hybrid_ptd_settings")
+    if settings is not None and any(f in PTD_FEATURES for f in model.features) and settings != PTD_SETTINGS:
+        raise InputError(f"{path}: this model's PTD features were computed with PTD settings {settings}, "
+                         f"this version computes them with {PTD_SETTINGS}; retrain the model")
     cell = model.meta.get(CELL_KEY, 1.0)
     if not (isinstance(cell, (int, float)) and math.isfinite(cell) and cell > 0):
         raise InputError(f"{path}: the model's feature cell size {cell!r} is not a number > 0")
@@ -298,10 +345,14 @@ class HybridResult:
 
 @dataclass(frozen=True)
 class Hybrid:
-    """The learned hybrid ground filter. ``model_path`` empty = the shipped model; a point is
-    ground when the model gives it a ground probability of at least ``ground_probability``."""
+    """The learned hybrid ground filter. ``model_path`` empty = the shipped model named by
+    ``shipped_model``: "fast" (:data:`DEFAULT_MODEL`, SMRF's surfaces and openings) or "accurate"
+    (:data:`PTD_MODEL`, the same and PTD's ground surface: 2-3x slower, better on the ISPRS
+    samples). A point is ground when the model gives it a ground probability of at least
+    ``ground_probability``."""
     model_path: str = ""
     ground_probability: float = 0.5
+    shipped_model: str = "fast"
     _model: object = field(default=None, init=False, repr=False, compare=False)
 
     name = "hybrid"
@@ -312,7 +363,9 @@ class Hybrid:
                  f"ground_probability must be between 0 and 1 (got {self.ground_probability})")
         if not isinstance(self.model_path, (str, os.PathLike)):
             raise InvalidParameterError(f"model_path must be a file path or empty (got {self.model_path!r})")
-        object.__setattr__(self, "_model", load_hybrid_model(self.model_path))
+        _require(self.shipped_model in SHIPPED_MODELS,
+                 f"shipped_model must be one of {', '.join(SHIPPED_MODELS)} (got {self.shipped_model!r})")
+        object.__setattr__(self, "_model", load_hybrid_model(self.model_path or SHIPPED_MODELS[self.shipped_model]))
 
     @property
     def model(self):
@@ -339,6 +392,7 @@ class Hybrid:
     @staticmethod
     def reach_of(features: Sequence[str], cell: float) -> float:
         """The reach (m) of the hybrid features ``features`` on a grid of ``cell`` m."""
+        from ..filters.ptd import PTD
         from ..filters.smrf import SMRF
         from .features import parse_feature_name
         reach = 2.0 * cell
@@ -346,6 +400,9 @@ class Hybrid:
             radius = opening_radius(name)
             if name in ("above_smrf", "smrf_slope", "smrf_curvature"):
                 reach = max(reach, SMRF(cell_size_m=cell).reach_m)
+            elif name in PTD_FEATURES:
+                # PTD's reach (two seed cells) plus two cells for the bilinear value and the slope.
+                reach = max(reach, PTD(**PTD_SETTINGS).reach_m + 2.0 * cell)
             elif radius is not None:
                 reach = max(reach, 2.0 * radius + 2.0 * cell)
             elif name not in GRID_FEATURES:

@@ -137,3 +137,25 @@ def test_a_mistyped_input_is_named_before_the_outputs(tmp_path):
                  str(tmp_path / "out" / "classified.vpc")], out=out) == 1
     assert f"{tmp_path / 'survey_typo'}: no such file or folder" in out.getvalue()
     assert ".vpc" not in out.getvalue()
+
+
+def test_hybrid_on_the_command_line_with_the_shipped_models(scene, tmp_path):
+    """`python -m groundsieve hybrid`: groundsieve:hybrid's MODEL, SHIPPED and PROBABILITY as --model,
+    --shipped fast|accurate and --probability; the defaults build Hybrid()."""
+    from groundsieve.core.learn.hybrid import PTD_FEATURES, Hybrid
+    text = help_of("hybrid")
+    assert "--shipped {fast,accurate}" in text and "--model PATH" in text and "--probability X" in text
+    algorithm, _o, _d = options_from(build_parser().parse_args(["hybrid", "--input", "x", "--output", "y"]))
+    assert algorithm == Hybrid() and algorithm.shipped_model == "fast"
+    args = build_parser().parse_args(["hybrid", "--input", "x", "--output", "y", "--shipped", "accurate",
+                                      "--probability", "0.6"])
+    algorithm, _o, _d = options_from(args)
+    assert algorithm == Hybrid(shipped_model="accurate", ground_probability=0.6)
+    assert set(PTD_FEATURES) <= set(algorithm.features)
+    out = io.StringIO()
+    assert main(["hybrid", "--input", scene, "--output", str(tmp_path / "h.laz"), "--shipped", "accurate"],
+                out=out) == 0, out.getvalue()
+    classes = np.asarray(laspy.read(tmp_path / "h.laz").classification)
+    assert set(np.unique(classes)) <= {1, 2} and (classes == 2).any()
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["hybrid", "--input", "x", "--output", "y", "--shipped", "best"])

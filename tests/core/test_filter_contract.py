@@ -18,7 +18,7 @@ from groundsieve.core.filters.ptd import PTD
 from groundsieve.core.filters.smrf import SMRF
 from groundsieve.core.learn.hybrid import Hybrid
 
-FILTERS = [SMRF(), PMF(), CSF(), PTD(), EchoGrid(), EVC(), Hybrid()]
+FILTERS = [SMRF(), PMF(), CSF(), PTD(), EchoGrid(), EVC(), Hybrid(), Hybrid(shipped_model="accurate")]
 
 
 def plane(size=20.0, density=4.0, seed=0):
@@ -83,7 +83,7 @@ def test_concurrent_runs_in_threads_give_the_same_results():
 
 X0, Y0 = 512000.0, 5403000.0
 #: The filters of a terrain surface: on degenerate but finite input every point is ground.
-TERRAIN_FILTERS = [SMRF(), PMF(), CSF(), PTD(), Hybrid()]
+TERRAIN_FILTERS = [SMRF(), PMF(), CSF(), PTD(), Hybrid(), Hybrid(shipped_model="accurate")]
 
 
 def _bad_arrays():

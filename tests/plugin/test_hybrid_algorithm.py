@@ -98,3 +98,22 @@ def test_an_rftrain_model_on_the_hybrid_preset_runs_in_hybrid(groundsieve_provid
     processing.run("groundsieve:hybrid", {"INPUT": str(src), "OUTPUT": str(out), "MODEL": str(model)})
     acc = ground_accuracy(classes_of(out) == 2, scene.classification == 2)
     assert acc.total < 0.05, acc
+
+
+def test_hybrid_with_the_accurate_shipped_model(groundsieve_provider, scene_laz, tmp_path):
+    """SHIPPED = 1 (accurate: SMRF + PTD surfaces) when no model file is given; a model file wins."""
+    import processing
+    from groundsieve.core.metrics import ground_accuracy
+    from qgis.core import QgsApplication
+    alg = QgsApplication.processingRegistry().algorithmById("groundsieve:hybrid")
+    shipped = alg.parameterDefinition("SHIPPED")
+    assert shipped.defaultValue() == 0 and len(shipped.options()) == 2 and "accurate" in shipped.options()[1]
+    src, scene = scene_laz
+    out = tmp_path / "accurate.laz"
+    processing.run("groundsieve:hybrid", {"INPUT": str(src), "OUTPUT": str(out), "SHIPPED": 1})
+    acc = ground_accuracy(classes_of(out) == 2, scene.classification == 2)
+    assert acc.total < 0.05, acc
+    from qgis.core import QgsProcessingContext
+    context = QgsProcessingContext()
+    assert alg.buildFilter({"SHIPPED": 1}, context).shipped_model == "accurate"
+    assert alg.buildFilter({}, context).shipped_model == "fast"
