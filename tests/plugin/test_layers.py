@@ -204,3 +204,35 @@ def test_loaded_vpc_has_the_survey_extent(groundsieve_provider, scene_laz, tmp_p
               max(i.maxs[0] for i in infos), max(i.maxs[1] for i in infos))
     got = (extent.xMinimum(), extent.yMinimum(), extent.xMaximum(), extent.yMaximum())
     assert all(abs(a - b) < 1.0 for a, b in zip(got, native)), (got, native)
+
+
+def test_a_loaded_copc_layer_is_an_input_read_by_bounds(groundsieve_provider, scene_laz, tmp_path):
+    """Where a provider opens COPC (3.40's ``copc``), a loaded COPC layer is the input of a tiled
+    run: its tiles read it by bounds (no binning), with the classes of the same run on the file."""
+    import laspy
+    import numpy as np
+    import processing
+    from qgis.core import QgsPointCloudLayer, QgsProject
+    from groundsieve.algorithms import pointclouds
+    if not pointclouds.providers_opening("x.copc.laz"):
+        pytest.skip("this QGIS has no point-cloud provider for COPC (QGIS < 3.26)")
+    from groundsieve.tests.core.test_copc import scene_las, write_copc
+    _src, scene = scene_laz
+    copc = tmp_path / "scene.copc.laz"
+    write_copc(copc, scene_las(scene))
+    layer = QgsPointCloudLayer(str(copc), "scene", "copc")
+    assert layer.isValid() and layer.providerType() == "copc"
+    QgsProject.instance().addMapLayer(layer)
+    try:
+        params = {"TILE_SIZE": 50.0}
+        feedback = _Feedback()
+        processing.run("groundsieve:smrf", {"INPUT_LAYER": layer.id(), "OUTPUT": str(tmp_path / "a.laz"), **params},
+                       context=_context(), feedback=feedback)
+        processing.run("groundsieve:smrf", {"INPUT": str(copc), "OUTPUT": str(tmp_path / "b.laz"), **params},
+                       context=_context(), feedback=_Feedback())
+    finally:
+        QgsProject.instance().removeAllMapLayers()
+    assert any("COPC file(s) read by bounds" in line for line in feedback.infos), feedback.infos
+    a, b = laspy.read(tmp_path / "a.laz"), laspy.read(tmp_path / "b.laz")
+    assert len(a.points) == len(scene.x) and np.array_equal(a.classification, b.classification)
+    assert 0.3 < np.mean(a.classification == 2) < 0.95
