@@ -583,11 +583,13 @@ def assemble_classified(src: str, dst: str, pieces: Sequence[dict]) -> None:
     header and VLRs as laspy's writer writes them for a streamed copy, the pieces' records or LAZ
     chunks, one chunk table. The same bytes as :func:`write_classified_stream`."""
     import laspy
+    from .copc import plain_evlrs, plain_header
     compress = _ext(dst) == ".laz"
     pieces = sorted(pieces, key=lambda p: p["first"])
     try:
         with laspy.open(src) as reader:
-            header = copy.deepcopy(reader.header)
+            header = plain_header(reader.header)  # as write_classified_stream: no COPC records
+            evlrs = plain_evlrs(reader.header) if reader.header.version.minor >= 4 else []
         with atomic_path(dst) as tmp, open(tmp, "wb") as f:
             writer = laspy.LasWriter(f, header=header, do_compress=compress, closefd=False,
                                      laz_backend=_pieces_backend(pieces) if compress else None)
@@ -596,6 +598,8 @@ def assemble_classified(src: str, dst: str, pieces: Sequence[dict]) -> None:
                 for piece in pieces:
                     with open(piece["path"], "rb") as g:
                         _copy_bytes(g, f, os.path.getsize(piece["path"]))
+            if evlrs:  # after the points (the LAZ backend's done() writes the chunks first)
+                writer.write_evlrs(evlrs)
             writer.close()
     except OSError as err:
         raise OutputError(f"{dst}: cannot be written ({err})") from err

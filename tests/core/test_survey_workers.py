@@ -149,15 +149,22 @@ def test_auto_runs_small_surveys_in_threads_and_big_ones_in_processes():
     assert tiles._auto_parallel(tiles.PROCESS_MIN_POINTS) == "processes"
 
 
+@pytest.mark.parametrize("evlr", [False, True], ids=["las12", "las14-evlr"])
 @pytest.mark.parametrize("ext", [".laz", ".las"])
-def test_the_classified_copy_in_pieces_is_the_streamed_copy_byte_for_byte(tmp_path, ext):
+def test_the_classified_copy_in_pieces_is_the_streamed_copy_byte_for_byte(tmp_path, ext, evlr):
     """The write phase: the binning keeps the records in file order (two binning pieces here), the
     copy is written in 3 pieces on LAZ chunk boundaries (in reverse order) and put together: the
-    bytes of one streamed laspy pass over the input (header, VLRs, chunks and chunk table)."""
+    bytes of one streamed laspy pass over the input (header, VLRs, chunks and chunk table, and the
+    EVLRs of a LAS 1.4 input: the pieces' copy dropped them)."""
     from groundsieve.core.io.lasfiles import (TileGrid, assemble_classified, bin_file, laz_chunk_points, piece_cuts,
                                               write_classified_piece, write_classified_stream)
     src = str(tmp_path / "s.laz")
     write_scene(make_scene(SceneSpec(size_m=260.0, density_per_m2=2.0, seed=3)), src)
+    if evlr:  # LAS 1.4 point format 6 with an EVLR of its own
+        from laspy.vlrs.vlrlist import VLRList
+        las = laspy.convert(laspy.read(src), point_format_id=6, file_version="1.4")
+        las.evlrs = VLRList([laspy.VLR("groundsieve", 42, "a test EVLR", b"kept" * 100)])
+        las.write(src)
     with laspy.open(src) as r:
         n, pf = int(r.header.point_count), r.header.point_format
     assert n > 3 * laz_chunk_points(pf) > 0
@@ -172,7 +179,10 @@ def test_the_classified_copy_in_pieces_is_the_streamed_copy_byte_for_byte(tmp_pa
               for i, (a, b) in enumerate(zip(cuts[:-1], cuts[1:]))]
     assemble_classified(src, str(tmp_path / f"got{ext}"), pieces[::-1])
     assert (tmp_path / f"got{ext}").read_bytes() == (tmp_path / f"ref{ext}").read_bytes()
-    assert np.array_equal(laspy.read(tmp_path / f"got{ext}").classification, classes)
+    got = laspy.read(tmp_path / f"got{ext}")
+    assert np.array_equal(got.classification, classes)
+    if evlr:
+        assert [(v.user_id, v.record_id, v.record_data) for v in got.evlrs] == [("groundsieve", 42, b"kept" * 100)]
 
 
 def test_one_big_file_is_written_in_pieces_on_the_workers_with_the_serial_outputs(tmp_path, monkeypatch):
