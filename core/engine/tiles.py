@@ -547,7 +547,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         written.append(result)
         write_steps.report((len(write_jobs) + len(written)) / total_jobs)
     assemble_jobs = [dict(key=("assemble", k), path=info.path, out=outs[k], pieces=pieces.get(k, []),
-                          class_path=class_paths[k], count=info.count)
+                          class_path=class_paths[k], class_parts=sorted(class_parts[k]), count=info.count)
                      for k, info in enumerate(infos) if outs[k]]
     _map_files(_assemble_job, assemble_jobs, record_write, tiling, steps, log, points=sum(i.count for i in infos),
                paths=[info.path for info in infos] + [work],
@@ -607,18 +607,25 @@ def _write_pieces(infos, outs, tiling) -> List[list]:
     return result
 
 
-def _write_piece_job(job) -> dict:
-    """Points ``first`` to ``stop`` of one input's classified copy (a pure function of its job): the
-    records the binning kept, with the classes the tiles wrote (in the per-file memmap, or on a
-    cluster in one part per tile that held points of the file, applied here on the worker, so that
-    the client never handles points), compressed into a piece file of the working folder."""
-    first, stop = job["first"], job["stop"]
+def _file_classes(job, first: int, stop: int) -> np.ndarray:
+    """Points ``first`` to ``stop`` of one input's classes, as its tiles wrote them: in the per-file
+    memmap, or on a cluster in one part per tile that held points of the file, applied here on the
+    worker (so that the client never handles points); a resumed run may have tiles of both kinds."""
     classes = np.array(np.load(job["class_path"], mmap_mode="r")[first:stop])
-    for part in job.get("class_parts") or ():  # (a resumed run may have tiles of both kinds)
+    for part in job.get("class_parts") or ():
         with np.load(part) as saved:
             index = saved["index"]
             sel = (index >= first) & (index < stop)
             classes[index[sel] - first] = saved["cls"][sel]
+    return classes
+
+
+def _write_piece_job(job) -> dict:
+    """Points ``first`` to ``stop`` of one input's classified copy (a pure function of its job): the
+    records the binning kept, with the classes the tiles wrote (:func:`_file_classes`), compressed
+    into a piece file of the working folder."""
+    first, stop = job["first"], job["stop"]
+    classes = _file_classes(job, first, stop)
     piece = write_classified_piece(job["path"], job["records"], classes, first, stop, job["piece_path"],
                                    compress=_ext(job["out"]) == ".laz", check=job.get("check"))
     piece["file_index"] = int(job["key"][1])
@@ -626,10 +633,11 @@ def _write_piece_job(job) -> dict:
 
 
 def _assemble_job(job) -> dict:
-    """One input's classified copy (atomic) from its pieces; an input without points is streamed."""
+    """One input's classified copy (atomic) from its pieces; an input without kept records (a COPC
+    input, or one without points) is streamed with the classes its tiles wrote."""
     if not job["pieces"]:
-        classes = np.load(job["class_path"], mmap_mode="r")[:job["count"]]
-        write_classified_stream(job["path"], job["out"], classes, check=job.get("check"))
+        write_classified_stream(job["path"], job["out"], _file_classes(job, 0, job["count"]),
+                                check=job.get("check"))
     else:
         assemble_classified(job["path"], job["out"], job["pieces"])
         for piece in job["pieces"]:

@@ -242,3 +242,18 @@ def test_local_cluster_workers_run_one_thread_each():
         assert {k: os.environ.get(k) for k in before} == before
     assert len(limits) == 2
     assert set(limits.values()) == {("1", 1)}
+
+
+@needs_dask
+def test_a_copc_input_on_the_cluster_gets_the_classes_its_tiles_wrote(tmp_path):
+    """On a cluster the tiles write their classes as parts, which the write job of each file
+    applies; a COPC input, read by bounds and so written by the streamed copy, got none of them
+    (every point left at class 0) once the binned files moved to the pieces' write path."""
+    from groundsieve.tests.core.test_copc import scene_las, write_copc
+    copc = tmp_path / "scene.copc.laz"
+    write_copc(copc, scene_las(make_scene(SceneSpec(size_m=120.0, density_per_m2=2.0, seed=5))))
+    run_ground_filter(str(copc), str(tmp_path / "threads.laz"), SMRF(), options=options())
+    run_ground_filter(str(copc), str(tmp_path / "dask.laz"), SMRF(), options=options("local:2"))
+    want, got = (laspy.read(tmp_path / f"{n}.laz").classification for n in ("threads", "dask"))
+    assert 0.3 < np.mean(want == 2) < 0.95
+    assert np.array_equal(got, want)
