@@ -330,24 +330,16 @@ class CopcSource:
 
 
 def _tile_selection(x, y, key, size: float, buffer: float):
-    """(in the tile or its buffer, the tile's own) for points at x, y: the same test, on the same
-    floating-point values, as ``lasfiles.bin_file`` (``TileGrid.key_of`` and ``_in_buffer``)."""
-    kx = np.floor(x / size).astype(np.int64)
-    ky = np.floor(y / size).astype(np.int64)
+    """(in the tile or its buffer, the tile's own) for points at x, y: ``lasfiles.bin_file``'s
+    test (``TileGrid.key_of`` and ``_in_buffer``), so that a tile holds the points its parts would."""
+    from .lasfiles import TileGrid, _in_buffer
+    grid = TileGrid(size, buffer)
+    kx, ky = grid.key_of(x, y)
     m = int(math.ceil(buffer / size)) if buffer > 0 else 0
     dx, dy = key[0] - kx, key[1] - ky
     near = (np.abs(dx) <= m) & (np.abs(dy) <= m)
-    fx = x - kx * size
-    fy = y - ky * size
-    keep = near & _within(fx, dx, size, buffer) & _within(fy, dy, size, buffer)
+    keep = near & _in_buffer(x - kx * size, dx, grid) & _in_buffer(y - ky * size, dy, grid)
     return keep, keep & (dx == 0) & (dy == 0)
-
-
-def _within(f, d, size, buffer):
-    """``lasfiles._in_buffer`` for an array of tile steps ``d``."""
-    left = f + (-d - 1) * size < buffer
-    right = (size - f) + (d - 1) * size <= buffer
-    return np.where(d < 0, left, np.where(d > 0, right, True))
 
 
 def read_tile(source: CopcSource) -> Tuple[PointCloud, np.ndarray, int]:

@@ -266,8 +266,9 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
     the part of the file that tile needs into ``work_dir``. Tiles exist only where points are.
     ``first``/``stop`` bin only those points of the file (one ``piece`` of it, named in the parts'
     file names): pieces binned in parallel, their parts taken in file order, give the whole file's.
-    ``records``: a file (created if missing) into which the decoded records are also written, at their place in file order, so that the classified copy is written from them
-    without decoding the input again (:func:`write_classified_piece`)."""
+    ``records``: a file (created if missing) into which the decoded records are also written, at
+    their place in file order, so that the classified copy is written from them without decoding
+    the input again (:func:`write_classified_piece`)."""
     import laspy
     parts: Dict[tuple, TilePart] = {}
     writers = {}
@@ -363,9 +364,16 @@ def _write_part_records(writer, records: np.ndarray, point_format) -> None:
     h.maxs = np.maximum(h.maxs, [v.max() * sc + off for v, sc, off in zip(ints, h.scales, h.offsets)])
 
 
-def _in_buffer(f: np.ndarray, d: int, grid: TileGrid) -> np.ndarray:
+def _in_buffer(f: np.ndarray, d, grid: TileGrid) -> np.ndarray:
     """Whether points at ``f`` (their position inside their own tile, [0, size), along x or y) lie
-    within the buffer of the tile ``d`` tiles away along that axis (all of them for d = 0)."""
+    within the buffer of the tile ``d`` tiles away along that axis (all of them for d = 0); ``d``
+    one step for all points, or one per point (each point then tested as for its own step)."""
+    if np.ndim(d):
+        out = np.empty(f.shape[0], dtype=bool)
+        for step in np.unique(d):
+            at = d == step
+            out[at] = _in_buffer(f[at], int(step), grid)
+        return out
     if d < 0:
         return f + (-d - 1) * grid.size < grid.buffer
     if d > 0:
