@@ -59,6 +59,10 @@ SPARSE_AREA_M2 = 1e8
 #: a single input file is binned in pieces of at least this many points, one per worker
 BIN_PIECE_POINTS = 4 * CHUNK_POINTS
 
+#: the layout of the working folder (tile parts, records, done marks): a run resumes only from
+#: a folder of the same layout (2: parts hold the records' leading bytes, int32 indices)
+WORK_FORMAT = 2
+
 #: a tile holding fewer points than this, buffer included, is not filtered (isolated points)
 MIN_TILE_POINTS = 50
 
@@ -348,7 +352,8 @@ def _fingerprint(infos, grid, algorithm, options, dtm) -> str:
     import hashlib
     import json as _json
     files = [(os.path.realpath(i.path), os.path.getsize(i.path), os.stat(i.path).st_mtime_ns) for i in infos]
-    text = _json.dumps([files, grid.size, grid.buffer, repr(algorithm), repr(options), repr(dtm)], default=str)
+    text = _json.dumps([files, grid.size, grid.buffer, repr(algorithm), repr(options), repr(dtm), WORK_FORMAT],
+                       default=str)
     return hashlib.sha1(text.encode()).hexdigest()[:16]
 
 
@@ -513,7 +518,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     # every tile is done (and marked so for a resumed run): its parts make room for the write's pieces
     for parts in tiles.values():
         for part in parts:
-            for name in (part.las_path, part.index_path):
+            for name in (part.points_path, part.index_path):
                 if os.path.exists(name):
                     os.remove(name)
     # 3. write the outputs: every classified file to a temporary name first (atomic_path), then the vpc

@@ -227,19 +227,40 @@ class TileGrid:
         return (i * self.size, j * self.size, (i + 1) * self.size, (j + 1) * self.size)
 
 
-def _part_header(header):
-    return copy.deepcopy(header)
+#: What a tile part holds of each record: its first bytes, from X to the classification
+#: (X, Y, Z, intensity, the return bits and the classification with its flags: 16 bytes in point
+#: formats 0-5, 17 in 6-10; every field a tile cloud has), not the whole record: the tiles read
+#: nothing else, and the classified copy is written from the records kept in file order.
+PART_FIELDS = {"X", "Y", "Z", "intensity", "bit_fields", "raw_classification", "classification_flags",
+               "classification"}
+
+
+def part_record_width(point_format) -> int:
+    """The bytes of a record a tile part keeps (:data:`PART_FIELDS`, which lead every format)."""
+    dtype = point_format.dtype()
+    width = 0
+    for name in dtype.names:
+        if name not in PART_FIELDS:
+            break
+        width = dtype.fields[name][1] + dtype.fields[name][0].itemsize
+    return width
 
 
 @dataclass
 class TilePart:
-    """The points of one input file that one tile (with its buffer) needs: an uncompressed LAS
-    file of the records as they are in the input, and beside it their indices in the input
-    (``>= 0``: the tile's own point; ``-1 - index``: a buffer point)."""
+    """The points of one input file that one tile (with its buffer) needs: a file of the leading
+    bytes of their records as they are in the input (:func:`part_record_width`), and beside it
+    their indices in the input (``>= 0``: the tile's own point; ``-1 - index``: a buffer point;
+    int32 when the file has fewer than 2**31 points, int64 otherwise)."""
     file_index: int
-    las_path: str
+    points_path: str
     index_path: str
     own_count: int = 0      #: points of the tile itself (the rest is buffer)
+    point_format: int = 0   #: the input's point format (how the record bytes read)
+    width: int = 0          #: bytes per point in ``points_path``
+    scales: tuple = (1.0, 1.0, 1.0)
+    offsets: tuple = (0.0, 0.0, 0.0)
+    index_dtype: str = "<i8"
 
 
 def _chunks(reader, first: int, stop: Optional[int], chunk_points: int):
@@ -259,6 +280,11 @@ def _chunks(reader, first: int, stop: Optional[int], chunk_points: int):
         yield chunk
 
 
+def index_dtype(count: int) -> np.dtype:
+    """The dtype of a tile part's indices into a file of ``count`` points."""
+    return np.dtype("<i4") if count < (1 << 31) - 1 else np.dtype("<i8")
+
+
 def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk_points: int = CHUNK_POINTS,
              check=None, first: int = 0, stop: Optional[int] = None, piece: Optional[int] = None,
              records: Optional[str] = None) -> Dict[tuple, TilePart]:
@@ -268,70 +294,57 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
     file names): pieces binned in parallel, their parts taken in file order, give the whole file's.
     ``records``: a file (created if missing) into which the decoded records are also written, at
     their place in file order, so that the classified copy is written from them without decoding
-    the input again (:func:`write_classified_piece`)."""
+    the input again (:func:`write_classified_piece`).
+
+    A point goes to its own tile (``TileGrid.key_of``) and to every tile whose buffer holds it
+    (:func:`_in_buffer`), in one numba pass a chunk (``_binning_kernels``); each part holds its
+    points in file order."""
     import laspy
+
+    from ._binning_kernels import bin_chunk_kernel
     parts: Dict[tuple, TilePart] = {}
-    writers = {}
+    point_files = {}
     index_files = {}
     m = int(math.ceil(grid.buffer / grid.size)) if grid.buffer > 0 else 0
     stem = f"f{file_index:05d}" + (f"p{piece:04d}" if piece is not None else "")
     fd = os.open(records, os.O_WRONLY | os.O_CREAT, 0o644) if records is not None else None
     try:
         with laspy.open(path) as reader:
+            h = reader.header
+            width = part_record_width(h.point_format)
+            idx_dtype = index_dtype(int(h.point_count))
+            (sx, sy, _), (ox, oy, _) = (float(v) for v in h.scales), (float(v) for v in h.offsets)
             start = first
             for chunk in _chunks(reader, first, stop, chunk_points):
                 if check is not None:
                     check()
                 n = len(chunk)
+                recs = np.ascontiguousarray(chunk.array)
+                raw = recs.view(np.uint8).reshape(n, recs.dtype.itemsize)
                 if fd is not None:
-                    raw = memoryview(np.ascontiguousarray(chunk.array)).cast("B")
+                    flat = memoryview(raw).cast("B")
                     done = 0
-                    while done < len(raw):  # (pwrite may write less than asked)
-                        done += os.pwrite(fd, raw[done:], start * chunk.array.dtype.itemsize + done)
-                x = np.asarray(chunk.x, dtype=np.float64)
-                y = np.asarray(chunk.y, dtype=np.float64)
-                kx, ky = grid.key_of(x, y)
-                fx = x - kx * grid.size  # position inside the own tile, [0, size)
-                fy = y - ky * grid.size
-                targets_k, targets_p, targets_own = [], [], []
-                local = np.arange(n, dtype=np.int64)
-                for dx in range(-m, m + 1):
-                    inx = _in_buffer(fx, dx, grid)
-                    for dy in range(-m, m + 1):
-                        iny = _in_buffer(fy, dy, grid)
-                        sel = local[inx & iny]
-                        if sel.size == 0:
-                            continue
-                        key = (kx[sel] + dx) * np.int64(1 << 31) + (ky[sel] + dy)
-                        targets_k.append(key)
-                        targets_p.append(sel)
-                        targets_own.append(np.full(sel.size, dx == 0 and dy == 0))
-                keys = np.concatenate(targets_k)
-                pts = np.concatenate(targets_p)
-                own = np.concatenate(targets_own)
-                order = np.argsort(keys, kind="stable")
-                keys, pts, own = keys[order], pts[order], own[order]
-                # Every target's record in one take, as fixed-size raw bytes (2.4 times faster than
-                # laspy's record indexing, per tile); each tile's records are then a slice of it.
-                records = chunk.array
-                gathered = records.view(np.dtype((np.void, records.dtype.itemsize)))[pts].view(records.dtype)
-                cuts = np.flatnonzero(np.diff(keys)) + 1
-                for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, keys.size]):
-                    k = int(keys[lo])
-                    tkey = _split_key(k)
-                    sel = pts[lo:hi]
-                    if tkey not in writers:
-                        name = f"{stem}_{tkey[0]}_{tkey[1]}"
-                        part = TilePart(file_index, os.path.join(work_dir, name + ".las"),
-                                        os.path.join(work_dir, name + ".idx"))
-                        parts[tkey] = part
-                        writers[tkey] = laspy.open(part.las_path, mode="w", header=_part_header(reader.header),
-                                                   do_compress=False)
-                        index_files[tkey] = open(part.index_path, "wb")
-                    _write_part_records(writers[tkey], gathered[lo:hi], chunk.point_format)
-                    parts[tkey].own_count += int(own[lo:hi].sum())
-                    gidx = start + sel
-                    index_files[tkey].write(np.where(own[lo:hi], gidx, -1 - gidx).astype(np.int64).tobytes())
+                    while done < len(flat):  # (pwrite may write less than asked)
+                        done += os.pwrite(fd, flat[done:], start * recs.dtype.itemsize + done)
+                kx0, ky0, nky, cuts, out_rec, out_idx, own_count = bin_chunk_kernel(
+                    recs["X"], recs["Y"], sx, ox, sy, oy, float(grid.size), float(grid.buffer), m, raw, width,
+                    start)
+                out_idx = out_idx.astype(idx_dtype, copy=False)
+                for b in np.flatnonzero(np.diff(cuts)):
+                    lo, hi = int(cuts[b]), int(cuts[b + 1])
+                    tkey = (int(kx0 + b // nky), int(ky0 + b % nky))
+                    if tkey not in point_files:
+                        name = os.path.join(work_dir, f"{stem}_{tkey[0]}_{tkey[1]}")
+                        parts[tkey] = TilePart(file_index, name + ".pts", name + ".idx",
+                                               point_format=int(h.point_format.id), width=width,
+                                               scales=tuple(float(v) for v in h.scales),
+                                               offsets=tuple(float(v) for v in h.offsets),
+                                               index_dtype=idx_dtype.str)
+                        point_files[tkey] = open(parts[tkey].points_path, "wb")
+                        index_files[tkey] = open(parts[tkey].index_path, "wb")
+                    point_files[tkey].write(memoryview(out_rec[lo:hi]).cast("B"))
+                    index_files[tkey].write(memoryview(out_idx[lo:hi]).cast("B"))
+                    parts[tkey].own_count += int(own_count[b])
                 start += n
     except OSError as err:
         raise OutputError(f"{work_dir}: cannot write the temporary tiles of {path} ({err}); "
@@ -342,26 +355,11 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
         raise InputError(f"{path}: cannot read its points ({type(err).__name__}: {err}); "
                          "the file is damaged or truncated") from err
     finally:
-        for w in writers.values():
-            w.close()
-        for f in index_files.values():
+        for f in list(point_files.values()) + list(index_files.values()):
             f.close()
         if fd is not None:
             os.close(fd)
     return parts
-
-
-def _write_part_records(writer, records: np.ndarray, point_format) -> None:
-    """Append raw records to a tile part's (uncompressed) laspy writer, its header growing by their
-    count and bounds only: laspy's ``write_points`` also counts the returns (``np.unique`` of every
-    record's return number), which no reader of a part uses (a third of the part writes' time)."""
-    import laspy
-    h = writer.header
-    writer.point_writer.write_points(laspy.PackedPointRecord(records, point_format))
-    h.point_count += records.shape[0]
-    ints = [records[name] for name in ("X", "Y", "Z")]
-    h.mins = np.minimum(h.mins, [v.min() * sc + off for v, sc, off in zip(ints, h.scales, h.offsets)])
-    h.maxs = np.maximum(h.maxs, [v.max() * sc + off for v, sc, off in zip(ints, h.scales, h.offsets)])
 
 
 def _in_buffer(f: np.ndarray, d, grid: TileGrid) -> np.ndarray:
@@ -389,13 +387,33 @@ def _split_key(k: int) -> tuple:
 
 
 def read_part(part: TilePart) -> Tuple[PointCloud, np.ndarray]:
-    """The cloud of one tile part (every field ``read_cloud`` gives) and its index array."""
-    cloud = read_cloud(part.las_path)
-    index = np.fromfile(part.index_path, dtype=np.int64)
-    if index.shape[0] != len(cloud):
-        raise InputError(f"{part.las_path}: {len(cloud)} points but {index.shape[0]} indices; "
+    """The cloud of one tile part (the fields a tile cloud has: x, y, z, classification, returns,
+    intensity, withheld; decoded as laspy decodes them) and its index array."""
+    raw = np.fromfile(part.points_path, dtype=np.uint8)
+    index = np.fromfile(part.index_path, dtype=np.dtype(part.index_dtype))
+    if raw.size != index.shape[0] * part.width:
+        raise InputError(f"{part.points_path}: {raw.size // max(part.width, 1)} points but {index.shape[0]} indices; "
                          "the working folder was changed during the run")
-    cloud.las = None
+    rec = raw.reshape(-1, part.width)
+    n = rec.shape[0]
+
+    def field(offset, dtype):
+        return np.ndarray((n,), dtype=np.dtype(dtype), buffer=rec, offset=offset, strides=(part.width,))
+    xyz = [field(4 * k, "<i4") * scale + offset for k, (scale, offset) in enumerate(zip(part.scales, part.offsets))]
+    bits = field(14, "u1")
+    if part.point_format >= 6:  # returns 4 + 4 bits; flags byte (withheld: bit 2), then the class byte
+        return_number, number_of_returns = bits & 0x0F, bits >> 4
+        withheld = (field(15, "u1") & 0x04).astype(bool)
+        classification = field(16, "u1").copy()
+    else:  # returns 3 + 3 bits; class in bits 0-4 of one byte with its flags (withheld: bit 7)
+        return_number, number_of_returns = bits & 0x07, (bits >> 3) & 0x07
+        cls = field(15, "u1")
+        withheld = (cls & 0x80).astype(bool)
+        classification = cls & 0x1F
+    cloud = PointCloud(path=part.points_path, x=xyz[0], y=xyz[1], z=xyz[2], classification=classification,
+                       return_number=return_number, number_of_returns=number_of_returns,
+                       intensity=field(12, "<u2").copy(), has_return_info=True,
+                       withheld=withheld if withheld.any() else None)
     return cloud, index
 
 

@@ -324,3 +324,41 @@ def test_an_interrupted_run_resumes_and_skips_the_tiles_done(scene_laz, tmp_path
     clean = tmp_path / "clean.tif"
     run_ground_filter(scene_laz, None, SMRF(), options=tiled(), dtm_path=str(clean))
     assert np.array_equal(gdal.Open(str(dtm)).ReadAsArray(), gdal.Open(str(clean)).ReadAsArray())
+
+
+@pytest.mark.parametrize("point_format,version", [(0, "1.2"), (1, "1.2"), (3, "1.2"), (6, "1.4"), (7, "1.4"),
+                                                  (8, "1.4")])
+def test_tile_parts_read_as_laspy_reads_the_points(tmp_path, point_format, version):
+    """A tile part keeps only the leading bytes of each record (x, y, z, intensity, returns, the
+    class and its flags): read back, every field a tile cloud has equals laspy's reading of the same
+    points of the input, withheld flags and classes above 31 (formats 6-10) included, for points
+    of the tile and of its buffer alike."""
+    from groundsieve.core.io.lasfiles import TileGrid, bin_file, read_part
+    rng = np.random.default_rng(point_format)
+    n = 20_000
+    x, y = rng.uniform(0, 300, n) + 500_000.0, rng.uniform(0, 300, n) + 5_400_000.0
+    top = 255 if point_format >= 6 else 31
+    returns = rng.integers(1, 6 if point_format < 6 else 16, n)
+    las = new_las(x, y, rng.uniform(100, 140, n), point_format=point_format, version=version, scale=0.001,
+                  classification=rng.integers(0, top + 1, n).astype(np.uint8),
+                  intensity=rng.integers(0, 65536, n).astype(np.uint16),
+                  number_of_returns=returns, return_number=np.minimum(returns, rng.integers(1, 16, n)),
+                  withheld=rng.random(n) < 0.1, synthetic=rng.random(n) < 0.3, key_point=rng.random(n) < 0.3)
+    src = tmp_path / "in.las"
+    write_las(las, str(src))
+    want = read_cloud(str(src))
+    (tmp_path / "parts").mkdir()
+    parts = bin_file(str(src), 0, TileGrid(100.0, 30.0), str(tmp_path / "parts"), chunk_points=7_000)
+    seen = np.zeros(n, dtype=np.int64)
+    for part in parts.values():
+        cloud, index = read_part(part)
+        at = np.where(index >= 0, index, -1 - index)
+        assert np.all(np.diff(at) > 0)  # in file order
+        seen[at[index >= 0]] += 1
+        for name in ("x", "y", "z", "classification", "return_number", "number_of_returns", "intensity"):
+            assert np.array_equal(getattr(cloud, name), getattr(want, name)[at]), name
+            assert getattr(cloud, name).dtype == getattr(want, name).dtype, name
+        assert np.array_equal(cloud.withheld_mask, want.withheld_mask[at])
+        assert part.own_count == int((index >= 0).sum())
+    assert np.all(seen == 1)  # every point is own to exactly one tile
+    assert want.withheld_mask.any() and want.classification.max() == top
