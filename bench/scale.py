@@ -83,7 +83,7 @@ def generate(work, sizes, density=10.0):
         print(f"{paths[m]}: {counts[m]:,} points, {os.path.getsize(paths[m]) / 1e6:.0f} MB")
 
 
-def run(work, sizes, workers):
+def run(work, sizes, workers, params=()):
     import re
 
     import laspy
@@ -101,6 +101,7 @@ def run(work, sizes, workers):
                f"--OUTPUT={out}", f"--DTM={dtm}", "--DTM_CELL=1"]
         if workers:
             cmd.append(f"--WORKERS={workers}")
+        cmd += [f"--{p}" for p in params]
         run_s, run_gb, log, run_cpu = timed(cmd)
         l2 = load()
         for line in log.splitlines():
@@ -149,11 +150,13 @@ def main():
     parser.add_argument("--work", default=os.path.join(str(REPO), ".build", "bench-scale"))
     parser.add_argument("--sizes", type=int, nargs="+", default=[20, 50, 200])
     parser.add_argument("--workers", type=int, default=0)
+    parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                        help="another parameter of groundsieve:smrf for the run, e.g. --param TILE_SIZE=500")
     args = parser.parse_args()
     if args.what == "generate":
         generate(args.work, args.sizes)
     elif args.what == "run":
-        run(args.work, args.sizes, args.workers)
+        run(args.work, args.sizes, args.workers, args.param)
     else:
         assembly(args.work)
 

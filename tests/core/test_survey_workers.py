@@ -141,6 +141,35 @@ def test_worker_processes_share_the_cores():
     assert set(limits) == {(str(share), share)}
 
 
+def _rss_after_freeing(_job=None):
+    """RSS (kB) with a 200 MB array, then after freeing it."""
+    def rss():
+        with open("/proc/self/status") as f:
+            return next(int(line.split()[1]) for line in f if line.startswith("VmRSS:"))
+    a = np.ones(25_000_000)
+    held = rss()
+    del a
+    return held, rss()
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="reads the RSS from /proc (Linux)")
+def test_worker_processes_keep_the_memory_a_tile_frees_for_the_next():
+    """In the engine's worker processes, a large array freed stays in the process for the next
+    tile's (glibc's malloc neither unmaps it nor trims the heap: ``keep_freed_memory``); a process
+    of its own without that setting gives it back at once (the comparison shows the test can
+    fail)."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    from groundsieve.core.engine.tiles import _worker_pool
+    with _worker_pool(1, True) as pool:
+        held, after = pool.submit(_rss_after_freeing).result()
+    assert after > held - 50_000  # (kB) the 200 MB are still the process's
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as plain:
+        held, after = plain.submit(_rss_after_freeing).result()
+    assert after < held - 150_000
+
+
 def test_auto_runs_small_surveys_in_threads_and_big_ones_in_processes():
     """Spawning worker processes only pays on big runs (docs/BENCHMARKS.md): "auto" picks threads
     below PROCESS_MIN_POINTS, processes from there (here, in a Python interpreter that can spawn)."""
