@@ -60,8 +60,8 @@ SPARSE_AREA_M2 = 1e8
 BIN_PIECE_POINTS = 4 * CHUNK_POINTS
 
 #: the layout of the working folder (tile parts, records, done marks): a run resumes only from
-#: a folder of the same layout (2: parts hold the records' leading bytes, int32 indices)
-WORK_FORMAT = 2
+#: a folder of the same layout (3: parts are int32 indices into the records kept in file order)
+WORK_FORMAT = 3
 
 #: a tile holding fewer points than this, buffer included, is not filtered (isolated points)
 MIN_TILE_POINTS = 50
@@ -248,13 +248,14 @@ def check_tiled_outputs(inputs: Sequence[str], output_path: Optional[str], dtm_p
 
 
 def _check_disk(work_dir: str, infos: Sequence[LasInfo], buffer_m: float, size: float) -> None:
-    """Refuse before work when the working folder's disk cannot hold the temporary tiles: the tile
-    parts (records and indices, the buffer's points in several), each input's records once more
-    in file order (the classified copy is written from them) and the classes. The parts are
-    removed before the copy's pieces are written, and the pieces are at most the records' size."""
+    """Refuse before work when the working folder's disk cannot hold the temporary tiles: each
+    input's records in file order (the tiles read their points from them, and the classified copy
+    is written from them), the tile parts' indices (the buffer's points in several) and the
+    classes; the classified copy's pieces (at most the records' size) come after the parts are
+    removed."""
     record = {0: 20, 1: 28, 2: 26, 3: 34, 4: 57, 5: 63, 6: 30, 7: 36, 8: 38, 9: 59, 10: 67}
     overlap = ((size + 2 * buffer_m) / size) ** 2
-    need = sum(i.count * (record.get(i.point_format, 40) * (overlap + 1) + 8 * overlap + 1) for i in infos)
+    need = sum(i.count * (record.get(i.point_format, 40) * 2 + 8 * overlap + 1) for i in infos)
     free = shutil.disk_usage(work_dir).free
     if free < need:
         raise OutputError(f"{work_dir}: the working folder's disk has {free / 1e9:.1f} GB free, the temporary "
@@ -518,9 +519,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     # every tile is done (and marked so for a resumed run): its parts make room for the write's pieces
     for parts in tiles.values():
         for part in parts:
-            for name in (part.points_path, part.index_path):
-                if os.path.exists(name):
-                    os.remove(name)
+            if os.path.exists(part.index_path):
+                os.remove(part.index_path)
     # 3. write the outputs: every classified file to a temporary name first (atomic_path), then the vpc
     write_steps = steps.sub(0.85, 1.0)
     t_write = time.perf_counter()

@@ -28,18 +28,17 @@ def _reach(f, size, buffer, m):
 
 
 @njit(cache=True, nogil=True)
-def bin_chunk_kernel(X, Y, sx, ox, sy, oy, size, buffer, m, rec, width, first):
+def bin_chunk_kernel(X, Y, sx, ox, sy, oy, size, buffer, m, first):
     """Every (tile, point) pair of one chunk: the point in the tile or in its buffer.
 
     ``X``, ``Y``: the records' integer coordinates (scaled as laspy does, ``X * sx + ox``);
-    ``rec``: the records as bytes (n, itemsize), of which the first ``width`` are kept;
     ``first``: the chunk's first point in the file.
 
-    Returns (kx0, ky0, nky, bucket_start, out_rec, out_idx, own_count): the pairs grouped by tile
-    (bucket ``b`` is tile (kx0 + b // nky, ky0 + b % nky) and holds the pairs
-    ``bucket_start[b]:bucket_start[b + 1]``), each group in file order; ``out_rec`` their records'
-    first ``width`` bytes, ``out_idx`` the point's index in the file (``-1 - index`` for a buffer
-    point), ``own_count`` the tile's own points per bucket."""
+    Returns (kx0, ky0, nky, bucket_start, out_idx, own_count): the pairs grouped by tile (bucket
+    ``b`` is tile (kx0 + b // nky, ky0 + b % nky) and holds the pairs
+    ``bucket_start[b]:bucket_start[b + 1]``), each group in file order; ``out_idx`` the point's
+    index in the file (``-1 - index`` for a buffer point), ``own_count`` the tile's own points per
+    bucket."""
     n = X.shape[0]
     kx = np.empty(n, dtype=np.int64)
     ky = np.empty(n, dtype=np.int64)
@@ -81,7 +80,6 @@ def bin_chunk_kernel(X, Y, sx, ox, sy, oy, size, buffer, m, rec, width, first):
         counts[b + 1] += counts[b]
     total = counts[nkx * nky]
     fill = counts[:-1].copy()
-    out_rec = np.empty((total, width), dtype=np.uint8)
     out_idx = np.empty(total, dtype=np.int64)
     own_count = np.zeros(nkx * nky, dtype=np.int64)
     for i in range(n):
@@ -90,11 +88,9 @@ def bin_chunk_kernel(X, Y, sx, ox, sy, oy, size, buffer, m, rec, width, first):
                 b = (kx[i] + dx - kx0) * nky + (ky[i] + dy - ky0)
                 j = fill[b]
                 fill[b] = j + 1
-                for c in range(width):
-                    out_rec[j, c] = rec[i, c]
                 if dx == 0 and dy == 0:
                     out_idx[j] = first + i
                     own_count[b] += 1
                 else:
                     out_idx[j] = -1 - (first + i)
-    return kx0, ky0, nky, counts, out_rec, out_idx, own_count
+    return kx0, ky0, nky, counts, out_idx, own_count

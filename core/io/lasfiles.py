@@ -227,37 +227,27 @@ class TileGrid:
         return (i * self.size, j * self.size, (i + 1) * self.size, (j + 1) * self.size)
 
 
-#: What a tile part holds of each record: its first bytes, from X to the classification
-#: (X, Y, Z, intensity, the return bits and the classification with its flags: 16 bytes in point
-#: formats 0-5, 17 in 6-10; every field a tile cloud has), not the whole record: the tiles read
-#: nothing else, and the classified copy is written from the records kept in file order.
+#: The fields of a record a tile reads (every field a tile cloud has), which lead every point format:
+#: its first 16 bytes in formats 0-5, 17 in 6-10.
 PART_FIELDS = {"X", "Y", "Z", "intensity", "bit_fields", "raw_classification", "classification_flags",
                "classification"}
 
 
-def part_record_width(point_format) -> int:
-    """The bytes of a record a tile part keeps (:data:`PART_FIELDS`, which lead every format)."""
-    dtype = point_format.dtype()
-    width = 0
-    for name in dtype.names:
-        if name not in PART_FIELDS:
-            break
-        width = dtype.fields[name][1] + dtype.fields[name][0].itemsize
-    return width
-
-
 @dataclass
 class TilePart:
-    """The points of one input file that one tile (with its buffer) needs: a file of the leading
-    bytes of their records as they are in the input (:func:`part_record_width`), and beside it
-    their indices in the input (``>= 0``: the tile's own point; ``-1 - index``: a buffer point;
-    int32 when the file has fewer than 2**31 points, int64 otherwise)."""
+    """The points of one input file that one tile (with its buffer) needs: their indices in the
+    input (``>= 0``: the tile's own point; ``-1 - index``: a buffer point; int32 when the file has
+    fewer than 2**31 points, int64 otherwise), in file order, in ``index_path``. Their records are
+    read from the input's records as the binning kept them in file order (``records_path``, raw
+    records of ``record_size`` bytes): a tile part copies no record, so the working folder holds
+    each record once (the classified copy is written from the same file)."""
     file_index: int
-    points_path: str
+    records_path: str
     index_path: str
     own_count: int = 0      #: points of the tile itself (the rest is buffer)
+    count: int = 0          #: points of the tile and its buffer
     point_format: int = 0   #: the input's point format (how the record bytes read)
-    width: int = 0          #: bytes per point in ``points_path``
+    record_size: int = 0    #: bytes per record in ``records_path``
     scales: tuple = (1.0, 1.0, 1.0)
     offsets: tuple = (0.0, 0.0, 0.0)
     index_dtype: str = "<i8"
@@ -292,26 +282,27 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
     the part of the file that tile needs into ``work_dir``. Tiles exist only where points are.
     ``first``/``stop`` bin only those points of the file (one ``piece`` of it, named in the parts'
     file names): pieces binned in parallel, their parts taken in file order, give the whole file's.
-    ``records``: a file (created if missing) into which the decoded records are also written, at
-    their place in file order, so that the classified copy is written from them without decoding
-    the input again (:func:`write_classified_piece`).
+    ``records``: the file (created if missing; ``fNNNNN.rec`` in ``work_dir`` when None) into which
+    the decoded records are written, at their place in file order: the tiles read their points
+    from it (:func:`read_part`), and the classified copy is written from it without decoding the
+    input again (:func:`write_classified_piece`).
 
     A point goes to its own tile (``TileGrid.key_of``) and to every tile whose buffer holds it
-    (:func:`_in_buffer`), in one numba pass a chunk (``_binning_kernels``); each part holds its
+    (:func:`_in_buffer`), in one numba pass a chunk (``_binning_kernels``); each part lists its
     points in file order."""
     import laspy
 
     from ._binning_kernels import bin_chunk_kernel
     parts: Dict[tuple, TilePart] = {}
-    point_files = {}
     index_files = {}
+    if records is None:
+        records = os.path.join(work_dir, f"f{file_index:05d}.rec")
     m = int(math.ceil(grid.buffer / grid.size)) if grid.buffer > 0 else 0
     stem = f"f{file_index:05d}" + (f"p{piece:04d}" if piece is not None else "")
-    fd = os.open(records, os.O_WRONLY | os.O_CREAT, 0o644) if records is not None else None
+    fd = os.open(records, os.O_WRONLY | os.O_CREAT, 0o644)
     try:
         with laspy.open(path) as reader:
             h = reader.header
-            width = part_record_width(h.point_format)
             idx_dtype = index_dtype(int(h.point_count))
             (sx, sy, _), (ox, oy, _) = (float(v) for v in h.scales), (float(v) for v in h.offsets)
             start = first
@@ -321,30 +312,27 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
                 n = len(chunk)
                 recs = np.ascontiguousarray(chunk.array)
                 raw = recs.view(np.uint8).reshape(n, recs.dtype.itemsize)
-                if fd is not None:
-                    flat = memoryview(raw).cast("B")
-                    done = 0
-                    while done < len(flat):  # (pwrite may write less than asked)
-                        done += os.pwrite(fd, flat[done:], start * recs.dtype.itemsize + done)
-                kx0, ky0, nky, cuts, out_rec, out_idx, own_count = bin_chunk_kernel(
-                    recs["X"], recs["Y"], sx, ox, sy, oy, float(grid.size), float(grid.buffer), m, raw, width,
-                    start)
+                flat = memoryview(raw).cast("B")
+                done = 0
+                while done < len(flat):  # (pwrite may write less than asked)
+                    done += os.pwrite(fd, flat[done:], start * recs.dtype.itemsize + done)
+                kx0, ky0, nky, cuts, out_idx, own_count = bin_chunk_kernel(
+                    recs["X"], recs["Y"], sx, ox, sy, oy, float(grid.size), float(grid.buffer), m, start)
                 out_idx = out_idx.astype(idx_dtype, copy=False)
                 for b in np.flatnonzero(np.diff(cuts)):
                     lo, hi = int(cuts[b]), int(cuts[b + 1])
                     tkey = (int(kx0 + b // nky), int(ky0 + b % nky))
-                    if tkey not in point_files:
-                        name = os.path.join(work_dir, f"{stem}_{tkey[0]}_{tkey[1]}")
-                        parts[tkey] = TilePart(file_index, name + ".pts", name + ".idx",
-                                               point_format=int(h.point_format.id), width=width,
+                    if tkey not in index_files:
+                        name = os.path.join(work_dir, f"{stem}_{tkey[0]}_{tkey[1]}.idx")
+                        parts[tkey] = TilePart(file_index, records, name, point_format=int(h.point_format.id),
+                                               record_size=int(recs.dtype.itemsize),
                                                scales=tuple(float(v) for v in h.scales),
                                                offsets=tuple(float(v) for v in h.offsets),
                                                index_dtype=idx_dtype.str)
-                        point_files[tkey] = open(parts[tkey].points_path, "wb")
-                        index_files[tkey] = open(parts[tkey].index_path, "wb")
-                    point_files[tkey].write(memoryview(out_rec[lo:hi]).cast("B"))
+                        index_files[tkey] = open(name, "wb")
                     index_files[tkey].write(memoryview(out_idx[lo:hi]).cast("B"))
                     parts[tkey].own_count += int(own_count[b])
+                    parts[tkey].count += hi - lo
                 start += n
     except OSError as err:
         raise OutputError(f"{work_dir}: cannot write the temporary tiles of {path} ({err}); "
@@ -355,10 +343,9 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
         raise InputError(f"{path}: cannot read its points ({type(err).__name__}: {err}); "
                          "the file is damaged or truncated") from err
     finally:
-        for f in list(point_files.values()) + list(index_files.values()):
+        for f in index_files.values():
             f.close()
-        if fd is not None:
-            os.close(fd)
+        os.close(fd)
     return parts
 
 
@@ -386,19 +373,46 @@ def _split_key(k: int) -> tuple:
     return (int(i), int(j))
 
 
+#: a tile reads its records from the records file in windows of at most this many bytes of
+#: consecutive records (its points are in file order), each read at once into one buffer
+READ_WINDOW_BYTES = 64 << 20
+
+
 def read_part(part: TilePart) -> Tuple[PointCloud, np.ndarray]:
     """The cloud of one tile part (the fields a tile cloud has: x, y, z, classification, returns,
-    intensity, withheld; decoded as laspy decodes them) and its index array."""
-    raw = np.fromfile(part.points_path, dtype=np.uint8)
+    intensity, withheld; decoded as laspy decodes them) and its index array. The records are
+    gathered from the records file window by window (:data:`READ_WINDOW_BYTES`): fast where a
+    tile's points lie in runs in file order (the order of acquisition, or any spatial sort); a
+    file in random order reads its whole records once per tile."""
     index = np.fromfile(part.index_path, dtype=np.dtype(part.index_dtype))
-    if raw.size != index.shape[0] * part.width:
-        raise InputError(f"{part.points_path}: {raw.size // max(part.width, 1)} points but {index.shape[0]} indices; "
-                         "the working folder was changed during the run")
-    rec = raw.reshape(-1, part.width)
+    at = np.where(index >= 0, index, -1 - index).astype(np.int64)
+    size = part.record_size
+    held = os.path.getsize(part.records_path) // size if os.path.exists(part.records_path) else 0
+    if index.shape[0] != part.count or (at.size and (at[-1] >= held or np.any(np.diff(at) <= 0))):
+        raise InputError(f"{part.index_path}: {index.shape[0]:,} indices, not the {part.count:,} points binned into "
+                         f"{part.records_path} ({held:,} records); the working folder was changed during the run")
+    rec = np.empty((at.size, size), dtype=np.uint8)
+    per_window = max(1, READ_WINDOW_BYTES // size)
+    buffer = np.empty(min(per_window, int(at[-1] - at[0]) + 1 if at.size else 0) * size, dtype=np.uint8)
+    fd = os.open(part.records_path, os.O_RDONLY)
+    try:
+        lo = 0
+        while lo < at.size:  # a window of consecutive records read at once, the part's taken from it
+            first = int(at[lo])
+            hi = int(np.searchsorted(at, first + per_window, side="left"))
+            span = (int(at[hi - 1]) - first + 1) * size
+            got = os.preadv(fd, [memoryview(buffer[:span])], first * size)
+            if got != span:
+                raise InputError(f"{part.records_path}: ends before record {int(at[hi - 1]):,}; "
+                                 "the working folder was changed during the run")
+            rec[lo:hi] = buffer[:span].reshape(-1, size)[at[lo:hi] - first]
+            lo = hi
+    finally:
+        os.close(fd)
     n = rec.shape[0]
 
     def field(offset, dtype):
-        return np.ndarray((n,), dtype=np.dtype(dtype), buffer=rec, offset=offset, strides=(part.width,))
+        return np.ndarray((n,), dtype=np.dtype(dtype), buffer=rec, offset=offset, strides=(size,))
     xyz = [field(4 * k, "<i4") * scale + offset for k, (scale, offset) in enumerate(zip(part.scales, part.offsets))]
     bits = field(14, "u1")
     if part.point_format >= 6:  # returns 4 + 4 bits; flags byte (withheld: bit 2), then the class byte
@@ -410,7 +424,7 @@ def read_part(part: TilePart) -> Tuple[PointCloud, np.ndarray]:
         cls = field(15, "u1")
         withheld = (cls & 0x80).astype(bool)
         classification = cls & 0x1F
-    cloud = PointCloud(path=part.points_path, x=xyz[0], y=xyz[1], z=xyz[2], classification=classification,
+    cloud = PointCloud(path=part.index_path, x=xyz[0], y=xyz[1], z=xyz[2], classification=classification,
                        return_number=return_number, number_of_returns=number_of_returns,
                        intensity=field(12, "<u2").copy(), has_return_info=True,
                        withheld=withheld if withheld.any() else None)
