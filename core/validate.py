@@ -35,11 +35,13 @@ def validate_xyz(xyz: np.ndarray, *, what: str = "point cloud") -> np.ndarray:
     if xyz.shape[0] == 0:
         raise InputError(f"{what}: holds no points")
     xyz = np.ascontiguousarray(xyz, dtype=np.float64)
-    finite = np.isfinite(xyz).all(axis=1)
-    if not finite.all():
-        bad = int((~finite).sum())
+    # Two reductions without a temporary (min and max are NaN when any value is, infinite when any
+    # is): the full checks below run only when they find something.
+    lo, hi = float(xyz.min()), float(xyz.max())
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        bad = int((~np.isfinite(xyz).all(axis=1)).sum())
         raise InputError(f"{what}: {bad} point(s) have NaN or infinite coordinates")
-    if np.abs(xyz).max() > 1e9:
-        raise InputError(f"{what}: coordinates beyond ±1e9 m (max |value| {np.abs(xyz).max():.3g}); "
+    if max(-lo, hi) > 1e9:
+        raise InputError(f"{what}: coordinates beyond ±1e9 m (max |value| {max(-lo, hi):.3g}); "
                          "the file's scale/offset or coordinate system is probably wrong")
     return xyz

@@ -216,3 +216,29 @@ def test_isprs_default_parameters_mean_total_error(isprs):
     assert mean <= PINGEL_PY_MEAN_TOTAL_SINGLE, \
         f"mean total error {mean:.2f} % > {PINGEL_PY_MEAN_TOTAL_SINGLE} %; per sample: " + \
         ", ".join(f"{k} {v:.2f}" for k, v in totals.items())
+
+
+def test_the_last_step_reads_both_grids_as_the_cubic_interpolation_does():
+    """SMRF's last step interpolates the surface and its slope at each point with one set of
+    weights: the classes are exactly those of the cubic convolution of each grid on its own
+    (``_kernels._cubic_one``), for points inside the grid and beyond its edges (clamped), with
+    points placed within a few millimetres of the threshold so that any change in the arithmetic
+    shows."""
+    from groundsieve.core.filters.smrf import ground_against_surface
+    from groundsieve.core.grids._kernels import _cubic_at_points_kernel
+    from groundsieve.core.grids.spec import GridSpec
+    rng = np.random.default_rng(7)
+    grid = GridSpec(1000.0, 2000.0, 1.0, 40, 50)
+    surface = np.cumsum(rng.normal(0, 0.3, grid.shape), axis=1)
+    slope = rng.uniform(0, 0.6, grid.shape)
+    n = 200_000
+    x, y = rng.uniform(997.0, 1053.0, n), rng.uniform(1957.0, 2003.0, n)
+    zs, ss = np.empty(n), np.empty(n)
+    _cubic_at_points_kernel(surface, x, y, grid.x0, grid.top, grid.cell, zs)
+    _cubic_at_points_kernel(slope, x, y, grid.x0, grid.top, grid.cell, ss)
+    limit = 0.5 + 1.25 * ss
+    z = zs + rng.choice([-1.0, 1.0], n) * (limit + rng.uniform(-0.003, 0.003, n))
+    want = np.abs(z - zs) <= 0.5 + 1.25 * ss
+    got = ground_against_surface(x, y, z, surface, slope, grid, 0.5, 1.25)
+    assert np.array_equal(got, want)
+    assert 0.3 < want.mean() < 0.7

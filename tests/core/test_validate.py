@@ -47,6 +47,9 @@ def test_validate_xyz_returns_contiguous_float64_and_leaves_the_input_alone():
     (np.array([[0.0, 0.0, np.nan], [1.0, 1.0, 1.0]]), "1 point\\(s\\) have NaN"),
     (np.array([[0.0, np.inf, 0.0]]), "NaN or infinite"),
     (np.array([[2e9, 0.0, 0.0]]), "beyond ±1e9 m"),
+    (np.array([[0.0, 0.0, 0.0], [0.0, -np.inf, 0.0]]), "1 point\\(s\\) have NaN or infinite"),
+    (np.array([[1.0, 2.0, 3.0], [0.0, -2e9, 0.0]]), "beyond ±1e9 m"),
+    (np.vstack([np.ones((1000, 3)), [[np.nan, np.inf, 1.0]], [[1.0, 1.0, -np.inf]]]), "2 point\\(s\\) have NaN"),
 ])
 def test_validate_xyz_refuses_bad_points_naming_what(xyz, message):
     with pytest.raises(InputError, match=message) as info:
