@@ -519,8 +519,9 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     # every tile is done (and marked so for a resumed run): its parts make room for the write's pieces
     for parts in tiles.values():
         for part in parts:
-            if os.path.exists(part.index_path):
-                os.remove(part.index_path)
+            for name in (part.index_path, part.copy_path):
+                if name and os.path.exists(name):
+                    os.remove(name)
     # 3. write the outputs: every classified file to a temporary name first (atomic_path), then the vpc
     write_steps = steps.sub(0.85, 1.0)
     t_write = time.perf_counter()

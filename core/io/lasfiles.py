@@ -246,6 +246,8 @@ class TilePart:
     index_path: str
     own_count: int = 0      #: points of the tile itself (the rest is buffer)
     count: int = 0          #: points of the tile and its buffer
+    span: int = 0           #: records a tile reads to gather them (per chunk, first to last point)
+    copy_path: str = ""     #: where the points lie scattered in the file: their records, copied
     point_format: int = 0   #: the input's point format (how the record bytes read)
     record_size: int = 0    #: bytes per record in ``records_path``
     scales: tuple = (1.0, 1.0, 1.0)
@@ -333,7 +335,15 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
                     index_files[tkey].write(memoryview(out_idx[lo:hi]).cast("B"))
                     parts[tkey].own_count += int(own_count[b])
                     parts[tkey].count += hi - lo
+                    a, z = int(out_idx[lo]), int(out_idx[hi - 1])
+                    parts[tkey].span += (z if z >= 0 else -1 - z) - (a if a >= 0 else -1 - a) + 1
                 start += n
+            for f in index_files.values():
+                f.close()
+            scattered = [p for p in parts.values()
+                         if p.span > SCATTER_FACTOR * p.count and p.span > SCATTER_FACTOR * chunk_points]
+            if scattered:
+                _copy_scattered(records, scattered, first, start, check)
     except OSError as err:
         raise OutputError(f"{work_dir}: cannot write the temporary tiles of {path} ({err}); "
                           "point the working folder at a disk with more room") from err
@@ -347,6 +357,54 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
             f.close()
         os.close(fd)
     return parts
+
+
+#: a part whose points a tile would gather from more than this many times as many records (and
+#: more than this many chunks' worth): a file in no spatial order. Its records are copied once at
+#: the end of the binning instead of read by every tile from all over the file.
+SCATTER_FACTOR = 4
+
+
+def _copy_scattered(records: str, parts: Sequence[TilePart], first: int, stop: int, check=None) -> None:
+    """Copy the records of ``parts`` (of the records ``first`` to ``stop``, in file order) into a file
+    beside each part's index (``copy_path``), in one pass over those records, window by window; each
+    part's indices are read as the pass goes (memory: a window, and a batch of indices a part)."""
+    size = parts[0].record_size
+    per = max(1, READ_WINDOW_BYTES // size)
+    batch = 1 << 20
+    state = []
+    try:
+        for p in parts:
+            p.copy_path = p.index_path[:-len(".idx")] + ".rec"
+            state.append([open(p.index_path, "rb"), np.empty(0, dtype=np.int64), open(p.copy_path, "wb"), p])
+        fd = os.open(records, os.O_RDONLY)
+        try:
+            buffer = np.empty(min(per, max(stop - first, 1)) * size, dtype=np.uint8)
+            for w0 in range(first, stop, per):
+                if check is not None:
+                    check()
+                w1 = min(w0 + per, stop)
+                rows = buffer[:(w1 - w0) * size]
+                if os.preadv(fd, [memoryview(rows)], w0 * size) != rows.size:
+                    raise InputError(f"{records}: ends before record {w1:,}")
+                rows = rows.reshape(-1, size)
+                for entry in state:
+                    index_file, pending, out, p = entry
+                    while not pending.size or pending[-1] < w1:
+                        more = np.fromfile(index_file, dtype=np.dtype(p.index_dtype), count=batch)
+                        if not more.size:
+                            break
+                        pending = np.concatenate([pending, np.where(more >= 0, more, -1 - more).astype(np.int64)])
+                    cut = int(np.searchsorted(pending, w1))
+                    if cut:
+                        out.write(memoryview(np.ascontiguousarray(rows[pending[:cut] - w0])).cast("B"))
+                    entry[1] = pending[cut:]
+        finally:
+            os.close(fd)
+    finally:
+        for index_file, _pending, out, _p in state:
+            index_file.close()
+            out.close()
 
 
 def _in_buffer(f: np.ndarray, d, grid: TileGrid) -> np.ndarray:
@@ -382,8 +440,9 @@ def read_part(part: TilePart) -> Tuple[PointCloud, np.ndarray]:
     """The cloud of one tile part (the fields a tile cloud has: x, y, z, classification, returns,
     intensity, withheld; decoded as laspy decodes them) and its index array. The records are
     gathered from the records file window by window (:data:`READ_WINDOW_BYTES`): fast where a
-    tile's points lie in runs in file order (the order of acquisition, or any spatial sort); a
-    file in random order reads its whole records once per tile."""
+    tile's points lie in runs in file order (the order of acquisition, or any spatial sort); those
+    of a part scattered over a file in no such order were copied at the binning
+    (:data:`SCATTER_FACTOR`) and are read from their copy."""
     index = np.fromfile(part.index_path, dtype=np.dtype(part.index_dtype))
     at = np.where(index >= 0, index, -1 - index).astype(np.int64)
     size = part.record_size
@@ -391,6 +450,12 @@ def read_part(part: TilePart) -> Tuple[PointCloud, np.ndarray]:
     if index.shape[0] != part.count or (at.size and (at[-1] >= held or np.any(np.diff(at) <= 0))):
         raise InputError(f"{part.index_path}: {index.shape[0]:,} indices, not the {part.count:,} points binned into "
                          f"{part.records_path} ({held:,} records); the working folder was changed during the run")
+    if part.copy_path:  # a part scattered over the file: its records copied at the binning
+        rec = np.fromfile(part.copy_path, dtype=np.uint8)
+        if rec.size != at.size * size:
+            raise InputError(f"{part.copy_path}: {rec.size // size:,} records, not the {at.size:,} points of "
+                             f"{part.index_path}; the working folder was changed during the run")
+        return _part_cloud(part, rec.reshape(-1, size)), index
     rec = np.empty((at.size, size), dtype=np.uint8)
     per_window = max(1, READ_WINDOW_BYTES // size)
     buffer = np.empty(min(per_window, int(at[-1] - at[0]) + 1 if at.size else 0) * size, dtype=np.uint8)
@@ -409,7 +474,12 @@ def read_part(part: TilePart) -> Tuple[PointCloud, np.ndarray]:
             lo = hi
     finally:
         os.close(fd)
-    n = rec.shape[0]
+    return _part_cloud(part, rec), index
+
+
+def _part_cloud(part: TilePart, rec: np.ndarray) -> PointCloud:
+    """The tile cloud of a part's records (rows of ``record_size`` bytes)."""
+    n, size = rec.shape
 
     def field(offset, dtype):
         return np.ndarray((n,), dtype=np.dtype(dtype), buffer=rec, offset=offset, strides=(size,))
@@ -424,11 +494,10 @@ def read_part(part: TilePart) -> Tuple[PointCloud, np.ndarray]:
         cls = field(15, "u1")
         withheld = (cls & 0x80).astype(bool)
         classification = cls & 0x1F
-    cloud = PointCloud(path=part.index_path, x=xyz[0], y=xyz[1], z=xyz[2], classification=classification,
-                       return_number=return_number, number_of_returns=number_of_returns,
-                       intensity=field(12, "<u2").copy(), has_return_info=True,
-                       withheld=withheld if withheld.any() else None)
-    return cloud, index
+    return PointCloud(path=part.index_path, x=xyz[0], y=xyz[1], z=xyz[2], classification=classification,
+                      return_number=return_number, number_of_returns=number_of_returns,
+                      intensity=field(12, "<u2").copy(), has_return_info=True,
+                      withheld=withheld if withheld.any() else None)
 
 
 # -- the classified copy --------------------------------------------------------------------------

@@ -326,14 +326,16 @@ def test_an_interrupted_run_resumes_and_skips_the_tiles_done(scene_laz, tmp_path
     assert np.array_equal(gdal.Open(str(dtm)).ReadAsArray(), gdal.Open(str(clean)).ReadAsArray())
 
 
-@pytest.mark.parametrize("point_format,version", [(0, "1.2"), (1, "1.2"), (3, "1.2"), (6, "1.4"), (7, "1.4"),
-                                                  (8, "1.4")])
-def test_tile_parts_read_as_laspy_reads_the_points(tmp_path, monkeypatch, point_format, version):
+@pytest.mark.parametrize("point_format,version,scattered", [(0, "1.2", False), (1, "1.2", True), (3, "1.2", False),
+                                                            (6, "1.4", True), (7, "1.4", False), (8, "1.4", False)])
+def test_tile_parts_read_as_laspy_reads_the_points(tmp_path, monkeypatch, point_format, version, scattered):
     """A tile part lists its points' indices; its cloud, read from the records the binning kept in
     file order (in windows of consecutive records: small ones here, so that a part takes many) and
     decoded without laspy, has every field a tile cloud has equal to laspy's reading of the same
     points of the input, withheld flags and classes above 31 (formats 6-10) included, for points of
-    the tile and of its buffer alike."""
+    the tile and of its buffer alike. The points here are in random order: with small chunks
+    (``scattered``) each part spans many times its points and its records are copied at the
+    binning, read from the copy (in small windows too), with the same result."""
     from groundsieve.core.io import lasfiles
     from groundsieve.core.io.lasfiles import TileGrid, bin_file, read_part
     monkeypatch.setattr(lasfiles, "READ_WINDOW_BYTES", 3_000)
@@ -351,7 +353,9 @@ def test_tile_parts_read_as_laspy_reads_the_points(tmp_path, monkeypatch, point_
     write_las(las, str(src))
     want = read_cloud(str(src))
     (tmp_path / "parts").mkdir()
-    parts = bin_file(str(src), 0, TileGrid(100.0, 30.0), str(tmp_path / "parts"), chunk_points=7_000)
+    parts = bin_file(str(src), 0, TileGrid(50.0, 10.0), str(tmp_path / "parts"),
+                     chunk_points=1_000 if scattered else 7_000)
+    assert {bool(p.copy_path) for p in parts.values() if p.count > 100} == {scattered}  # (not the corners' few)
     seen = np.zeros(n, dtype=np.int64)
     for part in parts.values():
         cloud, index = read_part(part)
