@@ -8,6 +8,9 @@ arguments give the same points, bit for bit.
 """
 from __future__ import annotations
 
+import os
+import signal
+
 import numpy as np
 
 X0, Y0 = 512000.0, 5403000.0  # UTM-sized coordinates, as real data
@@ -79,3 +82,17 @@ def flaky_smrf(budget: int = 3):
             return SMRF()(xyz, steps)
 
     return Flaky
+
+
+def die_once_in(marker, key, function, job):
+    """Run ``function(job)``, except the first time the job of tile ``key`` runs anywhere: then the
+    worker process running it kills itself (SIGKILL), in the middle of the run. (For the Dask
+    tests: here, in a module their worker processes can import.)"""
+    if list(job["key"]) == list(key):
+        try:
+            os.close(os.open(marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+        except FileExistsError:
+            pass
+        else:
+            os.kill(os.getpid(), signal.SIGKILL)
+    return function(job)
