@@ -29,11 +29,14 @@ MAX_CELL_M = 1e6
 #: Share of the memory available at the start of a grid that one run may use by default.
 DEFAULT_MEMORY_FRACTION = 0.6
 
-#: Measured peak of the harmonic fill (core/grids/inpaint.py, sparse LU) per empty cell of a large
-#: hole (bench/fill_memory.py, docs/BENCHMARKS.md): 1.9 kB at 500 x 500, 2.2 kB at 1000 x 1000, 2.3 kB
-#: at 1500 x 1500 (the fill-in grows slowly with the hole). Filters that fill their grid count this
-#: for every cell that no point can reach (cells - points, a lower bound of the empty cells).
-FILL_BYTES_PER_EMPTY_CELL = 2300
+#: Peak of the harmonic fill (core/grids/inpaint.py) per empty cell of a large hole, with a margin:
+#: the iterative solve that fills holes of more than 4096 cells measured 145-174 bytes a cell
+#: (bench/fill_memory.py, docs/BENCHMARKS.md "Memory guard"); a 4,200 x 4,200 m SMRF grid over two
+#: 200 m blocks of points peaked at 3.2 GB, 182 bytes a cell with SMRF's own grids. (The sparse LU,
+#: 1.9-2.3 kB a cell, now fills only holes of at most 4096 cells, and large ones where the iteration
+#: would not converge, which was never seen.) Filters that fill their grid count this for every cell
+#: that no point can reach (cells - points, a lower bound of the empty cells).
+FILL_BYTES_PER_EMPTY_CELL = 400
 
 _BUDGET = contextvars.ContextVar("groundsieve_memory_budget", default=None)
 
