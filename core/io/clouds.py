@@ -16,7 +16,7 @@ import numpy as np
 
 from ..errors import GroundSieveError, InputError, InvalidParameterError, OutputError, UnsupportedFormatError
 from ..progress import Steps
-from .outputs import LAS_EXTENSIONS, _ext, atomic_path, check_output_path
+from .outputs import LAS_EXTENSIONS, _ext, atomic_path, check_classes_fit, check_output_path
 
 
 TEXT_EXTENSIONS = (".txt",)
@@ -362,8 +362,7 @@ def write_classified(cloud: PointCloud, classification: np.ndarray, path: str, *
         if is_copc_header(las.header):  # laspy writes no COPC; nor would the copy be one (its chunks)
             import laspy
             las = laspy.LasData(header=plain_header(las.header), points=las.points)
-        if las.point_format.id < 6 and classification.max(initial=0) > 31:
-            raise OutputError(f"{path}: point format {las.point_format.id} stores classes 0-31 only")
+        check_classes_fit(path, las.point_format.id, classification)
         original = np.array(las.classification)
         las.classification = classification
         try:

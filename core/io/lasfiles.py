@@ -18,7 +18,7 @@ import numpy as np
 
 from ..errors import GroundSieveError, InputError, OutputError, UnsupportedFormatError
 from .clouds import PointCloud, header_crs_wkt, read_cloud
-from .outputs import LAS_EXTENSIONS, _ext, atomic_path
+from .outputs import LAS_EXTENSIONS, _ext, atomic_path, check_classes_fit
 
 VPC_EXTENSION = ".vpc"
 #: points per chunk of the streamed passes (about 100 MB of laspy records for the largest formats)
@@ -515,8 +515,7 @@ def write_classified_stream(src: str, dst: str, classification: np.ndarray, *,
             n_total = int(reader.header.point_count)
             if classification.shape[0] != n_total:
                 raise OutputError(f"{dst}: {classification.shape[0]} classes for {n_total} points of {src}")
-            if reader.header.point_format.id < 6 and n_total and int(classification.max()) > 31:
-                raise OutputError(f"{dst}: point format {reader.header.point_format.id} stores classes 0-31 only")
+            check_classes_fit(dst, reader.header.point_format.id, classification)
             with atomic_path(dst) as tmp:
                 # Not COPC any more (the LAZ chunks are not the octree's nodes): no COPC records.
                 with laspy.open(tmp, mode="w", header=plain_header(reader.header),
@@ -571,8 +570,7 @@ def write_classified_piece(src: str, records: str, classification: np.ndarray, f
         with laspy.open(src) as reader:
             header = copy.deepcopy(reader.header)
         pf = header.point_format
-        if pf.id < 6 and classification.size and int(classification.max()) > 31:
-            raise OutputError(f"{src}: point format {pf.id} stores classes 0-31 only")
+        check_classes_fit(src, pf.id, classification)
         header.partial_reset()  # as laspy's writer does: the statistics come from the points written
         dtype = pf.dtype()
         vlr = lazrs.LazVlr.new_for_compression(pf.id, pf.num_extra_bytes) if compress else None

@@ -62,6 +62,12 @@ def _reason(err: OSError) -> str:
     return err.strerror or str(err)
 
 
+def check_classes_fit(path: str, point_format_id: int, classification) -> None:
+    """Refuse classes the output's point format cannot store (formats 0-5 keep 5 bits: 0-31)."""
+    if point_format_id < 6 and len(classification) and int(classification.max()) > 31:
+        raise OutputError(f"{path}: point format {point_format_id} stores classes 0-31 only")
+
+
 def check_distinct_outputs(outputs) -> None:
     """Refuse two outputs on one file (the last write would win): ``outputs`` is
     ``{label: path}`` or ``[(label, path), ...]``, labels as the dialog names the outputs."""

@@ -146,6 +146,22 @@ def test_write_classified_refuses_classes_above_31_on_old_formats(tmp_path):
     assert not (tmp_path / "out.las").exists()
 
 
+def test_the_streamed_and_piecewise_copies_refuse_classes_above_31_on_old_formats(tmp_path):
+    """The survey engine's two ways of writing the classified copy refuse, as write_classified
+    does, classes a point format 0-5 cannot store, naming the file, and leave no output."""
+    from groundsieve.core.io.lasfiles import write_classified_piece, write_classified_stream
+    src = tmp_path / "in.las"
+    write_las(sample_las(point_format=1, extra=False), str(src))
+    n = len(read_cloud(str(src)))
+    classes = np.full(n, 40, np.uint8)
+    with pytest.raises(OutputError, match="out.laz: point format 1 stores classes 0-31 only"):
+        write_classified_stream(str(src), str(tmp_path / "out.laz"), classes)
+    records = tmp_path / "in.rec"
+    with pytest.raises(OutputError, match="in.las: point format 1 stores classes 0-31 only"):
+        write_classified_piece(str(src), str(records), classes, 0, n, str(tmp_path / "piece"), compress=True)
+    assert sorted(os.listdir(tmp_path)) == ["in.las"]
+
+
 def test_write_classified_wrong_length(tmp_path):
     src = tmp_path / "in.las"
     write_las(sample_las(n=50, extra=False), str(src))
