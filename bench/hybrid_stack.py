@@ -98,8 +98,8 @@ def main():
         X2[h] = f2h if args.only_stage2 else np.hstack([X1[h], f2h])
         m2 = fit(samples, train, X2)
         truth = samples[h][2]
-        a1 = ground_accuracy(p_h >= 0.5, truth)
-        a2 = ground_accuracy(proba(m2, X2[h]) >= 0.5, truth)
+        a1 = ground_accuracy(truth, p_h >= 0.5)
+        a2 = ground_accuracy(truth, proba(m2, X2[h]) >= 0.5)
         rows1.append((h, len(truth), a1))
         rows2.append((h, len(truth), a2))
         print(f"  {h}: stage 1 {100 * a1.total:.2f} %, stage 2 {100 * a2.total:.2f} % "

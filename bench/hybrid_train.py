@@ -84,7 +84,7 @@ def loso(samples, features):
         others = [s for s in samples if s != held]
         model = train(samples, others, features)
         X, _y, ground, xyz = samples[held]
-        acc = ground_accuracy(predict_ground(model, X), ground)
+        acc = ground_accuracy(ground, predict_ground(model, X))
         rows.append((held, len(ground), acc))
         print(f"  {held}: total {100 * acc.total:.2f} %", file=sys.stderr, flush=True)
     return rows
@@ -92,7 +92,7 @@ def loso(samples, features):
 
 def smrf_rows(samples):
     from groundsieve.core.filters.smrf import SMRF
-    return [(s, len(v[2]), ground_accuracy(SMRF()(v[3]), v[2])) for s, v in samples.items()]
+    return [(s, len(v[2]), ground_accuracy(v[2], SMRF()(v[3]))) for s, v in samples.items()]
 
 
 def table(rows, smrf=None):
@@ -138,8 +138,8 @@ def scenes_table(model_path):
     for label, spec in kinds.items():
         scene = make_scene(spec)
         xyz, truth = scene.xyz, scene.ground
-        h = ground_accuracy(hybrid(xyz), truth)
-        s = ground_accuracy(SMRF()(xyz), truth)
+        h = ground_accuracy(truth, hybrid(xyz))
+        s = ground_accuracy(truth, SMRF()(xyz))
         lines.append(f"| {label} | {len(truth):,} | {100 * h.total:.2f} | {100 * h.kappa:.2f} | "
                      f"{100 * s.total:.2f} | {100 * s.kappa:.2f} |")
         print(lines[-1], file=sys.stderr, flush=True)

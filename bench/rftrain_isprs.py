@@ -60,7 +60,7 @@ def main():
         learning.train_file(merged, model, None, options)
         out = os.path.join(work, f"{held}_classified.las")
         _cloud, predicted = learning.classify_file(os.path.join(work, held + ".las"), out, model)
-        acc = ground_accuracy(predicted == 2, truth[held])
+        acc = ground_accuracy(truth[held], predicted == 2)
         rows.append((held, len(predicted), acc))
         print(f"  {held}: total {100 * acc.total:.2f} % ({time.perf_counter() - t0:.0f} s)", file=sys.stderr,
               flush=True)

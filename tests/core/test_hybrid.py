@@ -132,7 +132,7 @@ def test_training_is_deterministic_and_the_model_is_usable(tmp_path):
     path = tmp_path / "mine.npz"
     save_model(a, str(path))
     xyz, truth = plane_scene(seed=9, size=50.0, density=2.0, boxes=[(10, 25, 10, 25)])
-    acc = ground_accuracy(Hybrid(model_path=str(path))(xyz), truth)
+    acc = ground_accuracy(truth, Hybrid(model_path=str(path))(xyz))
     assert acc.total < 0.05, acc
 
 
@@ -159,10 +159,10 @@ def test_hybrid_beats_a_trivial_baseline_and_stays_near_smrf(scenes, kind):
     from groundsieve.core.filters.smrf import SMRF
     scene = scenes[kind]
     xyz, truth = scene.xyz, scene.ground
-    hybrid = ground_accuracy(Hybrid()(xyz), truth)
+    hybrid = ground_accuracy(truth, Hybrid()(xyz))
     X = hybrid_features(xyz, ["above_cell_min"])
-    baseline = ground_accuracy(X[:, 0] <= 0.0, truth)
-    smrf = ground_accuracy(SMRF()(xyz), truth)
+    baseline = ground_accuracy(truth, X[:, 0] <= 0.0)
+    smrf = ground_accuracy(truth, SMRF()(xyz))
     assert hybrid.total < baseline.total, (hybrid, baseline)
     assert hybrid.total <= smrf.total + 0.01, (hybrid, smrf)
     assert hybrid.kappa > 0.8
@@ -262,7 +262,7 @@ def test_rftrain_defaults_train_the_hybrid_features_and_the_model_runs_in_both(t
                       classification=np.ones(len(other), dtype=np.uint8)), str(target))
     _cloud, predicted = learning.classify_file(str(target), str(tmp_path / "out.las"), str(model))
     by_filter = Hybrid(model_path=str(model))(other)
-    assert ground_accuracy(predicted == 2, other_truth).total < 0.05
+    assert ground_accuracy(other_truth, predicted == 2).total < 0.05
     assert np.mean((predicted == 2) == by_filter) >= 0.999
 
 
@@ -317,7 +317,7 @@ def test_the_accurate_shipped_model_loads_and_runs_on_xyz():
     assert h.features == model.features
     assert Hybrid(model_path=PTD_MODEL).features == model.features
     xyz, truth = plane_scene(seed=9, size=60.0, density=2.0, boxes=[(10, 25, 10, 25), (35, 50, 30, 45)])
-    acc = ground_accuracy(h(xyz), truth)
+    acc = ground_accuracy(truth, h(xyz))
     assert acc.total < 0.05, acc
     with pytest.raises(InvalidParameterError, match="shipped_model"):
         Hybrid(shipped_model="best")
@@ -353,9 +353,9 @@ def test_the_accurate_model_against_the_fast_one_and_smrf(scenes):
     fast, accurate = Hybrid(), Hybrid(shipped_model="accurate")
     for kind, scene in scenes.items():
         xyz, truth = scene.xyz, scene.ground
-        f = ground_accuracy(fast(xyz), truth).total
-        a = ground_accuracy(accurate(xyz), truth).total
-        s = ground_accuracy(SMRF()(xyz), truth).total
+        f = ground_accuracy(truth, fast(xyz)).total
+        a = ground_accuracy(truth, accurate(xyz)).total
+        s = ground_accuracy(truth, SMRF()(xyz)).total
         assert a <= f + 0.001, (kind, a, f)
         assert a < s, (kind, a, s)
         if kind == "steep hills":

@@ -31,7 +31,7 @@ def test_hybrid_with_the_shipped_model(groundsieve_provider, scene_laz, tmp_path
     cls = classes_of(out)
     assert set(np.unique(cls)) <= {1, 2}
     assert result["GROUND_COUNT"] == int((cls == 2).sum())
-    acc = ground_accuracy(cls == 2, scene.classification == 2)
+    acc = ground_accuracy(scene.classification == 2, cls == 2)
     assert acc.total < 0.05, acc
 
 
@@ -96,7 +96,7 @@ def test_an_rftrain_model_on_the_hybrid_preset_runs_in_hybrid(groundsieve_provid
     assert result["TEST_ACCURACY"] > 0.9
     out = tmp_path / "filtered.laz"
     processing.run("groundsieve:hybrid", {"INPUT": str(src), "OUTPUT": str(out), "MODEL": str(model)})
-    acc = ground_accuracy(classes_of(out) == 2, scene.classification == 2)
+    acc = ground_accuracy(scene.classification == 2, classes_of(out) == 2)
     assert acc.total < 0.05, acc
 
 
@@ -111,7 +111,7 @@ def test_hybrid_with_the_accurate_shipped_model(groundsieve_provider, scene_laz,
     src, scene = scene_laz
     out = tmp_path / "accurate.laz"
     processing.run("groundsieve:hybrid", {"INPUT": str(src), "OUTPUT": str(out), "SHIPPED": 1})
-    acc = ground_accuracy(classes_of(out) == 2, scene.classification == 2)
+    acc = ground_accuracy(scene.classification == 2, classes_of(out) == 2)
     assert acc.total < 0.05, acc
     from qgis.core import QgsProcessingContext
     context = QgsProcessingContext()
