@@ -369,3 +369,22 @@ def test_tile_parts_read_as_laspy_reads_the_points(tmp_path, monkeypatch, point_
         assert part.own_count == int((index >= 0).sum())
     assert np.all(seen == 1)  # every point is own to exactly one tile
     assert want.withheld_mask.any() and want.classification.max() == top
+
+
+def test_the_density_of_a_file_in_no_spatial_order_is_that_of_its_points(scene_laz, tmp_path):
+    """Tiles are sized from the density the first chunk shows. A file whose points are shuffled
+    (its first chunk spread thinly over the whole area) gets the same estimate as the same points
+    in spatial order, not one many times lower (which planned tiles that many times too large)."""
+    from groundsieve.core.engine.tiles import sample_density
+    las = laspy.read(scene_laz)
+    shuffled = laspy.LasData(las.header)
+    shuffled.points = las.points[np.random.default_rng(3).permutation(len(las.points))]
+    path = tmp_path / "shuffled.laz"
+    shuffled.write(path)
+    chunk = len(las.points) // 8
+    ordered_density = sample_density(scene_laz, chunk_points=chunk)
+    shuffled_density = sample_density(str(path), chunk_points=chunk)
+    first_chunk_only = chunk / (np.unique(np.floor(np.asarray(shuffled.x[:chunk]) / 10.0) * 1e6
+                                          + np.floor(np.asarray(shuffled.y[:chunk]) / 10.0)).size * 100.0)
+    assert 0.7 < shuffled_density / ordered_density < 1.5, (shuffled_density, ordered_density)
+    assert first_chunk_only < 0.5 * ordered_density  # what the first chunk alone said
