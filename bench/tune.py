@@ -37,6 +37,7 @@ def main(argv=None) -> int:
     ap.add_argument("--filter", default="smrf")
     ap.add_argument("--budget", type=int, default=T.TuneOptions.budget, help="filter runs per sample")
     ap.add_argument("--blocks", type=int, default=T.TuneOptions.blocks)
+    ap.add_argument("--seconds", type=float, default=T.TuneOptions.seconds, help="time limit per sample (0 = none)")
     ap.add_argument("--metric", default="total", choices=T.METRICS)
     ap.add_argument("--samples", default="")
     ap.add_argument("--out", default="")
@@ -44,7 +45,8 @@ def main(argv=None) -> int:
     settings = os.path.join(args.data, "isprs_smrf_settings.txt")
     rows = read_params(settings) if os.path.exists(settings) else {}
     wanted = {s for s in args.samples.split(",") if s}
-    print(f"filter {args.filter}, metric {args.metric}, budget {args.budget} sets, {args.blocks} blocks\n")
+    print(f"filter {args.filter}, metric {args.metric}, budget {args.budget} sets, {args.blocks} blocks, "
+          f"time limit {args.seconds:g} s\n")
     print("| Sample | Points | Pingel's set total % | target % | tuned CV total % | met | tuned in-sample % "
           "| defaults % | runs / sets | seconds | CPU s |")
     print("|---|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|")
@@ -65,7 +67,7 @@ def main(argv=None) -> int:
             pingel = ground_accuracy(ref, algo(cloud.xyz)).total
         t0, c0 = time.perf_counter(), time.process_time()
         result = T.tune(cloud, args.filter, T.TuneOptions(metric=args.metric, budget=args.budget,
-                                                          blocks=args.blocks))
+                                                          blocks=args.blocks, seconds=args.seconds))
         seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
         cv, fit, start = result.cv.total, result.best_accuracy.total, result.start_accuracy.total
         target = None if pingel is None else pingel + 0.003
