@@ -212,14 +212,17 @@ class SMRF:
     def run(self, xyz: np.ndarray, steps: Steps | None = None,
             minimum: SMRFMinimum | None = None) -> SMRFResult:
         steps = steps or Steps()
+        # Progress shares from the stages' times (5 M points, warm: the copy of the coordinates and
+        # the minimum surface 21 %, the openings and the surface 49 %, the last step 29 %).
         xyz = validate_xyz(xyz)
         x, y, z = (np.ascontiguousarray(xyz[:, i]) for i in range(3))
+        steps.report(0.05)
         if minimum is None:
-            minimum = self._minimum(x, y, z, steps.sub(0.0, 0.17), False)
-        grid, zpro, objects = self._surface(minimum, steps.sub(0.17, 0.85))
-        steps.report(0.85)
+            minimum = self._minimum(x, y, z, steps.sub(0.05, 0.22), False)
+        grid, zpro, objects = self._surface(minimum, steps.sub(0.22, 0.72))
+        steps.report(0.72)
         ground = ground_against_surface(x, y, z, zpro, surface_slope(zpro, self.cell_size_m), grid,
-                                        self.elevation_threshold_m, self.elevation_scalar, steps.sub(0.85, 1.0))
+                                        self.elevation_threshold_m, self.elevation_scalar, steps.sub(0.72, 1.0))
         steps.report(1.0)
         return SMRFResult(ground, grid, zpro, objects)
 

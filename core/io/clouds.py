@@ -132,6 +132,10 @@ class PointCloud:
         return np.column_stack([self.x, self.y, self.z])
 
 
+#: share of a LAS/LAZ read's progress given to decoding its points; the rest to making the cloud's
+#: arrays of them (coordinates, returns, classes: 0.3 s of 1.4 s for 5 M points in the desktop)
+READ_SHARE = 0.8
+
 #: points read or written per chunk of a LAS/LAZ file: progress is reported and cancellation
 #: checked between chunks (about 0.1 s of LAZ decompression each on this machine)
 CHUNK_POINTS = 500_000
@@ -169,10 +173,13 @@ def read_cloud(path: str, steps: Optional[Steps] = None) -> PointCloud:
             f"{path}: unsupported file type '{ext or '(none)'}'; expected .las, .laz or ISPRS .txt")
     if len(cloud) == 0:
         raise InputError(f"{path}: the file holds no points")
-    finite = np.isfinite(cloud.x) & np.isfinite(cloud.y) & np.isfinite(cloud.z)
-    if not finite.all():
+    # min and max of each coordinate, without temporaries (NaN when any value is, infinite when any
+    # is); the per-point count only when they find something
+    ends = [float(f(a)) for a in (cloud.x, cloud.y, cloud.z) for f in (np.min, np.max)]
+    if not all(np.isfinite(ends)):
+        finite = np.isfinite(cloud.x) & np.isfinite(cloud.y) & np.isfinite(cloud.z)
         raise InputError(f"{path}: {int((~finite).sum())} point(s) have NaN or infinite coordinates")
-    biggest = max(np.abs(cloud.x).max(), np.abs(cloud.y).max(), np.abs(cloud.z).max())
+    biggest = max(abs(v) for v in ends)
     if biggest > 1e9:
         raise InputError(f"{path}: coordinates reach {biggest:.3g}, beyond ±1e9 m; "
                          "the header's scale/offset or the coordinate system is probably wrong")
@@ -228,7 +235,7 @@ def _read_las(path: str, steps: Steps) -> PointCloud:
                 # Reading the announced count would take the EVLRs' bytes for points.
                 announced = int(header.point_count)
                 evlr_at = int(header.start_of_first_evlr)
-                las = laspy.LasData(header=header, points=_read_points(reader, room, steps))
+                las = laspy.LasData(header=header, points=_read_points(reader, room, steps.sub(0.0, READ_SHARE)))
                 las.evlrs = reader.evlrs
                 las.update_header()
                 notes.append(f"{path}: the header announces {announced:,} points but the file holds "
@@ -243,7 +250,7 @@ def _read_las(path: str, steps: Steps) -> PointCloud:
                              "something else follows the points; rewrite the file with a tool that fixes its "
                              "header to use them all).")
             if las is None:
-                las = laspy.LasData(header=header, points=_read_points(reader, int(header.point_count), steps))
+                las = laspy.LasData(header=header, points=_read_points(reader, int(header.point_count), steps.sub(0.0, READ_SHARE)))
     except GroundSieveError:
         raise  # cancelled
     except Exception as err:  # laspy raises many types for damaged files
@@ -256,16 +263,18 @@ def _read_las(path: str, steps: Steps) -> PointCloud:
         raise InputError(f"{path}: header announces {las.header.point_count} points but {n} could be read; "
                          "the file is truncated")
     crs_wkt = header_crs_wkt(las.header)
+    x, y, z = (np.asarray(v, dtype=np.float64) for v in (las.x, las.y, las.z))
+    steps.report(READ_SHARE + 0.5 * (1.0 - READ_SHARE))
     rn = np.asarray(las.return_number, dtype=np.uint8)
     nr = np.asarray(las.number_of_returns, dtype=np.uint8)
     withheld = np.asarray(las.withheld).astype(bool)
-    return PointCloud(
-        path=path, withheld=withheld if withheld.any() else None, notes=notes,
-        x=np.asarray(las.x, dtype=np.float64), y=np.asarray(las.y, dtype=np.float64),
-        z=np.asarray(las.z, dtype=np.float64),
+    cloud = PointCloud(
+        path=path, withheld=withheld if withheld.any() else None, notes=notes, x=x, y=y, z=z,
         classification=np.asarray(las.classification, dtype=np.uint8),
         return_number=rn, number_of_returns=nr,
         intensity=np.asarray(las.intensity), crs_wkt=crs_wkt, has_return_info=True, las=las)
+    steps.report(1.0)
+    return cloud
 
 
 def _read_isprs_text(path: str) -> PointCloud:
