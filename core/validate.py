@@ -27,6 +27,20 @@ def check_choice(params, name: str, choices) -> None:
         raise InvalidParameterError(f"{name} must be one of {', '.join(choices)} (got {value!r})")
 
 
+def check_coordinates(*columns: np.ndarray, what: str) -> None:
+    """Refuse coordinates that are NaN, infinite or beyond ±1e9 m: ``columns`` are x, y and z (one
+    value a point each) or one (n, 3) array. One min and one max a column, no temporaries (they are
+    NaN when any value is, infinite when any is); the points are counted only when one is wrong."""
+    ends = [float(f(c)) for c in columns for f in (np.min, np.max)]
+    if not all(np.isfinite(ends)):
+        finite = np.logical_and.reduce([np.isfinite(c).reshape(len(c), -1).all(axis=1) for c in columns])
+        raise InputError(f"{what}: {int((~finite).sum())} point(s) have NaN or infinite coordinates")
+    biggest = max(abs(v) for v in ends)
+    if biggest > 1e9:
+        raise InputError(f"{what}: coordinates beyond ±1e9 m (max |value| {biggest:.3g}); "
+                         "the file's scale/offset or coordinate system is probably wrong")
+
+
 def validate_xyz(xyz: np.ndarray, *, what: str = "point cloud") -> np.ndarray:
     """Return ``xyz`` as a contiguous float64 (n, 3) array; refuse empty or non-finite input."""
     xyz = np.asarray(xyz)
@@ -35,13 +49,5 @@ def validate_xyz(xyz: np.ndarray, *, what: str = "point cloud") -> np.ndarray:
     if xyz.shape[0] == 0:
         raise InputError(f"{what}: holds no points")
     xyz = np.ascontiguousarray(xyz, dtype=np.float64)
-    # Two reductions without a temporary (min and max are NaN when any value is, infinite when any
-    # is): the full checks below run only when they find something.
-    lo, hi = float(xyz.min()), float(xyz.max())
-    if not (np.isfinite(lo) and np.isfinite(hi)):
-        bad = int((~np.isfinite(xyz).all(axis=1)).sum())
-        raise InputError(f"{what}: {bad} point(s) have NaN or infinite coordinates")
-    if max(-lo, hi) > 1e9:
-        raise InputError(f"{what}: coordinates beyond ±1e9 m (max |value| {max(-lo, hi):.3g}); "
-                         "the file's scale/offset or coordinate system is probably wrong")
+    check_coordinates(xyz, what=what)
     return xyz

@@ -165,40 +165,27 @@ def sample_density(path: str, chunk_points: int = CHUNK_POINTS, cell_m: float = 
     order (its first chunk and a chunk from its middle spread over the same cells) has its first
     chunk thinly over the whole area: then the file's points over the cells the two chunks occupy
     (without this, a shuffled file's tiles were planned about its count / a chunk times too large)."""
-    if scan_header(path).copc:  # its first chunk is its root node: sparse points over the whole file
+    info = scan_header(path)
+    if info.copc:  # its first chunk is its root node: sparse points over the whole file
         from ..io.copc import sample_density as copc_density
         return copc_density(path)
 
     def cells(chunk):
         x, y = np.asarray(chunk.x), np.asarray(chunk.y)
         return np.unique(np.floor(x / cell_m).astype(np.int64) * (1 << 32) + np.floor(y / cell_m).astype(np.int64))
-    count = scan_header(path).count
     for chunk in iter_chunks(path, chunk_points):
         if len(chunk) == 0:
             break
         first = cells(chunk)
         density = len(chunk) / (first.size * cell_m * cell_m)
-        if count < 3 * chunk_points:
+        if info.count < 3 * chunk_points:
             return density
-        middle = cells(_chunk_at(path, count // 2, chunk_points))
+        middle = cells(next(iter_chunks(path, chunk_points, first=info.count // 2)))
         shared = np.intersect1d(first, middle, assume_unique=True).size
         if shared > 0.5 * min(first.size, middle.size):
-            return max(density, count / (np.union1d(first, middle).size * cell_m * cell_m))
+            return max(density, info.count / (np.union1d(first, middle).size * cell_m * cell_m))
         return density
     return 1.0
-
-
-def _chunk_at(path: str, first: int, chunk_points: int):
-    """``chunk_points`` records of ``path`` from point ``first`` (LAZ: decoding from the chunk that
-    holds it)."""
-    import laspy
-    try:
-        with laspy.open(path) as reader:
-            reader.seek(first)
-            return reader.read_points(chunk_points)
-    except Exception as err:
-        raise InputError(f"{path}: cannot read its points ({type(err).__name__}: {err}); "
-                         "the file is damaged or truncated") from err
 
 
 def plan_tile_size(infos: Sequence[LasInfo], tiling: TileOptions, buffer_m: float, density: float,

@@ -16,6 +16,7 @@ import numpy as np
 
 from ..errors import GroundSieveError, InputError, InvalidParameterError, OutputError, UnsupportedFormatError
 from ..progress import Steps
+from ..validate import check_coordinates
 from .outputs import LAS_EXTENSIONS, _ext, atomic_path, check_classes_fit, check_output_path
 
 
@@ -173,16 +174,7 @@ def read_cloud(path: str, steps: Optional[Steps] = None) -> PointCloud:
             f"{path}: unsupported file type '{ext or '(none)'}'; expected .las, .laz or ISPRS .txt")
     if len(cloud) == 0:
         raise InputError(f"{path}: the file holds no points")
-    # min and max of each coordinate, without temporaries (NaN when any value is, infinite when any
-    # is); the per-point count only when they find something
-    ends = [float(f(a)) for a in (cloud.x, cloud.y, cloud.z) for f in (np.min, np.max)]
-    if not all(np.isfinite(ends)):
-        finite = np.isfinite(cloud.x) & np.isfinite(cloud.y) & np.isfinite(cloud.z)
-        raise InputError(f"{path}: {int((~finite).sum())} point(s) have NaN or infinite coordinates")
-    biggest = max(abs(v) for v in ends)
-    if biggest > 1e9:
-        raise InputError(f"{path}: coordinates reach {biggest:.3g}, beyond ±1e9 m; "
-                         "the header's scale/offset or the coordinate system is probably wrong")
+    check_coordinates(cloud.x, cloud.y, cloud.z, what=path)
     return cloud
 
 

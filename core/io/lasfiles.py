@@ -17,7 +17,7 @@ from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 import numpy as np
 
 from ..errors import GroundSieveError, InputError, OutputError, UnsupportedFormatError
-from .clouds import PointCloud, header_crs_wkt, read_cloud
+from .clouds import PointCloud, header_crs_wkt
 from .outputs import LAS_EXTENSIONS, _ext, atomic_path, check_classes_fit
 
 VPC_EXTENSION = ".vpc"
@@ -227,12 +227,6 @@ class TileGrid:
         return (i * self.size, j * self.size, (i + 1) * self.size, (j + 1) * self.size)
 
 
-#: The fields of a record a tile reads (every field a tile cloud has), which lead every point format:
-#: its first 16 bytes in formats 0-5, 17 in 6-10.
-PART_FIELDS = {"X", "Y", "Z", "intensity", "bit_fields", "raw_classification", "classification_flags",
-               "classification"}
-
-
 @dataclass
 class TilePart:
     """The points of one input file that one tile (with its buffer) needs: their indices in the
@@ -277,6 +271,21 @@ def index_dtype(count: int) -> np.dtype:
     return np.dtype("<i4") if count < (1 << 31) - 1 else np.dtype("<i8")
 
 
+def file_positions(index: np.ndarray) -> np.ndarray:
+    """The points' places in the file (int64) of a tile part's indices (``-1 - index`` for a buffer
+    point)."""
+    return np.where(index >= 0, index, -1 - index).astype(np.int64)
+
+
+def _read_records(fd: int, buffer: np.ndarray, first: int, stop: int, size: int, path: str) -> np.ndarray:
+    """Records ``first`` to ``stop`` of the records file ``path`` (open as ``fd``), read at once into
+    ``buffer``: rows of ``size`` bytes."""
+    rows = buffer[:(stop - first) * size]
+    if os.preadv(fd, [memoryview(rows)], first * size) != rows.size:
+        raise InputError(f"{path}: ends before record {stop - 1:,}; the working folder was changed during the run")
+    return rows.reshape(-1, size)
+
+
 def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk_points: int = CHUNK_POINTS,
              check=None, first: int = 0, stop: Optional[int] = None, piece: Optional[int] = None,
              records: Optional[str] = None) -> Dict[tuple, TilePart]:
@@ -306,7 +315,7 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
         with laspy.open(path) as reader:
             h = reader.header
             idx_dtype = index_dtype(int(h.point_count))
-            (sx, sy, _), (ox, oy, _) = (float(v) for v in h.scales), (float(v) for v in h.offsets)
+            scales, offsets = tuple(float(v) for v in h.scales), tuple(float(v) for v in h.offsets)
             start = first
             for chunk in _chunks(reader, first, stop, chunk_points):
                 if check is not None:
@@ -319,7 +328,8 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
                 while done < len(flat):  # (pwrite may write less than asked)
                     done += os.pwrite(fd, flat[done:], start * recs.dtype.itemsize + done)
                 kx0, ky0, nky, cuts, out_idx, own_count = bin_chunk_kernel(
-                    recs["X"], recs["Y"], sx, ox, sy, oy, float(grid.size), float(grid.buffer), m, start)
+                    recs["X"], recs["Y"], scales[0], offsets[0], scales[1], offsets[1], float(grid.size),
+                    float(grid.buffer), m, start)
                 out_idx = out_idx.astype(idx_dtype, copy=False)
                 for b in np.flatnonzero(np.diff(cuts)):
                     lo, hi = int(cuts[b]), int(cuts[b + 1])
@@ -328,15 +338,13 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
                         name = os.path.join(work_dir, f"{stem}_{tkey[0]}_{tkey[1]}.idx")
                         parts[tkey] = TilePart(file_index, records, name, point_format=int(h.point_format.id),
                                                record_size=int(recs.dtype.itemsize),
-                                               scales=tuple(float(v) for v in h.scales),
-                                               offsets=tuple(float(v) for v in h.offsets),
-                                               index_dtype=idx_dtype.str)
+                                               scales=scales, offsets=offsets, index_dtype=idx_dtype.str)
                         index_files[tkey] = open(name, "wb")
                     index_files[tkey].write(memoryview(out_idx[lo:hi]).cast("B"))
                     parts[tkey].own_count += int(own_count[b])
                     parts[tkey].count += hi - lo
-                    a, z = int(out_idx[lo]), int(out_idx[hi - 1])
-                    parts[tkey].span += (z if z >= 0 else -1 - z) - (a if a >= 0 else -1 - a) + 1
+                    a, z = file_positions(out_idx[[lo, hi - 1]])
+                    parts[tkey].span += int(z - a) + 1
                 start += n
             for f in index_files.values():
                 f.close()
@@ -384,17 +392,14 @@ def _copy_scattered(records: str, parts: Sequence[TilePart], first: int, stop: i
                 if check is not None:
                     check()
                 w1 = min(w0 + per, stop)
-                rows = buffer[:(w1 - w0) * size]
-                if os.preadv(fd, [memoryview(rows)], w0 * size) != rows.size:
-                    raise InputError(f"{records}: ends before record {w1:,}")
-                rows = rows.reshape(-1, size)
+                rows = _read_records(fd, buffer, w0, w1, size, records)
                 for entry in state:
                     index_file, pending, out, p = entry
                     while not pending.size or pending[-1] < w1:
                         more = np.fromfile(index_file, dtype=np.dtype(p.index_dtype), count=batch)
                         if not more.size:
                             break
-                        pending = np.concatenate([pending, np.where(more >= 0, more, -1 - more).astype(np.int64)])
+                        pending = np.concatenate([pending, file_positions(more)])
                     cut = int(np.searchsorted(pending, w1))
                     if cut:
                         out.write(memoryview(np.ascontiguousarray(rows[pending[:cut] - w0])).cast("B"))
@@ -424,13 +429,6 @@ def _in_buffer(f: np.ndarray, d, grid: TileGrid) -> np.ndarray:
     return np.ones(f.shape[0], dtype=bool)
 
 
-def _split_key(k: int) -> tuple:
-    i, j = divmod(k, 1 << 31)
-    if j >= 1 << 30:  # negative j borrowed one from i
-        i, j = i + 1, j - (1 << 31)
-    return (int(i), int(j))
-
-
 #: a tile reads its records from the records file in windows of at most this many bytes of
 #: consecutive records (its points are in file order), each read at once into one buffer
 READ_WINDOW_BYTES = 64 << 20
@@ -444,7 +442,7 @@ def read_part(part: TilePart) -> Tuple[PointCloud, np.ndarray]:
     of a part scattered over a file in no such order were copied at the binning
     (:data:`SCATTER_FACTOR`) and are read from their copy."""
     index = np.fromfile(part.index_path, dtype=np.dtype(part.index_dtype))
-    at = np.where(index >= 0, index, -1 - index).astype(np.int64)
+    at = file_positions(index)
     size = part.record_size
     held = os.path.getsize(part.records_path) // size if os.path.exists(part.records_path) else 0
     if index.shape[0] != part.count or (at.size and (at[-1] >= held or np.any(np.diff(at) <= 0))):
@@ -465,12 +463,8 @@ def read_part(part: TilePart) -> Tuple[PointCloud, np.ndarray]:
         while lo < at.size:  # a window of consecutive records read at once, the part's taken from it
             first = int(at[lo])
             hi = int(np.searchsorted(at, first + per_window, side="left"))
-            span = (int(at[hi - 1]) - first + 1) * size
-            got = os.preadv(fd, [memoryview(buffer[:span])], first * size)
-            if got != span:
-                raise InputError(f"{part.records_path}: ends before record {int(at[hi - 1]):,}; "
-                                 "the working folder was changed during the run")
-            rec[lo:hi] = buffer[:span].reshape(-1, size)[at[lo:hi] - first]
+            rows = _read_records(fd, buffer, first, int(at[hi - 1]) + 1, size, part.records_path)
+            rec[lo:hi] = rows[at[lo:hi] - first]
             lo = hi
     finally:
         os.close(fd)
@@ -712,13 +706,13 @@ def assemble_classified(src: str, dst: str, pieces: Sequence[dict]) -> None:
         raise OutputError(f"{dst}: cannot be written ({err})") from err
 
 
-def iter_chunks(path: str, chunk_points: int = CHUNK_POINTS) -> Iterable:
-    """laspy point records of ``path``, ``chunk_points`` at a time; a damaged or truncated file is an
-    :class:`InputError` naming it (laspy and lazrs raise many types)."""
+def iter_chunks(path: str, chunk_points: int = CHUNK_POINTS, first: int = 0) -> Iterable:
+    """laspy point records of ``path`` from point ``first`` on, ``chunk_points`` at a time; a damaged
+    or truncated file is an :class:`InputError` naming it (laspy and lazrs raise many types)."""
     import laspy
     try:
         with laspy.open(path) as reader:
-            yield from reader.chunk_iterator(chunk_points)
+            yield from _chunks(reader, first, None, chunk_points)
     except GroundSieveError:
         raise
     except Exception as err:

@@ -96,6 +96,21 @@ def test_a_truncated_single_file_is_named_before_the_tiles_are_planned(survey, t
     assert sorted(os.listdir(tmp_path)) == ["cut.laz"]
 
 
+def _jobs_given(monkeypatch, job_function) -> list:
+    """The jobs the engine's ``_map_files`` is given for ``job_function`` from now on (it still runs
+    them)."""
+    from groundsieve.core.engine import tiles
+    seen = []
+    real_map = tiles._map_files
+
+    def spy(function, jobs, *args, **kw):
+        if function is job_function:
+            seen.extend(jobs)
+        return real_map(function, jobs, *args, **kw)
+    monkeypatch.setattr(tiles, "_map_files", spy)
+    return seen
+
+
 def test_one_big_file_is_binned_in_pieces_on_the_workers_with_the_serial_outputs(survey, tmp_path, monkeypatch):
     """A single input binned in 2 pieces of consecutive points (one per worker process; the second
     piece starts by seeking in the LAZ) gives the serial run's classes and DTM."""
@@ -114,14 +129,7 @@ def test_one_big_file_is_binned_in_pieces_on_the_workers_with_the_serial_outputs
                 ds.GetRasterBand(1).ReadAsArray().tobytes())
     ref = run(tmp_path / "serial", 1)
     monkeypatch.setattr(tiles, "BIN_PIECE_POINTS", 5000)
-    bin_jobs = []
-    real_map = tiles._map_files
-
-    def spy(function, jobs, *args, **kw):
-        if function is tiles._bin_job:
-            bin_jobs.extend(jobs)
-        return real_map(function, jobs, *args, **kw)
-    monkeypatch.setattr(tiles, "_map_files", spy)
+    bin_jobs = _jobs_given(monkeypatch, tiles._bin_job)
     got = run(tmp_path / "pieces", 2)
     assert [j.get("piece") for j in bin_jobs] == [0, 1] and bin_jobs[1]["first"] > 0
     assert got == ref
@@ -230,14 +238,7 @@ def test_one_big_file_is_written_in_pieces_on_the_workers_with_the_serial_output
         return (out / "c.laz").read_bytes()
     ref = run(tmp_path / "serial", 1)
     monkeypatch.setattr(tiles, "WRITE_PIECE_POINTS", 5000)
-    write_jobs = []
-    real_map = tiles._map_files
-
-    def spy(function, jobs, *args, **kw):
-        if function is tiles._write_piece_job:
-            write_jobs.extend(jobs)
-        return real_map(function, jobs, *args, **kw)
-    monkeypatch.setattr(tiles, "_map_files", spy)
+    write_jobs = _jobs_given(monkeypatch, tiles._write_piece_job)
     got = run(tmp_path / "pieces", 2)
     assert [(j["first"], j["stop"] > j["first"]) for j in write_jobs][0] == (0, True) and len(write_jobs) == 2
     assert write_jobs[1]["first"] % 50_000 == 0 and write_jobs[1]["first"] > 0
