@@ -39,6 +39,7 @@ def main(argv=None) -> int:
     ap.add_argument("--blocks", type=int, default=T.TuneOptions.blocks)
     ap.add_argument("--seconds", type=float, default=T.TuneOptions.seconds, help="time limit per sample (0 = none)")
     ap.add_argument("--metric", default="total", choices=T.METRICS)
+    ap.add_argument("--selection", default=T.TuneOptions.selection, choices=T.SELECTIONS)
     ap.add_argument("--samples", default="")
     ap.add_argument("--out", default="")
     args = ap.parse_args(argv)
@@ -67,7 +68,8 @@ def main(argv=None) -> int:
             pingel = ground_accuracy(ref, algo(cloud.xyz)).total
         t0, c0 = time.perf_counter(), time.process_time()
         result = T.tune(cloud, args.filter, T.TuneOptions(metric=args.metric, budget=args.budget,
-                                                          blocks=args.blocks, seconds=args.seconds))
+                                                          blocks=args.blocks, seconds=args.seconds,
+                                                          selection=args.selection))
         seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
         cv, fit, start = result.cv.total, result.best_accuracy.total, result.start_accuracy.total
         target = None if pingel is None else pingel + 0.003

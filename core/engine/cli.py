@@ -137,7 +137,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _add_tune(sub) -> None:
-    from .tune import METRICS, TuneOptions
+    from .tune import METRICS, SELECTIONS, TuneOptions
     d = _defaults(TuneOptions)
     parser = sub.add_parser("tune", help="tune a filter on a labelled patch: a preset file and an HTML report",
                             description="Search a filter's parameters on a labelled patch (class 2 = ground, or "
@@ -154,6 +154,9 @@ def _add_tune(sub) -> None:
                         help="spatial blocks of the cross-validation (default %(default)s)")
     parser.add_argument("--seconds", type=float, default=d["seconds"], metavar="S",
                         help="stop starting new sets after this long (0 = no limit; default %(default)s)")
+    parser.add_argument("--selection", choices=SELECTIONS, default=d["selection"],
+                        help="best: the set with the lowest error; one-se: of the sets within one standard "
+                             "error of it, the one nearest the starting set (default %(default)s)")
     parser.add_argument("--start", metavar="FILE", help="a preset to start from (its other parameters are kept)")
     parser.add_argument("--preset-out", metavar="PATH", help="the preset file to write (.json)")
     parser.add_argument("--report", metavar="PATH", help="the HTML report to write")
@@ -169,7 +172,8 @@ def run_tune(args, out) -> int:
         return 2
     base = load_preset(args.start, args.tune_filter).values if args.start else None
     result = tune(args.input, args.tune_filter,
-                  TuneOptions(metric=args.metric, budget=args.budget, blocks=args.blocks, seconds=args.seconds),
+                  TuneOptions(metric=args.metric, budget=args.budget, blocks=args.blocks, seconds=args.seconds,
+                              selection=args.selection),
                   base=base, progress=_progress_printer(out), log=lambda msg: print(msg, file=out, flush=True))
     if args.preset_out:
         write_preset(args.preset_out, args.tune_filter, preset_values(result), source=preset_source(result),

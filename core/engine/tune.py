@@ -35,6 +35,11 @@ from ..progress import Steps
 from . import parameters as P
 
 METRICS = ("total", "kappa", "f1")
+#: how a set is chosen among those tried: "best" = the lowest error on the blocks it is chosen on;
+#: "one-se" = the one-standard-error rule (Breiman et al. 1984): of the sets whose error is within one
+#: standard error (of the paired per-block differences) of the best, the one nearest the set the
+#: search started from (the defaults, or the starting preset)
+SELECTIONS = ("best", "one-se")
 METRIC_LABELS = {"total": "total error", "kappa": "Cohen's kappa", "f1": "F1 of the ground class"}
 
 
@@ -48,6 +53,7 @@ class TuneOptions:
     blocks: int = 8
     seconds: float = 0.0        #: stop starting new sets after this long (0 = no limit)
     design_share: float = 0.4   #: share of the budget spent on the space-filling design
+    selection: str = "best"     #: how the sets are chosen (SELECTIONS)
 
     def __post_init__(self):
         if self.metric not in METRICS:
@@ -58,6 +64,8 @@ class TuneOptions:
             raise InvalidParameterError(f"cross-validation blocks must be 2 to 16 (got {self.blocks!r})")
         if not (isinstance(self.seconds, (int, float)) and math.isfinite(self.seconds) and self.seconds >= 0):
             raise InvalidParameterError(f"the time limit must be >= 0 seconds (got {self.seconds!r})")
+        if self.selection not in SELECTIONS:
+            raise InvalidParameterError(f"selection must be one of {', '.join(SELECTIONS)} (got {self.selection!r})")
         if not 0.0 < self.design_share <= 1.0:
             raise InvalidParameterError(f"design_share must be in (0, 1] (got {self.design_share})")
 
@@ -233,6 +241,7 @@ class TuneResult:
     stopped: str = ""           #: why the search stopped early ("time limit", ...), "" = budget spent
     default_trial: int = 0      #: index of the starting set (defaults or the starting preset)
     runs: int = 0               #: filter runs (the budget's unit; re-scored sets cost none)
+    selection: str = "best"     #: how the preset's and the folds' sets were chosen (SELECTIONS)
 
     @property
     def cv(self) -> GroundAccuracy:
@@ -259,6 +268,40 @@ class TuneResult:
         out = dict(self.fixed)
         out.update(self.trials[self.best].values)
         return out
+
+
+def _distance(values: Mapping[str, object], start: Mapping[str, object], dims: Sequence[Dim]) -> float:
+    """Squared distance between two sets, each range scaled to 1 (a different choice counts 1)."""
+    d = 0.0
+    for dim in dims:
+        a, b = values[dim.field], start[dim.field]
+        if dim.values or not dim.span:
+            d += float(a != b)
+        else:
+            d += ((float(a) - float(b)) / dim.span) ** 2
+    return d
+
+
+def choose(trials: Sequence[Trial], indices: Sequence[int], blocks: Sequence[int], metric: str,
+           selection: str = "best", start: Optional[Mapping[str, object]] = None,
+           dims: Sequence[Dim] = ()) -> int:
+    """The trial chosen among ``indices`` on ``blocks``: the lowest loss ("best"), or by the
+    one-standard-error rule ("one-se", see SELECTIONS). Ties go to the earlier trial."""
+    best = min(indices, key=lambda i: (trials[i].loss(metric, blocks), i))
+    if selection == "best" or start is None or len(blocks) < 2:
+        return best
+    blocks = list(blocks)
+    per_block = lambda i: np.array([loss(trials[i].counts[b], metric) for b in blocks])  # noqa: E731
+    base, base_loss = per_block(best), trials[best].loss(metric, blocks)
+    near = []
+    for i in indices:
+        if trials[i].counts is None:
+            continue
+        gap = trials[i].loss(metric, blocks) - base_loss
+        se = float(np.std(per_block(i) - base, ddof=1)) / math.sqrt(len(blocks))
+        if gap <= se + 1e-12:
+            near.append((_distance(trials[i].values, start, dims), trials[i].loss(metric, blocks), i))
+    return min(near)[2] if near else best
 
 
 def _key(values: Mapping[str, object]) -> tuple:
@@ -475,16 +518,19 @@ def tune(cloud, name: str, options: TuneOptions = TuneOptions(), *, base: Option
     steps.report(1.0)
     if all(t.counts is None for t in trials):
         raise InputError(f"{where}: every parameter set failed ({trials[0].error})")
-    best = best_of(range(len(trials)), -1)
+    def chosen_of(indices, t):
+        return choose(trials, indices, train[t], metric, options.selection, start, dims)
+
+    best = chosen_of(range(len(trials)), -1)
     folds = []
     for b in all_blocks:
-        chosen = best_of(pools[b], b)
+        chosen = chosen_of(pools[b], b)
         folds.append(Fold(b, chosen, accuracy(trials[chosen].counts[b])))
     return TuneResult(filter=name, metric=metric, patch=where, points=len(idx), dims=dims, fixed=fixed,
                       trials=trials, best=best, folds=folds, block_grid=grid,
                       block_sizes=[int(v) for v in np.bincount(block, minlength=k)],
                       seconds=time.monotonic() - t0, budget=options.budget, stopped=stopped[0],
-                      default_trial=start_index, runs=runs[0])
+                      default_trial=start_index, runs=runs[0], selection=options.selection)
 
 
 def preset_values(result: TuneResult) -> Dict[str, object]:
@@ -497,6 +543,6 @@ def preset_values(result: TuneResult) -> Dict[str, object]:
 def preset_source(result: TuneResult) -> Dict[str, object]:
     cv, fit = result.cv, result.best_accuracy
     return {"patch": result.patch, "points": result.points, "metric": result.metric,
-            "blocks": len(result.folds), "sets_tried": len(result.trials),
+            "blocks": len(result.folds), "selection": result.selection, "sets_tried": len(result.trials),
             "cv_total_error": round(cv.total, 5), "cv_kappa": round(cv.kappa, 5), "cv_f1": round(cv.f1, 5),
             "patch_total_error": round(fit.total, 5), "patch_kappa": round(fit.kappa, 5)}

@@ -16,6 +16,9 @@ W, H = 340, 220
 PAD_L, PAD_R, PAD_T, PAD_B = 52, 12, 14, 40
 
 
+SELECTION_NOTE = (" Sets chosen by the one-standard-error rule: of the sets within one standard error of the"
+                  " lowest error on the blocks they are chosen on, the one nearest the starting set.")
+
 def _fmt(v) -> str:
     if isinstance(v, bool):
         return "on" if v else "off"
@@ -148,7 +151,7 @@ td {{ text-align: right; }} th {{ background: #f0f0f0; }} .err {{ color: #b00; }
 ({result.runs} filter runs, budget {result.budget}) in
 {result.seconds:.0f} s, optimising the {html.escape(label)}; {len(result.folds)} spatial blocks
 ({result.block_grid[0]} x {result.block_grid[1]}, {", ".join(f"{s:,}" for s in result.block_sizes)} points)
-for the cross-validation.{" Stopped early: " + html.escape(result.stopped) + "." if result.stopped else ""}</p>
+for the cross-validation.{SELECTION_NOTE if result.selection == "one-se" else ""}{" Stopped early: " + html.escape(result.stopped) + "." if result.stopped else ""}</p>
 <p class="big"><b>Cross-validated total error {_pct(cv.total)}</b> (kappa {_pct(cv.kappa)}, F1 {_pct(cv.f1)}): each
 block classified with the set chosen without it. This is what to expect on similar data. The chosen set on the
 whole patch: total error {_pct(fit.total)} (in-sample, optimistic){"" if start is None else

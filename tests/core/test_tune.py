@@ -51,7 +51,8 @@ def test_a_patch_without_ground_or_without_objects_is_refused_naming_the_file():
 
 
 def test_options_are_checked():
-    for bad in (dict(metric="rmse"), dict(budget=2), dict(blocks=1), dict(blocks=40), dict(seconds=-1)):
+    for bad in (dict(metric="rmse"), dict(budget=2), dict(blocks=1), dict(blocks=40), dict(seconds=-1),
+                dict(selection="lowest")):
         with pytest.raises(InvalidParameterError):
             T.TuneOptions(**bad)
 
@@ -142,6 +143,48 @@ def test_the_search_is_deterministic(result):
     again = T.tune(patch_cloud(), "smrf", T.TuneOptions(budget=8, blocks=4), base={"window_m": 4.0})
     assert [t.values for t in again.trials] == [t.values for t in result.trials]
     assert again.best == result.best and again.cv == result.cv
+
+
+def _trial(values, errors, n=100):
+    """A trial with ``errors[b]`` misclassified points of ``n`` (as fn) in block b."""
+    counts = np.array([[n // 2 - e, e, 0, n // 2] for e in errors])
+    return T.Trial(dict(values), counts, 0.0, "design")
+
+
+def test_the_one_standard_error_rule_takes_the_set_nearest_the_start_among_the_near_best():
+    dims = [T.Dim("W", "window_m", 2.0, 30.0), T.Dim("S", "slope", 0.0, 1.0)]
+    start = {"window_m": 18.0, "slope": 0.15}
+    trials = [
+        _trial({"window_m": 29.0, "slope": 0.9}, [2, 2, 2, 2]),     # lowest error, far from the start
+        _trial({"window_m": 17.0, "slope": 0.2}, [6, 0, 5, 0]),     # 0.75 point worse, noisy: within 1 SE
+        _trial({"window_m": 18.0, "slope": 0.15}, [5, 5, 5, 5]),    # the start: 3 points worse, every block
+        _trial({"window_m": 10.0, "slope": 0.5}, [3, 1, 4, 1]),     # within 1 SE too, but farther
+    ]
+    blocks = [0, 1, 2, 3]
+    assert T.choose(trials, range(4), blocks, "total") == 0
+    assert T.choose(trials, range(4), blocks, "total", "one-se", start, dims) == 1
+    # the rule cannot take a set that is worse on every block by more than the spread
+    assert T.choose(trials, [0, 2], blocks, "total", "one-se", start, dims) == 0
+    # on the blocks it is chosen on only: without blocks 0 and 2, set 1 is the best outright
+    assert T.choose(trials, range(4), [1, 3], "total", "one-se", start, dims) == 1
+    failed = T.Trial(dict(start), None, 0.0, "design", error="too big")
+    assert T.choose(trials + [failed], range(5), blocks, "total", "one-se", start, dims) == 1
+
+
+def test_the_one_standard_error_rule_in_a_search():
+    """Folds and preset are chosen by the rule, each on its own blocks; the preset records it."""
+    r = T.tune(patch_cloud(), "smrf", T.TuneOptions(budget=8, blocks=4, selection="one-se"),
+               base={"window_m": 4.0})
+    start = {d.field: r.fixed[d.field] for d in r.dims}
+    assert r.selection == "one-se" and T.preset_source(r)["selection"] == "one-se"
+    assert r.best == T.choose(r.trials, range(len(r.trials)), [0, 1, 2, 3], "total", "one-se", start, r.dims)
+    for f in r.folds:
+        others = [b for b in range(4) if b != f.block]
+        pool = [i for i, u in enumerate(r.trials) if u.phase in ("start", "design") or f.block in u.proposed_by]
+        assert f.chosen == T.choose(r.trials, pool, others, "total", "one-se", start, r.dims)
+    best = T.choose(r.trials, range(len(r.trials)), [0, 1, 2, 3], "total")
+    assert r.best_accuracy.total >= r.trials[best].loss("total")
+    assert "one-standard-error rule" in report_html(r)
 
 
 def test_kappa_and_f1_are_maximised():

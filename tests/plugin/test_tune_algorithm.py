@@ -29,6 +29,16 @@ def test_tune_writes_the_preset_and_a_report_for_the_results_viewer(groundsieve_
     assert data["filter"] == "smrf" and data["source"]["metric"] == "kappa"
     assert abs(data["source"]["cv_kappa"] - result["CV_KAPPA"]) < 1e-5
     assert "<svg" in open(report, encoding="utf-8").read()
+    assert data["source"]["selection"] == "best"
+
+
+def test_tune_chooses_by_the_one_standard_error_rule_when_asked(groundsieve_provider, patch, tmp_path):
+    import processing
+    preset, report = str(tmp_path / "p.json"), str(tmp_path / "r.html")
+    processing.run("groundsieve:tune", {"INPUT": patch, "FILTER": 0, "BUDGET": 4, "BLOCKS": 4, "SELECTION": 1,
+                                        "OUTPUT_PRESET": preset, "OUTPUT_HTML": report})
+    assert json.load(open(preset, encoding="utf-8"))["source"]["selection"] == "one-se"
+    assert "one-standard-error rule" in open(report, encoding="utf-8").read()
 
 
 def test_tune_refuses_a_patch_without_non_ground_naming_it(groundsieve_provider, tmp_path):
@@ -120,3 +130,7 @@ def test_the_dialog_defaults_are_the_core_defaults(groundsieve_provider):
     assert algorithm.parameterDefinition("BLOCKS").defaultValue() == TuneOptions.blocks
     assert algorithm.parameterDefinition("BUDGET").defaultValue() == TuneOptions.budget
     assert algorithm.parameterDefinition("SECONDS").defaultValue() == TuneOptions.seconds
+    from groundsieve.algorithms import tune as dialog
+    from groundsieve.core.engine import tune as core
+    assert dialog.SELECTIONS == core.SELECTIONS and dialog.METRICS == core.METRICS
+    assert dialog.SELECTIONS[algorithm.parameterDefinition("SELECTION").defaultValue()] == TuneOptions.selection
