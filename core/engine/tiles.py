@@ -267,9 +267,8 @@ def _check_disk(work_dir: str, infos: Sequence[LasInfo], buffer_m: float, size: 
     is written from them), the tile parts' indices (the buffer's points in several) and the
     classes; the classified copy's pieces (at most the records' size) come after the parts are
     removed."""
-    record = {0: 20, 1: 28, 2: 26, 3: 34, 4: 57, 5: 63, 6: 30, 7: 36, 8: 38, 9: 59, 10: 67}
     overlap = ((size + 2 * buffer_m) / size) ** 2
-    need = sum(i.count * (record.get(i.point_format, 40) * 2 + 8 * overlap + 1) for i in infos)
+    need = sum(i.count * ((i.record_size or 40) * 2 + 8 * overlap + 1) for i in infos)
     free = shutil.disk_usage(work_dir).free
     if free < need:
         raise OutputError(f"{work_dir}: the working folder's disk has {free / 1e9:.1f} GB free, the temporary "

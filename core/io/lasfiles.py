@@ -36,6 +36,7 @@ class LasInfo:
     version: str
     crs_wkt: Optional[str]
     copc: bool = False  #: a COPC file (the COPC info VLR): its tiles read it by bounds (io/copc.py)
+    record_size: int = 0  #: bytes per point record, extra bytes included (0 = not known)
 
     @property
     def area_m2(self) -> float:
@@ -57,7 +58,7 @@ def scan_header(path: str) -> LasInfo:
             return LasInfo(path, int(h.point_count), tuple(float(v) for v in h.mins),
                            tuple(float(v) for v in h.maxs), int(h.point_format.id), str(h.version),
                            header_crs_wkt(h),
-                           copc=is_copc_header(h))
+                           copc=is_copc_header(h), record_size=int(h.point_format.size))
     except (InputError, UnsupportedFormatError):
         raise
     except Exception as err:  # laspy raises many types for damaged files

@@ -302,6 +302,26 @@ def test_a_full_working_disk_is_refused_before_work(scene_laz, tmp_path, monkeyp
     assert os.listdir(tmp_path) == []
 
 
+def test_the_disk_check_counts_the_records_extra_bytes(tmp_path, monkeypatch):
+    """The header's record size (extra bytes included) sizes the working folder: 1,000 points of
+    format 1 need about 69 kB, the same points with 200 extra bytes each about 469 kB."""
+    import shutil as _shutil
+    from groundsieve.core.engine import tiles
+    infos = []
+    for name, dims in (("plain.las", 0), ("extra.las", 50)):
+        las = laspy.LasData(laspy.LasHeader(point_format=1, version="1.2"))
+        for k in range(dims):
+            las.add_extra_dim(laspy.ExtraBytesParams(name=f"e{k}", type=np.float32))
+        las.x, las.y, las.z = np.arange(1000.0), np.arange(1000.0), np.zeros(1000)
+        las.write(str(tmp_path / name))
+        infos.append(scan_header(str(tmp_path / name)))
+    assert [i.record_size for i in infos] == [28, 228]
+    monkeypatch.setattr(tiles.shutil, "disk_usage", lambda _p: _shutil._ntuple_diskusage(10**12, 10**12, 100_000))
+    tiles._check_disk(str(tmp_path), infos[:1], 10.0, 100.0)
+    with pytest.raises(OutputError, match="working folder's disk has 0.0 GB free"):
+        tiles._check_disk(str(tmp_path), infos[1:], 10.0, 100.0)
+
+
 def test_an_interrupted_run_resumes_and_skips_the_tiles_done(scene_laz, tmp_path):
     Flaky = flaky_smrf(budget=3)
     work = tmp_path / "work"
