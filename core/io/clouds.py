@@ -269,18 +269,46 @@ def _read_las(path: str, steps: Steps) -> PointCloud:
     return cloud
 
 
+def _text_problem(path: str) -> str:
+    """Where a text file stops being rows of 3 or 4 numbers, in words: the first line (counted from
+    1) with a word that is not a number or with another count of columns than the first row."""
+    try:
+        with open(path, encoding="utf-8") as f:
+            columns = None
+            for number, line in enumerate(f, 1):
+                words = line.split()
+                if not words:
+                    continue
+                for column, word in enumerate(words, 1):
+                    try:
+                        float(word)
+                    except ValueError:
+                        return f"line {number}, column {column}: {word[:40]!r} is not a number"
+                if columns is None:
+                    columns = len(words)
+                elif len(words) != columns:
+                    return f"line {number} has {len(words)} columns, the lines before it {columns}"
+    except UnicodeDecodeError:
+        return "it is not text (a binary file?)"
+    except OSError as err:
+        return f"it cannot be read ({err.strerror or err})"
+    return ""
+
+
 def _read_isprs_text(path: str) -> PointCloud:
+    what = "not an ISPRS text file of 'x y z [label]' numbers"
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # "empty input file" is reported below
             data = np.loadtxt(path, dtype=np.float64, ndmin=2)
     except (ValueError, UnicodeDecodeError) as err:
-        raise UnsupportedFormatError(
-            f"{path}: not an ISPRS text file of 'x y z [label]' numbers ({err})") from err
+        raise UnsupportedFormatError(f"{path}: {what}: {_text_problem(path) or err}") from err
     if data.size == 0:
         raise InputError(f"{path}: the file holds no points")
-    if data.shape[1] < 3:
-        raise UnsupportedFormatError(f"{path}: expected at least 3 columns 'x y z', found {data.shape[1]}")
+    if not 3 <= data.shape[1] <= 4:
+        raise UnsupportedFormatError(
+            f"{path}: {what}: expected 3 or 4 columns 'x y z [label]', found {data.shape[1]}"
+            + ("" if data.shape[1] < 3 else "; for other text layouts convert the file to LAS/LAZ first"))
     n = data.shape[0]
     label = data[:, 3].astype(np.uint8) if data.shape[1] >= 4 else None
     ones = np.ones(n, dtype=np.uint8)

@@ -313,11 +313,16 @@ def test_las_with_huge_coordinates(tmp_path):
     assert_names_file(err, path)
 
 
-@pytest.mark.parametrize("content, match", [("a b c\n", "ISPRS"), ("1 2\n3 4\n", "3 columns"),
-                                            ("1 2 3\n4 5\n", "ISPRS")])
+@pytest.mark.parametrize("content, match", [
+    ("a b c\n", r"line 1, column 1: 'a' is not a number"),
+    ("1 2\n3 4\n", "expected 3 or 4 columns 'x y z \\[label\\]', found 2"),
+    ("1 2 3\n4 5\n", "line 2 has 2 columns, the lines before it 3"),
+    ("1 2 3 0\n4 5 6 1\n7 8 abc 0\n", r"line 3, column 3: 'abc' is not a number"),
+    ("1 2 3 4 5\n", "found 5; for other text layouts convert the file to LAS/LAZ first"),
+    (b"\xff\xfe\x00\x01 binary\n", "not text")])
 def test_text_not_numbers(tmp_path, content, match):
     path = tmp_path / "bad.txt"
-    path.write_text(content)
+    path.write_bytes(content if isinstance(content, bytes) else content.encode())
     with pytest.raises(UnsupportedFormatError, match=match) as err:
         read_cloud(str(path))
     assert_names_file(err, path)
