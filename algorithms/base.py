@@ -142,6 +142,9 @@ def explain_parameter(param, value, strictly_positive=(), largest=None):
             return None
         if os.path.isdir(value) and "folder" in (param.fileFilter() or "").lower():
             return None  # the survey inputs take a folder of LAS/LAZ files too
+        if param.name() == "PRESET" and not os.path.isfile(value):
+            from .presets import shipped_preset_problem
+            return shipped_preset_problem(label, value)
         if not os.path.isfile(value):
             return f"{label}: {value} does not exist or is not a file"
         extensions = _file_extensions(param.fileFilter())
@@ -258,10 +261,11 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
                 kwargs[p.field] = self.parameterAsDouble(parameters, p.name, context)
         return kwargs
 
-    def buildFilter(self, parameters, context):  # noqa: N802
-        """The filter from the dialog's values over the PRESET's (algorithms/presets.py)."""
+    def buildFilter(self, parameters, context, log=None):  # noqa: N802
+        """The filter from the dialog's values over the PRESET's (algorithms/presets.py); ``log``
+        (a callable) gets the parameters the run uses and which came from the preset."""
         from .presets import build_filter
-        return build_filter(self, parameters, context)
+        return build_filter(self, parameters, context, log)
 
     def completeFilterArguments(self, kwargs):  # noqa: N802
         """The filter's keyword arguments once the dialog's and the preset's are merged; a filter
@@ -364,7 +368,7 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         output_path = self.parameterAsFileOutput(parameters, self.OUTPUT, context)
         dtm_path = self.parameterAsOutputLayer(parameters, self.DTM, context) or None
         try:
-            algorithm = self.buildFilter(parameters, context)
+            algorithm = self.buildFilter(parameters, context, feedback.pushInfo)
             rasters = {name: (path, make) for name, (path, make) in self.rasterOutputs(parameters, context).items()
                        if path}
             self.checkDistinctOutputs([(self.OUTPUT, output_path), (self.DTM, dtm_path),

@@ -53,8 +53,12 @@ fewer ground points lost.</p>
             self.PROBABILITY, "Ground probability threshold", type=Double, defaultValue=0.5,
             minValue=0.01, maxValue=0.99))
 
-    def buildFilter(self, parameters, context):  # noqa: N802
+    def buildFilter(self, parameters, context, log=None):  # noqa: N802
         from ..core.learn.hybrid import Hybrid
-        return Hybrid(model_path=self.parameterAsFile(parameters, self.MODEL, context) or "",
-                      ground_probability=self.parameterAsDouble(parameters, self.PROBABILITY, context),
-                      shipped_model=self.SHIPPED_CHOICES[self.parameterAsEnum(parameters, self.SHIPPED, context)])
+        built = Hybrid(model_path=self.parameterAsFile(parameters, self.MODEL, context) or "",
+                       ground_probability=self.parameterAsDouble(parameters, self.PROBABILITY, context),
+                       shipped_model=self.SHIPPED_CHOICES[self.parameterAsEnum(parameters, self.SHIPPED, context)])
+        if log is not None:
+            model = built.model_path or f"the shipped {built.shipped_model} model"
+            log(f"Learned hybrid: {model}, ground at a probability of {built.ground_probability:g} or more")
+        return built

@@ -29,28 +29,53 @@ def add_preset_parameter(algorithm) -> None:
         behavior=QgsProcessingParameterFile.Behavior.File, fileFilter=PRESET_FILTER, optional=True))
 
 
+def shipped_names():
+    """The names of the presets shipped with the plugin (file names without .json)."""
+    folder = shipped_folder()
+    return sorted(f[:-5] for f in os.listdir(folder) if f.endswith(".json")) if os.path.isdir(folder) else []
+
+
+def shipped_preset_problem(label, value):
+    """None when ``value`` names a shipped preset (``forest-smrf.json``: QGIS takes a file input's
+    value only with the extension of its filter); else what is wrong, with the shipped names."""
+    bare = os.sep not in value and "/" not in value
+    if bare and value.lower().endswith(".json") and value[:-5] in shipped_names():
+        return None
+    if bare and value in shipped_names():
+        return f"{label}: give the shipped preset's name with .json: {value}.json"
+    return (f"{label}: {value} does not exist or is not a file (the shipped presets, which can be given by "
+            f"name: {', '.join(n + '.json' for n in shipped_names())}; their folder: {shipped_folder()})")
+
+
 def preset_path(algorithm, parameters, context) -> str:
     if PRESET not in parameters or parameters.get(PRESET) in (None, ""):
         return ""
     return algorithm.parameterAsFile(parameters, PRESET, context) or ""
 
 
-def build_filter(algorithm, parameters, context):
+def build_filter(algorithm, parameters, context, log=None):
     """The filter of ``algorithm`` (a GroundFilterAlgorithm with FILTER set): the dialog's values,
     over the preset's when a PRESET is given, then the algorithm's own completion of them
     (``completeFilterArguments``). Raises the core's PresetError / InvalidParameterError
     (GroundSieveError: processAlgorithm turns it into a QgsProcessingException)."""
     from ..core.engine import parameters as table
-    from ..core.engine.presets import load_preset, merge
+    from ..core.engine.presets import describe, load_preset, merge
     kwargs = algorithm.filterArguments(parameters, context)
     path = preset_path(algorithm, parameters, context)
-    if path:
-        kwargs = merge(algorithm.FILTER, load_preset(path, algorithm.FILTER).values, kwargs)
-    return table.filter_class(algorithm.FILTER)(**algorithm.completeFilterArguments(kwargs))
+    preset = load_preset(path, algorithm.FILTER) if path else None
+    if preset is not None:
+        kwargs = merge(algorithm.FILTER, preset.values, kwargs)
+    kwargs = algorithm.completeFilterArguments(kwargs)
+    built = table.filter_class(algorithm.FILTER)(**kwargs)
+    if log is not None:
+        for line in describe(algorithm.FILTER, {f: getattr(built, f) for f in kwargs}, preset):
+            log(line)
+    return built
 
 
 PRESET_HELP = """<p><b>Preset</b> (optional; every filter but the learned hybrid): a parameters file written by <i>Tune a ground filter on a
-labelled patch</i> (groundsieve:tune), or one shipped with the plugin (its <code>presets</code> folder).
+labelled patch</i> (groundsieve:tune), or one shipped with the plugin, by its file or its name
+(<code>forest-smrf.json</code>; the plugin's <code>presets</code> folder).
 Its parameters replace the filter's defaults; a parameter you set in this dialog to a value other than
 its default wins over the preset. A preset for another filter, of another format version, or with an
 unknown or out-of-range parameter is refused with the file's name and the problem.</p>"""

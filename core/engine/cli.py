@@ -198,17 +198,24 @@ def _progress_printer(out):
     return progress
 
 
-def options_from(args):
-    """(algorithm, FilterOptions, DTMOptions) from parsed arguments."""
+def options_from(args, log=None):
+    """(algorithm, FilterOptions, DTMOptions) from parsed arguments; ``log`` gets the parameters
+    the run uses (and which came from the preset)."""
+    from .presets import describe, load_preset
     given = {k[2:]: v for k, v in vars(args).items() if k.startswith("f_")}
+    preset = None
     if args.filter == "hybrid":
         from ..learn.hybrid import Hybrid
         algorithm = Hybrid(**given)
     elif getattr(args, "preset", None):
-        from .presets import load_preset
-        algorithm = load_preset(args.preset, args.filter).build(given)
+        preset = load_preset(args.preset, args.filter)
+        algorithm = preset.build(given)
     else:
         algorithm = P.filter_class(args.filter)(**given)
+    if log is not None and args.filter != "hybrid":
+        for line in describe(args.filter, {f.name: getattr(algorithm, f.name) for f in P.filter_fields(args.filter)},
+                             preset):
+            log(line)
     tiling = TileOptions(tile_size_m=args.tile_size, buffer_m=None if args.tile_buffer < 0 else args.tile_buffer,
                          memory_budget_mb=args.memory_budget, workers=args.workers,
                          work_dir=args.work_folder or None, scheduler=args.scheduler or "")
@@ -236,9 +243,10 @@ def main(argv: Optional[List[str]] = None, out=None) -> int:
         return 2
     progress = _progress_printer(out)
     try:
-        algorithm, options, dtm = options_from(args)
+        log = lambda msg: print(msg, file=out, flush=True)  # noqa: E731
+        algorithm, options, dtm = options_from(args, log)
         run = run_ground_filter(args.input, args.output, algorithm, options=options, dtm_path=args.dtm, dtm=dtm,
-                                progress=progress, log=lambda msg: print(msg, file=out, flush=True))
+                                progress=progress, log=log)
     except KeyboardInterrupt:
         print("groundsieve: interrupted", file=out)
         return 1

@@ -23,7 +23,7 @@ import json
 import math
 import os
 from dataclasses import dataclass, field
-from typing import Dict, Mapping, Optional
+from typing import Dict, List, Mapping, Optional
 
 from ..errors import InputError
 from ..io.outputs import atomic_path
@@ -63,6 +63,26 @@ def merge(name: str, preset_values: Mapping[str, object], given: Mapping[str, ob
         if value != P.default(name, key):
             out[key] = value
     return out
+
+
+def describe(name: str, values: Mapping[str, object], preset: Optional["Preset"] = None) -> List[str]:
+    """Log lines saying which parameters a run uses (``values``: every field of the filter) and,
+    with a preset, which come from it and which the dialog or command line set over it."""
+    table = P.params(name)
+
+    def show(p):
+        v = values[p.field]
+        v = f"{v:g}" if isinstance(v, float) else str(v)
+        return f"{p.name} {v}" + (f" {p.unit}" if p.unit in ("m", "degrees", "cells") else "")
+    lines = [f"{P.FILTERS[name][1]} parameters: " + ", ".join(show(p) for p in table)]
+    if preset is not None:
+        from_preset = [p for p in table if p.field in preset.values]
+        over = [p for p in from_preset if values[p.field] != preset.values[p.field]]
+        lines.append(f"From the preset {os.path.basename(preset.path) or preset.path}: "
+                     + (", ".join(show(p) for p in from_preset if p not in over) or "nothing")
+                     + ("; set over the preset: " + ", ".join(show(p) for p in over) if over else "")
+                     + " (a value equal to the filter's default never replaces the preset's)")
+    return lines
 
 
 def _version() -> str:

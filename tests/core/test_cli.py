@@ -113,6 +113,13 @@ def test_tune_writes_a_preset_that_every_run_of_the_filter_takes(scene, tmp_path
     algorithm, _options, _dtm = options_from(build_parser().parse_args(
         ["smrf", "--input", scene, "--output", "o.laz", "--preset", preset, "--threshold", "0.31"]))
     assert algorithm == dataclasses.replace(tuned, elevation_threshold_m=0.31)  # a value given wins
+    lines = []
+    options_from(build_parser().parse_args(["smrf", "--input", scene, "--output", "o.laz", "--preset", preset,
+                                            "--threshold", "0.31"]), lines.append)
+    assert lines[0].startswith("SMRF parameters: CELL ") and "THRESHOLD 0.31 m" in lines[0]
+    assert f"WINDOW {tuned.window_m:g} m" in lines[0]
+    assert lines[1].startswith("From the preset smrf.json: ") and lines[1].count("THRESHOLD") == 1
+    assert "; set over the preset: THRESHOLD 0.31 m" in lines[1]
     out = io.StringIO()
     assert main(["pmf", "--input", scene, "--output", str(tmp_path / "o.laz"), "--preset", preset], out=out) == 1
     assert out.getvalue().strip() == f"groundsieve: {preset}: a preset for SMRF (smrf), not for PMF (pmf)"

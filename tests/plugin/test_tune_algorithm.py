@@ -76,6 +76,12 @@ def test_every_table_filter_takes_a_preset_and_the_dialog_values_set_win(grounds
         SMRF(slope=0.2, window_m=16.0, elevation_threshold_m=0.45)
     assert algorithm.buildFilter(dict(dialog, PRESET=path, SCALAR=2.0), context) == \
         SMRF(slope=0.2, window_m=16.0, elevation_threshold_m=0.45, elevation_scalar=2.0)
+    lines = []
+    algorithm.buildFilter(dict(dialog, PRESET=path, SCALAR=2.0, THRESHOLD=0.3), context, lines.append)
+    assert lines == ["SMRF parameters: CELL 1 m, SLOPE 0.2, WINDOW 16 m, THRESHOLD 0.3 m, SCALAR 2, "
+                     "LOW_OUTLIER_FILL True",
+                     "From the preset smrf.json: SLOPE 0.2, WINDOW 16 m; set over the preset: THRESHOLD 0.3 m "
+                     "(a value equal to the filter's default never replaces the preset's)"]
     other = str(tmp_path / "pmf.json")
     write_preset(other, "pmf", {"slope": 0.5})
     with pytest.raises(PresetError, match=r"pmf\.json: a preset for PMF \(pmf\), not for SMRF"):
@@ -94,7 +100,7 @@ def test_a_shipped_preset_runs_through_processing_and_a_foreign_one_is_refused(g
     import laspy
     import numpy as np
     import processing
-    from qgis.core import QgsProcessingException
+    from qgis.core import QgsApplication, QgsProcessingContext, QgsProcessingException
 
     from groundsieve.algorithms.presets import shipped_folder
     from groundsieve.core.engine.presets import load_preset, write_preset
@@ -111,6 +117,16 @@ def test_a_shipped_preset_runs_through_processing_and_a_foreign_one_is_refused(g
     default = str(tmp_path / "default.laz")
     processing.run("groundsieve:smrf", {"INPUT": patch, "OUTPUT": default})
     assert not np.array_equal(np.asarray(a), np.asarray(laspy.read(default).classification))  # the preset acts
+    by_name = str(tmp_path / "by-name.laz")  # a shipped preset by its name, as on the command line
+    processing.run("groundsieve:smrf", {"INPUT": patch, "PRESET": "forest-smrf.json", "OUTPUT": by_name})
+    assert np.array_equal(np.asarray(laspy.read(by_name).classification), np.asarray(a))
+    with pytest.raises(QgsProcessingException, match=r"forest-smrff.json does not exist or is not a file \(the shipped "
+                                                     r"presets, which can be given by name: forest-smrf.json, "):
+        processing.run("groundsieve:smrf", {"INPUT": patch, "PRESET": "forest-smrff.json", "OUTPUT": by_name})
+    algorithm = QgsApplication.processingRegistry().algorithmById("groundsieve:smrf")
+    ok, message = algorithm.checkParameterValues({"INPUT": patch, "PRESET": "forest-smrf", "OUTPUT": by_name},
+                                                 QgsProcessingContext())
+    assert not ok and message.endswith("give the shipped preset's name with .json: forest-smrf.json")
 
     pmf = str(tmp_path / "for-pmf.json")
     write_preset(pmf, "pmf", {"slope": 0.5})
