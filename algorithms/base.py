@@ -5,7 +5,7 @@ import math
 import os
 import re
 
-from qgis.core import (QgsCoordinateReferenceSystem, QgsFeature, QgsFeatureSink, QgsField, QgsFields,
+from qgis.core import (Qgis, QgsCoordinateReferenceSystem, QgsFeature, QgsFeatureSink, QgsField, QgsFields,
                        QgsGeometry, QgsPoint, QgsProcessing, QgsProcessingAlgorithm, QgsProcessingException,
                        QgsProcessingParameterBoolean, QgsProcessingParameterDefinition,
                        QgsProcessingParameterEnum, QgsProcessingParameterFeatureSink,
@@ -78,6 +78,15 @@ intermediate grids are not written in a tiled run.</p>
 #: filter's extensions unless one pattern is a bare *), so one INPUT takes a file, a folder or a .vpc.
 INPUT_FILTER = ("Point clouds (*.las *.laz *.vpc *.LAS *.LAZ *.VPC);;ISPRS text (*.txt);;"
                 "All files and folders (*)")
+
+
+def _int_field(name):
+    """An integer attribute field: QgsField takes a QMetaType from QGIS 3.38 on (the QVariant form is
+    deprecated there and warns on every run), a QVariant type before."""
+    if Qgis.QGIS_VERSION_INT >= 33800:
+        from qgis.PyQt.QtCore import QMetaType
+        return QgsField(name, QMetaType.Type.Int)
+    return QgsField(name, QVariant.Int)
 
 
 def dialog_help(html):
@@ -510,8 +519,8 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
 
     def _write_ground_points(self, parameters, context, feedback, run):
         fields = QgsFields()
-        fields.append(QgsField("return_number", QVariant.Int))
-        fields.append(QgsField("intensity", QVariant.Int))
+        fields.append(_int_field("return_number"))
+        fields.append(_int_field("intensity"))
         crs = QgsCoordinateReferenceSystem.fromWkt(run.cloud.crs_wkt) if run.cloud.crs_wkt else \
             QgsCoordinateReferenceSystem()
         sink, sink_id = self.parameterAsSink(parameters, self.GROUND_POINTS, context, fields,

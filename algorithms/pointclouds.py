@@ -123,7 +123,7 @@ def load_or_log(context, feedback, path, layer_name, output_name):
     ext = ".copc.laz" if path.lower().endswith(".copc.laz") else os.path.splitext(path)[1].lower()
     feedback.pushInfo(f"{layer_name}: written to {path}. Not loaded: this QGIS has no point-cloud provider "
                       f"that opens {ext} files (QGIS builds with PDAL, as on Windows and macOS, do); "
-                      "open it there, in CloudCompare, or use the DTM.")
+                      "open it there or in CloudCompare.")
     return None
 
 

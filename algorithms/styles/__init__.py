@@ -2,7 +2,7 @@
 raster as a paletted layer with a legend (its classes named and coloured), the DTM as an
 elevation ramp. Applied by layer post-processors (QgsProcessingLayerPostProcessorInterface), which
 run in the main thread once the layer is loaded; qgis_process loads nothing, so styles nothing."""
-from qgis.core import (QgsColorRampShader, QgsPalettedRasterRenderer, QgsProcessingLayerPostProcessorInterface,
+from qgis.core import (Qgis, QgsColorRampShader, QgsPalettedRasterRenderer, QgsProcessingLayerPostProcessorInterface,
                        QgsRasterBandStats, QgsRasterLayer, QgsRasterShader, QgsSingleBandPseudoColorRenderer,
                        QgsStyle)
 from qgis.PyQt.QtGui import QColor
@@ -24,7 +24,11 @@ def style_dtm(layer):
     """An elevation ramp (QGIS's "Spectral", low blue to high red) stretched over the band's
     minimum and maximum, five classes interpolated: a DTM reads as terrain, not as grey."""
     provider = layer.dataProvider()
-    stats = provider.bandStatistics(1, QgsRasterBandStats.Min | QgsRasterBandStats.Max)
+    if hasattr(Qgis, "RasterBandStatistic"):
+        # QGIS 3.40: every call giving the statistics wanted warns as deprecated, the default (all) does not
+        stats = provider.bandStatistics(1)
+    else:
+        stats = provider.bandStatistics(1, QgsRasterBandStats.Min | QgsRasterBandStats.Max)
     if not stats.maximumValue > stats.minimumValue:
         return  # an empty or flat DTM: QGIS's default grey is as good
     ramp = QgsStyle.defaultStyle().colorRamp("Spectral")

@@ -34,3 +34,11 @@ def scene_laz(tmp_path_factory):
 def classes_of(path):
     import laspy
     return np.asarray(laspy.read(str(path)).classification)
+
+
+def pytest_collection_modifyitems(items):
+    """A QGIS API call that this QGIS deprecates, made from the plugin's own code, fails the test:
+    users would see its warning in every run's log (QGIS 3.40 deprecates what 3.22 offered)."""
+    for item in items:
+        if "tests/plugin/" in str(item.fspath).replace("\\", "/"):
+            item.add_marker(pytest.mark.filterwarnings("error::DeprecationWarning:groundsieve.*"))
