@@ -39,7 +39,7 @@ def main():
 
     cmd = [str(REPO / "scripts" / "qgis-process"), "run", "groundsieve:smrf",
            f"--INPUT={scene_path}", f"--OUTPUT={classified}", f"--DTM={dtm}", "--DTM_CELL=1.0"]
-    print("Running:", " ".join(cmd[1:]).replace(str(REPO) + "/", ""))
+    print("Running:", " ".join(cmd).replace(str(REPO) + "/", ""))
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, capture_output=True, text=True)
     elapsed = time.perf_counter() - t0

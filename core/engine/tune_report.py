@@ -150,7 +150,7 @@ td {{ text-align: right; }} th {{ background: #f0f0f0; }} .err {{ color: #b00; }
 <p>{result.points:,} labelled points, {len(result.trials)} parameter sets tried
 ({result.runs} filter runs, budget {result.budget}) in
 {result.seconds:.0f} s, optimising the {html.escape(label)}; {len(result.folds)} spatial blocks
-({result.block_grid[0]} x {result.block_grid[1]}, {", ".join(f"{s:,}" for s in result.block_sizes)} points)
+({result.block_grid[0]} x {result.block_grid[1]}; points per block: {", ".join(f"{s:,}" for s in result.block_sizes)})
 for the cross-validation.{SELECTION_NOTE if result.selection == "one-se" else ""}{" Stopped early: " + html.escape(result.stopped) + "." if result.stopped else ""}</p>
 <p class="big"><b>Cross-validated total error {_pct(cv.total)}</b> (kappa {_pct(cv.kappa)}, F1 {_pct(cv.f1)}): each
 block classified with the set chosen without it. This is what to expect on similar data. The chosen set on the
@@ -174,7 +174,8 @@ f"; the starting set (filter defaults or starting preset): {_pct(start.total)}"}
         parts.append(_confusion(start, "Starting set on the whole patch"))
     parts.append(f"<h2>Sensitivity: {html.escape(label)} of each set against each parameter</h2>"
                  f"<p class='small'>Each dot is one set (whole patch); red: the chosen set; ring: the starting set. "
-                 f"A flat cloud means the parameter matters little on this patch.</p><div class='plots'>")
+                 f"A flat cloud means the parameter matters little on this patch. The last plot: each set in the "
+                 f"order tried, and the line the best so far.</p><div class='plots'>")
     for d in result.dims:
         pts = []
         for i in ok:

@@ -218,7 +218,7 @@ def _cells(x, y, cell, origin, what, bytes_per_cell):
     nrows, ncols = gy1 - gy0 + 1, gx1 - gx0 + 1
     check_memory(nrows * ncols * float(bytes_per_cell), what=what, shape=(nrows, ncols), cell=cell, x=x, y=y)
     if nrows * ncols > MAX_CELLS:
-        raise InvalidParameterError(f"{what}: a cell size of {cell:g} m needs {nrows} x {ncols} = "
+        raise InvalidParameterError(f"{what}: a cell size of {cell:g} m needs {ncols} x {nrows} = "
                                     f"{nrows * ncols:,} cells (limit {MAX_CELLS:,}); use a larger cell size")
     grid = GridSpec(ox + gx0 * cell, oy + (gy1 + 1) * cell, float(cell), nrows, ncols)
     gx -= gx0

@@ -293,9 +293,9 @@ def tin_dtm(x, y, z, grid: GridSpec, *, fill_outside: bool = False, points_per_c
     steps.report(0.1)
     if log is not None:
         log(f"DTM: triangulating {xs.size:,} ground points ({x.size:,} before thinning to at most "
-            f"{points_per_cell} per cell), {grid.nrows:,} x {grid.ncols:,} cells of {grid.cell:g} m ..."
-            if points_per_cell else f"DTM: triangulating {xs.size:,} ground points, {grid.nrows:,} x "
-            f"{grid.ncols:,} cells of {grid.cell:g} m ...")
+            f"{points_per_cell} per cell), {grid.ncols:,} x {grid.nrows:,} cells of {grid.cell:g} m ..."
+            if points_per_cell else f"DTM: triangulating {xs.size:,} ground points, {grid.ncols:,} x "
+            f"{grid.nrows:,} cells of {grid.cell:g} m ...")
     rate = SWEEP_S_PER_POINT if triangulator == "sweep" else QHULL_S_PER_POINT
     if threads is None:
         import numba

@@ -140,7 +140,7 @@ def check_memory(nbytes: float, *, what: str, shape: tuple, cell: float, x=None,
     if nbytes <= budget:
         return
     nrows, ncols = (int(v) for v in shape)
-    message = (f"{what}: {nrows:,} x {ncols:,} cells of {cell:g} m (an extent of "
+    message = (f"{what}: {ncols:,} x {nrows:,} cells of {cell:g} m (an extent of "
                f"{ncols * cell:,.1f} x {nrows * cell:,.1f} m) need about {_size(nbytes)} at peak, more than the "
                f"{_size(budget)} this run may use")
     if _BUDGET.get() is None:
@@ -203,7 +203,7 @@ class GridSpec:
         if cells > MAX_CELLS:
             raise InvalidParameterError(
                 f"{what}: a cell size of {cell:g} m over an extent of {xmax - xmin:.1f} x {ymax - ymin:.1f} m "
-                f"needs {nrows} x {ncols} = {cells:,} cells (limit {MAX_CELLS:,}); use a larger cell size")
+                f"needs {ncols} x {nrows} = {cells:,} cells (limit {MAX_CELLS:,}); use a larger cell size")
         return cls(float(x0), float(top), float(cell), nrows, ncols)
 
     @property

@@ -347,7 +347,7 @@ class HybridResult:
 class Hybrid:
     """The learned hybrid ground filter. ``model_path`` empty = the shipped model named by
     ``shipped_model``: "fast" (:data:`DEFAULT_MODEL`, SMRF's surfaces and openings) or "accurate"
-    (:data:`PTD_MODEL`, the same and PTD's ground surface: 2-3x slower, better on the ISPRS
+    (:data:`PTD_MODEL`, the same and PTD's ground surface: about 3x the filtering time, better on the ISPRS
     samples). A point is ground when the model gives it a ground probability of at least
     ``ground_probability``."""
     model_path: str = ""

@@ -121,7 +121,7 @@ def test_a_stray_point_far_away_is_refused_with_its_place_not_a_crash(tmp_path):
     out = tmp_path / "out.laz"
     rc, text = _run("groundsieve:smrf", f"--INPUT={src}", f"--OUTPUT={out}", f"--DTM={tmp_path / 'dtm.tif'}")
     assert rc == 1, text
-    assert "SMRF grid: 40 x 1,000,041 cells of 1 m" in text, text
+    assert "SMRF grid: 1,000,041 x 40 cells of 1 m" in text, text
     assert "Likely cause: 1 point lies 1000.0 km from the others, at x 1512040.00" in text, text
     assert "survey-scale tiler" in text and "Traceback" not in text
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.las"]
