@@ -39,7 +39,7 @@ def shipped_preset_problem(label, value):
     """None when ``value`` names a shipped preset (``forest-smrf.json``: QGIS takes a file input's
     value only with the extension of its filter); else what is wrong, with the shipped names."""
     bare = os.sep not in value and "/" not in value
-    if bare and value.lower().endswith(".json") and value[:-5] in shipped_names():
+    if bare and value.endswith(".json") and value[:-5] in shipped_names():
         return None
     if bare and value in shipped_names():
         return f"{label}: give the shipped preset's name with .json: {value}.json"
@@ -68,7 +68,8 @@ def build_filter(algorithm, parameters, context, log=None):
     kwargs = algorithm.completeFilterArguments(kwargs)
     built = table.filter_class(algorithm.FILTER)(**kwargs)
     if log is not None:
-        for line in describe(algorithm.FILTER, {f: getattr(built, f) for f in kwargs}, preset):
+        values = {f.name: getattr(built, f.name) for f in table.filter_fields(algorithm.FILTER)}
+        for line in describe(algorithm.FILTER, values, preset):
             log(line)
     return built
 

@@ -77,9 +77,9 @@ chosen on the other blocks only (by a search of its own), and the errors of thes
 the <b>cross-validated error</b>, what to expect on similar data. The preset carries the set chosen on
 the whole patch.</p>
 <p><b>Score</b>: total error (ISPRS: misclassified / all), Cohen's kappa, or the F1 of the ground class.</p>
-<p><b>Choice of the set</b> (advanced): the set with the lowest error, or by the one-standard-error rule:
-of the sets whose error is within one standard error of the lowest (from the blocks' differences), the
-one nearest the starting set. The rule gives up a little on the patch for sets that hold better
+<p><b>Choice of the set</b> (advanced): the set with the lowest error, or by the one-standard-error rule
+(3 blocks or more): of the sets whose error is within one standard error of the lowest (from the
+blocks' differences), the one nearest the starting set. The rule gives up a little on the patch for sets that hold better
 elsewhere (on the 8 ISPRS samples: cross-validated 3.58 % against 3.74 % on average).</p>
 <p><b>Report</b>: an HTML page (it opens in the results viewer) with the cross-validated error, the
 chosen parameters, the confusion matrices, a plot of the score against each parameter (its

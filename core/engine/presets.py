@@ -66,21 +66,27 @@ def merge(name: str, preset_values: Mapping[str, object], given: Mapping[str, ob
 
 
 def describe(name: str, values: Mapping[str, object], preset: Optional["Preset"] = None) -> List[str]:
-    """Log lines saying which parameters a run uses (``values``: every field of the filter) and,
-    with a preset, which come from it and which the dialog or command line set over it."""
-    table = P.params(name)
+    """Log lines saying which parameters a run uses (``values``: every field of the filter): the
+    dialog's, and the finer settings (by their preset names) where they are not the defaults; with
+    a preset, which fields come from it and which the run changed (the dialog, the command line, or
+    a filter completing its arguments)."""
+    table = {p.field: p for p in P.params(name)}
+    names = {fld: key for key, fld in P.preset_names(name).items()}
 
-    def show(p):
-        v = values[p.field]
+    def show(fld):
+        v = values[fld]
         v = f"{v:g}" if isinstance(v, float) else str(v)
-        return f"{p.name} {v}" + (f" {p.unit}" if p.unit in ("m", "degrees", "cells") else "")
-    lines = [f"{P.FILTERS[name][1]} parameters: " + ", ".join(show(p) for p in table)]
+        unit = table[fld].unit if fld in table else ""
+        return f"{names.get(fld, fld)} {v}" + (f" {unit}" if unit in ("m", "degrees", "cells") else "")
+    shown = list(table) + [f.name for f in P.core_only_fields(name)
+                           if values[f.name] != f.default or (preset is not None and f.name in preset.values)]
+    lines = [f"{P.FILTERS[name][1]} parameters: " + ", ".join(show(f) for f in shown)]
     if preset is not None:
-        from_preset = [p for p in table if p.field in preset.values]
-        over = [p for p in from_preset if values[p.field] != preset.values[p.field]]
+        given = [f for f in shown if f in preset.values]
+        changed = [f for f in given if values[f] != preset.values[f]]
         lines.append(f"From the preset {os.path.basename(preset.path) or preset.path}: "
-                     + (", ".join(show(p) for p in from_preset if p not in over) or "nothing")
-                     + ("; set over the preset: " + ", ".join(show(p) for p in over) if over else "")
+                     + (", ".join(show(f) for f in given if f not in changed) or "nothing")
+                     + ("; changed from the preset: " + ", ".join(show(f) for f in changed) if changed else "")
                      + " (a value equal to the filter's default never replaces the preset's)")
     return lines
 

@@ -66,6 +66,9 @@ class TuneOptions:
             raise InvalidParameterError(f"the time limit must be >= 0 seconds (got {self.seconds!r})")
         if self.selection not in SELECTIONS:
             raise InvalidParameterError(f"selection must be one of {', '.join(SELECTIONS)} (got {self.selection!r})")
+        if self.selection == "one-se" and self.blocks < 3:
+            raise InvalidParameterError("the one-standard-error rule needs at least 3 cross-validation blocks (each "
+                                        f"fold chooses on the others, at least 2; got {self.blocks})")
         if not 0.0 < self.design_share <= 1.0:
             raise InvalidParameterError(f"design_share must be in (0, 1] (got {self.design_share})")
 
@@ -286,19 +289,23 @@ def choose(trials: Sequence[Trial], indices: Sequence[int], blocks: Sequence[int
            selection: str = "best", start: Optional[Mapping[str, object]] = None,
            dims: Sequence[Dim] = ()) -> int:
     """The trial chosen among ``indices`` on ``blocks``: the lowest loss ("best"), or by the
-    one-standard-error rule ("one-se", see SELECTIONS). Ties go to the earlier trial."""
+    one-standard-error rule ("one-se", see SELECTIONS; at least 2 blocks): the gap to the best and
+    its standard error are the mean and standard error of the per-block differences (so a block
+    whose kappa jumps from 1 to 0 on one point weighs in both). Ties go to the earlier trial."""
     best = min(indices, key=lambda i: (trials[i].loss(metric, blocks), i))
-    if selection == "best" or start is None or len(blocks) < 2:
+    if selection == "best" or start is None:
         return best
     blocks = list(blocks)
+    if len(blocks) < 2:
+        raise ValueError("the one-standard-error rule needs at least 2 blocks to choose on")
     per_block = lambda i: np.array([loss(trials[i].counts[b], metric) for b in blocks])  # noqa: E731
-    base, base_loss = per_block(best), trials[best].loss(metric, blocks)
+    base = per_block(best)
     near = []
     for i in indices:
         if trials[i].counts is None:
             continue
-        gap = trials[i].loss(metric, blocks) - base_loss
-        se = float(np.std(per_block(i) - base, ddof=1)) / math.sqrt(len(blocks))
+        diff = per_block(i) - base
+        gap, se = float(diff.mean()), float(np.std(diff, ddof=1)) / math.sqrt(len(blocks))
         if gap <= se + 1e-12:
             near.append((_distance(trials[i].values, start, dims), trials[i].loss(metric, blocks), i))
     return min(near)[2] if near else best

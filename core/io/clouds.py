@@ -271,12 +271,17 @@ def _read_las(path: str, steps: Steps) -> PointCloud:
 
 def _text_problem(path: str) -> str:
     """Where a text file stops being rows of 3 or 4 numbers, in words: the first line (counted from
-    1) with a word that is not a number or with another count of columns than the first row."""
+    1) with a word that is not a number or with another count of columns than the first row.
+    Read as numpy's loadtxt reads it: comments from '#' on, bytes as Latin-1, a UTF-8 BOM ignored."""
     try:
-        with open(path, encoding="utf-8") as f:
+        with open(path, encoding="latin-1") as f:
             columns = None
             for number, line in enumerate(f, 1):
-                words = line.split()
+                if number == 1 and line.startswith("\xef\xbb\xbf"):
+                    line = line[3:]
+                if "\x00" in line:
+                    return "it is not text (a binary file?)"
+                words = line.split("#", 1)[0].split()
                 if not words:
                     continue
                 for column, word in enumerate(words, 1):
@@ -288,8 +293,6 @@ def _text_problem(path: str) -> str:
                     columns = len(words)
                 elif len(words) != columns:
                     return f"line {number} has {len(words)} columns, the lines before it {columns}"
-    except UnicodeDecodeError:
-        return "it is not text (a binary file?)"
     except OSError as err:
         return f"it cannot be read ({err.strerror or err})"
     return ""
@@ -300,8 +303,11 @@ def _read_isprs_text(path: str) -> PointCloud:
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # "empty input file" is reported below
-            data = np.loadtxt(path, dtype=np.float64, ndmin=2)
-    except (ValueError, UnicodeDecodeError) as err:
+            try:
+                data = np.loadtxt(path, dtype=np.float64, ndmin=2, encoding="utf-8-sig")
+            except UnicodeDecodeError:  # not UTF-8 (e.g. a Latin-1 comment): bytes as Latin-1
+                data = np.loadtxt(path, dtype=np.float64, ndmin=2, encoding="latin-1")
+    except ValueError as err:
         raise UnsupportedFormatError(f"{path}: {what}: {_text_problem(path) or err}") from err
     if data.size == 0:
         raise InputError(f"{path}: the file holds no points")

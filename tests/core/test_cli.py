@@ -119,7 +119,7 @@ def test_tune_writes_a_preset_that_every_run_of_the_filter_takes(scene, tmp_path
     assert lines[0].startswith("SMRF parameters: CELL ") and "THRESHOLD 0.31 m" in lines[0]
     assert f"WINDOW {tuned.window_m:g} m" in lines[0]
     assert lines[1].startswith("From the preset smrf.json: ") and lines[1].count("THRESHOLD") == 1
-    assert "; set over the preset: THRESHOLD 0.31 m" in lines[1]
+    assert "; changed from the preset: THRESHOLD 0.31 m" in lines[1]
     out = io.StringIO()
     assert main(["pmf", "--input", scene, "--output", str(tmp_path / "o.laz"), "--preset", preset], out=out) == 1
     assert out.getvalue().strip() == f"groundsieve: {preset}: a preset for SMRF (smrf), not for PMF (pmf)"

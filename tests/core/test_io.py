@@ -319,6 +319,10 @@ def test_las_with_huge_coordinates(tmp_path):
     ("1 2 3\n4 5\n", "line 2 has 2 columns, the lines before it 3"),
     ("1 2 3 0\n4 5 6 1\n7 8 abc 0\n", r"line 3, column 3: 'abc' is not a number"),
     ("1 2 3 4 5\n", "found 5; for other text layouts convert the file to LAS/LAZ first"),
+    ("# x y z label\n1 2 3 0\n4 5 6 1\n7 8 abc 0\n", r"line 4, column 3: 'abc' is not a number"),
+    ("1 2 3 0 # first\n4 5 6\n", "line 2 has 3 columns, the lines before it 4"),
+    (b"\xef\xbb\xbf1 2 3 0\n4 5 x 1\n", r"line 2, column 3: 'x' is not a number"),
+    (b"# caf\xe9\n1 2 3 0\n1 2 z 0\n", r"line 3, column 3: 'z' is not a number"),
     (b"\xff\xfe\x00\x01 binary\n", "not text")])
 def test_text_not_numbers(tmp_path, content, match):
     path = tmp_path / "bad.txt"
@@ -326,6 +330,15 @@ def test_text_not_numbers(tmp_path, content, match):
     with pytest.raises(UnsupportedFormatError, match=match) as err:
         read_cloud(str(path))
     assert_names_file(err, path)
+
+
+def test_text_with_a_bom_comments_and_latin1_is_read(tmp_path):
+    path = tmp_path / "ok.txt"
+    path.write_bytes(b"\xef\xbb\xbf# caf\xc3\xa9 x y z label\n1 2 3 0\n4 5 6 1 # a roof\n")
+    cloud = read_cloud(str(path))
+    assert cloud.z.tolist() == [3.0, 6.0] and cloud.reference_label.tolist() == [0, 1]
+    path.write_bytes(b"# caf\xe9\n1 2 3 0\n")
+    assert read_cloud(str(path)).x.tolist() == [1.0]
 
 
 def test_empty_text(tmp_path):
