@@ -68,8 +68,7 @@ def build_filter(algorithm, parameters, context, log=None):
     kwargs = algorithm.completeFilterArguments(kwargs)
     built = table.filter_class(algorithm.FILTER)(**kwargs)
     if log is not None:
-        values = {f.name: getattr(built, f.name) for f in table.filter_fields(algorithm.FILTER)}
-        for line in describe(algorithm.FILTER, values, preset):
+        for line in describe(algorithm.FILTER, built, preset):
             log(line)
     return built
 

@@ -213,8 +213,7 @@ def options_from(args, log=None):
     else:
         algorithm = P.filter_class(args.filter)(**given)
     if log is not None and args.filter != "hybrid":
-        for line in describe(args.filter, {f.name: getattr(algorithm, f.name) for f in P.filter_fields(args.filter)},
-                             preset):
+        for line in describe(args.filter, algorithm, preset):
             log(line)
     tiling = TileOptions(tile_size_m=args.tile_size, buffer_m=None if args.tile_buffer < 0 else args.tile_buffer,
                          memory_budget_mb=args.memory_budget, workers=args.workers,

@@ -65,11 +65,12 @@ def merge(name: str, preset_values: Mapping[str, object], given: Mapping[str, ob
     return out
 
 
-def describe(name: str, values: Mapping[str, object], preset: Optional["Preset"] = None) -> List[str]:
-    """Log lines saying which parameters a run uses (``values``: every field of the filter): the
+def describe(name: str, built, preset: Optional["Preset"] = None) -> List[str]:
+    """Log lines saying which parameters the filter ``built`` (of filter ``name``) runs with: the
     dialog's, and the finer settings (by their preset names) where they are not the defaults; with
     a preset, which fields come from it and which the run changed (the dialog, the command line, or
     a filter completing its arguments)."""
+    values = {f.name: getattr(built, f.name) for f in P.filter_fields(name)}
     table = {p.field: p for p in P.params(name)}
     names = {fld: key for key, fld in P.preset_names(name).items()}
 

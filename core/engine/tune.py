@@ -498,12 +498,9 @@ def tune(cloud, name: str, options: TuneOptions = TuneOptions(), *, base: Option
     train = {t: ([b for b in all_blocks if b != t] if t >= 0 else all_blocks) for t in tracks}
     pools = {t: list(pool_design) for t in tracks}
 
-    def best_of(indices, t):
-        return min(indices, key=lambda i: (trials[i].loss(metric, train[t]), i))
-
     searches = {}
-    for t in tracks:
-        b = best_of(pools[t], t)
+    for t in tracks:  # each refinement starts from the lowest error on its blocks
+        b = choose(trials, pools[t], train[t], metric)
         searches[t] = _pattern_search(trials[b].values, trials[b].loss(metric, train[t]), dims)
     pending = {t: next(searches[t], None) for t in tracks}
     while any(v is not None for v in pending.values()):
@@ -525,6 +522,7 @@ def tune(cloud, name: str, options: TuneOptions = TuneOptions(), *, base: Option
     steps.report(1.0)
     if all(t.counts is None for t in trials):
         raise InputError(f"{where}: every parameter set failed ({trials[0].error})")
+
     def chosen_of(indices, t):
         return choose(trials, indices, train[t], metric, options.selection, start, dims)
 

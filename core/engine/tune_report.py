@@ -19,6 +19,7 @@ PAD_L, PAD_R, PAD_T, PAD_B = 52, 12, 14, 40
 SELECTION_NOTE = (" Sets chosen by the one-standard-error rule: of the sets within one standard error of the"
                   " lowest error on the blocks they are chosen on, the one nearest the starting set.")
 
+
 def _fmt(v) -> str:
     if isinstance(v, bool):
         return "on" if v else "off"

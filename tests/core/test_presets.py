@@ -132,12 +132,11 @@ def test_the_run_log_names_every_value_used_and_what_came_from_the_preset(tmp_pa
     write_preset(path, "smrf", {"low_outlier_slope": 3.0, "slope": 0.2})
     preset = load_preset(path, "smrf")
     built = preset.build({"slope": 0.3})
-    values = {f.name: getattr(built, f.name) for f in P.filter_fields("smrf")}
-    first, second = describe("smrf", values, preset)
+    first, second = describe("smrf", built, preset)
     assert first == ("SMRF parameters: CELL 1 m, SLOPE 0.3, WINDOW 18 m, THRESHOLD 0.5 m, SCALAR 1.25, "
                      "LOW_OUTLIER_FILL True, LOW_OUTLIER_SLOPE 3")
     assert second == ("From the preset fine.json: LOW_OUTLIER_SLOPE 3; changed from the preset: SLOPE 0.3 "
                       "(a value equal to the filter's default never replaces the preset's)")
-    plain = describe("smrf", {f.name: getattr(SMRF(), f.name) for f in P.filter_fields("smrf")})
+    plain = describe("smrf", SMRF())
     assert plain == ["SMRF parameters: CELL 1 m, SLOPE 0.15, WINDOW 18 m, THRESHOLD 0.5 m, SCALAR 1.25, "
                      "LOW_OUTLIER_FILL True"]
