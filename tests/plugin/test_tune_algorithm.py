@@ -150,3 +150,33 @@ def test_the_dialog_defaults_are_the_core_defaults(groundsieve_provider):
     from groundsieve.core.engine import tune as core
     assert dialog.SELECTIONS == core.SELECTIONS and dialog.METRICS == core.METRICS
     assert dialog.SELECTIONS[algorithm.parameterDefinition("SELECTION").defaultValue()] == TuneOptions.selection
+
+
+def test_the_dialog_and_the_core_agree_on_which_names_are_shipped_presets(groundsieve_provider, tmp_path,
+                                                                          monkeypatch):
+    """The dialog checks a PRESET name without the core (algorithms/presets.shipped_preset_problem); the
+    core resolves it (core/engine/presets.shipped_path, load_preset). A name the dialog passes must load,
+    and a name ending in .json (any case) that the core resolves must pass the dialog."""
+    from groundsieve.algorithms.presets import shipped_folder, shipped_names, shipped_preset_problem
+    from groundsieve.core.engine.presets import SHIPPED_DIR, PresetError, load_preset, shipped_path
+
+    assert os.path.samefile(shipped_folder(), SHIPPED_DIR)
+    names = shipped_names()
+    assert names == sorted(f[:-5] for f in os.listdir(SHIPPED_DIR) if f.endswith(".json")) and names
+    monkeypatch.chdir(tmp_path)  # no file of these names in the working folder
+    candidates = []
+    for name in names:
+        candidates += [name, name + ".json", name + ".JSON", name.upper() + ".json", name + ".json.json",
+                       "presets/" + name + ".json", name + " .json", name[:-1] + ".json"]
+    for value in candidates:
+        dialog_ok = shipped_preset_problem("Preset", value) is None
+        try:
+            load_preset(value)
+            core_ok = True
+        except PresetError:
+            core_ok = False
+        if dialog_ok:
+            assert core_ok, value
+        if value.lower().endswith(".json") and "/" not in value:
+            assert dialog_ok == (shipped_path(value) is not None) == core_ok, value
+    assert sum(shipped_preset_problem("Preset", v) is None for v in candidates) == len(names)
