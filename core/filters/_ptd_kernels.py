@@ -48,6 +48,17 @@ def spatial_sort_kernel(x, y, x0, y0, cell, ncols, nrows, block, perm, cell_star
 
 
 @njit(cache=True, nogil=True)
+def gather_kernel(xyz, perm, x0, y0, out):
+    """``out[j]`` = the point ``perm[j]`` of ``xyz`` relative to (x0, y0) (numpy's fancy indexing
+    of one column at a time reads the points three times)."""
+    for j in range(perm.shape[0]):
+        i = perm[j]
+        out[j, 0] = xyz[i, 0] - x0
+        out[j, 1] = xyz[i, 1] - y0
+        out[j, 2] = xyz[i, 2]
+
+
+@njit(cache=True, nogil=True)
 def cell_min_kernel(vz, cell_start, out):
     """Lowest z of each fine cell (inf where empty); points are sorted by cell."""
     for k in range(out.shape[0]):

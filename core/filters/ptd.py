@@ -229,9 +229,7 @@ class PTD:
         nv = n + 4 + ring.shape[0]
         points = np.empty((nv, 3))
         vx, vy, vz = points[:, 0], points[:, 1], points[:, 2]
-        for out, col, origin in ((vx, 0, x0), (vy, 1, y0), (vz, 2, 0.0)):
-            out[:n] = xyz[perm, col]
-            out[:n] -= origin
+        K.gather_kernel(xyz, perm, x0, y0, points)
         steps.report(0.03)
 
         # 2. Seeds, low outliers.
