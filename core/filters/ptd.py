@@ -261,17 +261,18 @@ class PTD:
 
         # 3. The points that take part in the densification (the candidates and the seeds) in rows of
         # their own, in the same order, then the virtual vertices: in a dense cloud the thinned points
-        # are most of the points, and the TIN's rounds then walk a much smaller memory. Each row holds
-        # x, y, z and the next point of its triangle's list side by side: a point is one 32-byte row,
-        # read in one go (the lists are walked in no particular order).
+        # are most of the points, and the TIN's rounds then walk a much smaller memory. A point's x, y,
+        # z side by side, read in one go; the next point of its triangle's list in a small array of its
+        # own (walking a list then waits on that array only, not on the coordinates).
         member = status == K.CANDIDATE
         member[seeds] = True
         index = np.flatnonzero(member).astype(np.int32)  # the point of each member
         del member
         nm = index.size
         mv = nm + 4 + ring.shape[0]
-        rows = np.empty((mv, 4))
-        mx, my, mz, nxt = rows[:, 0], rows[:, 1], rows[:, 2], rows[:nm, 3]
+        rows = np.empty((mv, 3))
+        mx, my, mz = rows[:, 0], rows[:, 1], rows[:, 2]
+        nxt = np.empty(nm, dtype=np.int32)
         mx[:nm], my[:nm], mz[:nm] = vx[index], vy[index], vz[index]
         mstatus = status[index]
         mseeds = np.searchsorted(index, seeds).astype(np.int32)
