@@ -48,6 +48,17 @@ def spatial_sort_kernel(x, y, x0, y0, cell, ncols, nrows, block, perm, cell_star
 
 
 @njit(cache=True, nogil=True)
+def gather_kernel(xyz, perm, x0, y0, out):
+    """``out[j]`` = the point ``perm[j]`` of ``xyz`` relative to (x0, y0) (numpy's fancy indexing
+    of one column at a time reads the points three times)."""
+    for j in range(perm.shape[0]):
+        i = perm[j]
+        out[j, 0] = xyz[i, 0] - x0
+        out[j, 1] = xyz[i, 1] - y0
+        out[j, 2] = xyz[i, 2]
+
+
+@njit(cache=True, nogil=True)
 def cell_min_kernel(vz, cell_start, out):
     """Lowest z of each fine cell (inf where empty); points are sorted by cell."""
     for k in range(out.shape[0]):
@@ -152,15 +163,10 @@ def _longest_edge2(vx, vy, a, b, c):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _axelsson_test(vx, vy, vz, a, b, c, px, py, pz, tan2_angle, max_dist, max_slope2, below_free):
-    """Axelsson's test of point p against the facet (a, b, c). Above the facet, p passes when
-    its distance to the facet's plane is at most ``max_dist`` and every angle between the
-    plane and the lines from p to the three vertices is at most the iteration angle (tan²
-    given; the angle at the vertex nearest p's projection is the largest). Below the facet
-    (with ``below_free``) only the distance counts: the TIN, built up from the lowest points,
-    is too high there. A facet steeper than the terrain angle (slope² > ``max_slope2``, e.g.
-    one stood up along a wall) is no terrain and accepts nothing. Returns the signed distance
-    (positive above) when p passes, NaN otherwise."""
+def _facet_plane(vx, vy, vz, a, b, c, max_slope2):
+    """Unit normal (pointing up) of the facet (a, b, c); NaNs when the facet is vertical or
+    steeper than the terrain angle (slope² > ``max_slope2``, e.g. one stood up along a wall:
+    no terrain, it accepts nothing). Computed once per facet for all the points tested in it."""
     ax = vx[a]
     ay = vy[a]
     az = vz[a]
@@ -174,13 +180,27 @@ def _axelsson_test(vx, vy, vz, a, b, c, px, py, pz, tan2_angle, max_dist, max_sl
     ny = uz * wx - ux * wz
     nz = ux * wy - uy * wx
     if nz == 0.0 or nx * nx + ny * ny > max_slope2 * nz * nz:
-        return np.nan
+        return np.nan, np.nan, np.nan
     norm = math.sqrt(nx * nx + ny * ny + nz * nz)
     if nz < 0.0:
         norm = -norm
-    nx /= norm
-    ny /= norm
-    nz /= norm
+    return nx / norm, ny / norm, nz / norm
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _plane_test(vx, vy, vz, a, b, c, nx, ny, nz, px, py, pz, tan2_angle, max_dist, below_free):
+    """Axelsson's test of point p against the facet (a, b, c) of unit normal (nx, ny, nz) (from
+    _facet_plane; NaN: the facet accepts nothing). Above the facet, p passes when its distance
+    to the facet's plane is at most ``max_dist`` and every angle between the plane and the lines
+    from p to the three vertices is at most the iteration angle (tan² given; the angle at the
+    vertex nearest p's projection is the largest). Below the facet (with ``below_free``) only
+    the distance counts: the TIN, built up from the lowest points, is too high there. Returns
+    the signed distance (positive above) when p passes, NaN otherwise."""
+    if nz != nz:
+        return np.nan
+    ax = vx[a]
+    ay = vy[a]
+    az = vz[a]
     d = (px - ax) * nx + (py - ay) * ny + (pz - az) * nz
     if abs(d) > max_dist:
         return np.nan
@@ -201,18 +221,26 @@ def _axelsson_test(vx, vy, vz, a, b, c, px, py, pz, tan2_angle, max_dist, max_sl
     return d
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _axelsson_test(vx, vy, vz, a, b, c, px, py, pz, tan2_angle, max_dist, max_slope2, below_free):
+    """Axelsson's test of point p against the facet (a, b, c) (_facet_plane, then _plane_test).
+    Returns the signed distance (positive above) when p passes, NaN otherwise."""
+    nx, ny, nz = _facet_plane(vx, vy, vz, a, b, c, max_slope2)
+    return _plane_test(vx, vy, vz, a, b, c, nx, ny, nz, px, py, pz, tan2_angle, max_dist, below_free)
+
+
 @njit(cache=True, nogil=True)
-def _test_point(tv, tn, vx, vy, vz, t, px, py, pz, tan2_angle, max_dist, max_slope2, mirror):
-    """Axelsson's test of point p in triangle t; when it fails and ``mirror`` is set, the test
-    of p's mirror image through the nearest vertex of t (2 v - p, in 3-D) against the triangle
-    holding that image: a point up a steep slope from a vertex passes when the slope goes on
-    beyond the vertex, which a single facet across a break of slope cannot show (Axelsson's
-    mirror points). Returns the signed distance of the point (or of its image) to the facet
+def _test_point(tv, tn, vx, vy, vz, t, nx, ny, nz, px, py, pz, tan2_angle, max_dist, max_slope2, mirror):
+    """Axelsson's test of point p in triangle t (of unit normal (nx, ny, nz), from _facet_plane);
+    when it fails and ``mirror`` is set, the test of p's mirror image through the nearest vertex
+    of t (2 v - p, in 3-D) against the triangle holding that image: a point up a steep slope
+    from a vertex passes when the slope goes on beyond the vertex, which a single facet across a
+    break of slope cannot show (Axelsson's mirror points). Returns the signed distance of the point (or of its image) to the facet
     when it passes, NaN otherwise."""
     a = tv[t, 0]
     b = tv[t, 1]
     c = tv[t, 2]
-    d = _axelsson_test(vx, vy, vz, a, b, c, px, py, pz, tan2_angle, max_dist, max_slope2, True)
+    d = _plane_test(vx, vy, vz, a, b, c, nx, ny, nz, px, py, pz, tan2_angle, max_dist, True)
     if d == d or not mirror:
         return d
     v = a
@@ -261,6 +289,7 @@ def test_kernel(tv, tn, vx, vy, vz, head, nxt, status, dirty, ndirty, best,
         c = tv[t, 2]
         e2 = _longest_edge2(vx, vy, a, b, c)
         frozen = e2 < min_edge2
+        nx, ny, nz = _facet_plane(vx, vy, vz, a, b, c, max_slope2)
         bi = -1
         bd = np.inf
         kept = -1
@@ -271,8 +300,8 @@ def test_kernel(tv, tn, vx, vy, vz, head, nxt, status, dirty, ndirty, best,
             if status[x] == CANDIDATE:
                 keep = True
                 if e2 <= max_edge2:
-                    d = _test_point(tv, tn, vx, vy, vz, t, vx[x], vy[x], vz[x], tan2_angle, max_dist,
-                                    max_slope2, mirror)
+                    d = _test_point(tv, tn, vx, vy, vz, t, nx, ny, nz, vx[x], vy[x], vz[x], tan2_angle,
+                                    max_dist, max_slope2, mirror)
                     if d == d:
                         if frozen or _at_vertex(vx, vy, a, b, c, vx[x], vy[x]):
                             # not to be inserted: ground at once
@@ -317,8 +346,9 @@ def insert_kernel(tv, tn, tstamp, vx, vy, vz, head, nxt, status, dirty, ndirty, 
             # it will be tested again next round)
             if e2 > max_edge2:
                 continue
-            d = _test_point(tv, tn, vx, vy, vz, t, vx[i], vy[i], vz[i], tan2_angle, max_dist, max_slope2,
-                            mirror)
+            nx, ny, nz = _facet_plane(vx, vy, vz, a, b, c, max_slope2)
+            d = _test_point(tv, tn, vx, vy, vz, t, nx, ny, nz, vx[i], vy[i], vz[i], tan2_angle, max_dist,
+                            max_slope2, mirror)
             if d != d:
                 continue
         if e2 < min_edge2:
@@ -343,11 +373,14 @@ def offset_kernel(tv, ntri, vx, vy, vz, head, nxt, status, offset, max_slope2, m
         found = 0
         if _longest_edge2(vx, vy, tv[t, 0], tv[t, 1], tv[t, 2]) > max_edge2:
             continue
+        a = tv[t, 0]
+        b = tv[t, 1]
+        c = tv[t, 2]
+        nx, ny, nz = _facet_plane(vx, vy, vz, a, b, c, max_slope2)
         x = head[t]
         while x >= 0:
             if status[x] == CANDIDATE:
-                d = _axelsson_test(vx, vy, vz, tv[t, 0], tv[t, 1], tv[t, 2], vx[x], vy[x], vz[x], np.inf,
-                                   offset, max_slope2, True)
+                d = _plane_test(vx, vy, vz, a, b, c, nx, ny, nz, vx[x], vy[x], vz[x], np.inf, offset, True)
                 if d == d:
                     status[x] = GROUND_OTHER
                     found += 1
@@ -498,6 +531,9 @@ def last_pass_kernel(tv, tn, ntri, vx, vy, vz, n, status, tan2_angle, max_dist, 
     counts = np.zeros(nchunks, dtype=np.int64)
     for ch in prange(nchunks):
         hint = 0
+        last = -1  # the triangle whose plane and edge test are at hand (consecutive points share one)
+        long = False
+        nx = ny = nz = np.nan
         for i in range(ch * size, min((ch + 1) * size, n)):
             if status[i] != THINNED:
                 continue
@@ -506,11 +542,16 @@ def last_pass_kernel(tv, tn, ntri, vx, vy, vz, n, status, tan2_angle, max_dist, 
             a = tv[t, 0]
             b = tv[t, 1]
             c = tv[t, 2]
-            if _longest_edge2(vx, vy, a, b, c) > max_edge2:
+            if t != last:
+                last = t
+                long = _longest_edge2(vx, vy, a, b, c) > max_edge2
+                nx, ny, nz = _facet_plane(vx, vy, vz, a, b, c, max_slope2)
+            if long:
                 continue
-            d = _test_point(tv, tn, vx, vy, vz, t, vx[i], vy[i], vz[i], tan2_angle, max_dist, max_slope2, mirror)
+            d = _test_point(tv, tn, vx, vy, vz, t, nx, ny, nz, vx[i], vy[i], vz[i], tan2_angle, max_dist,
+                            max_slope2, mirror)
             if d != d and offset > 0.0:
-                d = _axelsson_test(vx, vy, vz, a, b, c, vx[i], vy[i], vz[i], np.inf, offset, max_slope2, True)
+                d = _plane_test(vx, vy, vz, a, b, c, nx, ny, nz, vx[i], vy[i], vz[i], np.inf, offset, True)
             if d == d:
                 status[i] = GROUND_OTHER
                 counts[ch] += 1

@@ -73,7 +73,10 @@ Implementation (numba, core/filters/_ptd_tin.py and _ptd_kernels.py): one increm
 adjacency structure, never rebuilt. Every triangle keeps the list of candidate points inside
 it; a split or flip shares the points of the old triangles among the new ones, so no point is
 ever searched for. Only the triangles changed in the last round are tested again (in parallel),
-and the chosen points are inserted one by one with Lawson flips.
+and the chosen points are inserted one by one with Lawson flips. The rounds work on a copy of the
+candidates and seeds only (in a dense cloud the thinned points are most of the points, and the
+lists are then walked in a memory an order of magnitude smaller), in the points' order, so the
+TIN and the order of every list are those the whole array would give.
 """
 from __future__ import annotations
 
@@ -224,13 +227,9 @@ class PTD:
         K.spatial_sort_kernel(xyz[:, 0], xyz[:, 1], x0, y0, cell, ncols, nrows, block, perm, cell_start)
         ring = _ring(xr, yr, seed_cell)
         nv = n + 4 + ring.shape[0]
-        # x, y, z of each vertex and the next point of its triangle's list side by side: a point
-        # is one 32-byte row, read in one go (the lists are walked in no particular order).
-        rows = np.empty((nv, 4))
-        vx, vy, vz, nxt = rows[:, 0], rows[:, 1], rows[:, 2], rows[:n, 3]
-        for out, col, origin in ((vx, 0, x0), (vy, 1, y0), (vz, 2, 0.0)):
-            out[:n] = xyz[perm, col]
-            out[:n] -= origin
+        points = np.empty((nv, 3))
+        vx, vy, vz = points[:, 0], points[:, 1], points[:, 2]
+        K.gather_kernel(xyz, perm, x0, y0, points)
         steps.report(0.03)
 
         # 2. Seeds, low outliers.
@@ -260,31 +259,49 @@ class PTD:
             has_seed[:] = False
         steps.report(0.06)
 
-        # 3. The initial TIN: the box's corners, the ring, the seeds.
+        # 3. The points that take part in the densification (the candidates and the seeds) in rows of
+        # their own, in the same order, then the virtual vertices: in a dense cloud the thinned points
+        # are most of the points, and the TIN's rounds then walk a much smaller memory. A point's x, y,
+        # z side by side, read in one go; the next point of its triangle's list in a small array of its
+        # own (walking a list then waits on that array only, not on the coordinates).
+        member = status == K.CANDIDATE
+        member[seeds] = True
+        index = np.flatnonzero(member).astype(np.int32)  # the point of each member
+        del member
+        nm = index.size
+        mv = nm + 4 + ring.shape[0]
+        rows = np.empty((mv, 3))
+        mx, my, mz = rows[:, 0], rows[:, 1], rows[:, 2]
+        nxt = np.empty(nm, dtype=np.int32)
+        mx[:nm], my[:nm], mz[:nm] = vx[index], vy[index], vz[index]
+        mstatus = status[index]
+        mseeds = np.searchsorted(index, seeds).astype(np.int32)
+
+        # 4. The initial TIN: the box's corners, the ring, the seeds.
         zgrid = np.full(scols * srows, float(vz[seeds[0]]))
         zgrid[has_seed] = vz[seed_of_cell[has_seed]]
         zgrid = _fill_nearest(np.where(has_seed, zgrid, np.nan).reshape(srows, scols)) if has_seed.any() \
             else zgrid.reshape(srows, scols)
         m = seed_cell
         extra = np.vstack([[[-m, -m], [xr + m, -m], [xr + m, yr + m], [-m, yr + m]], ring])
-        vx[n:], vy[n:] = extra[:, 0], extra[:, 1]
+        mx[nm:], my[nm:] = extra[:, 0], extra[:, 1]
         c = np.clip((extra[:, 0] // seed_cell).astype(np.int64), 0, scols - 1)
         r = np.clip((extra[:, 1] // seed_cell).astype(np.int64), 0, srows - 1)
-        vz[n:] = zgrid[r, c]
-        capacity = 2 * nv + 16
+        mz[nm:] = zgrid[r, c]
+        capacity = 2 * mv + 16
         tv = np.empty((capacity, 3), dtype=np.int32)
         tn = np.empty((capacity, 3), dtype=np.int32)
         tstamp = np.empty(capacity, dtype=np.int32)
         head = np.empty(capacity, dtype=np.int32)
         dirty = np.empty(capacity, dtype=np.int32)
         state = np.zeros(3, dtype=np.int64)  # triangles, dirty-list length, dirty-list mark
-        T.init_box_kernel(tv, tn, tstamp, head, state, n, n + 1, n + 2, n + 3)
-        order = np.concatenate([np.arange(n + 4, nv), seeds]).astype(np.int32)
+        T.init_box_kernel(tv, tn, tstamp, head, state, nm, nm + 1, nm + 2, nm + 3)
+        order = np.concatenate([np.arange(nm + 4, mv), mseeds]).astype(np.int32)
         inserted = np.zeros(order.size, dtype=np.bool_)
-        T.insert_vertices_kernel(tv, tn, tstamp, dirty, state, vx, vy, head, nxt, status, order, inserted)
-        status[seeds] = np.where(inserted[ring.shape[0]:], K.GROUND_VERTEX, K.GROUND_OTHER)
+        T.insert_vertices_kernel(tv, tn, tstamp, dirty, state, mx, my, head, nxt, mstatus, order, inserted)
+        mstatus[mseeds] = np.where(inserted[ring.shape[0]:], K.GROUND_VERTEX, K.GROUND_OTHER)
         ntri = int(state[0])
-        T.fill_buckets_kernel(tv, tn, ntri, vx, vy, n, status, head, nxt)
+        T.fill_buckets_kernel(tv, tn, ntri, mx, my, nm, mstatus, head, nxt)
         # Every triangle is dirty for the first round.
         mark = 0
         dirty[:ntri] = np.arange(ntri, dtype=np.int32)
@@ -292,16 +309,16 @@ class PTD:
         ndirty = ntri
         new_dirty = np.empty(capacity, dtype=np.int32)
         best = np.empty(capacity, dtype=np.int32)
-        hints = np.zeros(nv - n, dtype=np.int64)
+        hints = np.zeros(mv - nm, dtype=np.int64)
         zlo, zhi = float(vz[:n].min()), float(vz[:n].max())
         state[1], state[2] = ndirty, mark
         for _ in range(2):  # the virtual vertices extrapolate the seeds' TIN
-            K.update_virtual_kernel(tv, tn, tstamp, dirty, state, vx, vy, vz, n, nv, hints, zlo, zhi,
+            K.update_virtual_kernel(tv, tn, tstamp, dirty, state, mx, my, mz, nm, mv, hints, zlo, zhi,
                                     _VIRTUAL_TOLERANCE_M)
         ndirty = int(state[1])
         steps.report(0.08)
 
-        # 4. Densification rounds.
+        # 5. Densification rounds.
         tan2 = tan_angle ** 2
         max_dist = float(self.max_distance_m)
         max_slope2 = math.tan(math.radians(self.max_terrain_angle_deg)) ** 2 \
@@ -310,19 +327,19 @@ class PTD:
         max_edge2 = float(self.max_edge_m) ** 2 if self.max_edge_m > 0 else np.inf
         mirror = bool(self.mirror)
         added = []
-        candidates = max(int((status == K.CANDIDATE).sum()), 1)
+        candidates = max(int((mstatus == K.CANDIDATE).sum()), 1)
         found = 0
         for rnd in range(_MAX_ROUNDS):
             if rnd:
                 state[1], state[2] = ndirty, mark
-                K.update_virtual_kernel(tv, tn, tstamp, dirty, state, vx, vy, vz, n, nv, hints, zlo, zhi,
+                K.update_virtual_kernel(tv, tn, tstamp, dirty, state, mx, my, mz, nm, mv, hints, zlo, zhi,
                                         _VIRTUAL_TOLERANCE_M)
                 ndirty = int(state[1])
-            got = K.test_kernel(tv, tn, vx, vy, vz, head, nxt, status, dirty, ndirty, best,
+            got = K.test_kernel(tv, tn, mx, my, mz, head, nxt, mstatus, dirty, ndirty, best,
                                 tan2, max_dist, max_slope2, min_edge2, max_edge2, mirror)
             mark += 1
             state[1], state[2] = 0, mark
-            got += K.insert_kernel(tv, tn, tstamp, vx, vy, vz, head, nxt, status, dirty, ndirty, best, new_dirty,
+            got += K.insert_kernel(tv, tn, tstamp, mx, my, mz, head, nxt, mstatus, dirty, ndirty, best, new_dirty,
                                    state, tan2, max_dist, max_slope2, min_edge2, max_edge2, mirror)
             dirty, new_dirty, ndirty = new_dirty, dirty, int(state[1])
             added.append(int(got))
@@ -333,11 +350,15 @@ class PTD:
                 break
         del dirty, new_dirty, best
 
-        # 5. Points near the final TIN, thinned points.
+        # 6. Points near the final TIN, thinned points (the TIN's vertices back to the points' numbers).
+        ntri = int(state[0])
         if self.offset_m > 0:
-            K.offset_kernel(tv, int(state[0]), vx, vy, vz, head, nxt, status, float(self.offset_m), max_slope2,
-                            max_edge2)
-        K.last_pass_kernel(tv, tn, int(state[0]), vx, vy, vz, n, status, tan2, max_dist, max_slope2, max_edge2,
+            K.offset_kernel(tv, ntri, mx, my, mz, head, nxt, mstatus, float(self.offset_m), max_slope2, max_edge2)
+        status[index] = mstatus
+        vx[n:], vy[n:], vz[n:] = mx[nm:], my[nm:], mz[nm:]
+        tv = np.concatenate([index, np.arange(n, nv, dtype=np.int32)])[tv[:ntri]]
+        del rows, head, mstatus
+        K.last_pass_kernel(tv, tn, ntri, vx, vy, vz, n, status, tan2, max_dist, max_slope2, max_edge2,
                            float(self.offset_m), mirror)
         ground = np.empty(n, dtype=bool)
         ground[perm] = (status == K.GROUND_VERTEX) | (status == K.GROUND_OTHER)

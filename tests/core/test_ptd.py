@@ -49,6 +49,19 @@ def test_dense_plane_is_all_ground_with_thinning():
     assert res.tin_vertex.sum() < 0.2 * len(xyz)  # about one vertex per m²
 
 
+def test_a_thinned_point_can_be_a_seed():
+    """A low outlier rejected as a seed leaves the seed to the next lowest point of its cell, here a
+    point of the outlier's 1 m square, thinned (not a candidate): the rounds, which work on the
+    candidates and seeds only, still have it as a vertex."""
+    xyz, _ = plane_scene(seed=3, size=40.0, density=6.0)
+    outlier, seed = len(xyz), len(xyz) + 1
+    xyz = np.vstack([xyz, [[X0 + 15.3, Y0 + 15.3, 80.0], [X0 + 15.6, Y0 + 15.6, 99.5]]])
+    res = PTD().run(xyz)
+    assert res.low_outlier[outlier] and not res.ground[outlier]
+    assert res.seed[seed] and res.tin_vertex[seed] and res.ground[seed]
+    assert res.ground.mean() > 0.999
+
+
 @pytest.mark.parametrize("tilt", [(0.0, 0.0), (0.1, 0.05)], ids=["flat", "tilted"])
 def test_box_on_plane_is_object_and_plane_is_ground(tilt):
     xyz, truth = plane_scene(tilt=tilt, box=BOX)
