@@ -11,7 +11,7 @@ class HybridAlgorithm(GroundFilterAlgorithm):
     SHIPPED = "SHIPPED"
     #: the SHIPPED enum's values (core: Hybrid.shipped_model) and labels, in that order
     SHIPPED_CHOICES = ("fast", "accurate")
-    SHIPPED_LABELS = ("fast (SMRF surfaces)", "accurate (SMRF + PTD surfaces, about 3x the filtering time)")
+    SHIPPED_LABELS = ("fast (SMRF surfaces)", "accurate (SMRF + PTD surfaces, about 2.4x the filtering time)")
     PROBABILITY = "PROBABILITY"
 
     def name(self):
@@ -34,7 +34,7 @@ filter-test samples 11, 21, 23, 31, 41, 51, 52 and 54 (their leave-one-sample-ou
 <i>fast</i> (the default): the features above. <i>accurate</i>: also the height of the point above
 the surface of the ground points of progressive TIN densification (PTD, Axelsson 2000, at fixed
 settings: 50 m seed cell, 30°, 1 m, offset 0.05 m) and that surface's slope; lower error on the
-ISPRS samples, about 3x the fast model's filtering time (it runs PTD; less with reading and writing).
+ISPRS samples, about 2.4x the fast model's filtering time (it runs PTD; less with reading and writing).
 <b>Model file</b> (optional): a model trained on the hybrid features (.npz); empty = the shipped
 model chosen above. A model trained on other features is refused.
 <b>Ground probability threshold</b>: a point is ground when the forest gives it at least this

@@ -25,8 +25,9 @@ feature                     value at the point
 ``ptd_ground_slope``        gradient magnitude (rise/run) of that surface
 ==========================  ==================================================================
 
-The PTD features cost a PTD run (about 2-3x the time of the other features): they are computed
-only when a model asks for them (the shipped :data:`PTD_MODEL`, not the default).
+The PTD features cost a PTD run (the accurate model's filter takes about 2.4x the fast one's time
+on 10 M points, docs/BENCHMARKS.md): they are computed only when a model asks for them (the
+shipped :data:`PTD_MODEL`, not the default).
 
 Every length is in metres, not in points, so the features mean the same on a 3 m-spacing
 airborne survey and on a 3 cm UAV cloud. Names made by ``core/learn/features.py``
@@ -347,7 +348,7 @@ class HybridResult:
 class Hybrid:
     """The learned hybrid ground filter. ``model_path`` empty = the shipped model named by
     ``shipped_model``: "fast" (:data:`DEFAULT_MODEL`, SMRF's surfaces and openings) or "accurate"
-    (:data:`PTD_MODEL`, the same and PTD's ground surface: about 3x the filtering time, better on the ISPRS
+    (:data:`PTD_MODEL`, the same and PTD's ground surface: about 2.4x the filtering time, better on the ISPRS
     samples). A point is ground when the model gives it a ground probability of at least
     ``ground_probability``."""
     model_path: str = ""
