@@ -374,7 +374,7 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         self.checkGroundPointsDestination(parameters, context)
         from . import pointclouds, styles
         input_path = pointclouds.input_path(self, parameters, context, self.INPUT, self.INPUT_LAYER)
-        output_path = self.parameterAsFileOutput(parameters, self.OUTPUT, context)
+        output_path = pointclouds.classified_output_path(self, parameters, context, self.OUTPUT, input_path)
         dtm_path = self.parameterAsOutputLayer(parameters, self.DTM, context) or None
         try:
             algorithm = self.buildFilter(parameters, context, feedback.pushInfo)

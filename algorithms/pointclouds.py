@@ -21,8 +21,8 @@ Every decision below comes from the file patterns the registered point-cloud pro
 import fnmatch
 import os
 
-from qgis.core import (QgsProcessingContext, QgsProcessingException, QgsProcessingParameterDefinition,
-                       QgsProcessingUtils, QgsProviderMetadata, QgsProviderRegistry)
+from qgis.core import (QgsProcessing, QgsProcessingContext, QgsProcessingException,
+                       QgsProcessingParameterDefinition, QgsProcessingUtils, QgsProviderMetadata, QgsProviderRegistry)
 
 try:  # QGIS >= 3.32 names the enum Qgis.FileFilterType.PointCloud
     from qgis.core import Qgis
@@ -104,6 +104,38 @@ def input_path(algorithm, parameters, context, file_name, layer_name):
     return path
 
 
+def is_survey_input(path):
+    """A folder of LAS/LAZ or a .vpc: several files in, so several classified files out."""
+    return bool(path) and (os.path.isdir(path) or path.lower().endswith(".vpc"))
+
+
+def _temporary(value, path, context):
+    """True when an output is Processing's temporary one: the dialog's default "[Save to temporary
+    file]", ``TEMPORARY_OUTPUT`` in qgis_process, a graphical model's intermediate step."""
+    sink = getattr(value, "sink", None)
+    if sink is not None:
+        value = sink.staticValue()
+    if value == QgsProcessing.TEMPORARY_OUTPUT:
+        return True
+    try:
+        folder = QgsProcessingUtils.tempFolder(context)  # QGIS >= 3.32 takes the context's setting
+    except TypeError:
+        folder = QgsProcessingUtils.tempFolder()
+    return bool(path) and os.path.abspath(path).startswith(os.path.abspath(folder) + os.sep)
+
+
+def classified_output_path(algorithm, parameters, context, name, input_path):
+    """The classified cloud's path. Several input files give several classified files, which a .vpc
+    names (core/engine/tiles.py ``output_files``): a temporary output of a folder or .vpc input is
+    therefore made a .vpc, where the user could not choose its extension (the dialog's default, a
+    model's intermediate step); a named one is left for the core to check."""
+    path = algorithm.parameterAsFileOutput(parameters, name, context)
+    if path and is_survey_input(input_path) and not path.lower().endswith(".vpc") \
+            and _temporary(parameters.get(name), path, context):
+        path = os.path.splitext(path)[0] + ".vpc"
+    return path
+
+
 def make_input_optional(param):
     """The file input is optional where a loaded layer may replace it."""
     param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagOptional)
@@ -119,12 +151,28 @@ def load_or_log(context, feedback, path, layer_name, output_name):
         details = QgsProcessingContext.LayerDetails(layer_name, context.project(), output_name,
                                                     QgsProcessingUtils.LayerHint.PointCloud)
         context.addLayerToLoadOnCompletion(path, details)
+        undrawn = _members_not_opened(path)
+        if undrawn:
+            feedback.pushInfo(f"{layer_name}: {path} is loaded, but this QGIS has no point-cloud provider that "
+                              f"opens its {'/'.join(undrawn)} files (QGIS builds with PDAL, as on Windows and "
+                              "macOS, do): the layer shows the files' extents only, not their points.")
         return keys[0]
     ext = ".copc.laz" if path.lower().endswith(".copc.laz") else os.path.splitext(path)[1].lower()
     feedback.pushInfo(f"{layer_name}: written to {path}. Not loaded: this QGIS has no point-cloud provider "
                       f"that opens {ext} files (QGIS builds with PDAL, as on Windows and macOS, do); "
                       "open it there or in CloudCompare.")
     return None
+
+
+def _members_not_opened(path, patterns=None):
+    """The extensions of a written .vpc's files (in the folder beside it) no provider here opens."""
+    if not path.lower().endswith(".vpc"):
+        return []
+    folder = os.path.splitext(path)[0]
+    names = os.listdir(folder) if os.path.isdir(folder) else []
+    exts = sorted({".copc.laz" if n.lower().endswith(".copc.laz") else os.path.splitext(n)[1].lower()
+                   for n in names})
+    return [ext for ext in exts if ext in READ_SUFFIXES and not providers_opening("cloud" + ext, patterns)]
 
 
 # -- the graphical modeler ------------------------------------------------------------------

@@ -247,12 +247,13 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         errors, rf, learning = _rf()
         from ..core.engine.workflow import DTMOptions
-        output = self.parameterAsFileOutput(parameters, self.OUTPUT, context)
+        input_path = self.parameterAsFile(parameters, self.INPUT, context)
+        output = pointclouds.classified_output_path(self, parameters, context, self.OUTPUT, input_path)
         dtm_path = self.parameterAsOutputLayer(parameters, self.DTM, context) or None
         try:
             dtm = DTMOptions(cell_size_m=self.parameterAsDouble(parameters, self.DTM_CELL, context),
                              fill_outside_hull=self.parameterAsBoolean(parameters, self.DTM_FILL, context))
-            learning.classify_file(self.parameterAsFile(parameters, self.INPUT, context), output,
+            learning.classify_file(input_path, output,
                                    self.parameterAsFile(parameters, self.MODEL, context), dtm_path=dtm_path,
                                    dtm=dtm, ignore_classes=self.parameterAsString(
                                        parameters, self.IGNORE_CLASSES, context) or "",

@@ -6,6 +6,7 @@ import subprocess
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from .conftest import classes_of
 
@@ -49,6 +50,59 @@ def test_folder_in_vpc_out_through_processing(groundsieve_provider, scene_laz, t
     assert result["GROUND_COUNT"] == sum(int((classes_of(tmp_path / "out" / "classified" / n) == 2).sum())
                                          for n in ("east.laz", "west.laz"))
     assert os.path.exists(tmp_path / "dtm.tif")
+
+
+def test_a_temporary_output_of_several_files_is_a_vpc(groundsieve_provider, scene_laz, tmp_path):
+    """The dialog's default "[Save to temporary file]" (TEMPORARY_OUTPUT) and a model's intermediate
+    step give no extension to choose: for a folder or .vpc input the classified cloud is then a .vpc."""
+    import processing
+    from groundsieve.core.io.lasfiles import read_vpc
+    src, _scene = scene_laz
+    _split(src, tmp_path / "in")
+    for alg, extra in (("groundsieve:smrf", {}), ("groundsieve:echogrid", {"DTM": "TEMPORARY_OUTPUT"})):
+        result = processing.run(alg, dict(extra, INPUT=str(tmp_path / "in"), OUTPUT="TEMPORARY_OUTPUT"))
+        out = result["OUTPUT"]
+        assert out.endswith(".vpc") and os.path.isfile(out), out
+        members = read_vpc(out)
+        assert sorted(os.path.basename(m) for m in members) == ["east.laz", "west.laz"]
+        assert sum(len(classes_of(m)) for m in members) == len(classes_of(src)) == result["POINT_COUNT"]
+    # one file in: a temporary output stays one LAZ; a named non-.vpc output of a folder is still refused
+    single = processing.run("groundsieve:smrf", {"INPUT": str(src), "OUTPUT": "TEMPORARY_OUTPUT"})["OUTPUT"]
+    assert single.endswith(".laz") and len(classes_of(single)) == len(classes_of(src))
+    from qgis.core import QgsProcessingException
+    with pytest.raises(QgsProcessingException, match="the output must name a .vpc"):
+        processing.run("groundsieve:smrf", {"INPUT": str(tmp_path / "in"), "OUTPUT": str(tmp_path / "c.laz")})
+
+
+def test_a_folder_step_feeds_the_next_step_of_a_model(groundsieve_provider, scene_laz, tmp_path):
+    """A graphical model whose first step filters a folder and whose classified cloud only feeds a
+    second step (not a model output, so a temporary one): it runs, the second step reads the .vpc."""
+    from qgis.core import (QgsProcessingContext, QgsProcessingFeedback, QgsProcessingModelAlgorithm,
+                           QgsProcessingModelChildAlgorithm, QgsProcessingModelChildParameterSource,
+                           QgsProcessingModelOutput, QgsProcessingModelParameter, QgsProcessingParameterFile)
+    src, _scene = scene_laz
+    _split(src, tmp_path / "in")
+    model = QgsProcessingModelAlgorithm("chain", "tests")
+    model.addModelParameter(QgsProcessingParameterFile("tiles", "Tiles", behavior=QgsProcessingParameterFile.Behavior.Folder),
+                            QgsProcessingModelParameter("tiles"))
+    first = QgsProcessingModelChildAlgorithm("groundsieve:smrf")
+    first.setChildId("smrf")
+    first.addParameterSources("INPUT", [QgsProcessingModelChildParameterSource.fromModelParameter("tiles")])
+    model.addChildAlgorithm(first)
+    second = QgsProcessingModelChildAlgorithm("groundsieve:echogrid")
+    second.setChildId("echo")
+    second.addParameterSources("INPUT", [QgsProcessingModelChildParameterSource.fromChildOutput("smrf", "OUTPUT")])
+    output = QgsProcessingModelOutput("classified", "classified")
+    output.setChildOutputName("OUTPUT")
+    second.setModelOutputs({"classified": output})
+    second.setDependencies([])
+    model.addChildAlgorithm(second)
+    out = tmp_path / "final.vpc"
+    context, feedback = QgsProcessingContext(), QgsProcessingFeedback()
+    results, ok = model.run({"tiles": str(tmp_path / "in"), "echo:classified": str(out)}, context, feedback)
+    assert ok and str(out) in results.values(), results
+    from groundsieve.core.io.lasfiles import read_vpc
+    assert sum(len(classes_of(m)) for m in read_vpc(str(out))) == len(classes_of(src))
 
 
 def test_vpc_through_qgis_process(scene_laz, tmp_path):
