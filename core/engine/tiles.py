@@ -45,7 +45,7 @@ from ..errors import Cancelled, GroundSieveError, InputError, InvalidParameterEr
 from ..io.lasfiles import (CHUNK_POINTS, VPC_EXTENSION, LasInfo, TileGrid, assemble_classified, bin_file,
                            check_survey, expand_inputs, iter_chunks, piece_cuts, read_part, scan_header, tile_cloud,
                            write_classified_piece, write_classified_stream, write_vpc)
-from ..io.outputs import LAS_EXTENSIONS, _ext, check_output_path
+from ..io.outputs import LAS_EXTENSIONS, _ext, _reason, check_folder_writable, check_output_path
 from ..progress import Steps
 
 #: Memory a point costs in a whole-cloud run with a DTM (measured: 321 bytes/point at 50 M points
@@ -275,6 +275,18 @@ def _check_disk(work_dir: str, infos: Sequence[LasInfo], buffer_m: float, size: 
                           f"tiles need about {need / 1e9:.1f} GB; set the working folder to a bigger disk")
 
 
+def _check_working_folder(parent: str, work: str) -> None:
+    """Refuse a working folder where the temporary tiles cannot be made (read-only, no permission),
+    before its disk's free space is read (a read-only file system reports none)."""
+    try:
+        check_folder_writable(work, parent)
+    except OutputError as err:
+        cause = err.__cause__
+        reason = _reason(cause) if isinstance(cause, OSError) else str(err)
+        raise OutputError(f"{parent}: the working folder cannot be written to ({reason}); "
+                          "choose a folder where you may create files") from err
+
+
 def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options, dtm_path: Optional[str] = None,
               dtm=None, steps: Optional[Steps] = None, log: Optional[Callable[[str], None]] = None) -> TiledRun:
     """Classify ``input_path`` (a LAS/LAZ, a folder or a .vpc) tile by tile; see the module's docstring.
@@ -301,6 +313,8 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
         f"({'set' if tiling.buffer_m is not None else 'the filter reach'}); {tiling.worker_count} worker(s).")
     steps.check()
     parent = tiling.work_dir or os.path.dirname(os.path.abspath(output_path or dtm_path or inputs[0]))
+    if os.path.exists(parent) and not os.path.isdir(parent):
+        raise OutputError(f"{parent}: the working folder is a file, not a folder")
     if not os.path.isdir(parent):
         raise OutputError(f"{parent}: the working folder does not exist")
     # The working folder is named after everything the tiles' results depend on: a run killed or
@@ -310,8 +324,13 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     if os.path.isdir(work):
         log(f"Resuming the interrupted run in {work}.")
     else:
+        _check_working_folder(parent, work)
         _check_disk(parent, [i for i in infos if not i.copc], buffer_m, size)  # COPC files are not binned
-        os.makedirs(work)
+        try:
+            os.makedirs(work)
+        except OSError as err:
+            raise OutputError(f"{parent}: the working folder cannot be written to ({_reason(err)}); "
+                              "choose a folder where you may create files") from err
     cluster = None
     pool = None
     rasters = []  # the DTM writer, released at once if the run fails

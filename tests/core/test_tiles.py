@@ -302,6 +302,32 @@ def test_a_full_working_disk_is_refused_before_work(scene_laz, tmp_path, monkeyp
     assert os.listdir(tmp_path) == []
 
 
+def test_a_working_folder_that_cannot_take_the_tiles_is_refused_in_words(scene_laz, tmp_path, monkeypatch):
+    """A file given as the working folder, and a read-only one (a read-only mount: the root user here
+    ignores permissions, so the file system's refusal is simulated where the probe file is made),
+    are refused by name before any work, before the free space is read (a read-only file system
+    reports none), and leave nothing behind."""
+    import errno
+    from groundsieve.core.io import outputs
+    out = tmp_path / "out" / "o.laz"
+    out.parent.mkdir()
+    afile = tmp_path / "notes.txt"
+    afile.write_text("x")
+    with pytest.raises(OutputError, match=r"notes\.txt: the working folder is a file, not a folder$"):
+        run_ground_filter(scene_laz, str(out), SMRF(), options=tiled(work_dir=str(afile)))
+    work = tmp_path / "ro"
+    work.mkdir()
+
+    def read_only(*_args, **_kwargs):
+        raise OSError(errno.EROFS, os.strerror(errno.EROFS))
+    monkeypatch.setattr(outputs.tempfile, "mkstemp", read_only)
+    monkeypatch.setattr(os, "makedirs", read_only)
+    with pytest.raises(OutputError, match=r"ro: the working folder cannot be written to \(Read-only file system\); "
+                                          r"choose a folder where you may create files$"):
+        run_ground_filter(scene_laz, str(out), SMRF(), options=tiled(work_dir=str(work)))
+    assert os.listdir(work) == [] and os.listdir(out.parent) == []
+
+
 def test_the_disk_check_counts_the_records_extra_bytes(tmp_path, monkeypatch):
     """The header's record size (extra bytes included) sizes the working folder: 1,000 points of
     format 1 need about 69 kB, the same points with 200 extra bytes each about 469 kB."""
