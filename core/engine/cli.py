@@ -46,8 +46,12 @@ def _add_common(parser: argparse.ArgumentParser) -> None:
                     help="fill DTM cells outside the ground hull (nearest value; default %(default)s)")
     io.add_argument("--last-returns", action=argparse.BooleanOptionalAction, default=fo["last_returns_only"],
                     help="filter only last returns (others become non-ground; default %(default)s)")
+    io.add_argument("--ignore-classes", default=None, metavar="LIST",
+                    help="classes never filtered, never ground, kept as they are and left out of the DTM: a list "
+                         "or ranges, 7,18,20-25 or PDAL's [7:18]; '' = none (default 7,18)")
+    # IGNORE_NOISE's former switch, still accepted (an explicit --ignore-classes wins)
     io.add_argument("--ignore-noise", action=argparse.BooleanOptionalAction, default=fo["ignore_noise"],
-                    help="ignore points already classified as noise (7, 18; default %(default)s)")
+                    help=argparse.SUPPRESS)
     io.add_argument("--keep-classes", action=argparse.BooleanOptionalAction, default=fo["keep_existing_classes"],
                     help="keep existing non-ground classes (default %(default)s)")
     tiles = parser.add_argument_group("survey scale: tiles")
@@ -219,7 +223,8 @@ def options_from(args, log=None):
                          memory_budget_mb=args.memory_budget, workers=args.workers,
                          work_dir=args.work_folder or None, scheduler=args.scheduler or "")
     options = FilterOptions(last_returns_only=args.last_returns, ignore_noise=args.ignore_noise,
-                            keep_existing_classes=args.keep_classes, tiling=tiling)
+                            ignore_classes=args.ignore_classes, keep_existing_classes=args.keep_classes,
+                            tiling=tiling)
     return algorithm, options, DTMOptions(cell_size_m=args.dtm_cell, fill_outside_hull=args.dtm_fill)
 
 
@@ -240,6 +245,8 @@ def main(argv: Optional[List[str]] = None, out=None) -> int:
     if not args.output and not args.dtm:
         print("groundsieve: give --output and/or --dtm", file=out)
         return 2
+    if not args.dtm and args.dtm_cell != _defaults(DTMOptions)["cell_size_m"]:
+        print("groundsieve: --dtm-cell is set but no --dtm is named: no DTM is made", file=out)
     progress = _progress_printer(out)
     try:
         log = lambda msg: print(msg, file=out, flush=True)  # noqa: E731
@@ -255,6 +262,11 @@ def main(argv: Optional[List[str]] = None, out=None) -> int:
     except GroundSieveError as err:
         print(f"groundsieve: {err}", file=out)
         return 1
+    from ..raster.crs import unit_warning
+    warning = unit_warning(args.input, run.crs_wkt if run.cloud is None else run.cloud.crs_wkt,
+                           "every length parameter (cell sizes, windows, thresholds)")
+    if warning:
+        print(f"WARNING: {warning}", file=out)
     points = run.point_count if run.cloud is None else len(run.cloud)
     print(f"{points:,} points, {run.ground_count:,} ground.", file=out)
     return 0

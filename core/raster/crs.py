@@ -25,3 +25,24 @@ def lonlat_box(x0: float, y0: float, x1: float, y1: float, crs_wkt: Optional[str
         return None
     lons, lats = [p[0] for p in lonlat], [p[1] for p in lonlat]
     return min(lons), min(lats), max(lons), max(lats)
+
+
+def unit_warning(path: str, crs_wkt: Optional[str], lengths: str = "every length parameter") -> Optional[str]:
+    """What to tell the user when the cloud has no CRS, or one whose unit is not the metre (the
+    filters read their lengths in the CRS's unit); None for a CRS in metres."""
+    if not crs_wkt:
+        return f"{path}: no CRS in the file; outputs have none either."
+    from osgeo import osr
+    ref = osr.SpatialReference()
+    try:
+        if ref.ImportFromWkt(crs_wkt) != 0:
+            return None
+    except RuntimeError:
+        return None
+    if ref.IsGeographic():
+        unit = "degrees"
+    elif ref.IsProjected() and abs(ref.GetLinearUnits() - 1.0) > 1e-12:
+        unit = ref.GetLinearUnitsName() or f"{ref.GetLinearUnits():g} m"
+    else:
+        return None
+    return f"{path}: the CRS's unit is {unit}, not metres: {lengths} was read in that unit."

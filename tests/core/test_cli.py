@@ -166,3 +166,36 @@ def test_hybrid_on_the_command_line_with_the_shipped_models(scene, tmp_path):
     assert set(np.unique(classes)) <= {1, 2} and (classes == 2).any()
     with pytest.raises(SystemExit):
         build_parser().parse_args(["hybrid", "--input", "x", "--output", "y", "--shipped", "best"])
+
+
+def test_ignored_classes_a_degree_crs_and_a_dtm_cell_without_dtm_as_in_the_dialog(scene, tmp_path):
+    """--ignore-classes is IGNORE_CLASSES (the dialog's words, its default 7,18); a cloud whose CRS is
+    in degrees is warned about as qgis_process does; --dtm-cell without --dtm says no DTM is made."""
+    las = laspy.read(scene)
+    las.classification = np.where(np.arange(len(las.points)) % 10 == 0, 20, 1).astype(np.uint8)
+    marked = tmp_path / "marked.laz"
+    las.write(str(marked))
+    args = build_parser().parse_args(["smrf", "--input", "a", "--output", "b", "--ignore-classes", "7,18,20-25"])
+    assert tuple(options_from(args)[1].ignored) == (7, 18, 20, 21, 22, 23, 24, 25)
+    assert tuple(options_from(build_parser().parse_args(["smrf", "--input", "a", "--output", "b"]))[1].ignored) \
+        == (7, 18)
+    out = io.StringIO()
+    assert main(["smrf", "--input", str(marked), "--output", str(tmp_path / "c.laz"), "--ignore-classes", "20"],
+                out=out) == 0, out.getvalue()
+    classes = np.asarray(laspy.read(tmp_path / "c.laz").classification)
+    assert np.array_equal(classes == 20, np.asarray(las.classification) == 20)  # kept as they were
+    assert "WARNING" not in out.getvalue()  # the scene's CRS is in metres
+    out = io.StringIO()
+    assert main(["smrf", "--input", "a.laz", "--output", "b.laz", "--ignore-classes", "7,x"], out=out) == 1
+    assert "ignored classes" in out.getvalue() and "Traceback" not in out.getvalue()
+
+    import pyproj
+    las.header.add_crs(pyproj.CRS.from_epsg(4326))
+    degrees = tmp_path / "degrees.laz"
+    las.write(str(degrees))
+    out = io.StringIO()
+    assert main(["smrf", "--input", str(degrees), "--output", str(tmp_path / "d.laz"), "--dtm-cell", "0.5"],
+                out=out) == 0, out.getvalue()
+    text = out.getvalue()
+    assert f"WARNING: {degrees}: the CRS's unit is degrees, not metres: every length parameter" in text
+    assert "--dtm-cell is set but no --dtm is named: no DTM is made" in text
