@@ -275,6 +275,20 @@ def _check_disk(work_dir: str, infos: Sequence[LasInfo], buffer_m: float, size: 
                           f"tiles need about {need / 1e9:.1f} GB; set the working folder to a bigger disk")
 
 
+#: The most cells a survey's DTM may have: it is written block by block (``BlockGeoTIFF``, sparse), so
+#: memory does not bound it; 2e10 cells are 80 GB of float32, a 0.5 m DTM of 5,000 km².
+MAX_SURVEY_DTM_CELLS = 20_000_000_000
+
+
+def survey_dtm_grid(infos: Sequence[LasInfo], cell: float):
+    """The survey DTM's grid over every file's header bounds, refused (naming the cell size) when it
+    would have more than :data:`MAX_SURVEY_DTM_CELLS` cells: the headers alone tell, before any work."""
+    from ..grids.spec import GridSpec
+    xs = np.array([v for i in infos if i.count for v in (i.mins[0], i.maxs[0])])
+    ys = np.array([v for i in infos if i.count for v in (i.mins[1], i.maxs[1])])
+    return GridSpec.covering(xs, ys, cell, what="DTM", bytes_per_cell=0.0, max_cells=MAX_SURVEY_DTM_CELLS)
+
+
 def _check_working_folder(parent: str, work: str) -> None:
     """Refuse a working folder where the temporary tiles cannot be made (read-only, no permission),
     before its disk's free space is read (a read-only file system reports none)."""
@@ -302,6 +316,8 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     if not any(i.count for i in infos):
         raise InputError(f"{input_path}: the input holds no points")
     outs = check_tiled_outputs(inputs, output_path, dtm_path)
+    if dtm_path:
+        survey_dtm_grid(infos, dtm.cell_size_m)  # a DTM cell far too small for the survey, refused now
     # The reach rounded up to whole metres: the buffer's edges then sit on whole metres, where the
     # filters' grids (edges on multiples of their cell) put theirs without floating-point doubt.
     buffer_m = math.ceil(filter_reach_m(algorithm)) if tiling.buffer_m is None else float(tiling.buffer_m)
@@ -465,11 +481,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     # 2. the DTM's grid, over every file's header bounds, and its block writer
     dtm_writer = None
     if dtm_path:
-        from ..grids.spec import GridSpec
         from ..raster.geotiff import BlockGeoTIFF
-        xs = np.array([v for i in infos if i.count for v in (i.mins[0], i.maxs[0])])
-        ys = np.array([v for i in infos if i.count for v in (i.mins[1], i.maxs[1])])
-        dtm_grid = GridSpec.covering(xs, ys, dtm.cell_size_m, what="DTM")
+        dtm_grid = survey_dtm_grid(infos, dtm.cell_size_m)
         dtm_writer = BlockGeoTIFF(os.path.join(work, "dtm.tif"), dtm_grid, crs_wkt=crs_wkt)
         if rasters is not None:
             rasters.append(dtm_writer)

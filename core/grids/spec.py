@@ -172,13 +172,14 @@ class GridSpec:
 
     @classmethod
     def covering(cls, x: np.ndarray, y: np.ndarray, cell: float, *, what: str = "grid",
-                 bytes_per_cell: float = 8.0, bytes_per_empty_cell: float = 0.0) -> "GridSpec":
+                 bytes_per_cell: float = 8.0, bytes_per_empty_cell: float = 0.0,
+                 max_cells: int = MAX_CELLS) -> "GridSpec":
         """The smallest grid with edges on multiples of ``cell`` that holds every point.
 
         Refused before anything is allocated when its estimated peak memory,
         ``cells * bytes_per_cell + max(0, cells - points) * bytes_per_empty_cell`` (what the
         caller's grids cost per cell, and per cell no point reaches, e.g. for filling holes),
-        is above the budget (:func:`check_memory`), or when it has more than ``MAX_CELLS``."""
+        is above the budget (:func:`check_memory`), or when it has more than ``max_cells``."""
         if not (cell > 0 and math.isfinite(cell)):
             raise InvalidParameterError(f"{what}: cell size must be a finite number > 0 (got {cell})")
         if cell > MAX_CELL_M:
@@ -200,10 +201,10 @@ class GridSpec:
         cells = nrows * ncols
         estimate = cells * float(bytes_per_cell) + max(0, cells - int(np.size(x))) * float(bytes_per_empty_cell)
         check_memory(estimate, what=what, shape=(nrows, ncols), cell=cell, x=x, y=y)
-        if cells > MAX_CELLS:
+        if cells > max_cells:
             raise InvalidParameterError(
-                f"{what}: a cell size of {cell:g} m over an extent of {xmax - xmin:.1f} x {ymax - ymin:.1f} m "
-                f"needs {ncols} x {nrows} = {cells:,} cells (limit {MAX_CELLS:,}); use a larger cell size")
+                f"{what}: a cell size of {cell:g} m over an extent of {xmax - xmin:,.1f} x {ymax - ymin:,.1f} m "
+                f"needs {ncols:,} x {nrows:,} = {cells:,} cells (limit {max_cells:,}); use a larger cell size")
         return cls(float(x0), float(top), float(cell), nrows, ncols)
 
     @property

@@ -328,6 +328,26 @@ def test_a_working_folder_that_cannot_take_the_tiles_is_refused_in_words(scene_l
     assert os.listdir(work) == [] and os.listdir(out.parent) == []
 
 
+def test_a_survey_dtm_cell_far_too_small_is_refused_by_its_cell_before_any_work(scene_laz, tmp_path, monkeypatch):
+    """A tiled run's DTM is written block by block: its size is bounded by cells, not by the memory
+    budget, and a typing error (0.001 m) is named as the cell size from the headers, before binning."""
+    from groundsieve.core.engine import tiles
+    from groundsieve.core.errors import InvalidParameterError
+    from groundsieve.core.grids import spec
+    out, dtm = tmp_path / "o.laz", tmp_path / "d.tif"
+    with pytest.raises(InvalidParameterError, match=r"^DTM: a cell size of 0.001 m over an extent of .* cells "
+                                                    r"\(limit 20,000,000,000\); use a larger cell size$"):
+        run_ground_filter(scene_laz, str(out), SMRF(), options=tiled(work_dir=str(tmp_path)), dtm_path=str(dtm),
+                          dtm=DTMOptions(cell_size_m=0.001))
+    assert os.listdir(tmp_path) == []  # no working folder: refused before binning
+    # a memory budget smaller than the whole DTM grid does not stop it (only the tiles' grids count)
+    monkeypatch.setattr(spec, "memory_budget_bytes", lambda: 4_000_000)
+    run_ground_filter(scene_laz, str(out), SMRF(), options=tiled(), dtm_path=str(dtm), dtm=DTMOptions(cell_size_m=0.25))
+    from osgeo import gdal
+    raster = gdal.Open(str(dtm))
+    assert raster.RasterXSize * raster.RasterYSize * 8 > 4_000_000 and tiles.MAX_SURVEY_DTM_CELLS == 2 * 10**10
+
+
 def test_the_disk_check_counts_the_records_extra_bytes(tmp_path, monkeypatch):
     """The header's record size (extra bytes included) sizes the working folder: 1,000 points of
     format 1 need about 69 kB, the same points with 200 extra bytes each about 469 kB."""
