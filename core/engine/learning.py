@@ -22,6 +22,7 @@ from ..learn.rf import (CRITERIA, DEFAULT_PRESET, PRESETS, SCALERS, ForestParams
 #: The paper's grid: splitting criterion x number of trees x scaler.
 PAPER_GRID = tuple((c, t, s) for c in CRITERIA for t in (100, 150, 200) for s in SCALERS)
 EXCLUDED_BY_DEFAULT = (0, 7, 18)  # never classified, noise
+EXCLUDED_NAMES = {0: "never classified", 7: "low noise", 18: "high noise"}
 
 
 @dataclass(frozen=True)
@@ -63,6 +64,12 @@ def _labelled(cloud, classes, log):
     if classes is None:
         present = np.unique(labels)
         classes = tuple(int(c) for c in present if c not in EXCLUDED_BY_DEFAULT)
+        if len(classes) < 2:
+            never = ", ".join(f"{int(c)} = {EXCLUDED_NAMES[int(c)]}" for c in present if c in EXCLUDED_BY_DEFAULT)
+            held = (f"only class {classes[0]}" + (f" besides classes never learnt ({never})" if never else "")
+                    if classes else f"only classes never learnt ({never})")
+            raise InputError(f"{cloud.path}: at least two classes are needed to train, and the file holds {held}; "
+                             "classify a training area first (ground 2 and the others)")
         log(f"Learning the classes present in {cloud.path}: {', '.join(map(str, classes))}.")
     missing = [c for c in classes if not np.any(labels == c)]
     if missing:
@@ -314,6 +321,10 @@ def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_pat
     options = FilterOptions(ignore_classes=ignore_classes if ignore_classes is not None else ())
     check_outputs(input_path, output_path, [dtm_path])
     model = load_model(model_path)
+    if dtm_path and CLASS_GROUND not in model.classes:  # found before any work, as groundsieve:hybrid does
+        raise InputError(f"{model_path}: this model has no ground class (2) (its classes: "
+                         f"{', '.join(map(str, model.classes))}): it cannot make a DTM; leave the DTM out or "
+                         "train a model with ground points")
     cloud = read_cloud(input_path)
     for note in cloud.notes:
         log(note)

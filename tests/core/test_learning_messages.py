@@ -1,0 +1,54 @@
+"""rftrain and rfclassify refuse what cannot work before the work, in words: a training cloud with
+fewer than two classes that can be learnt, a DTM asked of a model without ground."""
+from __future__ import annotations
+
+import os
+
+import laspy
+import numpy as np
+import pytest
+
+from groundsieve.core.engine import learning
+from groundsieve.core.errors import InputError
+from groundsieve.core.learn.model_file import save_model
+from groundsieve.core.learn.rf import ForestParams, train_forest
+from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    path = tmp_path_factory.mktemp("learning") / "scene.laz"
+    write_scene(make_scene(SceneSpec(size_m=40.0, density_per_m2=2.0, seed=11)), path)
+    return str(path)
+
+
+def _with_classes(src, path, classes):
+    las = laspy.read(src)
+    las.classification = np.resize(np.asarray(classes, dtype=np.uint8), len(las.points))
+    las.write(str(path))
+    return str(path)
+
+
+def test_training_without_two_learnable_classes_says_what_the_file_holds(scene, tmp_path):
+    unclassified = _with_classes(scene, tmp_path / "unclassified.laz", [0])
+    with pytest.raises(InputError, match=r"unclassified\.laz: at least two classes are needed to train, and the file "
+                                         r"holds only classes never learnt \(0 = never classified\); classify a "
+                                         r"training area first"):
+        learning.train_file(unclassified, str(tmp_path / "m.npz"))
+    ground_only = _with_classes(scene, tmp_path / "ground.laz", [2, 2, 7])
+    with pytest.raises(InputError, match=r"ground\.laz: .* holds only class 2 besides classes never learnt "
+                                         r"\(7 = low noise\)"):
+        learning.train_file(ground_only, str(tmp_path / "m.npz"))
+    assert not os.path.exists(tmp_path / "m.npz")
+
+
+def test_a_dtm_from_a_model_without_ground_is_refused_before_the_work(scene, tmp_path):
+    X = np.random.default_rng(1).normal(size=(100, 1)).astype(np.float32)
+    model = train_forest(X, np.where(X[:, 0] > 0, 6, 5), ["above_smrf"], ForestParams(n_trees=2), n_jobs=1)
+    path = tmp_path / "no_ground.npz"
+    save_model(model, str(path))
+    stages = []
+    with pytest.raises(InputError, match=r"no_ground\.npz: this model has no ground class \(2\) \(its classes: 5, 6\)"):
+        learning.classify_file(scene, str(tmp_path / "c.laz"), str(path), dtm_path=str(tmp_path / "d.tif"),
+                               progress=stages.append)
+    assert stages == [] and sorted(os.listdir(tmp_path)) == ["no_ground.npz"]
