@@ -106,7 +106,7 @@ def _add_hybrid(sub) -> None:
                             "chosen by --shipped")
     group.add_argument("--shipped", dest="f_shipped_model", default=d["shipped_model"], choices=list(SHIPPED_MODELS),
                        help="the shipped model used when no --model is given: fast = SMRF surfaces (the default), "
-                            "accurate = SMRF + PTD surfaces (lower error on the ISPRS samples, about 3x slower); "
+                            "accurate = SMRF + PTD surfaces (lower error on the ISPRS samples, about 2.4x slower); "
                             "default %(default)s")
     group.add_argument("--probability", dest="f_ground_probability", type=float, default=d["ground_probability"],
                        metavar="X", help="ground probability threshold; default %(default)s")
