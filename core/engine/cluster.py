@@ -6,7 +6,12 @@ result. Here those jobs go to Dask distributed instead of a local pool:
 * ``""`` (the default): not used at all; the engine runs its local processes or threads and this
   module's only import of ``distributed`` never happens (the plugin does not need it);
 * ``local:N``: a ``LocalCluster`` of N worker processes, one thread each, on this machine;
-* ``tcp://host:port`` (or ``tls://``, ``ws://``...): an existing scheduler.
+* ``tcp://host:port`` (or ``tls://``, ``ws://``, ``wss://``, ``ucx://``: the schemes Dask's client
+  connects with): an existing scheduler. The connection is tried in a thread the run can abandon
+  (cancel, Ctrl-C) and has a time limit as a whole: distributed's own ``Client(timeout=...)`` bounds
+  the TCP connection but not the handshake read that follows, so an address where another service
+  listens (the dashboard's port, an SSH server) would otherwise hang for good or feed garbage to
+  Dask's decoder. Such an address is refused with one line naming it.
 
 On a cluster each job writes only its own tile's files (its classes and done marker in the
 working folder) and returns its DTM block; the client applies the classes to the per-file arrays
@@ -23,8 +28,11 @@ with the packages the core needs and the GroundSieve version.
 """
 from __future__ import annotations
 
+import asyncio
 import os
 import re
+import threading
+import time
 from typing import Callable, List, Optional, Sequence, Tuple
 
 from ..errors import Cancelled, GroundSieveError, InvalidParameterError
@@ -32,6 +40,12 @@ from ..errors import Cancelled, GroundSieveError, InvalidParameterError
 PIP_HINT = 'python -m pip install "dask[distributed]"'
 #: how long a scheduler address may take to answer
 CONNECT_TIMEOUT_S = 10
+#: the address schemes Dask's client connects with (distributed.comm's backends; not ``inproc``,
+#: which reaches only a scheduler inside this same process)
+SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
+#: how often a connection in progress checks the run's cancel callable
+POLL_S = 0.1
+NOT_DASK_HINT = "is this the dashboard's port? The scheduler's is usually 8786"
 #: a tile that raised an unexpected error is tried this many times more
 RETRIES = 2
 
@@ -70,7 +84,10 @@ class ClusterError(GroundSieveError):
 
 
 def parse_scheduler(text: str) -> Tuple[str, object]:
-    """``""`` -> ("", None); ``local:N`` -> ("local", N); ``tcp://host:port`` -> ("address", text)."""
+    """``""`` -> ("", None); ``local:N`` -> ("local", N); ``tcp://host:port`` -> ("address", text).
+
+    Checked without Dask: an address whose scheme Dask's client cannot use (``http://``, the
+    dashboard's) is refused here, before any connection."""
     text = (text or "").strip()
     if not text:
         return "", None
@@ -80,10 +97,19 @@ def parse_scheduler(text: str) -> Tuple[str, object]:
         if n < 1:
             raise InvalidParameterError(f"Dask scheduler {text!r}: local:N needs N >= 1 workers")
         return "local", n
-    if re.fullmatch(r"[a-z+]+://[^\s/]+(:\d+)?/?", text):
-        return "address", text
-    raise InvalidParameterError(f"Dask scheduler address {text!r}: give tcp://host:port (e.g. tcp://10.0.0.5:8786), "
-                                "local:N for N worker processes on this machine, or leave it empty")
+    usage = ("give tcp://host:port (e.g. tcp://10.0.0.5:8786), local:N for N worker processes on this "
+             "machine, or leave it empty")
+    m = re.fullmatch(r"([A-Za-z][A-Za-z0-9+.-]*)://([^\s/]+(:\d+)?)/?", text)
+    if m:
+        scheme = m.group(1).lower()
+        if scheme in SCHEMES:
+            return "address", f"{scheme}://{m.group(2)}"
+        accepted = ", ".join(f"{s}://" for s in SCHEMES)
+        what = (f"{scheme}:// is a web address (the dashboard's), not the scheduler's"
+                if scheme in ("http", "https") else f"Dask cannot connect to a {scheme}:// address")
+        raise InvalidParameterError(f"Dask scheduler address {text!r}: {what}; {usage} "
+                                    f"(Dask accepts {accepted})")
+    raise InvalidParameterError(f"Dask scheduler address {text!r}: {usage}")
 
 
 def import_distributed():
@@ -179,7 +205,8 @@ def check_workers(client, paths: Sequence[str], writable: Sequence[str] = ()) ->
 class Cluster:
     """A client on the scheduler (and the LocalCluster it started, if any); a context manager."""
 
-    def __init__(self, scheduler: str, log: Callable[[str], None] = lambda _m: None):
+    def __init__(self, scheduler: str, log: Callable[[str], None] = lambda _m: None,
+                 is_cancelled: Optional[Callable[[], bool]] = None):
         kind, value = parse_scheduler(scheduler)
         if not kind:
             raise InvalidParameterError("no Dask scheduler given")
@@ -205,13 +232,14 @@ class Cluster:
                 self.client = distributed.Client(self.local, timeout=f"{CONNECT_TIMEOUT_S}s")
                 log(f"Started a local Dask cluster of {value} worker process(es).")
             else:
-                self.client = distributed.Client(value, timeout=f"{CONNECT_TIMEOUT_S}s")
+                self.client = _connect(distributed, value, is_cancelled or (lambda: False))
                 log(f"Connected to the Dask scheduler {value}.")
         except (OSError, TimeoutError) as err:
             self.close()
-            raise ClusterError(f"The Dask scheduler {scheduler} did not answer within {CONNECT_TIMEOUT_S} s "
-                               f"({type(err).__name__}: {err}); check the address and that `dask scheduler` "
-                               "runs there and its port is open") from err
+            raise _unreachable(scheduler, err) from err
+        except BaseException:
+            self.close()
+            raise
 
     def close(self):
         client = getattr(self, "client", None)
@@ -225,6 +253,147 @@ class Cluster:
 
     def __exit__(self, *exc):
         self.close()
+
+
+def _unreachable(address: str, err: BaseException) -> ClusterError:
+    return ClusterError(f"The Dask scheduler {address} did not answer within {CONNECT_TIMEOUT_S} s "
+                        f"({type(err).__name__}: {err}); check the address and that `dask scheduler` "
+                        "runs there and its port is open")
+
+
+def _not_dask(address: str, why: str) -> ClusterError:
+    return ClusterError(f"{address}: not a Dask scheduler ({why}; {NOT_DASK_HINT})")
+
+
+def _connect(distributed, address: str, is_cancelled: Callable[[], bool]):
+    """A ``distributed.Client`` on the scheduler at ``address``, or a one-line :class:`ClusterError`.
+
+    First a probe under our own time limit: distributed's connection and handshake, then the
+    ``identity`` call, which a scheduler answers with its type. ``Client(timeout=...)`` alone bounds
+    the TCP connection only: a service that accepts and never answers (http.server, the dashboard)
+    left it waiting for the handshake for good, and one that sends a banner (SSH) had its bytes
+    decoded as a frame length (a MemoryError of exabytes). Then the client itself. Both run in a
+    daemon thread that this one polls every ``POLL_S``: a cancel or Ctrl-C abandons it at once (the
+    probe is cancelled; a client that connects after that is closed by its thread)."""
+    state = {"loop": None, "task": None, "abandoned": False, "client": None, "error": None, "stage": "probe"}
+    lock = threading.Lock()
+    done = threading.Event()
+
+    def attempt():
+        try:
+            loop = asyncio.new_event_loop()
+            try:
+                with lock:
+                    if state["abandoned"]:
+                        return
+                    task = loop.create_task(asyncio.wait_for(_probe(distributed, address),
+                                                             CONNECT_TIMEOUT_S + 2))
+                    state["loop"], state["task"] = loop, task
+                loop.run_until_complete(task)
+            finally:
+                with lock:
+                    state["loop"] = None
+                _close_loop(loop)
+            with lock:
+                if state["abandoned"]:
+                    return
+                state["stage"] = "client"
+            client = distributed.Client(address, timeout=f"{CONNECT_TIMEOUT_S}s")
+            with lock:
+                abandoned = state["abandoned"]
+                if not abandoned:
+                    state["client"] = client
+            if abandoned:
+                client.close()
+        except BaseException as err:  # reported by the polling thread (or dropped if abandoned)
+            state["error"] = err
+        finally:
+            done.set()
+
+    def abandon():
+        with lock:
+            state["abandoned"] = True
+            loop, task = state["loop"], state["task"]
+            if loop is not None:
+                try:
+                    loop.call_soon_threadsafe(task.cancel)
+                except RuntimeError:  # the loop closed meanwhile
+                    pass
+
+    thread = threading.Thread(target=attempt, name=f"groundsieve-dask-connect {address}", daemon=True)
+    # a whole-attempt limit besides the probe's own: the client's handshake after a probe that
+    # succeeded, bounded by the client's timeout but for its handshake read
+    deadline = time.monotonic() + 3 * CONNECT_TIMEOUT_S + 5
+    thread.start()
+    try:
+        while not done.wait(POLL_S):
+            if is_cancelled():
+                raise Cancelled("cancelled by the user")
+            if time.monotonic() > deadline:
+                raise _not_dask(address, f"no Dask answer within {CONNECT_TIMEOUT_S} s")
+    except BaseException:
+        abandon()
+        raise
+    err = state["error"]
+    if err is None:
+        return state["client"]
+    if isinstance(err, GroundSieveError):
+        raise err
+    if state["stage"] == "client":  # the probe's handshake went well: a Dask scheduler answers
+        if isinstance(err, (OSError, TimeoutError)):
+            raise _unreachable(address, err) from err
+        raise ClusterError(f"{address}: the Dask scheduler answered but its client could not connect "
+                           f"({type(err).__name__}: {err})") from err
+    if isinstance(err, (asyncio.TimeoutError, TimeoutError)):
+        raise _not_dask(address, f"no Dask answer within {CONNECT_TIMEOUT_S} s") from err
+    comm_closed = getattr(getattr(distributed, "comm", None), "CommClosedError", ())
+    if type(err) is OSError:  # distributed's connect: no TCP connection within the time limit
+        raise _unreachable(address, err) from err
+    if isinstance(err, comm_closed):
+        if "ssl" in str(err).lower() or "tls" in str(err).lower():
+            raise ClusterError(f"{address}: cannot connect to the Dask scheduler ({err})") from err
+        raise _not_dask(address, "it closed the connection without a Dask answer") from err
+    # MemoryError, ValueError, msgpack's errors...: Dask's decoder fed with another protocol's bytes
+    raise _not_dask(address, "what answers there does not speak Dask's protocol") from err
+
+
+async def _probe(distributed, address: str) -> None:
+    """Dask's connection handshake with ``address`` and its ``identity``: a Dask scheduler's, or a
+    :class:`ClusterError` naming what answered."""
+    from distributed.comm import connect
+    comm = await connect(address, timeout=CONNECT_TIMEOUT_S, **_connection_args(distributed, address))
+    try:
+        await comm.write({"op": "identity", "reply": True})
+        reply = await comm.read()
+    finally:
+        comm.abort()
+    kind = reply.get("type") if isinstance(reply, dict) else None
+    if kind != "Scheduler":
+        what = f"a Dask {kind} answers there" if isinstance(kind, str) else "its answer is not a scheduler's"
+        raise ClusterError(f"{address}: not a Dask scheduler ({what}; give the scheduler's address, "
+                           "usually port 8786)")
+
+
+def _connection_args(distributed, address: str) -> dict:
+    """The client's connection arguments (TLS certificates from Dask's configuration), as the
+    ``Client`` computes them."""
+    try:
+        from distributed.client import _maybe_call_security_loader
+        security = _maybe_call_security_loader(address)
+    except ImportError:
+        security = None
+    return (security or distributed.Security()).get_connection_args("client")
+
+
+def _close_loop(loop) -> None:
+    try:
+        pending = [t for t in asyncio.all_tasks(loop) if not t.done()]
+        for t in pending:
+            t.cancel()
+        if pending:
+            loop.run_until_complete(asyncio.gather(*pending, return_exceptions=True))
+    finally:
+        loop.close()
 
 
 def _set_spawn_executable():
@@ -245,7 +414,7 @@ def run_jobs(scheduler: str, function, jobs: List[dict], record: Callable[[objec
     """Run ``function(job)`` for every job on the cluster and ``record`` each result as it comes
     (in completion order). Cancellation cancels the futures not yet done."""
     own = cluster is None
-    cluster = cluster or Cluster(scheduler, log)
+    cluster = cluster or Cluster(scheduler, log, is_cancelled)
     try:
         distributed = import_distributed()
         client = cluster.client
