@@ -353,7 +353,7 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     try:
         if tiling.scheduler:  # one connection (one LocalCluster) for the binning, the tiles and the writing
             from .cluster import Cluster
-            cluster = Cluster(tiling.scheduler, log)
+            cluster = Cluster(tiling.scheduler, log, steps.is_cancelled)
         elif tiling.worker_count > 1 and (tiling.parallel if tiling.parallel != "auto"
                                           else _auto_parallel(total)) == "processes":
             # one pool of worker processes for the binning, the tiles and the writing (each

@@ -157,6 +157,17 @@ def test_a_cancel_while_connecting_stops_at_once(silent):
 
 
 @needs_dask
+def test_a_cancel_of_the_run_while_connecting_stops_it_at_once(survey, tmp_path, silent):
+    """The run's own cancel (Processing's Cancel, the CLI's) reaches the connection: tiles.py
+    connects with the run's cancel callable."""
+    t0 = time.monotonic()
+    err, took = bounded(filter_to(survey, tmp_path / "x.laz", silent.address,
+                                  is_cancelled=lambda: time.monotonic() - t0 > 1.0))
+    assert isinstance(err, Cancelled), repr(err)
+    assert took < 5 and os.listdir(tmp_path) == []
+
+
+@needs_dask
 def test_a_cancel_while_connecting_stops_run_jobs(silent):
     """run_jobs without a cluster of the run's connects with the run's cancel callable."""
     from groundsieve.core.engine.cluster import run_jobs
