@@ -102,17 +102,26 @@ class Model:
     def n_trees(self) -> int:
         return int(self.roots.shape[0])
 
-    def predict_proba(self, X: np.ndarray) -> np.ndarray:
+    def predict_proba(self, X: np.ndarray, *, steps=None) -> np.ndarray:
+        """(n, classes) mean class probabilities of the rows of ``X``. The rows go through the
+        forest in blocks of about a tenth of a second, with progress and a cancel check on
+        ``steps`` (core/progress.py) between blocks; each row's result does not depend on the blocks."""
+        from ..progress import Steps
         from ._rf_kernels import _forest_proba_kernel
+        from .features import _run_in_row_blocks
+        steps = steps or Steps()
         X = np.ascontiguousarray(self.scaler.transform(np.asarray(X, dtype=np.float32)), dtype=np.float32)
         if X.ndim != 2 or X.shape[1] != len(self.features):
             raise InputError(f"the model expects {len(self.features)} features, got an array of shape {X.shape}")
         self._check_arrays()
         out = np.empty((X.shape[0], self.classes.size), dtype=np.float64)
-        if not _forest_proba_kernel(X, self.roots, self.left, self.right, self.feature, self.threshold,
-                                    self.missing_left, self.value, out):
-            raise InputError("the model's trees are malformed (a node index or feature index out of "
-                             "range, a cycle, or class columns that do not match); train the model again")
+
+        def block(lo, hi):
+            if not _forest_proba_kernel(X[lo:hi], self.roots, self.left, self.right, self.feature, self.threshold,
+                                        self.missing_left, self.value, out[lo:hi]):
+                raise InputError("the model's trees are malformed (a node index or feature index out of "
+                                 "range, a cycle, or class columns that do not match); train the model again")
+        _run_in_row_blocks(block, X.shape[0], steps)
         return out
 
     def _check_arrays(self) -> None:
