@@ -23,6 +23,34 @@ def _bilinear(grid, fx, fy):
 
 
 @njit(cache=True, nogil=True, parallel=True)
+def _point_features_into(x, y, z, surfaces, surface_mode, zmin_raw, zmax_raw, x0, top, cell, column, out):
+    """The values of :func:`_point_features_kernel` (its columns: one per surface, then the three
+    column features), value j of point i written to ``out[i, column[j]]``, or not computed when
+    ``column[j]`` is -1: a point's row is written at once, in the order the caller wants."""
+    n = x.shape[0]
+    k = surfaces.shape[0]
+    nrows, ncols = zmin_raw.shape
+    for i in prange(n):
+        fx = (x[i] - x0) / cell - 0.5
+        fy = (top - y[i]) / cell - 0.5
+        for j in range(k):
+            if column[j] >= 0:
+                v = _bilinear(surfaces[j], fx, fy)
+                out[i, column[j]] = z[i] - v if surface_mode[j] == 1 else v
+        if column[k] >= 0 or column[k + 1] >= 0 or column[k + 2] >= 0:
+            c = min(max(int(math.floor((x[i] - x0) / cell)), 0), ncols - 1)
+            r = min(max(int(math.floor((top - y[i]) / cell)), 0), nrows - 1)
+            lo = zmin_raw[r, c]
+            hi = zmax_raw[r, c]
+            if column[k] >= 0:
+                out[i, column[k]] = z[i] - lo
+            if column[k + 1] >= 0:
+                out[i, column[k + 1]] = hi - lo
+            if column[k + 2] >= 0:
+                out[i, column[k + 2]] = (z[i] - lo) / (hi - lo) if hi > lo else 0.0
+
+
+@njit(cache=True, nogil=True)
 def _point_features_kernel(x, y, z, surfaces, surface_mode, zmin_raw, zmax_raw, x0, top, cell, out):
     """One row of ``out`` (n, n_surfaces + 3) per point.
 
@@ -31,22 +59,8 @@ def _point_features_kernel(x, y, z, surfaces, surface_mode, zmin_raw, zmax_raw, 
     value itself. Then three column features from the raw per-cell minimum and maximum of the
     point's own cell: z - min, max - min, and the rank (z - min) / (max - min) (0 when max = min).
     """
-    n = x.shape[0]
-    k = surfaces.shape[0]
-    nrows, ncols = zmin_raw.shape
-    for i in prange(n):
-        fx = (x[i] - x0) / cell - 0.5
-        fy = (top - y[i]) / cell - 0.5
-        for j in range(k):
-            v = _bilinear(surfaces[j], fx, fy)
-            out[i, j] = z[i] - v if surface_mode[j] == 1 else v
-        c = min(max(int(math.floor((x[i] - x0) / cell)), 0), ncols - 1)
-        r = min(max(int(math.floor((top - y[i]) / cell)), 0), nrows - 1)
-        lo = zmin_raw[r, c]
-        hi = zmax_raw[r, c]
-        out[i, k] = z[i] - lo
-        out[i, k + 1] = hi - lo
-        out[i, k + 2] = (z[i] - lo) / (hi - lo) if hi > lo else 0.0
+    column = np.arange(surfaces.shape[0] + 3)
+    _point_features_into(x, y, z, surfaces, surface_mode, zmin_raw, zmax_raw, x0, top, cell, column, out)
 
 
 @njit(cache=True, nogil=True)
