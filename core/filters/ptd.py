@@ -87,7 +87,7 @@ from typing import Tuple
 import numpy as np
 
 from ..errors import InvalidParameterError
-from ..progress import Steps
+from ..progress import Steps, run_cancellable
 from ..validate import check_choice, check_number, validate_xyz
 
 #: Largest seed grid accepted (cells): a guard against a seed cell far too small.
@@ -352,14 +352,16 @@ class PTD:
 
         # 6. Points near the final TIN, thinned points (the TIN's vertices back to the points' numbers).
         ntri = int(state[0])
+        # The two last kernels (about 0.7 s each on 10 M points) in a worker thread: a cancel is seen at once.
         if self.offset_m > 0:
-            K.offset_kernel(tv, ntri, mx, my, mz, head, nxt, mstatus, float(self.offset_m), max_slope2, max_edge2)
+            run_cancellable(K.offset_kernel, tv, ntri, mx, my, mz, head, nxt, mstatus, float(self.offset_m),
+                            max_slope2, max_edge2, steps=steps.sub(0.95, 0.97))
         status[index] = mstatus
         vx[n:], vy[n:], vz[n:] = mx[nm:], my[nm:], mz[nm:]
         tv = np.concatenate([index, np.arange(n, nv, dtype=np.int32)])[tv[:ntri]]
         del rows, head, mstatus
-        K.last_pass_kernel(tv, tn, ntri, vx, vy, vz, n, status, tan2, max_dist, max_slope2, max_edge2,
-                           float(self.offset_m), mirror)
+        run_cancellable(K.last_pass_kernel, tv, tn, ntri, vx, vy, vz, n, status, tan2, max_dist, max_slope2,
+                        max_edge2, float(self.offset_m), mirror, steps=steps.sub(0.97, 0.99))
         ground = np.empty(n, dtype=bool)
         ground[perm] = (status == K.GROUND_VERTEX) | (status == K.GROUND_OTHER)
         seed = np.zeros(n, dtype=bool)
