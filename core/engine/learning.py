@@ -257,7 +257,7 @@ class ModelGround(Hybrid):
         from ..progress import Steps
         steps = steps or Steps()
         X = hybrid_features(xyz, self.features, cell_size_m=self.cell_size_m, steps=steps.sub(0.0, 0.6))
-        proba = self.model.predict_proba(X)
+        proba = self.model.predict_proba(X, steps=steps.sub(0.6, 1.0))
         predicted = np.asarray(self.model.classes)[np.argmax(proba, axis=1)]  # as Model.predict
         ground = proba[:, [int(c) for c in self.model.classes].index(GROUND_CLASS)]
         steps.report(1.0)
@@ -346,7 +346,7 @@ def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_pat
                          f"{model_path} was trained on {list(model.features)} (e.g. colour present in one "
                          "and not the other)")
     X = feature_matrix(part, names, steps.sub(0.0, 0.5))
-    predicted_part = model.predict(X).astype(np.uint8)
+    predicted_part = model.predict(X, steps=steps.sub(0.5, 0.7)).astype(np.uint8)
     predicted = cloud.classification.astype(np.uint8)  # a copy: withheld and ignored points as read
     predicted[may] = predicted_part
     steps.report(0.7)

@@ -141,8 +141,10 @@ class Model:
             raise InputError(f"the model has {self.classes.size} classes but {self.value.shape[1]} "
                              "probability columns")
 
-    def predict(self, X: np.ndarray) -> np.ndarray:
-        return self.classes[np.argmax(self.predict_proba(X), axis=1)]
+    def predict(self, X: np.ndarray, *, steps=None) -> np.ndarray:
+        """The most probable class of each row (a tie to the first class); ``steps`` as in
+        :meth:`predict_proba`."""
+        return self.classes[np.argmax(self.predict_proba(X, steps=steps), axis=1)]
 
 
 def from_sklearn(forest, features: Sequence[str], classes: np.ndarray, scaler: Scaler, meta: dict) -> Model:

@@ -52,3 +52,21 @@ def test_a_dtm_from_a_model_without_ground_is_refused_before_the_work(scene, tmp
         learning.classify_file(scene, str(tmp_path / "c.laz"), str(path), dtm_path=str(tmp_path / "d.tif"),
                                progress=stages.append)
     assert stages == [] and sorted(os.listdir(tmp_path)) == ["no_ground.npz"]
+
+
+def test_rfclassify_reports_and_honours_cancel_while_it_predicts(tmp_path):
+    """The forest's prediction (rfclassify's longest stage on a big file after the features) moves
+    the bar within its range (0.5-0.7 of a run) and stops on a cancel there."""
+    from groundsieve.core.errors import Cancelled
+    from groundsieve.core.learn.hybrid import DEFAULT_MODEL
+    path = tmp_path / "cloud.laz"
+    write_scene(make_scene(SceneSpec.for_points(400_000, density_per_m2=10.0, seed=4)), path)
+    seen = []
+    learning.classify_file(str(path), str(tmp_path / "c.laz"), DEFAULT_MODEL, progress=seen.append)
+    inside = [v for v in seen if 0.5 < v < 0.7]
+    assert inside and seen == sorted(seen) and seen[-1] == 1.0
+    seen.clear()
+    with pytest.raises(Cancelled):
+        learning.classify_file(str(path), str(tmp_path / "d.laz"), DEFAULT_MODEL, progress=seen.append,
+                               is_cancelled=lambda: bool(seen) and seen[-1] > 0.5)
+    assert max(seen) < 0.7 and not os.path.exists(tmp_path / "d.laz")
