@@ -224,7 +224,9 @@ class PTD:
         nkeys = ((nrows + block - 1) // block) * ((ncols + block - 1) // block) * block * block
         perm = np.empty(n, dtype=np.int32)
         cell_start = np.empty(nkeys + 1, dtype=np.int64)
-        K.spatial_sort_kernel(xyz[:, 0], xyz[:, 1], x0, y0, cell, ncols, nrows, block, perm, cell_start)
+        steps.check()
+        run_cancellable(K.spatial_sort_kernel, xyz[:, 0], xyz[:, 1], x0, y0, cell, ncols, nrows, block, perm,
+                        cell_start, steps=steps.sub(0.0, 0.02))
         ring = _ring(xr, yr, seed_cell)
         nv = n + 4 + ring.shape[0]
         points = np.empty((nv, 3))
