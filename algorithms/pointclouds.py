@@ -105,8 +105,15 @@ def input_path(algorithm, parameters, context, file_name, layer_name):
 
 
 def is_survey_input(path):
-    """A folder of LAS/LAZ or a .vpc: several files in, so several classified files out."""
-    return bool(path) and (os.path.isdir(path) or path.lower().endswith(".vpc"))
+    """A folder of LAS/LAZ or a .vpc holding several files: several classified files out (one file
+    behind a folder or a .vpc gives one, as the core's ``output_files``)."""
+    if not (path and (os.path.isdir(path) or path.lower().endswith(".vpc"))):
+        return False
+    try:
+        from ..core.io.lasfiles import expand_inputs
+        return len(expand_inputs(path)) > 1
+    except Exception:  # noqa: BLE001 - a bad input is the core's to report, in its words
+        return False
 
 
 def _temporary(value, path, context):

@@ -323,13 +323,17 @@ def _connect(distributed, address: str, is_cancelled: Callable[[], bool]):
     thread = threading.Thread(target=attempt, name=f"groundsieve-dask-connect {address}", daemon=True)
     # a whole-attempt limit besides the probe's own: the client's handshake after a probe that
     # succeeded, bounded by the client's timeout but for its handshake read
-    deadline = time.monotonic() + 3 * CONNECT_TIMEOUT_S + 5
+    start = time.monotonic()
+    deadline = start + 3 * CONNECT_TIMEOUT_S + 5
     thread.start()
     try:
         while not done.wait(POLL_S):
             if is_cancelled():
                 raise Cancelled("cancelled by the user")
             if time.monotonic() > deadline:
+                if state["stage"] == "client":  # a scheduler answered the probe; its client stalls
+                    raise ClusterError(f"{address}: the Dask scheduler answered but its client could not "
+                                       f"connect within {deadline - start:.0f} s; check the scheduler's log")
                 raise _not_dask(address, f"no Dask answer within {CONNECT_TIMEOUT_S} s")
     except BaseException:
         abandon()

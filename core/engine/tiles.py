@@ -289,6 +289,37 @@ def survey_dtm_grid(infos: Sequence[LasInfo], cell: float):
     return GridSpec.covering(xs, ys, cell, what="DTM", bytes_per_cell=0.0, max_cells=MAX_SURVEY_DTM_CELLS)
 
 
+def fit_dtm_blocks(size: float, buffer_m: float, cell: float, tiling: "TileOptions",
+                   log: Callable[[str], None] = lambda _m: None) -> float:
+    """Each tile interpolates its DTM block (its cells and its buffer's) in memory, the workers at
+    the same time: a planned tile size is made smaller until their blocks fit the memory budget
+    (``grids.spec.memory_budget_bytes``); a tile size the user set, or a DTM cell so small that no
+    tile of 10 m fits, is refused before any work, naming the cell size."""
+    from ..errors import MemoryBudgetError
+    from ..grids.spec import _size, memory_budget_bytes
+    from .workflow import DTM_BYTES_PER_CELL
+    budget, workers = memory_budget_bytes(), tiling.worker_count
+    pad = math.ceil(buffer_m / cell - 1e-9) + 1
+
+    def side(s):
+        return math.ceil(s / cell - 1e-9) + 2 * pad
+    per_cell = DTM_BYTES_PER_CELL * workers
+    if side(size) ** 2 * per_cell <= budget:
+        return size
+    fits = (math.floor(math.sqrt(budget / per_cell)) - 2 * pad) * cell  # the largest tile whose block fits
+    smaller = math.floor(math.floor(fits / 10.0) * 10.0 / cell + 1e-9) * cell
+    if tiling.tile_size_m <= 0 and smaller >= 10.0:
+        log(f"Tiles of {smaller:g} m instead of {size:g} m: each tile's DTM block of {cell:g} m cells must fit "
+            f"the memory ({workers} worker(s) at a time).")
+        return smaller
+    n = side(size)
+    raise MemoryBudgetError(
+        f"DTM: a cell size of {cell:g} m makes each tile's DTM block {n:,} x {n:,} cells ({size:g} m tiles and "
+        f"a {buffer_m:g} m buffer); {workers} worker(s) at a time need about {_size(n * n * per_cell)} at peak, more "
+        f"than the {_size(budget)} this run may use; use a larger DTM cell size"
+        + (", a smaller tile size or fewer workers" if tiling.tile_size_m > 0 else " or fewer workers"))
+
+
 def _check_working_folder(parent: str, work: str) -> None:
     """Refuse a working folder where the temporary tiles cannot be made (read-only, no permission),
     before its disk's free space is read (a read-only file system reports none)."""
@@ -323,6 +354,8 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     buffer_m = math.ceil(filter_reach_m(algorithm)) if tiling.buffer_m is None else float(tiling.buffer_m)
     density = sample_density(next(i.path for i in infos if i.count))
     size = plan_tile_size(infos, tiling, buffer_m, density, multiple_of=dtm.cell_size_m if dtm_path else 1.0)
+    if dtm_path:
+        size = fit_dtm_blocks(size, buffer_m, dtm.cell_size_m, tiling, log)
     grid = TileGrid(size, buffer_m)
     total = sum(i.count for i in infos)
     log(f"{len(inputs)} file(s), {total:,} points; tiles of {size:g} m with a buffer of {buffer_m:g} m "

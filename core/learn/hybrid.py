@@ -284,6 +284,9 @@ def _hybrid_features(xyz: np.ndarray, names: Sequence[str], *, cell_size_m: floa
         _point_features_into(x[lo:hi], y[lo:hi], z[lo:hi], stacked, modes_array, zmin_raw, zmax_raw,
                              grid.x0, grid.top, grid.cell, target, result[lo:hi])
     _run_in_row_blocks(block, x.shape[0], steps.sub(0.72, 0.8))
+    for j, name in enumerate(names):  # a name given twice: the kernel wrote its last column only
+        if name in column and target[column[name]] != j:
+            result[:, j] = result[:, target[column[name]]]
     point_names = [n for n in names if n not in column]
     if point_names:
         from .features import FeatureSpec, compute_features

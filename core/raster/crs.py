@@ -32,7 +32,10 @@ def unit_warning(path: str, crs_wkt: Optional[str], lengths: str = "every length
     filters read their lengths in the CRS's unit); None for a CRS in metres."""
     if not crs_wkt:
         return f"{path}: no CRS in the file; outputs have none either."
-    from osgeo import osr
+    try:
+        from osgeo import osr
+    except ImportError:  # the command line without GDAL: the CRS cannot be read, nothing to say
+        return None
     ref = osr.SpatialReference()
     try:
         if ref.ImportFromWkt(crs_wkt) != 0:

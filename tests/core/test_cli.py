@@ -199,3 +199,14 @@ def test_ignored_classes_a_degree_crs_and_a_dtm_cell_without_dtm_as_in_the_dialo
     text = out.getvalue()
     assert f"WARNING: {degrees}: the CRS's unit is degrees, not metres: every length parameter" in text
     assert "--dtm-cell is set but no --dtm is named: no DTM is made" in text
+
+
+def test_the_command_runs_without_gdal_and_then_says_nothing_of_the_crs(scene, tmp_path, monkeypatch):
+    """The command line is the core alone: without GDAL (a pip-only Dask client) the CRS's unit
+    cannot be read, and the run ends as usual instead of a traceback after its output."""
+    from groundsieve.core.raster.crs import unit_warning
+    monkeypatch.setitem(sys.modules, "osgeo", None)
+    assert unit_warning("x.laz", 'GEOGCS["WGS 84"]') is None
+    out = io.StringIO()
+    assert main(["smrf", "--input", scene, "--output", str(tmp_path / "c.laz")], out=out) == 0, out.getvalue()
+    assert "ground." in out.getvalue() and "WARNING" not in out.getvalue()

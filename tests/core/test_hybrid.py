@@ -420,3 +420,15 @@ def test_the_ptd_features_skip_withheld_and_noise_points_and_split_far_apart_sit
     merged = hybrid_features(np.vstack([a, b]), PTD_FEATURES)
     np.testing.assert_array_equal(merged[:len(a)], hybrid_features(a, PTD_FEATURES))
     np.testing.assert_array_equal(merged[len(a):], hybrid_features(b, PTD_FEATURES))
+
+
+def test_a_feature_named_twice_gets_the_same_values_in_both_columns():
+    """A hand-made model may list a name twice: both columns hold the feature (the per-point kernel
+    writes one column per value; the other is copied), never uninitialised memory."""
+    from groundsieve.core.synthetic import SceneSpec, make_scene
+    scene = make_scene(SceneSpec(size_m=40.0, density_per_m2=2.0, seed=21))
+    xyz = np.column_stack([scene.x, scene.y, scene.z])
+    once = hybrid_features(xyz, ["above_cell_min", "cell_range", "above_smrf"])
+    twice = hybrid_features(xyz, ["above_cell_min", "cell_range", "above_cell_min", "above_smrf", "above_smrf"])
+    assert np.array_equal(twice[:, [0, 1, 3]], once) and np.array_equal(twice[:, 2], once[:, 0])
+    assert np.array_equal(twice[:, 4], once[:, 2])

@@ -12,7 +12,7 @@ import pytest
 
 from groundsieve.core.engine.tiles import TileOptions, TiledRun
 from groundsieve.core.engine.workflow import DTMOptions, FilterOptions, classify_cloud, make_dtm, run_ground_filter
-from groundsieve.core.errors import Cancelled, GroundSieveError, InputError, OutputError
+from groundsieve.core.errors import Cancelled, GroundSieveError, InputError, MemoryBudgetError, OutputError
 from groundsieve.core.filters.csf import CSF
 from groundsieve.core.filters.echogrid import EchoGrid
 from groundsieve.core.filters.evc import EVC
@@ -328,24 +328,44 @@ def test_a_working_folder_that_cannot_take_the_tiles_is_refused_in_words(scene_l
     assert os.listdir(work) == [] and os.listdir(out.parent) == []
 
 
-def test_a_survey_dtm_cell_far_too_small_is_refused_by_its_cell_before_any_work(scene_laz, tmp_path, monkeypatch):
-    """A tiled run's DTM is written block by block: its size is bounded by cells, not by the memory
-    budget, and a typing error (0.001 m) is named as the cell size from the headers, before binning."""
-    from groundsieve.core.engine import tiles
+def test_a_survey_dtm_cell_far_too_small_is_refused_by_its_cell_before_any_work(scene_laz, tmp_path):
+    """A tiled run's DTM is written block by block: the whole is bounded by its cells, and a typing
+    error (0.001 m) is named as the cell size from the headers, before binning."""
     from groundsieve.core.errors import InvalidParameterError
-    from groundsieve.core.grids import spec
     out, dtm = tmp_path / "o.laz", tmp_path / "d.tif"
     with pytest.raises(InvalidParameterError, match=r"^DTM: a cell size of 0.001 m over an extent of .* cells "
                                                     r"\(limit 20,000,000,000\); use a larger cell size$"):
         run_ground_filter(scene_laz, str(out), SMRF(), options=tiled(work_dir=str(tmp_path)), dtm_path=str(dtm),
                           dtm=DTMOptions(cell_size_m=0.001))
     assert os.listdir(tmp_path) == []  # no working folder: refused before binning
-    # a memory budget smaller than the whole DTM grid does not stop it (only the tiles' grids count)
-    monkeypatch.setattr(spec, "memory_budget_bytes", lambda: 4_000_000)
-    run_ground_filter(scene_laz, str(out), SMRF(), options=tiled(), dtm_path=str(dtm), dtm=DTMOptions(cell_size_m=0.25))
-    from osgeo import gdal
-    raster = gdal.Open(str(dtm))
-    assert raster.RasterXSize * raster.RasterYSize * 8 > 4_000_000 and tiles.MAX_SURVEY_DTM_CELLS == 2 * 10**10
+    # each tile's DTM block (its cells and its buffer's, every worker at once) must fit the memory:
+    # 0.01 m cells with 80 m tiles are refused before any work, naming the cell size
+    with pytest.raises(MemoryBudgetError, match=r"^DTM: a cell size of 0.01 m makes each tile's DTM block "
+                                                r"15,602 x 15,602 cells \(80 m tiles and a 38 m buffer\); 2 "
+                                                r"worker\(s\) at a time need about .* use a larger DTM cell size, "
+                                                r"a smaller tile size or fewer workers$"):
+        run_ground_filter(scene_laz, str(out), SMRF(), options=tiled(work_dir=str(tmp_path)), dtm_path=str(dtm),
+                          dtm=DTMOptions(cell_size_m=0.01))
+    assert os.listdir(tmp_path) == []
+
+
+def test_planned_tiles_shrink_until_their_dtm_blocks_fit_the_memory(monkeypatch):
+    from groundsieve.core.engine import tiles
+    from groundsieve.core.grids import spec
+    monkeypatch.setattr(spec, "memory_budget_bytes", lambda: 100_000_000)
+    lines = []
+    planned = TileOptions(workers=2)
+    # 0.1 m cells: a 500 m tile with a 38 m buffer is a 5,762-cell block, 2.7 GB for two workers
+    size = tiles.fit_dtm_blocks(500.0, 38.0, 0.1, planned, lines.append)
+    side = round(size / 0.1) + 2 * 381
+    assert size == 30.0 and side ** 2 * 40 * 2 <= 100_000_000 < (side + 100) ** 2 * 40 * 2
+    assert lines == ["Tiles of 30 m instead of 500 m: each tile's DTM block of 0.1 m cells must fit the memory "
+                     "(2 worker(s) at a time)."]
+    assert tiles.fit_dtm_blocks(500.0, 38.0, 1.0, planned) == 500.0  # 1 m cells fit as planned
+    with pytest.raises(MemoryBudgetError, match="0.1 m .* use a larger DTM cell size, a smaller tile size or fewer"):
+        tiles.fit_dtm_blocks(500.0, 38.0, 0.1, TileOptions(workers=2, tile_size_m=500.0))  # the user's size
+    with pytest.raises(MemoryBudgetError, match="0.01 m .* use a larger DTM cell size or fewer workers$"):
+        tiles.fit_dtm_blocks(500.0, 38.0, 0.01, planned)  # not even a 10 m tile fits
 
 
 def test_the_disk_check_counts_the_records_extra_bytes(tmp_path, monkeypatch):

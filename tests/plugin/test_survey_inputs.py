@@ -66,6 +66,11 @@ def test_a_temporary_output_of_several_files_is_a_vpc(groundsieve_provider, scen
         members = read_vpc(out)
         assert sorted(os.path.basename(m) for m in members) == ["east.laz", "west.laz"]
         assert sum(len(classes_of(m)) for m in members) == len(classes_of(src)) == result["POINT_COUNT"]
+    # one file behind a folder: one classified LAZ, as the core writes it for a named .laz
+    (tmp_path / "one").mkdir()
+    os.link(os.path.join(tmp_path, "in", "west.laz"), tmp_path / "one" / "west.laz")
+    one = processing.run("groundsieve:smrf", {"INPUT": str(tmp_path / "one"), "OUTPUT": "TEMPORARY_OUTPUT"})["OUTPUT"]
+    assert one.endswith(".laz") and len(classes_of(one)) == len(classes_of(tmp_path / "in" / "west.laz"))
     # one file in: a temporary output stays one LAZ; a named non-.vpc output of a folder is still refused
     single = processing.run("groundsieve:smrf", {"INPUT": str(src), "OUTPUT": "TEMPORARY_OUTPUT"})["OUTPUT"]
     assert single.endswith(".laz") and len(classes_of(single)) == len(classes_of(src))
