@@ -317,7 +317,8 @@ def fit_dtm_blocks(size: float, buffer_m: float, cell: float, tiling: "TileOptio
         f"DTM: a cell size of {cell:g} m makes each tile's DTM block {n:,} x {n:,} cells ({size:g} m tiles and "
         f"a {buffer_m:g} m buffer); {workers} worker(s) at a time need about {_size(n * n * per_cell)} at peak, more "
         f"than the {_size(budget)} this run may use; use a larger DTM cell size"
-        + (", a smaller tile size or fewer workers" if tiling.tile_size_m > 0 else " or fewer workers"))
+        + ([" or fewer workers", ", a smaller tile size or fewer workers"] if workers > 1
+           else ["", " or a smaller tile size"])[tiling.tile_size_m > 0])
 
 
 def _check_working_folder(parent: str, work: str) -> None:
