@@ -148,5 +148,7 @@ sensitivity) and every set tried.</p>""")
         cv = result.cv
         feedback.pushInfo(f"{len(result.trials)} sets in {result.seconds:.0f} s. Cross-validated: {cv.summary()}. "
                           f"Chosen set on the whole patch: {result.best_accuracy.summary()}.")
+        if result.range_end_note():
+            feedback.pushWarning(result.range_end_note())
         return {self.OUTPUT_PRESET: preset_path, self.OUTPUT_HTML: report_path,
                 self.CV_TOTAL_ERROR: cv.total, self.CV_KAPPA: cv.kappa}

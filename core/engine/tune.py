@@ -98,6 +98,10 @@ class Dim:
         return self.high - self.low
 
 
+def _number(v) -> str:
+    return f"{float(v):g}"
+
+
 def search_space(name: str) -> List[Dim]:
     """The dimensions ``groundsieve:tune`` searches for filter ``name`` (parameters.SEARCH)."""
     table = P.by_name(name)
@@ -271,6 +275,32 @@ class TuneResult:
         out = dict(self.fixed)
         out.update(self.trials[self.best].values)
         return out
+
+    @property
+    def at_range_ends(self) -> List[Tuple[Dim, str]]:
+        """The searched numeric parameters whose chosen value is an end of its range, with "lower"
+        or "upper": the best value may lie beyond what was searched."""
+        out = []
+        values = self.best_values
+        for d in self.dims:
+            if d.values or d.span <= 0:
+                continue
+            v = float(values[d.field])
+            if v <= d.low + 1e-6 * d.span:
+                out.append((d, "lower"))
+            elif v >= d.high - 1e-6 * d.span:
+                out.append((d, "upper"))
+        return out
+
+    def range_end_note(self) -> str:
+        """A sentence on the parameters chosen at an end of their searched range ("" when none)."""
+        ends = self.at_range_ends
+        if not ends:
+            return ""
+        items = [f"{d.name} ({_number(self.best_values[d.field])}) at the {end} end of its searched range "
+                 f"({_number(d.low)} to {_number(d.high)})" for d, end in ends]
+        return ("; ".join(items) + ": the best value may lie beyond. The ranges are those the papers explored; to "
+                "try beyond, run the filter with this preset and the value set by hand, and compare on the patch.")
 
 
 def _distance(values: Mapping[str, object], start: Mapping[str, object], dims: Sequence[Dim]) -> float:

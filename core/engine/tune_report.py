@@ -145,7 +145,7 @@ table {{ border-collapse: collapse; margin: .4em 0; }} td, th {{ border: 1px sol
 td {{ text-align: right; }} th {{ background: #f0f0f0; }} .err {{ color: #b00; }}
 .cm {{ display: inline-table; margin-right: 2em; vertical-align: top; }} caption {{ font-weight: bold; }}
 .small {{ font-size: .9em; color: #444; }} .plots svg {{ margin: 4px 8px 4px 0; }}
-.big {{ font-size: 1.15em; }} tr.best td {{ background: #fde2e2; }}
+.big {{ font-size: 1.15em; }} tr.best td {{ background: #fde2e2; }} .warn {{ background: #fff4d6; padding: 4px 8px; }}
 </style></head><body>
 <h1>Tuning of {html.escape(cls_name)} on {html.escape(result.patch)}</h1>
 <p>{result.points:,} labelled points, {len(result.trials)} parameter sets tried
@@ -168,7 +168,10 @@ f"; the starting set (filter defaults or starting preset): {_pct(start.total)}"}
         parts.append(f"<tr><td style='text-align:left'>{html.escape(p.title())}</td><td>{p.name}</td>"
                      f"<td><b>{_fmt(best_values[p.field])}</b></td><td>{_fmt(result.fixed[p.field])}</td>"
                      f"<td>{rng or 'kept'}</td></tr>")
-    parts.append("</table><h2>Confusion matrices</h2>")
+    parts.append("</table>")
+    if result.range_end_note():
+        parts.append(f"<p class='warn'><b>At the end of a range:</b> {html.escape(result.range_end_note())}</p>")
+    parts.append("<h2>Confusion matrices</h2>")
     parts.append(_confusion(cv, "Cross-validated (held-out blocks)"))
     parts.append(_confusion(fit, "Chosen set on the whole patch"))
     if start is not None:

@@ -241,3 +241,28 @@ def test_the_report_is_self_contained_with_a_plot_per_parameter(result, tmp_path
         assert len(root.findall("{http://www.w3.org/2000/svg}circle")) >= 5
     assert f"{100 * result.cv.total:.2f} %" in text
     assert report_html(result) == text.rstrip("\n") + "\n" or report_html(result) == text
+
+
+def test_a_choice_at_an_end_of_its_range_is_said_in_the_report(result, tmp_path):
+    """A chosen value at an end of its searched range may hide a better one beyond: the report (and
+    the command line and the dialog's log, from the same sentence) says so; a value inside does not."""
+    import dataclasses
+    d = next(d for d in result.dims if not d.values)
+    best = result.trials[result.best]
+
+    def choosing(value):
+        trials = list(result.trials)
+        trials[result.best] = dataclasses.replace(best, values=dict(best.values, **{d.field: value}))
+        return dataclasses.replace(result, trials=trials)
+    high, low, inside = choosing(d.high), choosing(d.low), choosing((d.low + d.high) / 2)
+    assert (d, "upper") in high.at_range_ends and (d, "lower") in low.at_range_ends
+    assert d not in [e for e, _ in inside.at_range_ends]
+    note = high.range_end_note()
+    assert f"{d.name} ({d.high:g}) at the upper end of its searched range ({d.low:g} to {d.high:g})" in note
+    assert note.count(": the best value may lie beyond") == 1
+    path = tmp_path / "edge.html"
+    write_report(str(path), high)
+    assert "At the end of a range:" in path.read_text(encoding="utf-8")
+    if not inside.at_range_ends:
+        write_report(str(path), inside)
+        assert "At the end of a range" not in path.read_text(encoding="utf-8")
