@@ -417,11 +417,12 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
                                 self.OUTPUT)
         styles.style_when_loaded(context, dtm_path, styles.DTM_STYLE)
         for name, (path, _make) in rasters.items():
-            styles.style_when_loaded(context, path, self.rasterStyles().get(name))
+            styles.style_when_loaded(context, path, self.rasterStyles(run).get(name))
         return results
 
-    def rasterStyles(self):  # noqa: N802
-        """{output name: layer post-processor} of the rasters styled when loaded (algorithms/styles)."""
+    def rasterStyles(self, run=None):  # noqa: N802
+        """{output name: layer post-processor} of the rasters styled when loaded (algorithms/styles);
+        ``run`` the filter's run (e.g. its threshold)."""
         return {}
 
     def checkDistinctOutputs(self, outputs):  # noqa: N802

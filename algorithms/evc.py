@@ -99,9 +99,13 @@ Each is off by default: tick the ones you want in the dialog, or name them in <c
             self.addParameter(QgsProcessingParameterRasterDestination(
                 name, label, optional=True, createByDefault=False))
 
-    def rasterStyles(self):  # noqa: N802
-        from .styles import EVC_CLASS_STYLE
-        return {self.CLASS_RASTER: EVC_CLASS_STYLE}
+    def rasterStyles(self, run=None):  # noqa: N802
+        from .styles import EVC_CLASS_STYLE, evc_value_style
+        out = {self.CLASS_RASTER: EVC_CLASS_STYLE}
+        detail = getattr(run, "detail", None)
+        if detail is not None and getattr(detail, "threshold", None) is not None:
+            out[self.EVC_RASTER] = evc_value_style(float(detail.threshold))
+        return out
 
     def rasterOutputs(self, parameters, context):  # noqa: N802
         return {name: (self.parameterAsOutputLayer(parameters, name, context),

@@ -20,6 +20,27 @@ def style_evc_classes(layer):
     layer.triggerRepaint()
 
 
+def style_evc_values(layer, threshold):
+    """The EVC raster in the three intervals that make the classes (Fan et al. 2023, Table 2):
+    EVC <= 0, 0 < EVC <= threshold, EVC > threshold, coloured and labelled as the class raster. A
+    stretch over the values would show grey: dividing by near-zero mean differences makes a few
+    values of +-1e4 or more where most lie within a few units."""
+    colours = {label: colour for _value, label, colour in EVC_CLASSES}
+    items = [QgsColorRampShader.ColorRampItem(0.0, QColor(colours["Vegetation area"]),
+                                              "EVC <= 0: vegetation area"),
+             QgsColorRampShader.ColorRampItem(threshold, QColor(colours["Ground"]),
+                                              f"0 < EVC <= {threshold:g}: ground"),
+             QgsColorRampShader.ColorRampItem(float("inf"), QColor(colours["Vegetation boundary"]),
+                                              f"EVC > {threshold:g}: vegetation boundary")]
+    function = QgsColorRampShader(-abs(threshold), 2 * abs(threshold))
+    function.setColorRampType(QgsColorRampShader.Type.Discrete)
+    function.setColorRampItemList(items)
+    shader = QgsRasterShader()
+    shader.setRasterShaderFunction(function)
+    layer.setRenderer(QgsSingleBandPseudoColorRenderer(layer.dataProvider(), 1, shader))
+    layer.triggerRepaint()
+
+
 def style_dtm(layer):
     """An elevation ramp (QGIS's "Spectral", low blue to high red) stretched over the band's
     minimum and maximum, five classes interpolated: a DTM reads as terrain, not as grey."""
@@ -56,6 +77,16 @@ class _Styler(QgsProcessingLayerPostProcessorInterface):
 #: one instance each, alive for the session (QGIS keeps a bare pointer to a post-processor)
 EVC_CLASS_STYLE = _Styler(style_evc_classes)
 DTM_STYLE = _Styler(style_dtm)
+#: the EVC raster's stylers, one per threshold used, alive for the session as the two above
+_EVC_VALUE_STYLES = {}
+
+
+def evc_value_style(threshold):
+    """The post-processor styling an EVC raster for ``threshold`` (made once per threshold)."""
+    key = float(threshold)
+    if key not in _EVC_VALUE_STYLES:
+        _EVC_VALUE_STYLES[key] = _Styler(lambda layer: style_evc_values(layer, key))
+    return _EVC_VALUE_STYLES[key]
 
 
 def style_when_loaded(context, path, styler):

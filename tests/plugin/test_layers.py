@@ -112,14 +112,16 @@ def test_evc_class_raster_and_dtm_load_styled(groundsieve_provider, scene_laz, t
     import processing
     from qgis.core import QgsProcessingOutputLayerDefinition, QgsProject
     src, _scene = scene_laz
-    classes, dtm = tmp_path / "classes.tif", tmp_path / "dtm.tif"
+    classes, dtm, evc = tmp_path / "classes.tif", tmp_path / "dtm.tif", tmp_path / "evc_values.tif"
     context, feedback = _context(), _Feedback()
     # As the dialog passes outputs with "Open output file after running" ticked.
     params = {"INPUT": str(src), "OUTPUT": str(tmp_path / "c.laz"), "SMALL_SCALE": 0.5, "LARGE_SCALE": 4.0,
+              "THRESHOLD": 1.7,
               "CLASS_RASTER": QgsProcessingOutputLayerDefinition(str(classes), QgsProject.instance()),
+              "EVC_RASTER": QgsProcessingOutputLayerDefinition(str(evc), QgsProject.instance()),
               "DTM": QgsProcessingOutputLayerDefinition(str(dtm), QgsProject.instance())}
     processing.run("groundsieve:evcrasters", params, context=context, feedback=feedback)
-    assert not (tmp_path / "evc.tif").exists() and len(list(tmp_path.glob("*.tif"))) == 2  # only what was asked
+    assert not (tmp_path / "evc.tif").exists() and len(list(tmp_path.glob("*.tif"))) == 3  # only what was asked
     _load_results("groundsieve:evcrasters", context, feedback)
     try:
         layer = _project_layer(classes)
@@ -128,6 +130,14 @@ def test_evc_class_raster_and_dtm_load_styled(groundsieve_provider, scene_laz, t
         assert [label for label, _colour in legend] == ["Ground", "Vegetation area", "Vegetation boundary"]
         assert len({colour.name() for _label, colour in legend}) == 3
         assert [c.value for c in layer.renderer().classes()] == [1, 2, 3]
+        # the EVC values in the three intervals of the classes, split at 0 and at this run's threshold
+        values = _project_layer(evc)
+        assert values.renderer().type() == "singlebandpseudocolor"
+        items = values.renderer().shader().rasterShaderFunction().colorRampItemList()
+        assert [i.value for i in items] == [0.0, 1.7, float("inf")]
+        assert [i.label for i in items] == ["EVC <= 0: vegetation area", "0 < EVC <= 1.7: ground",
+                                            "EVC > 1.7: vegetation boundary"]
+        assert [i.color.name() for i in items] == ["#1a7f2e", "#b07d3c", "#9bd35a"]  # the class raster's
         dtm_layer = _project_layer(dtm)
         assert dtm_layer.renderer().type() == "singlebandpseudocolor"
         shader = dtm_layer.renderer().shader().rasterShaderFunction()
