@@ -69,7 +69,7 @@ class EVCRastersAlgorithm(EVCAlgorithm):
         DIFFERENCE_RASTER: ("Elevation difference", lambda d: (d.difference, d.small_grid)),
         EVC_RASTER: ("Elevation variation coefficient (EVC)", lambda d: (d.evc, d.small_grid)),
         CLASS_RASTER: ("EVC classes (1 ground, 2 vegetation area, 3 vegetation boundary)",
-                       lambda d: (_classes_or_nan(d), d.small_grid)),
+                       lambda d: (d.classes, d.small_grid, _CLASS_RASTER_FORMAT)),
     }
 
     def name(self):
@@ -113,8 +113,12 @@ Each is off by default: tick the ones you want in the dialog, or name them in <c
                 for name, (_label, make) in self.RASTERS.items()}
 
 
-def _classes_or_nan(detail):
-    """The class grid with empty cells as no data."""
-    values = detail.classes.astype("float32")
-    values[detail.classes == 0] = float("nan")
-    return values
+def _class_raster_format():
+    """The class raster as bytes, empty cells (0) as no data, its classes coloured (a palette) and
+    named (the band's description and metadata) in the file; QGIS also names them in the legend
+    when it loads it (algorithms/styles)."""
+    from .styles import EVC_CLASSES
+    return {"dtype": "uint8", "nodata": 0, "categories": EVC_CLASSES}
+
+
+_CLASS_RASTER_FORMAT = _class_raster_format()

@@ -284,10 +284,10 @@ def write_outputs(cloud: PointCloud, classification: np.ndarray, output_path: Op
             log(f"Writing {len(cloud):,} classified points to {output_path} ...")
             write_classified(cloud, classification, stack.enter_context(atomic_path(output_path)), atomic=False,
                              steps=steps.sub(0.0, share * 0.99))
-        for i, (path, values, grid) in enumerate(rasters):
+        for i, (path, values, grid, *how) in enumerate(rasters):  # how: write_geotiff's options, if any
             log(f"Writing {path} ...")
             write_geotiff(stack.enter_context(atomic_path(path)), values, grid, crs_wkt=cloud.crs_wkt,
-                          atomic=False)
+                          atomic=False, **(how[0] if how else {}))
             steps.report(share + (1 - share) * 0.99 * (i + 1) / len(rasters))
         steps.check()
     steps.report(1.0)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import contextlib
 import os
-from typing import Optional
+from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -21,9 +21,12 @@ def check_raster_path(path: str, *, inputs=()) -> str:
 
 
 def write_geotiff(path: str, values: np.ndarray, grid: GridSpec, *, crs_wkt: Optional[str] = None,
-                  nodata: float = NODATA, dtype: str = "float32", atomic: bool = True) -> None:
+                  nodata: float = NODATA, dtype: str = "float32", atomic: bool = True,
+                  categories: Sequence[Tuple[int, str, str]] = ()) -> None:
     """Write ``values`` (row 0 = north, NaN = no data) as a single-band GeoTIFF, atomically unless
-    the caller already writes to a temporary path of its own (``atomic=False``)."""
+    the caller already writes to a temporary path of its own (``atomic=False``). ``categories``
+    ``(value, name, "#rrggbb")`` of a class raster (``dtype`` uint8) are stored in the file: a
+    palette, and the names in the band's description and metadata."""
     from osgeo import gdal
     gdal.UseExceptions()
     path = check_raster_path(path)
@@ -42,6 +45,8 @@ def write_geotiff(path: str, values: np.ndarray, grid: GridSpec, *, crs_wkt: Opt
                 ds.SetProjection(crs_wkt)
             band = ds.GetRasterBand(1)
             band.SetNoDataValue(nodata)
+            if categories:
+                _set_categories(band, categories)
             band.WriteArray(data)
             band.FlushCache()
             ds = None  # closes and flushes the file
@@ -49,6 +54,19 @@ def write_geotiff(path: str, values: np.ndarray, grid: GridSpec, *, crs_wkt: Opt
         raise OutputError(f"{path}: cannot write the GeoTIFF ({err})") from err
     if not os.path.exists(path):
         raise OutputError(f"{path}: the GeoTIFF was not written")
+
+
+def _set_categories(band, categories) -> None:
+    """The classes in the TIFF itself (no .aux.xml beside it, which GDAL keeps category names in):
+    a palette, and each class's name in the band's description and metadata (``CLASS_<value>``)."""
+    from osgeo import gdal
+    table = gdal.ColorTable()
+    for value, _name, colour in categories:
+        table.SetColorEntry(int(value), tuple(int(colour[i:i + 2], 16) for i in (1, 3, 5)) + (255,))
+    band.SetColorTable(table)
+    band.SetColorInterpretation(gdal.GCI_PaletteIndex)
+    band.SetDescription(", ".join(f"{value} {name}" for value, name, _colour in categories))
+    band.SetMetadata({f"CLASS_{value}": name for value, name, _colour in categories})
 
 
 class BlockGeoTIFF:

@@ -114,7 +114,17 @@ def test_evcrasters_writes_every_raster(groundsieve_provider, scene_laz, tmp_pat
     assert (small[valid] >= zmin - 1e-3).all() and (small[valid] <= zmax + 1e-3).all()
     assert (large != -9999.0).mean() > 0.95
     classes, gt = _read(result["CLASS_RASTER"])
-    assert set(np.unique(classes)) <= {1.0, 2.0, 3.0, -9999.0}
+    assert set(np.unique(classes)) <= {0, 1, 2, 3}  # 0: an empty small cell, the no data
+    # bytes, its classes named and coloured in the file: any GIS shows the legend
+    ds = gdal.Open(result["CLASS_RASTER"])  # kept open while its band is read (GDAL 3.6)
+    band = ds.GetRasterBand(1)
+    assert band.DataType == gdal.GDT_Byte and band.GetNoDataValue() == 0
+    assert band.GetDescription() == "1 Ground, 2 Vegetation area, 3 Vegetation boundary"
+    assert band.GetMetadata() == {"CLASS_1": "Ground", "CLASS_2": "Vegetation area", "CLASS_3": "Vegetation boundary"}
+    assert not list(tmp_path.glob("*.aux.xml"))  # all in the TIFF
+    table = band.GetColorTable()
+    assert [table.GetColorEntry(v)[:3] for v in (1, 2, 3)] == [(0xb0, 0x7d, 0x3c), (0x1a, 0x7f, 0x2e),
+                                                               (0x9b, 0xd3, 0x5a)]
     # Points take their small cell's class: ground points == points in class-1 cells.
     import laspy
     las = laspy.read(str(tmp_path / "c.laz"))  # the coordinates as stored (0.01 m steps), as filtered
