@@ -11,7 +11,7 @@ from qgis.core import (Qgis, QgsCoordinateReferenceSystem, QgsFeature, QgsFeatur
                        QgsProcessingParameterEnum, QgsProcessingParameterFeatureSink,
                        QgsProcessingParameterFile, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterDestination,
-                       QgsProcessingParameterString, QgsUnitTypes,
+                       QgsProcessingParameterString,
                        QgsWkbTypes)
 from qgis.PyQt.QtCore import QVariant
 from qgis.PyQt.QtGui import QIcon
@@ -200,14 +200,12 @@ def destination_folder_problem(label, destination):
 
 
 def warn_about_crs(feedback, input_path, crs_wkt, lengths="every length parameter"):
-    """Warn when the cloud has no CRS, or one whose unit is not the metre (lengths are read in it)."""
-    if crs_wkt is None:
-        feedback.pushWarning(f"{input_path}: no CRS in the file; outputs have none either.")
-        return
-    units = QgsCoordinateReferenceSystem.fromWkt(crs_wkt).mapUnits()
-    if units != QgsUnitTypes.DistanceUnit.DistanceMeters:
-        feedback.pushWarning(f"{input_path}: the CRS's unit is {QgsUnitTypes.toString(units)}, not metres: "
-                             f"{lengths} was read in that unit.")
+    """Warn when the cloud has no CRS, or one whose unit is not the metre (lengths are read in it):
+    the command line's words (core/raster/crs.py)."""
+    from ..core.raster.crs import unit_warning
+    warning = unit_warning(input_path, crs_wkt, lengths)
+    if warning:
+        feedback.pushWarning(warning)
 
 
 class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
@@ -396,7 +394,7 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         except errors.GroundSieveError as err:
             raise QgsProcessingException(str(err)) from err
         tiled = run.cloud is None  # a tiled run (survey scale) holds no cloud in memory
-        warn_about_crs(feedback, input_path, run.crs_wkt if tiled else run.cloud.crs_wkt,
+        warn_about_crs(feedback, input_path, run.crs_wkt,
                        "every length parameter (cell sizes, windows, thresholds)")
         results = {self.OUTPUT: output_path, self.GROUND_COUNT: run.ground_count,
                    self.POINT_COUNT: run.point_count if tiled else len(run.cloud)}

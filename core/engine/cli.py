@@ -265,8 +265,7 @@ def main(argv: Optional[List[str]] = None, out=None) -> int:
         print(f"groundsieve: {err}", file=out)
         return 1
     from ..raster.crs import unit_warning
-    warning = unit_warning(args.input, run.crs_wkt if run.cloud is None else run.cloud.crs_wkt,
-                           "every length parameter (cell sizes, windows, thresholds)")
+    warning = unit_warning(args.input, run.crs_wkt, "every length parameter (cell sizes, windows, thresholds)")
     if warning:
         print(f"WARNING: {warning}", file=out)
     points = run.point_count if run.cloud is None else len(run.cloud)

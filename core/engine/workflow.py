@@ -111,6 +111,11 @@ class FilterRun:
     def ground_count(self) -> int:
         return int(self.ground.sum())
 
+    @property
+    def crs_wkt(self) -> Optional[str]:
+        """The cloud's CRS (a tiled run's ``TiledRun`` has the same field)."""
+        return self.cloud.crs_wkt
+
 
 def processable(cloud: PointCloud, options: FilterOptions) -> np.ndarray:
     """Boolean mask of the points that may be processed at all: not withheld, not of an ignored
