@@ -45,7 +45,7 @@ from ..errors import Cancelled, GroundSieveError, InputError, InvalidParameterEr
 from ..io.lasfiles import (CHUNK_POINTS, VPC_EXTENSION, LasInfo, TileGrid, assemble_classified, bin_file,
                            check_survey, expand_inputs, iter_chunks, piece_cuts, read_part, scan_header, tile_cloud,
                            write_classified_piece, write_classified_stream, write_vpc)
-from ..io.outputs import LAS_EXTENSIONS, _ext, _reason, check_folder_writable, check_output_path
+from ..io.outputs import LAS_EXTENSIONS, _ext, _reason, check_output_path
 from ..progress import Steps
 
 #: Memory a point costs in a whole-cloud run with a DTM (measured: 321 bytes/point at 50 M points
@@ -321,18 +321,6 @@ def fit_dtm_blocks(size: float, buffer_m: float, cell: float, tiling: "TileOptio
            else ["", " or a smaller tile size"])[tiling.tile_size_m > 0])
 
 
-def _check_working_folder(parent: str, work: str) -> None:
-    """Refuse a working folder where the temporary tiles cannot be made (read-only, no permission),
-    before its disk's free space is read (a read-only file system reports none)."""
-    try:
-        check_folder_writable(work, parent)
-    except OutputError as err:
-        cause = err.__cause__
-        reason = _reason(cause) if isinstance(cause, OSError) else str(err)
-        raise OutputError(f"{parent}: the working folder cannot be written to ({reason}); "
-                          "choose a folder where you may create files") from err
-
-
 def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options, dtm_path: Optional[str] = None,
               dtm=None, steps: Optional[Steps] = None, log: Optional[Callable[[str], None]] = None) -> TiledRun:
     """Classify ``input_path`` (a LAS/LAZ, a folder or a .vpc) tile by tile; see the module's docstring.
@@ -348,8 +336,8 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     if not any(i.count for i in infos):
         raise InputError(f"{input_path}: the input holds no points")
     outs = check_tiled_outputs(inputs, output_path, dtm_path)
-    if dtm_path:
-        survey_dtm_grid(infos, dtm.cell_size_m)  # a DTM cell far too small for the survey, refused now
+    # the DTM's grid from the headers: a DTM cell far too small for the survey is refused now
+    dtm_grid = survey_dtm_grid(infos, dtm.cell_size_m) if dtm_path else None
     # The reach rounded up to whole metres: the buffer's edges then sit on whole metres, where the
     # filters' grids (edges on multiples of their cell) put theirs without floating-point doubt.
     buffer_m = math.ceil(filter_reach_m(algorithm)) if tiling.buffer_m is None else float(tiling.buffer_m)
@@ -374,13 +362,18 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     if os.path.isdir(work):
         log(f"Resuming the interrupted run in {work}.")
     else:
-        _check_working_folder(parent, work)
-        _check_disk(parent, [i for i in infos if not i.copc], buffer_m, size)  # COPC files are not binned
+        # Made before the free space is read: a read-only folder is refused for what it is (a
+        # read-only file system reports no space), and a folder the disk check refuses is removed.
         try:
             os.makedirs(work)
         except OSError as err:
             raise OutputError(f"{parent}: the working folder cannot be written to ({_reason(err)}); "
                               "choose a folder where you may create files") from err
+        try:
+            _check_disk(parent, [i for i in infos if not i.copc], buffer_m, size)  # COPC files are not binned
+        except OutputError:
+            os.rmdir(work)
+            raise
     cluster = None
     pool = None
     rasters = []  # the DTM writer, released at once if the run fails
@@ -394,7 +387,7 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
             # process started once: its imports and numba caches loaded once)
             pool = _worker_pool(tiling.worker_count, True)
         run = _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling,
-                   steps, log, workflow, cluster=cluster, rasters=rasters, pool=pool)
+                   steps, log, workflow, cluster=cluster, rasters=rasters, pool=pool, dtm_grid=dtm_grid)
     except BaseException:
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)
@@ -449,7 +442,7 @@ def _save_json(path, doc) -> None:
 
 
 def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling, steps, log,
-         workflow, cluster=None, rasters=None, pool=None) -> TiledRun:
+         workflow, cluster=None, rasters=None, pool=None, dtm_grid=None) -> TiledRun:
     t_start = time.perf_counter()
     import json as _json
     from ..io.lasfiles import TilePart
@@ -512,11 +505,10 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         "bounds by each tile, not binned).")
     assigned = [0] * len(infos)
     crs_wkt = infos[0].crs_wkt
-    # 2. the DTM's grid, over every file's header bounds, and its block writer
+    # 2. the DTM's block writer, on the grid run_tiled made from the headers
     dtm_writer = None
     if dtm_path:
         from ..raster.geotiff import BlockGeoTIFF
-        dtm_grid = survey_dtm_grid(infos, dtm.cell_size_m)
         dtm_writer = BlockGeoTIFF(os.path.join(work, "dtm.tif"), dtm_grid, crs_wkt=crs_wkt)
         if rasters is not None:
             rasters.append(dtm_writer)

@@ -304,7 +304,7 @@ def test_a_full_working_disk_is_refused_before_work(scene_laz, tmp_path, monkeyp
 
 def test_a_working_folder_that_cannot_take_the_tiles_is_refused_in_words(scene_laz, tmp_path, monkeypatch):
     """A file given as the working folder, and a read-only one (a read-only mount: the root user here
-    ignores permissions, so the file system's refusal is simulated where the probe file is made),
+    ignores permissions, so the file system's refusal is simulated where files and folders are made),
     are refused by name before any work, before the free space is read (a read-only file system
     reports none), and leave nothing behind."""
     import errno
