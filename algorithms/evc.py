@@ -3,6 +3,7 @@ groundsieve:evcrasters — the same with its intermediate rasters."""
 from qgis.core import QgsProcessingParameterRasterDestination
 
 from .base import COMMON_HELP, GroundFilterAlgorithm, dialog_help
+from .styles import EVC_CLASSES
 
 
 EVC_HELP = """<p>The multiscale elevation-variation-coefficient filter of Fan et al. (2023), made for
@@ -102,9 +103,9 @@ Each is off by default: tick the ones you want in the dialog, or name them in <c
     def rasterStyles(self, run=None):  # noqa: N802
         from .styles import EVC_CLASS_STYLE, evc_value_style
         out = {self.CLASS_RASTER: EVC_CLASS_STYLE}
-        detail = getattr(run, "detail", None)
-        if detail is not None and getattr(detail, "threshold", None) is not None:
-            out[self.EVC_RASTER] = evc_value_style(float(detail.threshold))
+        detail = getattr(run, "detail", None)  # an EVCResult (a whole-cloud run), with its threshold
+        if detail is not None:
+            out[self.EVC_RASTER] = evc_value_style(detail.threshold)
         return out
 
     def rasterOutputs(self, parameters, context):  # noqa: N802
@@ -113,12 +114,7 @@ Each is off by default: tick the ones you want in the dialog, or name them in <c
                 for name, (_label, make) in self.RASTERS.items()}
 
 
-def _class_raster_format():
-    """The class raster as bytes, empty cells (0) as no data, its classes coloured (a palette) and
-    named (the band's description and metadata) in the file; QGIS also names them in the legend
-    when it loads it (algorithms/styles)."""
-    from .styles import EVC_CLASSES
-    return {"dtype": "uint8", "nodata": 0, "categories": EVC_CLASSES}
-
-
-_CLASS_RASTER_FORMAT = _class_raster_format()
+#: The class raster as bytes, empty cells (0) as no data, its classes coloured (a palette) and named
+#: (the band's description and metadata) in the file; QGIS also names them in the legend when it
+#: loads it (algorithms/styles).
+_CLASS_RASTER_FORMAT = {"dtype": "uint8", "nodata": 0, "categories": EVC_CLASSES}

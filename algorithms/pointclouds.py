@@ -105,13 +105,11 @@ def input_path(algorithm, parameters, context, file_name, layer_name):
 
 
 def is_survey_input(path):
-    """A folder of LAS/LAZ or a .vpc holding several files: several classified files out (one file
-    behind a folder or a .vpc gives one, as the core's ``output_files``)."""
-    if not (path and (os.path.isdir(path) or path.lower().endswith(".vpc"))):
-        return False
+    """Several files behind the input (a folder of LAS/LAZ, a .vpc): several classified files out
+    (one file, even behind a folder or a .vpc, gives one: the core's ``output_files``)."""
     try:
         from ..core.io.lasfiles import expand_inputs
-        return len(expand_inputs(path)) > 1
+        return bool(path) and len(expand_inputs(path)) > 1
     except Exception:  # noqa: BLE001 - a bad input is the core's to report, in its words
         return False
 
