@@ -103,3 +103,30 @@ def run_cancellable(fn, *args, steps: Optional[Steps] = None, expected_s: float 
         raise box["error"]
     steps.report(1.0)
     return box["value"]
+
+
+#: Seconds a block of :func:`run_in_row_blocks` aims at: a cancel is seen within about this.
+ROW_BLOCK_S = 0.1
+
+
+def run_in_row_blocks(call, n: int, steps: Steps, *, align: int = 2048, first: int = 1 << 16) -> None:
+    """``call(lo, hi)`` on consecutive blocks of the rows ``0:n`` (at least one call, ``0:0`` when
+    ``n`` is 0), reporting progress and honouring cancellation between blocks. The first block has
+    ``first`` rows; each next one as many as the rows per second so far do in :data:`ROW_BLOCK_S`
+    (so a cancel is seen within about that on any machine and for any kernel), a multiple of
+    ``align`` and of at least ``align`` per thread (each block keeps the threads busy). The rows
+    must be independent of each other: the blocks then change nothing in the results."""
+    import time
+    import numba
+    floor = align * max(1, int(numba.get_num_threads()))
+    lo, rows, done_s = 0, max(first, floor), 0.0
+    while True:
+        hi = min(n, lo + rows)
+        start = time.perf_counter()
+        call(lo, hi)
+        done_s += time.perf_counter() - start
+        steps.report(hi / n if n else 1.0)
+        if hi >= n:
+            return
+        lo = hi
+        rows = max(floor, int(ROW_BLOCK_S * lo / max(done_s, 1e-9)) // align * align)

@@ -207,9 +207,8 @@ def _hybrid_features(xyz: np.ndarray, names: Sequence[str], *, cell_size_m: floa
     from ..grids.morphology import opening
     from ..grids.rasterize import cell_min
     from ..grids.spec import GridSpec
-    from ..progress import run_cancellable
+    from ..progress import run_cancellable, run_in_row_blocks
     from ._hybrid_kernels import _point_features_into
-    from .features import _run_in_row_blocks
     steps = steps or Steps()
     names = list(names)
     bad = unknown_features(names)
@@ -283,7 +282,7 @@ def _hybrid_features(xyz: np.ndarray, names: Sequence[str], *, cell_size_m: floa
     def block(lo, hi):
         _point_features_into(x[lo:hi], y[lo:hi], z[lo:hi], stacked, modes_array, zmin_raw, zmax_raw,
                              grid.x0, grid.top, grid.cell, target, result[lo:hi])
-    _run_in_row_blocks(block, x.shape[0], steps.sub(0.72, 0.8))
+    run_in_row_blocks(block, x.shape[0], steps.sub(0.72, 0.8))
     for j, name in enumerate(names):  # a name given twice: the kernel wrote its last column only
         if name in column and target[column[name]] != j:
             result[:, j] = result[:, target[column[name]]]

@@ -106,9 +106,8 @@ class Model:
         """(n, classes) mean class probabilities of the rows of ``X``. The rows go through the
         forest in blocks of about a tenth of a second, with progress and a cancel check on
         ``steps`` (core/progress.py) between blocks; each row's result does not depend on the blocks."""
-        from ..progress import Steps
+        from ..progress import Steps, run_in_row_blocks
         from ._rf_kernels import _forest_proba_kernel
-        from .features import _run_in_row_blocks
         steps = steps or Steps()
         X = np.ascontiguousarray(self.scaler.transform(np.asarray(X, dtype=np.float32)), dtype=np.float32)
         if X.ndim != 2 or X.shape[1] != len(self.features):
@@ -121,7 +120,7 @@ class Model:
                                         self.missing_left, self.value, out[lo:hi]):
                 raise InputError("the model's trees are malformed (a node index or feature index out of "
                                  "range, a cycle, or class columns that do not match); train the model again")
-        _run_in_row_blocks(block, X.shape[0], steps)
+        run_in_row_blocks(block, X.shape[0], steps)
         return out
 
     def _check_arrays(self) -> None:
