@@ -162,11 +162,16 @@ def load_or_log(context, feedback, path, layer_name, output_name):
                               f"opens its {'/'.join(undrawn)} files (QGIS builds with PDAL, as on Windows and "
                               "macOS, do): the layer shows the files' extents only, not their points.")
         return keys[0]
-    ext = ".copc.laz" if path.lower().endswith(".copc.laz") else os.path.splitext(path)[1].lower()
+    ext = _suffix(path)
     feedback.pushInfo(f"{layer_name}: written to {path}. Not loaded: this QGIS has no point-cloud provider "
                       f"that opens {ext} files (QGIS builds with PDAL, as on Windows and macOS, do); "
                       "open it there or in CloudCompare.")
     return None
+
+
+def _suffix(name):
+    """A point-cloud file's suffix as the providers tell formats apart: ``.copc.laz`` or the last."""
+    return ".copc.laz" if name.lower().endswith(".copc.laz") else os.path.splitext(name)[1].lower()
 
 
 def _members_not_opened(path, patterns=None):
@@ -175,8 +180,7 @@ def _members_not_opened(path, patterns=None):
         return []
     folder = os.path.splitext(path)[0]
     names = os.listdir(folder) if os.path.isdir(folder) else []
-    exts = sorted({".copc.laz" if n.lower().endswith(".copc.laz") else os.path.splitext(n)[1].lower()
-                   for n in names})
+    exts = sorted({_suffix(n) for n in names})
     return [ext for ext in exts if ext in READ_SUFFIXES and not providers_opening("cloud" + ext, patterns)]
 
 
