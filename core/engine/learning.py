@@ -22,7 +22,6 @@ from ..learn.rf import (CRITERIA, DEFAULT_PRESET, PRESETS, SCALERS, ForestParams
 #: The paper's grid: splitting criterion x number of trees x scaler.
 PAPER_GRID = tuple((c, t, s) for c in CRITERIA for t in (100, 150, 200) for s in SCALERS)
 EXCLUDED_BY_DEFAULT = (0, 7, 18)  # never classified, noise
-EXCLUDED_NAMES = {0: "never classified", 7: "low noise", 18: "high noise"}
 
 
 @dataclass(frozen=True)
@@ -65,7 +64,8 @@ def _labelled(cloud, classes, log):
         present = np.unique(labels)
         classes = tuple(int(c) for c in present if c not in EXCLUDED_BY_DEFAULT)
         if len(classes) < 2:
-            never = ", ".join(f"{int(c)} = {EXCLUDED_NAMES[int(c)]}" for c in present if c in EXCLUDED_BY_DEFAULT)
+            from ..learn.report import ASPRS_NAMES
+            never = ", ".join(f"{int(c)} = {ASPRS_NAMES[int(c)]}" for c in present if c in EXCLUDED_BY_DEFAULT)
             held = (f"only class {classes[0]}" + (f" besides classes never learnt ({never})" if never else "")
                     if classes else f"only classes never learnt ({never})")
             raise InputError(f"{cloud.path}: at least two classes are needed to train, and the file holds {held}; "

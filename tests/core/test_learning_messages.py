@@ -37,7 +37,7 @@ def test_training_without_two_learnable_classes_says_what_the_file_holds(scene, 
         learning.train_file(unclassified, str(tmp_path / "m.npz"))
     ground_only = _with_classes(scene, tmp_path / "ground.laz", [2, 2, 7])
     with pytest.raises(InputError, match=r"ground\.laz: .* holds only class 2 besides classes never learnt "
-                                         r"\(7 = low noise\)"):
+                                         r"\(7 = low point \(noise\)\)"):
         learning.train_file(ground_only, str(tmp_path / "m.npz"))
     assert not os.path.exists(tmp_path / "m.npz")
 
