@@ -1,6 +1,6 @@
 """How soon a filter stops after a cancel, at ten moments of a run on a generated cloud.
 
-    .venv/bin/python bench/cancel_latency.py [--filter hybrid|hybrid-accurate|smrf|ptd] [--millions 10]
+    .venv/bin/python bench/cancel_latency.py [--filter hybrid|hybrid-accurate|smrf|... (bench/filters.py)] [--millions 10]
 
 The filter is run once whole (after a warm-up on 20,000 points) to time it, then ten times with a
 cancel callable that turns true at 5 %, 15 %, ... 95 % of that time; each line gives the progress
@@ -18,14 +18,7 @@ import numpy as np  # noqa: E402
 from groundsieve.core.errors import Cancelled  # noqa: E402
 from groundsieve.core.progress import Steps  # noqa: E402
 from groundsieve.core.synthetic import SceneSpec, make_scene  # noqa: E402
-
-
-def build(name):
-    if name.startswith("hybrid"):
-        from groundsieve.core.learn.hybrid import Hybrid
-        return Hybrid(shipped_model="accurate" if name == "hybrid-accurate" else "fast")
-    from groundsieve.core.engine import parameters as P
-    return P.filter_class(name)()
+from filters import make_filter  # noqa: E402 (bench/filters.py: the benches' filter names)
 
 
 def main():
@@ -37,7 +30,7 @@ def main():
     scene = make_scene(SceneSpec.for_points(int(args.millions * 1e6), density_per_m2=args.density, seed=0))
     xyz = np.column_stack([scene.x, scene.y, scene.z])
     del scene
-    algorithm = build(args.filter)
+    algorithm = make_filter(args.filter)
     algorithm(xyz[:20000])
     t0 = time.perf_counter()
     algorithm(xyz)
