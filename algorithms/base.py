@@ -24,8 +24,8 @@ _ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
 COMMON_HELP = """
 <h3>Input and outputs</h3>
 <p><b>Input point cloud</b>: LAS 1.2-1.4 or LAZ (point formats 0-10), or an ISPRS filter-test text
-file <code>x y z label</code> (.txt); or, for a survey, a folder of LAS/LAZ files (type or paste its
-path) or a QGIS virtual point cloud (.vpc, as "Build virtual point cloud" writes it). The files are
+file <code>x y z label</code> (.txt); or, for a survey, a folder of LAS/LAZ files (the folder button beside
+"...", or type its path) or a QGIS virtual point cloud (.vpc, as "Build virtual point cloud" writes it). The files are
 only read, never changed. Lengths given in metres
 are read in the unit of the cloud's CRS (a warning says so when that unit is not the metre).</p>
 <p><b>Classified point cloud</b>: LAS or LAZ (by extension) with every dimension, extra bytes, VLRs,
@@ -323,7 +323,7 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         param = QgsProcessingParameterFile(
             self.INPUT, "Input point cloud (LAS/LAZ, a folder of them, a .vpc, or ISPRS .txt)",
             behavior=QgsProcessingParameterFile.Behavior.File, fileFilter=INPUT_FILTER)
-        self.addParameter(pointclouds.offer_point_clouds_in_modeler(param))
+        self.addParameter(pointclouds.offer_point_clouds_in_modeler(param, folders=True))
         if pointclouds.add_input_layer_parameter(self, self.INPUT_LAYER, "…or a loaded point-cloud layer"):
             pointclouds.make_input_optional(param)
 

@@ -253,11 +253,15 @@ def keep_point_cloud_outputs(widget, model):
     return removed
 
 
-def offer_point_clouds_in_modeler(param):
+def offer_point_clouds_in_modeler(param, folders=False):
     """Give a point-cloud input (a file or point-cloud layer parameter) the widget below in
-    Processing's dialogs; the parameter's type, name and value are unchanged."""
+    Processing's dialogs; the parameter's type, name and value are unchanged. ``folders``: the
+    input also takes a folder of LAS/LAZ files (a survey), and the algorithm dialog's file widget
+    gets a button that picks one (QGIS's file parameter picks files or folders, never both)."""
     metadata = param.metadata()
     metadata["widget_wrapper"] = {"class": f"{__name__}.PointCloudInputWidget"}
+    if folders:
+        metadata["widget_wrapper"]["folders"] = True
     param.setMetadata(metadata)
     return param
 
@@ -268,7 +272,7 @@ class PointCloudInputWidget:
     as Processing would without the metadata; in the modeler, that widget without the child
     outputs that cannot be a point cloud."""
 
-    def __new__(cls, param, dialog, row=0, col=0, **_options):
+    def __new__(cls, param, dialog, row=0, col=0, folders=False, **_options):
         from processing.gui.wrappers import DIALOG_STANDARD, WidgetWrapperFactory, dialogTypes
         from qgis.gui import QgsGui
         registry = QgsGui.processingGuiRegistry()
@@ -279,7 +283,44 @@ class PointCloudInputWidget:
                 keep_point_cloud_outputs(wrapper, dialog.model)
         else:  # exactly what Processing does for a parameter without this metadata
             wrapper = registry.createParameterWidgetWrapper(param, dialogTypes.get(kind, DIALOG_STANDARD))
+            if wrapper is not None and folders and kind == "AlgorithmDialog":
+                add_folder_button(wrapper)
         if wrapper is None:
             return WidgetWrapperFactory.create_wrapper_from_class(param, dialog, row, col)
         wrapper.setDialog(dialog)
         return wrapper
+
+
+
+def add_folder_button(wrapper):
+    """Beside QGIS's own file widget of ``wrapper`` (the algorithm dialog's), a button that picks a
+    folder of LAS/LAZ files: QGIS's file parameter picks files or folders, never both. The value,
+    its checks and its signals stay QGIS's: the button only sets the widget's path. Processing's
+    dialog (Python) calls ``createWrappedWidget``, which this wraps."""
+    create = wrapper.createWrappedWidget
+
+    def create_with_folder_button(context):
+        widget = create(context)
+        layout = widget.layout() if widget is not None else None
+        if layout is None or not hasattr(widget, "setFilePath"):
+            return widget  # not the file widget this was written for: QGIS's widget as it is
+        from qgis.core import QgsApplication
+        from qgis.PyQt.QtWidgets import QFileDialog, QToolButton
+        button = QToolButton()
+        button.setIcon(QgsApplication.getThemeIcon("/mIconFolderOpen.svg"))
+        button.setToolTip("Choose a folder of LAS/LAZ files (a survey, filtered in tiles)")
+
+        def choose_folder():
+            start = widget.filePath()
+            if start and os.path.isfile(start):
+                start = os.path.dirname(start)
+            folder = QFileDialog.getExistingDirectory(button, "Choose a folder of LAS/LAZ files", start or "")
+            if folder:
+                widget.setFilePath(folder)
+
+        button.clicked.connect(choose_folder)
+        layout.addWidget(button)
+        return widget
+
+    wrapper.createWrappedWidget = create_with_folder_button
+    return wrapper

@@ -227,8 +227,8 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.addParameter(pointclouds.offer_point_clouds_in_modeler(QgsProcessingParameterFile(
-            self.INPUT, "Point cloud (LAS/LAZ, or a .vpc survey)", behavior=QgsProcessingParameterFile.Behavior.File,
-            fileFilter=SURVEY_FILTER)))
+            self.INPUT, "Point cloud (LAS/LAZ, a folder of them, or a .vpc survey)",
+            behavior=QgsProcessingParameterFile.Behavior.File, fileFilter=SURVEY_FILTER), folders=True))
         self.addParameter(QgsProcessingParameterFile(
             self.MODEL, "Model file", behavior=QgsProcessingParameterFile.Behavior.File,
             fileFilter="GroundSieve model (*.npz)"))
@@ -236,7 +236,8 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
             self.IGNORE_CLASSES, "Ignored classes: kept, not predicted, out of the DTM (e.g. 7,18,20-25)",
             defaultValue="7,18", optional=True))
         self.addParameter(QgsProcessingParameterFileDestination(
-            self.OUTPUT, "Classified point cloud", fileFilter="LAZ (*.laz);;LAS (*.las)"))
+            self.OUTPUT, "Classified point cloud (a .vpc for several input files)",
+            fileFilter="LAZ (*.laz);;LAS (*.las);;Virtual point cloud (*.vpc)"))
         self.addParameter(QgsProcessingParameterRasterDestination(
             self.DTM, "DTM (ground surface)", optional=True, createByDefault=False))
         self.addParameter(QgsProcessingParameterNumber(

@@ -170,6 +170,56 @@ def test_point_cloud_input_keeps_qgis_widgets_outside_the_modeler(groundsieve_pr
         dialog.deleteLater()
 
 
+def test_the_algorithm_dialog_input_picks_a_folder_or_a_file(groundsieve_provider, tmp_path, monkeypatch):
+    """QGIS's file parameter picks files or folders, never both: in the algorithm dialog, the
+    ground filters' and rfclassify's input has a folder button beside QGIS's own file widget.
+    Picking a folder sets the parameter's value to it (and tells the dialog); cancelling the
+    chooser changes nothing; a file set stays a file. Inputs that take no folder (features), and
+    the batch dialog, keep QGIS's widget as it is."""
+    from processing.gui.wrappers import WidgetWrapperFactory
+    from qgis.core import QgsApplication, QgsProcessingContext
+    from qgis.PyQt.QtWidgets import QDialog, QFileDialog, QToolButton
+
+    class AlgorithmDialog(QDialog):
+        pass
+
+    class BatchAlgorithmDialog(QDialog):
+        pass
+
+    def folder_buttons(widget):
+        return [b for b in widget.findChildren(QToolButton) if "folder of LAS/LAZ" in b.toolTip()]
+
+    tiles = tmp_path / "tiles"
+    tiles.mkdir()
+    context = QgsProcessingContext()
+    registry = QgsApplication.processingRegistry()
+    keep = []  # the dialogs, wrappers and widgets live together, as in Processing's dialog
+    for alg_id in ("groundsieve:smrf", "groundsieve:hybrid", "groundsieve:rfclassify"):
+        dialog = AlgorithmDialog()
+        wrapper = WidgetWrapperFactory.create_wrapper(registry.algorithmById(alg_id).parameterDefinition("INPUT"),
+                                                      dialog)
+        widget = wrapper.createWrappedWidget(context)
+        keep.append((dialog, wrapper, widget))
+        buttons = folder_buttons(widget)
+        assert len(buttons) == 1, alg_id
+        changes = []
+        wrapper.widgetValueHasChanged.connect(lambda w, changes=changes: changes.append(w.parameterValue()))
+        monkeypatch.setattr(QFileDialog, "getExistingDirectory", staticmethod(lambda *a, **k: str(tiles)))
+        buttons[0].click()
+        assert wrapper.parameterValue() == str(tiles) and changes[-1] == str(tiles), alg_id
+        monkeypatch.setattr(QFileDialog, "getExistingDirectory", staticmethod(lambda *a, **k: ""))
+        buttons[0].click()  # cancelled: the folder stays
+        assert wrapper.parameterValue() == str(tiles)
+        wrapper.setParameterValue(str(tmp_path / "a.laz"), context)
+        assert wrapper.parameterValue() == str(tmp_path / "a.laz")
+    for alg_id, dialog in (("groundsieve:features", AlgorithmDialog()), ("groundsieve:smrf", BatchAlgorithmDialog())):
+        wrapper = WidgetWrapperFactory.create_wrapper(registry.algorithmById(alg_id).parameterDefinition("INPUT"),
+                                                      dialog)
+        widget = wrapper.createWrappedWidget(context)
+        keep.append((dialog, wrapper, widget))
+        assert widget is not None and folder_buttons(widget) == [], (alg_id, type(dialog).__name__)
+
+
 def test_model_chains_the_classified_cloud_into_the_layer_input(groundsieve_provider, scene_laz, tmp_path):
     """Where the point-cloud-layer input exists (QGIS opens some point clouds), the modeler offers
     it the classified cloud of a previous child too: the model runs with it, the file read as is

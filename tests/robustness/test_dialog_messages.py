@@ -75,7 +75,7 @@ def test_dtm_cell_sizes_are_explained_in_the_dialogs_words(groundsieve_provider,
 
 @pytest.mark.parametrize("alg_id, label, accepted", [
     ("groundsieve:rftrain", "Labelled point cloud (LAS/LAZ)", ".las or .laz"),
-    ("groundsieve:rfclassify", "Point cloud (LAS/LAZ, or a .vpc survey)", ".las or .laz or .vpc")])
+    ("groundsieve:rfclassify", "Point cloud (LAS/LAZ, a folder of them, or a .vpc survey)", ".las or .laz or .vpc")])
 def test_an_isprs_text_given_to_the_random_forest_is_explained(groundsieve_provider, cloud, tmp_path, alg_id,
                                                                label, accepted):
     path, text = cloud
