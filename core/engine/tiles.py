@@ -191,11 +191,15 @@ def sample_density(path: str, chunk_points: int = CHUNK_POINTS, cell_m: float = 
 def plan_tile_size(infos: Sequence[LasInfo], tiling: TileOptions, buffer_m: float, density: float,
                    multiple_of: float = 1.0) -> float:
     """The tile side: the user's, or the largest square whose points and buffer fit one worker's
-    share of the budget; a multiple of ``multiple_of`` (e.g. the DTM cell) and of 10 m."""
+    share of the budget (less the decompressed-node cache a worker keeps for COPC inputs); a
+    multiple of ``multiple_of`` (e.g. the DTM cell) and of 10 m."""
     if tiling.tile_size_m > 0:
         size = float(tiling.tile_size_m)
     else:
         per_worker = tiling.budget_bytes / tiling.worker_count
+        if any(info.copc for info in infos):
+            from ..io.copc import NODE_CACHE_BYTES
+            per_worker = max(per_worker - NODE_CACHE_BYTES, per_worker / 2)
         points = per_worker / BYTES_PER_POINT
         side = math.sqrt(points / max(density, 1e-6))  # tile plus buffer
         size = max(side - 2 * buffer_m, buffer_m, 50.0)

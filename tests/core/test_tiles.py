@@ -474,3 +474,26 @@ def test_the_density_of_a_file_in_no_spatial_order_is_that_of_its_points(scene_l
                                           + np.floor(np.asarray(shuffled.y[:chunk]) / 10.0)).size * 100.0)
     assert 0.7 < shuffled_density / ordered_density < 1.5, (shuffled_density, ordered_density)
     assert first_chunk_only < 0.5 * ordered_density  # what the first chunk alone said
+
+
+def test_planned_tiles_leave_room_for_the_copc_node_cache():
+    """A worker reading COPC inputs keeps up to io/copc.NODE_CACHE_BYTES of decompressed nodes: a
+    planned tile is then smaller by that share of the budget, so points, buffer and cache together
+    fit what the tiles were given; a tile size set by the user is kept as it is."""
+    from groundsieve.core.engine.tiles import BYTES_PER_POINT, plan_tile_size
+    from groundsieve.core.io.copc import NODE_CACHE_BYTES
+    from groundsieve.core.io.lasfiles import LasInfo
+
+    def info(copc):
+        return LasInfo("a.copc.laz" if copc else "a.laz", 10_000_000, (0, 0, 0), (1000, 1000, 10), 6, "1.4",
+                       None, copc=copc)
+
+    tiling = TileOptions(memory_budget_mb=512, workers=2)
+    plain = plan_tile_size([info(False)], tiling, buffer_m=20.0, density=10.0)
+    copc = plan_tile_size([info(False), info(True)], tiling, buffer_m=20.0, density=10.0)
+    per_worker = tiling.budget_bytes / 2
+    assert copc < plain
+    # the COPC tile with its buffer fits the worker's share less the cache
+    assert (copc + 40.0) ** 2 * 10.0 * BYTES_PER_POINT <= per_worker - NODE_CACHE_BYTES
+    assert (plain + 40.0) ** 2 * 10.0 * BYTES_PER_POINT > per_worker - NODE_CACHE_BYTES
+    assert plan_tile_size([info(True)], TileOptions(tile_size_m=300, workers=2), 20.0, 10.0) == 300
