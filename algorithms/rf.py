@@ -263,5 +263,7 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
             raise QgsProcessingException(str(err)) from err
         results = {self.OUTPUT: output}
         if dtm_path:
+            from . import styles
             results[self.DTM] = dtm_path
+            styles.style_when_loaded(context, dtm_path, styles.DTM_STYLE)
         return results

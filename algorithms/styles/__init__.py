@@ -2,6 +2,9 @@
 raster as a paletted layer with a legend (its classes named and coloured), the DTM as an
 elevation ramp. Applied by layer post-processors (QgsProcessingLayerPostProcessorInterface), which
 run in the main thread once the layer is loaded; qgis_process loads nothing, so styles nothing."""
+import collections
+import functools
+
 from qgis.core import (Qgis, QgsColorRampShader, QgsPalettedRasterRenderer, QgsProcessingLayerPostProcessorInterface,
                        QgsRasterBandStats, QgsRasterLayer, QgsRasterShader, QgsSingleBandPseudoColorRenderer,
                        QgsStyle)
@@ -74,23 +77,28 @@ class _Styler(QgsProcessingLayerPostProcessorInterface):
             self._apply(layer)
 
 
-#: one instance each, alive for the session (QGIS keeps a bare pointer to a post-processor)
-EVC_CLASS_STYLE = _Styler(style_evc_classes)
-DTM_STYLE = _Styler(style_dtm)
-#: the EVC raster's stylers, one per threshold used, alive for the session as the two above
-_EVC_VALUE_STYLES = {}
+#: the styles (functions of the loaded layer) the algorithms name
+DTM_STYLE = style_dtm
+EVC_CLASS_STYLE = style_evc_classes
 
 
 def evc_value_style(threshold):
-    """The post-processor styling an EVC raster for ``threshold`` (made once per threshold)."""
-    key = float(threshold)
-    if key not in _EVC_VALUE_STYLES:
-        _EVC_VALUE_STYLES[key] = _Styler(lambda layer: style_evc_values(layer, key))
-    return _EVC_VALUE_STYLES[key]
+    """The style of an EVC raster made with ``threshold``."""
+    return functools.partial(style_evc_values, threshold=float(threshold))
 
 
-def style_when_loaded(context, path, styler):
-    """Give the raster ``path`` its style if this run loads it when it ends (the dialog, the
-    modeler with 'open output file'); nothing otherwise."""
-    if styler is not None and path and context.willLoadLayerOnCompletion(path):
+#: the post-processors given to QGIS, held here too: QGIS takes each one's ownership and deletes
+#: it after its layer loaded (so one instance serves one run), and a Python post-processor must
+#: stay alive on the Python side until then (the last ones are enough: a run loads its layers
+#: as it ends)
+_GIVEN = collections.deque(maxlen=64)
+
+
+def style_when_loaded(context, path, style):
+    """Give the raster ``path`` the ``style`` (a function of the loaded layer) if this run loads it
+    when it ends (the dialog, the modeler with 'open output file'); nothing otherwise. A new
+    post-processor each time: QGIS deletes the one it was given once it has run."""
+    if style is not None and path and context.willLoadLayerOnCompletion(path):
+        styler = _Styler(style)
+        _GIVEN.append(styler)
         context.layerToLoadOnCompletionDetails(path).setPostProcessor(styler)

@@ -148,6 +148,35 @@ def test_evc_class_raster_and_dtm_load_styled(groundsieve_provider, scene_laz, t
         QgsProject.instance().removeAllMapLayers()
 
 
+def test_every_run_of_a_session_loads_its_dtm_styled(groundsieve_provider, scene_laz, tmp_path):
+    """QGIS takes the ownership of a layer post-processor and deletes it once its layer is loaded:
+    the second run of a desktop session that loads a DTM once failed ('wrapped C/C++ object of type
+    _Styler has been deleted') after writing its outputs. Three runs in one session, each with its
+    own context as the dialog makes them, the last of rfclassify: each DTM loads styled."""
+    import gc
+
+    import processing
+    from qgis.core import QgsProcessingOutputLayerDefinition, QgsProject
+    src, _scene = scene_laz
+    model = tmp_path / "model.npz"
+    processing.run("groundsieve:rftrain", {"INPUT": str(src), "MODEL": str(model), "TREES": 4,
+                                           "REPORT": str(tmp_path / "r.html")}, feedback=_Feedback())
+    try:
+        for k, (alg_id, extra) in enumerate([("groundsieve:smrf", {}), ("groundsieve:smrf", {}),
+                                             ("groundsieve:rfclassify", {"MODEL": str(model)})]):
+            dtm = tmp_path / f"dtm{k}.tif"
+            context, feedback = _context(), _Feedback()
+            processing.run(alg_id, {"INPUT": str(src), "OUTPUT": str(tmp_path / f"c{k}.laz"), **extra,
+                                    "DTM": QgsProcessingOutputLayerDefinition(str(dtm), QgsProject.instance())},
+                           context=context, feedback=feedback)
+            _load_results(alg_id, context, feedback)
+            assert _project_layer(dtm).renderer().type() == "singlebandpseudocolor", (k, alg_id)
+            del context
+            gc.collect()
+    finally:
+        QgsProject.instance().removeAllMapLayers()
+
+
 def test_vpc_output_loads_and_a_loaded_layer_is_an_input(groundsieve_provider, scene_laz, tmp_path):
     """Where a provider opens .vpc (QGIS >= 3.32: 3.40 here), the survey's .vpc comes back as a
     point-cloud layer, and that loaded layer can be the next run's input."""
