@@ -32,7 +32,8 @@ are read in the unit of the cloud's CRS (a warning says so when that unit is not
 scales, offsets and the CRS of the input kept (an ISPRS text input gets a scale that keeps its
 decimals, 0.001 m for millimetres). Ground points get ASPRS class 2, the other filtered points class 1
 (with <i>Keep existing classes other than 0, 1, 2</i>, every point of another class, e.g. building 6,
-water 9, bridge deck 17 or a class of your own, keeps it exactly and is never made ground).</p>
+water 9, bridge deck 17 or a class of your own, keeps it exactly and is never made ground, so it stays
+out of the DTM unless its class is one of the <i>DTM classes</i>).</p>
 <p><b>Withheld points</b> (the LAS flag meaning, in the ASPRS LAS specification, "if set, this point should
 not be included in processing (synonymous with Deleted)"; bit 7 of the classification byte in point formats 0-5) are never
 given to the filter, never become ground, never enter the DTM, and keep their class and flags.</p>
@@ -46,7 +47,10 @@ of a path, and the classified cloud is loaded as a point-cloud layer when the ru
 (Debian's builds have no PDAL), the log says where the classified cloud was written.</p>
 <p><b>DTM</b> (on by default; untick or leave empty in qgis_process to skip it): a GeoTIFF of the ground points interpolated linearly on their Delaunay
 triangulation, cell size <i>DTM cell size</i>, the cloud's CRS, nodata -9999 outside the hull of
-the ground points unless <i>DTM: fill cells outside the ground hull</i> is ticked (nearest value).</p>
+the ground points unless <i>DTM: fill cells outside the ground hull</i> is ticked (nearest value).
+<i>DTM classes</i> (e.g. <code>9</code>): points of these classes in the input enter the DTM with the
+ground, whatever the filter made of them; for a flood model, with <i>Keep existing classes</i>, the
+DTM then holds the vendor's water surface while bridge decks (17) stay out of it.</p>
 <p><b>Ground points as a vector layer</b> (advanced, off by default): the ground points as a PointZ layer with return
 number and intensity; meant for small clouds.</p>
 <p>Outputs are written under a temporary name (<code>.NAME.gs&lt;process id&gt;-&lt;random&gt;.part</code> and the
@@ -208,6 +212,17 @@ def warn_about_crs(feedback, input_path, crs_wkt, lengths="every length paramete
         feedback.pushWarning(warning)
 
 
+def dtm_classes_parameter(name):
+    """The DTM's classes added to the ground (ground filters and rfclassify)."""
+    param = QgsProcessingParameterString(
+        name, "DTM classes: classes of the input added to the ground (e.g. 9 = water)", defaultValue="",
+        optional=True)
+    param.setHelp("Points of these classes in the input enter the DTM with the ground, whatever the filter "
+                  "made of them (withheld and ignored points never do): e.g. 9, so that a flood model's DTM "
+                  "holds the water surface. Empty: the ground only.")
+    return param
+
+
 class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
     """Base class of the ground filters. Subclasses declare their own parameters in
     ``initFilterParameters`` and build the core filter object in ``buildFilter``."""
@@ -221,6 +236,7 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
     DTM = "DTM"
     DTM_CELL = "DTM_CELL"
     DTM_FILL = "DTM_FILL"
+    DTM_CLASSES = "DTM_CLASSES"
     GROUND_POINTS = "GROUND_POINTS"
     GROUND_COUNT = "GROUND_COUNT"
     POINT_COUNT = "POINT_COUNT"
@@ -352,6 +368,7 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
             defaultValue=1.0, minValue=0.0))
         self.addParameter(QgsProcessingParameterBoolean(
             self.DTM_FILL, "DTM: fill cells outside the ground hull (nearest value)", defaultValue=False))
+        self.addParameter(dtm_classes_parameter(self.DTM_CLASSES))
         self.addParameter(QgsProcessingParameterFileDestination(
             self.OUTPUT, "Classified point cloud (a .vpc for several input files)",
             fileFilter="LAZ (*.laz);;LAS (*.las);;Virtual point cloud (*.vpc)"))
@@ -387,7 +404,8 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
                 tiling=self.tileOptions(parameters, context))
             dtm = workflow.DTMOptions(
                 cell_size_m=self.parameterAsDouble(parameters, self.DTM_CELL, context),
-                fill_outside_hull=self.parameterAsBoolean(parameters, self.DTM_FILL, context))
+                fill_outside_hull=self.parameterAsBoolean(parameters, self.DTM_FILL, context),
+                classes=self.parameterAsString(parameters, self.DTM_CLASSES, context) or "")
             run = workflow.run_ground_filter(
                 input_path, output_path, algorithm, options=options, dtm_path=dtm_path, dtm=dtm,
                 rasters={path: make for path, make in rasters.values()}, **feedback_callables(feedback))

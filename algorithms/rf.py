@@ -10,7 +10,7 @@ from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException, QgsProces
 from qgis.PyQt.QtGui import QIcon
 
 from . import pointclouds
-from .base import check_parameter_values, core_modules, dialog_help, feedback_callables
+from .base import check_parameter_values, core_modules, dialog_help, dtm_classes_parameter, feedback_callables
 from .discovery import Discoverable
 
 _ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
@@ -200,6 +200,7 @@ class RFClassifyAlgorithm(_RFBase):
     DTM = "DTM"
     DTM_CELL = "DTM_CELL"
     DTM_FILL = "DTM_FILL"
+    DTM_CLASSES = "DTM_CLASSES"
     IGNORE_CLASSES = "IGNORE_CLASSES"
 
     def name(self):
@@ -211,13 +212,14 @@ class RFClassifyAlgorithm(_RFBase):
     def shortHelpString(self):  # noqa: N802
         return dialog_help("""<p>Applies a model trained with <i>Train Random Forest classifier</i> to another cloud and
 writes it with the predicted ASPRS classes (every other dimension kept); optionally a DTM GeoTIFF
-from the points predicted as ground (class 2), as the ground filters make it.</p>
+from the points predicted as ground (class 2), as the ground filters make it, and from the points of
+the <i>DTM classes</i> of the input (e.g. <code>9</code>, water, for a flood model).</p>
 <p><b>Withheld points</b> (the LAS flag: "if set, this point should not be included in processing (synonymous with
 Deleted)") and
 points of the <b>Ignored classes</b> (default <code>7,18</code>, noise; a list or ranges such as
 <code>7,18,20-25</code>; empty = none) keep their class and flags and are left out of the features'
 neighbourhoods, the prediction and the DTM, whose grid spans only the other points.</p>
-<p><b>Surveys</b>: a virtual point cloud (.vpc) or a cloud larger than the memory is classified in
+<p><b>Surveys</b>: a folder of LAS/LAZ files, a virtual point cloud (.vpc) or a cloud larger than the memory is classified in
 buffered tiles, as the ground filters do (the buffer is the reach of the model's features); this works
 for ground models (classes 2 and 1) whose features come from x, y, z (the default HYBRID preset, or
 geometric features); other models are refused for surveys with the reason.</p>
@@ -244,6 +246,7 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
             self.DTM_CELL, "DTM cell size (m)", type=Double, defaultValue=1.0, minValue=0.0))
         self.addParameter(QgsProcessingParameterBoolean(
             self.DTM_FILL, "Fill DTM cells outside the ground hull (nearest value)", defaultValue=False))
+        self.addParameter(dtm_classes_parameter(self.DTM_CLASSES))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         errors, rf, learning = _rf()
@@ -253,7 +256,8 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
         dtm_path = self.parameterAsOutputLayer(parameters, self.DTM, context) or None
         try:
             dtm = DTMOptions(cell_size_m=self.parameterAsDouble(parameters, self.DTM_CELL, context),
-                             fill_outside_hull=self.parameterAsBoolean(parameters, self.DTM_FILL, context))
+                             fill_outside_hull=self.parameterAsBoolean(parameters, self.DTM_FILL, context),
+                             classes=self.parameterAsString(parameters, self.DTM_CLASSES, context) or "")
             learning.classify_file(input_path, output,
                                    self.parameterAsFile(parameters, self.MODEL, context), dtm_path=dtm_path,
                                    dtm=dtm, ignore_classes=self.parameterAsString(

@@ -44,6 +44,9 @@ def _add_common(parser: argparse.ArgumentParser) -> None:
                     help="DTM cell size (m; default %(default)s)")
     io.add_argument("--dtm-fill", action=argparse.BooleanOptionalAction, default=dt["fill_outside_hull"],
                     help="fill DTM cells outside the ground hull (nearest value; default %(default)s)")
+    io.add_argument("--dtm-classes", default="", metavar="LIST",
+                    help="classes of the input whose points enter the DTM with the ground, e.g. 9 (water) for "
+                         "a flood model; a list or ranges as --ignore-classes (default none)")
     io.add_argument("--last-returns", action=argparse.BooleanOptionalAction, default=fo["last_returns_only"],
                     help="filter only last returns (others become non-ground; default %(default)s)")
     io.add_argument("--ignore-classes", default=None, metavar="LIST",
@@ -53,7 +56,8 @@ def _add_common(parser: argparse.ArgumentParser) -> None:
     io.add_argument("--ignore-noise", action=argparse.BooleanOptionalAction, default=fo["ignore_noise"],
                     help=argparse.SUPPRESS)
     io.add_argument("--keep-classes", action=argparse.BooleanOptionalAction, default=fo["keep_existing_classes"],
-                    help="keep existing non-ground classes (default %(default)s)")
+                    help="keep every class other than 0, 1, 2 as it is (never made ground, so out of the DTM "
+                         "unless named in --dtm-classes; default %(default)s)")
     tiles = parser.add_argument_group("survey scale: tiles")
     tiles.add_argument("--tile-size", type=float, default=to["tile_size_m"], metavar="M",
                        help="tile size (m; 0 = from the memory budget; default %(default)s)")
@@ -227,7 +231,8 @@ def options_from(args, log=None):
     options = FilterOptions(last_returns_only=args.last_returns, ignore_noise=args.ignore_noise,
                             ignore_classes=args.ignore_classes, keep_existing_classes=args.keep_classes,
                             tiling=tiling)
-    return algorithm, options, DTMOptions(cell_size_m=args.dtm_cell, fill_outside_hull=args.dtm_fill)
+    return algorithm, options, DTMOptions(cell_size_m=args.dtm_cell, fill_outside_hull=args.dtm_fill,
+                                          classes=args.dtm_classes)
 
 
 def main(argv: Optional[List[str]] = None, out=None) -> int:
@@ -247,8 +252,10 @@ def main(argv: Optional[List[str]] = None, out=None) -> int:
     if not args.output and not args.dtm:
         print("groundsieve: give --output and/or --dtm", file=out)
         return 2
-    if not args.dtm and args.dtm_cell != _defaults(DTMOptions)["cell_size_m"]:
-        print("groundsieve: --dtm-cell is set but no --dtm is named: no DTM is made", file=out)
+    for flag, unset in (("--dtm-cell", args.dtm_cell == _defaults(DTMOptions)["cell_size_m"]),
+                        ("--dtm-classes", not args.dtm_classes)):
+        if not args.dtm and not unset:
+            print(f"groundsieve: {flag} is set but no --dtm is named: no DTM is made", file=out)
     progress = _progress_printer(out)
     try:
         log = lambda msg: print(msg, file=out, flush=True)  # noqa: E731

@@ -308,8 +308,8 @@ def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_pat
     result is then the engine's ``TiledRun``, not ``(cloud, predicted)``."""
     from ..io import CLASS_GROUND, read_cloud
     from ..progress import Steps
-    from .workflow import (DTMOptions, FilterOptions, check_dtm_memory, check_outputs, make_dtm, processable,
-                           write_outputs)
+    from .workflow import (DTMOptions, FilterOptions, check_dtm_memory, check_outputs, dtm_points, make_dtm,
+                           processable, write_outputs)
     from .tiles import TileOptions, needs_tiling
     if needs_tiling(input_path, tiling or TileOptions()):
         return classify_survey(input_path, output_path, model_path, dtm_path=dtm_path, dtm=dtm,
@@ -356,7 +356,7 @@ def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_pat
         ground = predicted_part == CLASS_GROUND
         if not ground.any():
             raise InputError(f"{input_path}: no point was predicted as ground (class 2): no DTM can be made")
-        grid, values = make_dtm(part.x, part.y, part.z, ground, dtm)
+        grid, values = make_dtm(part.x, part.y, part.z, dtm_points(part, ground, np.ones(len(part), bool), dtm), dtm)
         rasters.append((dtm_path, values, grid))
     write_outputs(cloud, predicted, output_path, rasters, steps.sub(0.7, 1.0))
     steps.report(1.0)

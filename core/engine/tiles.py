@@ -518,6 +518,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             rasters.append(dtm_writer)
     tile_log = []
     ground_total = 0
+    kept_out: Dict[int, int] = {}  # points kept in classes of their own, left out of the DTM
     filter_steps = steps.sub(0.3, 0.85)
     t_tiles = time.perf_counter()
     class_paths = [os.path.join(work, f"f{k:05d}.cls.npy") for k in range(len(infos))]
@@ -552,6 +553,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             assigned[int(k)] += count
         if result["block"] is not None:
             dtm_writer.write_block(*result["block"])
+        for code, count in result.get("kept_out", ()):
+            kept_out[int(code)] = kept_out.get(int(code), 0) + int(count)
         ground_total += result["ground"]
         tile_log.append(dict(key=tuple(result["key"]), points=result["own"], read=result["read"],
                              ground=result["ground"], copc_read=result.get("copc_read", 0)))
@@ -639,7 +642,13 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         from ..raster.crs import lonlat_box
         write_vpc(output_path, [scan_header(o) for o in outs], outs, lonlat=lonlat_box)
     if dtm_writer is not None:
+        from .workflow import kept_out_note
+        note = kept_out_note(kept_out)
+        if note:
+            log(note)
         dtm_writer.finish(dtm_path)
+        g = dtm_writer.grid
+        log(f"Wrote the DTM {dtm_path} ({g.ncols:,} x {g.nrows:,} cells of {g.cell:g} m).")
     steps.report(1.0)
     log(f"Done in {time.perf_counter() - t_start:.1f} s.")
     return TiledRun(inputs, [o for o in outs if o], sum(i.count for i in infos), ground_total, crs_wkt,
@@ -867,11 +876,16 @@ def _tile_job(job) -> Optional[dict]:
             # (the write phase reads them there; a killed worker's writes stay too).
             del classes
             assigned[int(k)] = int(sel.sum())
-        block = None
+        block, kept_out = None, {}
         if job["dtm"] is not None:
-            block = _dtm_block(cloud, ground, job["dtm"], job["dtm_grid"], job["bounds"], job["buffer"])
+            area = workflow.processable(cloud, options)
+            block = _dtm_block(cloud, workflow.dtm_points(cloud, ground, area, job["dtm"]), job["dtm"],
+                               job["dtm_grid"], job["bounds"], job["buffer"])
+            if options.keep_existing_classes:
+                kept_out = workflow.kept_out_of_dtm(cloud, cls, area & own, job["dtm"])
         result = dict(key=list(job["key"]), own=int(own.sum()), read=len(cloud), ground=int(ground[own].sum()),
-                      assigned=assigned, block=block, class_parts=class_parts, copc_read=copc_read)
+                      assigned=assigned, block=block, class_parts=class_parts, copc_read=copc_read,
+                      kept_out=sorted(kept_out.items()))
         _save_done(job["done_dir"], result)
         return result
     except Cancelled:

@@ -85,9 +85,14 @@ class DTMOptions:
     points_per_cell: int = 4
     #: bytes the DTM grid may take (None: a share of the memory available)
     memory_budget_bytes: Optional[int] = None
+    #: classes of the input whose points enter the DTM with the ground, whatever the filter made of
+    #: them: e.g. 9 (water), so that a flood model's DTM holds the water surface where the vendor
+    #: classified it ("9", "9, 17", "2-5", or codes). Withheld and ignored points never enter it.
+    classes: object = ()
 
     def __post_init__(self):
         _check_budget(self.memory_budget_bytes, "memory_budget_bytes")
+        object.__setattr__(self, "classes", parse_classes(self.classes, what="DTM classes"))
         if not (math.isfinite(self.cell_size_m) and self.cell_size_m > 0):
             raise InvalidParameterError(f"DTM cell size must be > 0 m (got {self.cell_size_m})")
         if self.cell_size_m > MAX_CELL_M:
@@ -231,6 +236,36 @@ def _codes(codes) -> str:
 DTM_BYTES_PER_CELL = 40
 
 
+def dtm_points(cloud: PointCloud, ground: np.ndarray, processable_mask: np.ndarray, options: DTMOptions) -> np.ndarray:
+    """The points a DTM is made from: the ground, and the processable points (neither withheld nor
+    ignored) whose class in the input is one of ``options.classes``."""
+    if not options.classes:
+        return ground
+    return ground | (np.isin(cloud.classification, options.classes) & processable_mask)
+
+
+def kept_out_of_dtm(cloud: PointCloud, classification: np.ndarray, processable_mask: np.ndarray,
+                    options: DTMOptions) -> dict:
+    """{class: points} of the processable points that kept a class of their own (kept classes:
+    neither 0, 1 nor 2) and stay out of the DTM (not one of ``options.classes``)."""
+    out = ~np.isin(classification, REWRITTEN_CLASSES) & processable_mask
+    if options.classes:
+        out &= ~np.isin(cloud.classification, options.classes)
+    codes, counts = np.unique(classification[out], return_counts=True)
+    return {int(c): int(n) for c, n in zip(codes, counts)}
+
+
+def kept_out_note(counts: dict) -> str:
+    """The log's line on points kept in classes of their own and left out of the DTM ("" if none)."""
+    if not counts:
+        return ""
+    from ..learn.report import ASPRS_NAMES
+    parts = ", ".join(f"{c} ({ASPRS_NAMES.get(c, 'class ' + str(c))}): {n:,}" for c, n in sorted(counts.items()))
+    return (f"DTM: {sum(counts.values()):,} points kept in classes of their own are not ground and stay out of "
+            f"it ({parts}); the DTM is interpolated across them. To make it hold a class (e.g. 9, the water "
+            "surface, for a flood model), name it in the DTM classes.")
+
+
 def check_dtm_memory(x, y, options: DTMOptions) -> GridSpec:
     """The DTM grid over the points ``x, y`` (those that may enter it), its memory checked against
     the budget: called before the filter runs, so that a DTM too large is refused before any work."""
@@ -367,8 +402,11 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     if dtm_path:
         # The DTM spans only the points that may enter it: not withheld, not ignored (noise may lie far away).
         area = done.processable
-        run.dtm_grid, run.dtm = make_dtm(*_where(area, cloud.x, cloud.y, cloud.z, ground), dtm,
-                                         getattr(done.detail, "no_ground_reason", ""), input_path,
+        note = kept_out_note(kept_out_of_dtm(cloud, cls, area, dtm)) if options.keep_existing_classes else ""
+        if note:
+            log(note)
+        run.dtm_grid, run.dtm = make_dtm(*_where(area, cloud.x, cloud.y, cloud.z, dtm_points(cloud, ground, area, dtm)),
+                                         dtm, getattr(done.detail, "no_ground_reason", ""), input_path,
                                          steps.sub(at_dtm, at_write), log)
     steps.report(at_write)
     extra = [(path, *make(run)) for path, make in rasters.items()]

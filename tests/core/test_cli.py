@@ -199,6 +199,15 @@ def test_ignored_classes_a_degree_crs_and_a_dtm_cell_without_dtm_as_in_the_dialo
     text = out.getvalue()
     assert f"WARNING: {degrees}: the CRS's unit is degrees, not metres: every length parameter" in text
     assert "--dtm-cell is set but no --dtm is named: no DTM is made" in text
+    # the DTM classes: a bad list in words; named without --dtm, said
+    out = io.StringIO()
+    assert main(["smrf", "--input", str(degrees), "--dtm", str(tmp_path / "e.tif"), "--dtm-classes", "water"],
+                out=out) == 1
+    assert "DTM classes: 'water' is not a class code" in out.getvalue() and "Traceback" not in out.getvalue()
+    out = io.StringIO()
+    assert main(["smrf", "--input", str(degrees), "--output", str(tmp_path / "f.laz"), "--dtm-classes", "9"],
+                out=out) == 0
+    assert "--dtm-classes is set but no --dtm is named: no DTM is made" in out.getvalue()
 
 
 def test_the_command_runs_without_gdal_and_then_says_nothing_of_the_crs(scene, tmp_path, monkeypatch):

@@ -31,7 +31,7 @@ def test_one_output_rule_for_every_filter(groundsieve_provider, name):
     # The DTM's options close the inputs the dialog shows, right above the outputs it lists last.
     shown = [p.name() for p in params if not p.isDestination() and not _advanced(p)
              and not p.flags() & D.Flag.FlagHidden]
-    assert shown[-2:] == ["DTM_CELL", "DTM_FILL"]
+    assert shown[-3:] == ["DTM_CELL", "DTM_FILL", "DTM_CLASSES"]
     assert any(_advanced(p) for p in params if not p.isDestination())  # an Advanced section
     for extra in (p for p in params if p.isDestination() and p.name() not in ("OUTPUT", "DTM", "GROUND_POINTS")):
         assert not extra.createByDefault(), extra.name()  # intermediate rasters are opt-in

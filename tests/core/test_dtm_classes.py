@@ -1,0 +1,93 @@
+"""DTM classes (``DTMOptions.classes``, the dialog's DTM_CLASSES, the CLI's --dtm-classes): points of
+the named input classes enter the DTM with the ground. A flood modeller's delivery has the river's
+surface classified water (9): with the vendor's classes kept, water is never ground, and without
+the DTM classes the DTM bridges the channel from bank to bank; with ``classes=9`` it holds the
+water surface, in a whole-cloud run and in a tiled one alike. The run says how many kept points
+stay out of the DTM."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from groundsieve.core.engine.tiles import TileOptions
+from groundsieve.core.engine.workflow import DTMOptions, FilterOptions, run_ground_filter
+from groundsieve.core.errors import InvalidParameterError
+from groundsieve.core.filters.smrf import SMRF
+from groundsieve.core.io import new_las, write_las
+
+BANK_Z, WATER_Z = 10.0, 6.0
+#: the river: a channel 20 m wide, x from 50 to 70 m, its surface 4 m below the banks
+RIVER = (50.0, 70.0)
+
+
+@pytest.fixture(scope="module")
+def river(tmp_path_factory):
+    """Flat banks at 10 m (ground), a 20 m channel of water points at 6 m (class 9), a few trees."""
+    rng = np.random.default_rng(3)
+    n = 24_000
+    x, y = rng.uniform(0, 120, n), rng.uniform(0, 120, n)
+    wet = (x > RIVER[0]) & (x < RIVER[1])
+    z = np.where(wet, WATER_Z, BANK_Z) + rng.normal(0, 0.02, n)
+    cls = np.where(wet, 9, 2).astype(np.uint8)
+    tree = (~wet) & (rng.random(n) < 0.05)
+    z[tree] += rng.uniform(3, 12, tree.sum())
+    cls[tree] = 5
+    path = tmp_path_factory.mktemp("river") / "river.laz"
+    write_las(new_las(x, y, z, classification=cls), str(path))
+    return path
+
+
+def _channel_values(dtm_path):
+    from osgeo import gdal
+    ds = gdal.Open(str(dtm_path))
+    values = ds.ReadAsArray().astype(float)
+    x0, cell = ds.GetGeoTransform()[0], ds.GetGeoTransform()[1]
+    cols = x0 + (np.arange(values.shape[1]) + 0.5) * cell
+    inside = (cols > RIVER[0] + 3) & (cols < RIVER[1] - 3)
+    return values[5:-5, inside]
+
+
+@pytest.mark.parametrize("tiled", [False, True], ids=["whole", "tiled"])
+def test_water_enters_the_dtm_when_named_and_the_run_says_what_stays_out(river, tmp_path, tiled):
+    tiling = TileOptions(tile_size_m=50.0, workers=1, parallel="threads") if tiled else TileOptions()
+    options = FilterOptions(keep_existing_classes=True, tiling=tiling)
+    logs = {}
+    for name, classes in (("without", ()), ("with", "9")):
+        lines = []
+        run_ground_filter(str(river), str(tmp_path / f"{name}.laz"), SMRF(), options=options,
+                          dtm_path=str(tmp_path / f"{name}.tif"), dtm=DTMOptions(classes=classes), log=lines.append)
+        logs[name] = lines
+    bridged = _channel_values(tmp_path / "without.tif")
+    held = _channel_values(tmp_path / "with.tif")
+    # without: the channel is interpolated between the banks (10 m); with 9: the water surface (6 m)
+    assert np.nanmedian(bridged) == pytest.approx(BANK_Z, abs=0.1)
+    assert np.nanmedian(held) == pytest.approx(WATER_Z, abs=0.1) and np.nanmax(np.abs(held - WATER_Z)) < 0.2
+    note = [line for line in logs["without"] if line.startswith("DTM: ") and "stay out" in line]
+    assert len(note) == 1 and "9 (water): " in note[0] and "5 (high vegetation): " in note[0], logs["without"]
+    assert "name it in the DTM classes" in note[0]
+    # with 9 named only the trees stay out
+    note = [line for line in logs["with"] if line.startswith("DTM: ") and "stay out" in line]
+    assert len(note) == 1 and "9 (water)" not in note[0] and "5 (high vegetation)" in note[0]
+    # the classified cloud keeps the vendor's water either way
+    import laspy
+    las = laspy.read(str(tmp_path / "with.laz"))
+    assert (np.asarray(las.classification)[np.asarray(las.x) > RIVER[0] + 1] != 2).any()
+    assert set(np.unique(np.asarray(las.classification))) >= {9, 5}
+
+
+def test_without_kept_classes_nothing_is_said_and_named_classes_still_enter(river, tmp_path):
+    """Without kept classes every point is filtered (water becomes 2 or 1): no note; a named class
+    enters the DTM by its class in the input, whatever the filter made of it."""
+    lines = []
+    run_ground_filter(str(river), str(tmp_path / "o.laz"), SMRF(), dtm_path=str(tmp_path / "d.tif"),
+                      dtm=DTMOptions(classes=[9]), log=lines.append)
+    assert not [line for line in lines if "stay out" in line]
+    assert np.nanmedian(_channel_values(tmp_path / "d.tif")) == pytest.approx(WATER_Z, abs=0.1)
+
+
+@pytest.mark.parametrize("bad, words", [("water", "DTM classes: 'water' is not a class code"),
+                                        ("300", "DTM classes: class codes are 0-255 (got 300)")])
+def test_bad_dtm_classes_are_refused_in_words(bad, words):
+    with pytest.raises(InvalidParameterError) as err:
+        DTMOptions(classes=bad)
+    assert str(err.value).startswith(words)
