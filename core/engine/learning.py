@@ -357,7 +357,7 @@ def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_pat
         if not ground.any():
             raise InputError(f"{input_path}: no point was predicted as ground (class 2): no DTM can be made")
         grid, values = make_dtm(part.x, part.y, part.z, dtm_points(part, ground, np.ones(len(part), bool), dtm), dtm)
-        rasters.append((dtm_path, values, grid))
+        rasters.append((dtm_path, values, grid, {"elevation": True}))
     write_outputs(cloud, predicted, output_path, rasters, steps.sub(0.7, 1.0))
     steps.report(1.0)
     return cloud, predicted

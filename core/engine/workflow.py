@@ -411,7 +411,7 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     steps.report(at_write)
     extra = [(path, *make(run)) for path, make in rasters.items()]
     if dtm_path:
-        extra.insert(0, (dtm_path, run.dtm, run.dtm_grid))
+        extra.insert(0, (dtm_path, run.dtm, run.dtm_grid, {"elevation": True}))
     write_outputs(cloud, cls, output_path, extra, steps.sub(at_write, 1.0), log)
     steps.report(1.0)
     return run

@@ -130,7 +130,9 @@ def check_survey(infos: Sequence[LasInfo]) -> None:
             by["no CRS" if i.crs_wkt is None else i.crs_wkt.split('"')[1] if '"' in i.crs_wkt else "a CRS"].append(
                 os.path.basename(i.path))
         listing = "; ".join(f"{k}: {', '.join(v[:3])}{' ...' if len(v) > 3 else ''}" for k, v in by.items())
-        raise InputError(f"the input files have different CRS ({listing}); reproject them to one first")
+        advice = ("assign the CRS to the files without one, or reproject them to one" if "no CRS" in by
+                  else "reproject them to one")
+        raise InputError(f"the input files have different CRS ({listing}); {advice} first")
 
 
 def write_vpc(path: str, infos: Sequence[LasInfo], files: Sequence[str], *, lonlat=None) -> None:

@@ -22,11 +22,12 @@ def check_raster_path(path: str, *, inputs=()) -> str:
 
 def write_geotiff(path: str, values: np.ndarray, grid: GridSpec, *, crs_wkt: Optional[str] = None,
                   nodata: float = NODATA, dtype: str = "float32", atomic: bool = True,
-                  categories: Sequence[Tuple[int, str, str]] = ()) -> None:
+                  categories: Sequence[Tuple[int, str, str]] = (), elevation: bool = False) -> None:
     """Write ``values`` (row 0 = north, NaN = no data) as a single-band GeoTIFF, atomically unless
     the caller already writes to a temporary path of its own (``atomic=False``). ``categories``
     ``(value, name, "#rrggbb")`` of a class raster (``dtype`` uint8) are stored in the file: a
-    palette, and the names in the band's description and metadata."""
+    palette, and the names in the band's description and metadata. ``elevation``: the values are
+    heights (a DTM): the band's unit is the CRS's linear unit (:func:`elevation_unit`)."""
     from osgeo import gdal
     gdal.UseExceptions()
     path = check_raster_path(path)
@@ -39,12 +40,15 @@ def write_geotiff(path: str, values: np.ndarray, grid: GridSpec, *, crs_wkt: Opt
         with (atomic_path(path) if atomic else contextlib.nullcontext(path)) as tmp:
             driver = gdal.GetDriverByName("GTiff")
             ds = driver.Create(tmp, grid.ncols, grid.nrows, 1, gdal_type,
-                               options=["COMPRESS=DEFLATE", "TILED=YES", "BIGTIFF=IF_SAFER"])
+                               options=["COMPRESS=DEFLATE", "TILED=YES", "BIGTIFF=IF_SAFER"]
+                               + (["PREDICTOR=3"] if dtype.startswith("float") else []))
             ds.SetGeoTransform(grid.geotransform)
             if crs_wkt:
                 ds.SetProjection(crs_wkt)
             band = ds.GetRasterBand(1)
             band.SetNoDataValue(nodata)
+            if elevation:
+                band.SetUnitType(elevation_unit(crs_wkt))
             if categories:
                 _set_categories(band, categories)
             band.WriteArray(data)
@@ -54,6 +58,26 @@ def write_geotiff(path: str, values: np.ndarray, grid: GridSpec, *, crs_wkt: Opt
         raise OutputError(f"{path}: cannot write the GeoTIFF ({err})") from err
     if not os.path.exists(path):
         raise OutputError(f"{path}: the GeoTIFF was not written")
+
+
+def elevation_unit(crs_wkt: Optional[str]) -> str:
+    """The raster's unit type for elevations read in the CRS's linear unit (the unit every length of
+    a run is read in): "m", "ft" or "US survey foot"; "" when there is no CRS or it is not linear."""
+    if not crs_wkt:
+        return ""
+    from osgeo import osr
+    srs = osr.SpatialReference()
+    try:
+        srs.ImportFromWkt(crs_wkt)
+    except RuntimeError:
+        return ""
+    if not srs.IsProjected():
+        return ""
+    factor = srs.GetLinearUnits()
+    for unit, metres in (("m", 1.0), ("ft", 0.3048), ("US survey foot", 1200.0 / 3937.0)):
+        if abs(factor - metres) < 1e-9:
+            return unit
+    return ""
 
 
 def _set_categories(band, categories) -> None:
@@ -85,12 +109,13 @@ class BlockGeoTIFF:
         try:
             self._ds = gdal.GetDriverByName("GTiff").Create(
                 work_path, grid.ncols, grid.nrows, 1, gdal.GDT_Float32,
-                options=["COMPRESS=DEFLATE", "TILED=YES", "BIGTIFF=IF_SAFER", "SPARSE_OK=TRUE"])
+                options=["COMPRESS=DEFLATE", "TILED=YES", "BIGTIFF=IF_SAFER", "SPARSE_OK=TRUE", "PREDICTOR=3"])
             self._ds.SetGeoTransform(grid.geotransform)
             if crs_wkt:
                 self._ds.SetProjection(crs_wkt)
             self._band = self._ds.GetRasterBand(1)
             self._band.SetNoDataValue(nodata)
+            self._band.SetUnitType(elevation_unit(crs_wkt))
         except RuntimeError as err:
             raise OutputError(f"{work_path}: cannot create the temporary raster ({err})") from err
 
@@ -117,6 +142,7 @@ class BlockGeoTIFF:
         try:
             with atomic_path(path) as tmp:
                 gdal.Translate(tmp, self.work_path, format="COG",
-                               creationOptions=["COMPRESS=DEFLATE", "BIGTIFF=IF_SAFER", "OVERVIEWS=AUTO"])
+                               creationOptions=["COMPRESS=DEFLATE", "PREDICTOR=YES", "BIGTIFF=IF_SAFER",
+                                                "OVERVIEWS=AUTO"])
         except RuntimeError as err:
             raise OutputError(f"{path}: cannot write the DTM ({err})") from err

@@ -497,3 +497,27 @@ def test_planned_tiles_leave_room_for_the_copc_node_cache():
     assert (copc + 40.0) ** 2 * 10.0 * BYTES_PER_POINT <= per_worker - NODE_CACHE_BYTES
     assert (plain + 40.0) ** 2 * 10.0 * BYTES_PER_POINT > per_worker - NODE_CACHE_BYTES
     assert plan_tile_size([info(True)], TileOptions(tile_size_m=300, workers=2), 20.0, 10.0) == 300
+
+
+def test_tiled_dtm_unit_and_predictor_and_the_crs_advice(tmp_path):
+    """A survey's DTM (a COG) says its heights are metres and uses the floating-point predictor; a
+    folder where one file has no CRS is refused with the advice to assign it."""
+    from osgeo import gdal
+    from groundsieve.core.synthetic import scene_crs_wkt
+    folder = tmp_path / "tiles"
+    folder.mkdir()
+    scene = make_scene(SceneSpec(size_m=100.0, density_per_m2=2.0, seed=4))
+    west = scene.x < 50
+    for name, part in (("w.laz", west), ("e.laz", ~west)):
+        write_las(new_las(scene.x[part], scene.y[part], scene.z[part], point_format=6, version="1.4",
+                          crs_wkt=scene_crs_wkt()), str(folder / name))
+    run_ground_filter(str(folder), str(tmp_path / "o.vpc"), SMRF(), dtm_path=str(tmp_path / "d.tif"),
+                      options=FilterOptions(tiling=TileOptions(tile_size_m=50.0, workers=1, parallel="threads")))
+    ds = gdal.Open(str(tmp_path / "d.tif"))
+    assert ds.GetRasterBand(1).GetUnitType() == "m"
+    assert ds.GetMetadata("IMAGE_STRUCTURE").get("PREDICTOR") == "3"
+    write_las(new_las(scene.x[west], scene.y[west], scene.z[west], point_format=6, version="1.4"),
+              str(folder / "w.laz"))
+    with pytest.raises(InputError, match="w.laz.*assign the CRS to the files without one"):
+        run_ground_filter(str(folder), str(tmp_path / "p.vpc"), SMRF(),
+                          options=FilterOptions(tiling=TileOptions(tile_size_m=50.0, workers=1)))

@@ -256,6 +256,8 @@ def test_dtm_geotiff(scene, tmp_path, cell):
     assert srs.GetAuthorityCode(None) == "32632"
     assert band.GetNoDataValue() == -9999.0
     assert band.DataType == 6  # GDT_Float32
+    assert band.GetUnitType() == "m"  # heights in the CRS's unit (UTM: metres)
+    assert ds.GetMetadata("IMAGE_STRUCTURE").get("PREDICTOR") == "3"  # floating-point predictor
     inside, X = expected_hull(scene, grid, run.ground)
     assert inside.any() and (~inside).any()
     np.testing.assert_allclose(values[inside], ground_z(X)[inside], atol=1e-3)  # the ground plane
