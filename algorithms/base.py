@@ -50,7 +50,9 @@ triangulation, cell size <i>DTM cell size</i>, the cloud's CRS, nodata -9999 out
 the ground points unless <i>DTM: fill cells outside the ground hull</i> is ticked (nearest value).
 <i>DTM classes</i> (e.g. <code>9</code>): points of these classes in the input enter the DTM with the
 ground, whatever the filter made of them; for a flood model, with <i>Keep existing classes</i>, the
-DTM then holds the vendor's water surface while bridge decks (17) stay out of it.</p>
+DTM then holds the vendor's water surface while bridge decks (17) stay out of it. <i>DTM: leave cells
+farther than this from any ground point empty</i> (advanced, 0 = no limit): data gaps are otherwise
+bridged by the triangulation.</p>
 <p><b>Ground points as a vector layer</b> (advanced, off by default): the ground points as a PointZ layer with return
 number and intensity; meant for small clouds.</p>
 <p>Outputs are written under a temporary name (<code>.NAME.gs&lt;process id&gt;-&lt;random&gt;.part</code> and the
@@ -223,6 +225,18 @@ def dtm_classes_parameter(name):
     return param
 
 
+def dtm_max_distance_parameter(name):
+    """The DTM's gap limit (ground filters and rfclassify), advanced."""
+    param = QgsProcessingParameterNumber(
+        name, "DTM: leave cells farther than this from any ground point empty (m, 0 = no limit)",
+        type=QgsProcessingParameterNumber.Type.Double, defaultValue=0.0, minValue=0.0)
+    param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
+    param.setHelp("A data gap (a missing tile, water without returns) is otherwise bridged by the "
+                  "triangulation: cells farther than this from every ground point stay nodata. In a survey, "
+                  "keep it at most the tile buffer.")
+    return param
+
+
 class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
     """Base class of the ground filters. Subclasses declare their own parameters in
     ``initFilterParameters`` and build the core filter object in ``buildFilter``."""
@@ -237,6 +251,7 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
     DTM_CELL = "DTM_CELL"
     DTM_FILL = "DTM_FILL"
     DTM_CLASSES = "DTM_CLASSES"
+    DTM_MAX_DISTANCE = "DTM_MAX_DISTANCE"
     GROUND_POINTS = "GROUND_POINTS"
     GROUND_COUNT = "GROUND_COUNT"
     POINT_COUNT = "POINT_COUNT"
@@ -369,6 +384,7 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         self.addParameter(QgsProcessingParameterBoolean(
             self.DTM_FILL, "DTM: fill cells outside the ground hull (nearest value)", defaultValue=False))
         self.addParameter(dtm_classes_parameter(self.DTM_CLASSES))
+        self.addParameter(dtm_max_distance_parameter(self.DTM_MAX_DISTANCE))
         self.addParameter(QgsProcessingParameterFileDestination(
             self.OUTPUT, "Classified point cloud (a .vpc for several input files)",
             fileFilter="LAZ (*.laz);;LAS (*.las);;Virtual point cloud (*.vpc)"))
@@ -405,7 +421,8 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
             dtm = workflow.DTMOptions(
                 cell_size_m=self.parameterAsDouble(parameters, self.DTM_CELL, context),
                 fill_outside_hull=self.parameterAsBoolean(parameters, self.DTM_FILL, context),
-                classes=self.parameterAsString(parameters, self.DTM_CLASSES, context) or "")
+                classes=self.parameterAsString(parameters, self.DTM_CLASSES, context) or "",
+                max_distance_m=self.parameterAsDouble(parameters, self.DTM_MAX_DISTANCE, context))
             run = workflow.run_ground_filter(
                 input_path, output_path, algorithm, options=options, dtm_path=dtm_path, dtm=dtm,
                 rasters={path: make for path, make in rasters.values()}, **feedback_callables(feedback))

@@ -10,7 +10,8 @@ from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException, QgsProces
 from qgis.PyQt.QtGui import QIcon
 
 from . import pointclouds
-from .base import check_parameter_values, core_modules, dialog_help, dtm_classes_parameter, feedback_callables
+from .base import (check_parameter_values, core_modules, dialog_help, dtm_classes_parameter, dtm_max_distance_parameter,
+                   feedback_callables)
 from .discovery import Discoverable
 
 _ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
@@ -201,6 +202,7 @@ class RFClassifyAlgorithm(_RFBase):
     DTM_CELL = "DTM_CELL"
     DTM_FILL = "DTM_FILL"
     DTM_CLASSES = "DTM_CLASSES"
+    DTM_MAX_DISTANCE = "DTM_MAX_DISTANCE"
     IGNORE_CLASSES = "IGNORE_CLASSES"
 
     def name(self):
@@ -247,6 +249,7 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
         self.addParameter(QgsProcessingParameterBoolean(
             self.DTM_FILL, "Fill DTM cells outside the ground hull (nearest value)", defaultValue=False))
         self.addParameter(dtm_classes_parameter(self.DTM_CLASSES))
+        self.addParameter(dtm_max_distance_parameter(self.DTM_MAX_DISTANCE))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         errors, rf, learning = _rf()
@@ -257,7 +260,8 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
         try:
             dtm = DTMOptions(cell_size_m=self.parameterAsDouble(parameters, self.DTM_CELL, context),
                              fill_outside_hull=self.parameterAsBoolean(parameters, self.DTM_FILL, context),
-                             classes=self.parameterAsString(parameters, self.DTM_CLASSES, context) or "")
+                             classes=self.parameterAsString(parameters, self.DTM_CLASSES, context) or "",
+                             max_distance_m=self.parameterAsDouble(parameters, self.DTM_MAX_DISTANCE, context))
             learning.classify_file(input_path, output,
                                    self.parameterAsFile(parameters, self.MODEL, context), dtm_path=dtm_path,
                                    dtm=dtm, ignore_classes=self.parameterAsString(

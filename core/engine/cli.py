@@ -47,6 +47,9 @@ def _add_common(parser: argparse.ArgumentParser) -> None:
     io.add_argument("--dtm-classes", default="", metavar="LIST",
                     help="classes of the input whose points enter the DTM with the ground, e.g. 9 (water) for "
                          "a flood model; a list or ranges as --ignore-classes (default none)")
+    io.add_argument("--dtm-max-distance", type=float, default=dt["max_distance_m"], metavar="M",
+                    help="leave DTM cells farther than this from any ground point empty, so that data gaps are "
+                         "not bridged (m; 0 = no limit; default %(default)s)")
     io.add_argument("--last-returns", action=argparse.BooleanOptionalAction, default=fo["last_returns_only"],
                     help="filter only last returns (others become non-ground; default %(default)s)")
     io.add_argument("--ignore-classes", default=None, metavar="LIST",
@@ -232,7 +235,7 @@ def options_from(args, log=None):
                             ignore_classes=args.ignore_classes, keep_existing_classes=args.keep_classes,
                             tiling=tiling)
     return algorithm, options, DTMOptions(cell_size_m=args.dtm_cell, fill_outside_hull=args.dtm_fill,
-                                          classes=args.dtm_classes)
+                                          classes=args.dtm_classes, max_distance_m=args.dtm_max_distance)
 
 
 def main(argv: Optional[List[str]] = None, out=None) -> int:
@@ -253,7 +256,7 @@ def main(argv: Optional[List[str]] = None, out=None) -> int:
         print("groundsieve: give --output and/or --dtm", file=out)
         return 2
     for flag, unset in (("--dtm-cell", args.dtm_cell == _defaults(DTMOptions)["cell_size_m"]),
-                        ("--dtm-classes", not args.dtm_classes)):
+                        ("--dtm-classes", not args.dtm_classes), ("--dtm-max-distance", not args.dtm_max_distance)):
         if not args.dtm and not unset:
             print(f"groundsieve: {flag} is set but no --dtm is named: no DTM is made", file=out)
     progress = _progress_printer(out)

@@ -516,6 +516,11 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         dtm_writer = BlockGeoTIFF(os.path.join(work, "dtm.tif"), dtm_grid, crs_wkt=crs_wkt)
         if rasters is not None:
             rasters.append(dtm_writer)
+        if dtm.max_distance_m > grid.buffer:
+            log(f"DTM: the maximum distance ({dtm.max_distance_m:g} m) is larger than the tiles' buffer "
+                f"({grid.buffer:g} m), how far a tile sees beyond its edges: in gaps wider than the buffer the "
+                "DTM may differ from tile to tile. Keep the distance at most the buffer, or set a larger tile "
+                "buffer.")
     tile_log = []
     ground_total = 0
     kept_out: Dict[int, int] = {}  # points kept in classes of their own, left out of the DTM
@@ -994,5 +999,5 @@ def _dtm_block(cloud, ground, dtm, full, bounds, buffer_m):
                    row1 - row0 + 2 * pad, col1 - col0 + 2 * pad)
     g = ground
     values = tin_dtm(cloud.x[g], cloud.y[g], cloud.z[g], ext, fill_outside=dtm.fill_outside_hull,
-                     points_per_cell=dtm.points_per_cell)
+                     points_per_cell=dtm.points_per_cell, max_distance=dtm.max_distance_m)
     return row0, col0, np.ascontiguousarray(values[pad:pad + row1 - row0, pad:pad + col1 - col0])

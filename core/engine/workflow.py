@@ -89,10 +89,16 @@ class DTMOptions:
     #: them: e.g. 9 (water), so that a flood model's DTM holds the water surface where the vendor
     #: classified it ("9", "9, 17", "2-5", or codes). Withheld and ignored points never enter it.
     classes: object = ()
+    #: cells farther than this (m) from every DTM point stay empty, so that a data gap (a missing
+    #: tile, a lake without returns) is not bridged by invented terrain; 0 = no limit
+    max_distance_m: float = 0.0
 
     def __post_init__(self):
         _check_budget(self.memory_budget_bytes, "memory_budget_bytes")
         object.__setattr__(self, "classes", parse_classes(self.classes, what="DTM classes"))
+        if not (math.isfinite(self.max_distance_m) and self.max_distance_m >= 0):
+            raise InvalidParameterError(f"DTM maximum distance must be >= 0 m, 0 = no limit "
+                                        f"(got {self.max_distance_m})")
         if not (math.isfinite(self.cell_size_m) and self.cell_size_m > 0):
             raise InvalidParameterError(f"DTM cell size must be > 0 m (got {self.cell_size_m})")
         if self.cell_size_m > MAX_CELL_M:
@@ -289,7 +295,8 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions, why_none: str = "
     # threads=None: the whole cloud's DTM in strips on numba's threads (a tile's, in the tiled
     # engine, runs on one core: its workers run the tiles in parallel)
     dtm = tin_dtm(x[ground], y[ground], z[ground], grid, fill_outside=options.fill_outside_hull,
-                  points_per_cell=options.points_per_cell, threads=None, steps=steps, log=log)
+                  points_per_cell=options.points_per_cell, threads=None, steps=steps, log=log,
+                  max_distance=options.max_distance_m)
     return grid, dtm
 
 

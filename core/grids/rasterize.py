@@ -243,7 +243,7 @@ def _strips_tin(xs, ys, zs, grid: GridSpec, threads: int, out: np.ndarray) -> tu
 
 def tin_dtm(x, y, z, grid: GridSpec, *, fill_outside: bool = False, points_per_cell: int = 4,
             triangulator: str = "sweep", threads: Optional[int] = 1, steps: Optional[Steps] = None,
-            log: Optional[Callable[[str], None]] = None) -> np.ndarray:
+            log: Optional[Callable[[str], None]] = None, max_distance: float = 0.0) -> np.ndarray:
     """DTM of ``grid`` by linear interpolation on the Delaunay triangulation of the
     points (normally the ground points). Cells whose centre is outside the convex
     hull are NaN, or with ``fill_outside`` take the value of the nearest filled cell.
@@ -265,6 +265,10 @@ def tin_dtm(x, y, z, grid: GridSpec, *, fill_outside: bool = False, points_per_c
     only): each strip from its own points and those within a buffer beyond its edges, keeping only
     the triangles that are the single triangulation's (their circumcircle holds no other point), the
     rest of the hull from wider strips (:func:`_strips_tin`): the same surface as one triangulation.
+
+    ``max_distance`` > 0: a cell whose centre lies farther than that from the centre of every cell
+    holding a point is left empty (NaN), after the fill if any: a data gap keeps no invented
+    terrain beyond that distance from its edge.
 
     ``steps`` gets the progress of the thinning, the triangulation and the rasterisation, and a
     cancel is honoured within a twentieth of a second in each (:func:`..progress.run_cancellable`);
@@ -327,5 +331,11 @@ def tin_dtm(x, y, z, grid: GridSpec, *, fill_outside: bool = False, points_per_c
             steps.check()
             idx = distance_transform_edt(missing, return_distances=False, return_indices=True)
             out = out[tuple(idx)]
+    if max_distance > 0:
+        steps.check()
+        empty = np.ones(grid.shape, dtype=bool)
+        empty[grid.row_of(ys), grid.col_of(xs)] = False
+        far = distance_transform_edt(empty, sampling=grid.cell) > max_distance
+        out[far] = np.nan
     steps.report(1.0)
     return out

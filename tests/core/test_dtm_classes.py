@@ -91,3 +91,46 @@ def test_bad_dtm_classes_are_refused_in_words(bad, words):
     with pytest.raises(InvalidParameterError) as err:
         DTMOptions(classes=bad)
     assert str(err.value).startswith(words)
+
+
+def test_a_data_gap_is_left_empty_beyond_the_maximum_distance(tmp_path):
+    """A survey with a 60 m square hole (a missing tile): without a limit the triangulation bridges
+    it (a whole run; a tiled run bridges it only where a tile has points of its own, so its DTM
+    there depends on the tiling); with a maximum distance of 10 m the cells farther than that from
+    every ground point are nodata, those near the gap's edge are interpolated as before, and a
+    tiled run (buffer larger than the distance) gives the same DTM as a whole run. (Tiles of 40 m:
+    each holds points of its own; a tile without any gives no DTM block at all.)"""
+    from osgeo import gdal
+    rng = np.random.default_rng(8)
+    x, y = rng.uniform(0, 150, 40_000), rng.uniform(0, 150, 40_000)
+    hole = (np.abs(x - 75) < 30) & (np.abs(y - 75) < 30)
+    x, y = x[~hole], y[~hole]
+    z = 100 + 0.05 * x + rng.normal(0, 0.01, x.size)
+    src = tmp_path / "holey.laz"
+    write_las(new_las(x, y, z, classification=np.full(x.size, 2, np.uint8)), str(src))
+    arrays = {}
+    for name, limit, tiling in (("bridged", 0.0, TileOptions()), ("limited", 10.0, TileOptions()),
+                                ("tiled", 10.0, TileOptions(tile_size_m=40.0, workers=1, parallel="threads"))):
+        dtm = tmp_path / f"{name}.tif"
+        run_ground_filter(str(src), str(tmp_path / f"{name}.laz"), SMRF(), dtm_path=str(dtm),
+                          dtm=DTMOptions(max_distance_m=limit), options=FilterOptions(tiling=tiling))
+        ds = gdal.Open(str(dtm))
+        arrays[name], gt = ds.ReadAsArray(), ds.GetGeoTransform()
+    bridged, limited = arrays["bridged"], arrays["limited"]
+    cx = gt[0] + (np.arange(bridged.shape[1]) + 0.5) * gt[1]
+    cy = gt[3] + (np.arange(bridged.shape[0]) + 0.5) * gt[5]
+    # the distance of each cell centre to the hole's edge, inside the hole
+    inside = np.minimum.outer(30 - np.abs(cy - 75), 30 - np.abs(cx - 75))
+    deep, rim = inside > 12, (inside > 0) & (inside < 8)
+    assert (bridged[deep] != -9999).all()          # bridged without a limit
+    assert (limited[deep] == -9999).all()          # left empty with one
+    np.testing.assert_array_equal(limited[rim], bridged[rim])  # near the edge, as before
+    outside = inside < -1
+    np.testing.assert_array_equal(limited[outside], bridged[outside])
+    assert arrays["tiled"].shape == limited.shape
+    np.testing.assert_allclose(arrays["tiled"], limited, atol=1e-4)
+
+
+def test_a_negative_maximum_distance_is_refused():
+    with pytest.raises(InvalidParameterError, match="DTM maximum distance must be >= 0 m"):
+        DTMOptions(max_distance_m=-1)

@@ -54,6 +54,9 @@ def test_dtm_classes_in_every_ground_filter_and_rfclassify(groundsieve_provider,
         param = QgsApplication.processingRegistry().algorithmById(f"groundsieve:{name}").parameterDefinition(
             "DTM_CLASSES")
         assert param is not None and not param.defaultValue(), name
+        gap = QgsApplication.processingRegistry().algorithmById(f"groundsieve:{name}").parameterDefinition(
+            "DTM_MAX_DISTANCE")
+        assert gap is not None and gap.defaultValue() == 0, name
     rng = np.random.default_rng(3)
     x, y = rng.uniform(0, 120, 20_000), rng.uniform(0, 120, 20_000)
     wet = (x > RIVER[0]) & (x < RIVER[1])
