@@ -145,6 +145,7 @@ def check_memory(nbytes: float, *, what: str, shape: tuple, cell: float, x=None,
                f"{_size(budget)} this run may use")
     if _BUDGET.get() is None:
         message += f" ({DEFAULT_MEMORY_FRACTION:.0%} of the memory available)"
+    far = ()
     if x is not None and y is not None:
         far, dist, core = isolated_points(x, y)
         if far.size:
@@ -154,11 +155,16 @@ def check_memory(nbytes: float, *, what: str, shape: tuple, cell: float, x=None,
             message += (f". Likely cause: {some} {_distance(float(dist[worst]))} from the others, at "
                         f"x {float(x[i]):.2f}, y {float(y[i]):.2f} (the others span about "
                         f"{core[1] - core[0]:,.0f} x {core[3] - core[2]:,.0f} m)")
-    message += (". Class such points as noise (7, which is ignored by default) or remove them; if the file holds "
-                "separate survey areas, split it into one file per area; or use a larger "
-                "cell size, or set a larger memory budget. A grid over the whole extent is what costs: the "
-                "survey-scale tiler, which grids only where points are, will avoid it once the run goes "
-                "through it.")
+    if x is not None and not len(far):
+        # no stray point: the points themselves span the grid, so the cell size is what costs
+        fits = float(f"{cell * math.sqrt(nbytes / max(budget, 1)) * 1.01:.2g}")
+        message += (f". The points themselves span this extent: use a larger cell size ({fits:g} m or more fits), "
+                    "set a larger memory budget, or run in tiles (a tile size), which grid one tile at a time.")
+    else:
+        message += (". Class such points as noise (7, which is ignored by default) or remove them; if the file "
+                    "holds separate survey areas, split it into one file per area; or use a larger cell size, or "
+                    "set a larger memory budget. A grid over the whole extent is what costs: the survey-scale "
+                    "tiler, which grids only where points are, will avoid it once the run goes through it.")
     raise MemoryBudgetError(message)
 
 

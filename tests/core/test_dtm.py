@@ -304,3 +304,23 @@ def test_strip_cuts_share_the_points_evenly():
     assert strip_cuts(cols, 10, 2) == [0, 1, 10]
     assert strip_cuts(np.arange(100) % 50, 50, 4) == [0, 13, 25, 38, 50]
     assert strip_cuts(np.zeros(5, dtype=np.int64), 1, 3) == [0, 1]
+
+
+def test_a_cell_too_small_for_dense_points_is_blamed_on_the_cell_not_on_stray_points():
+    """A survey's normal extent with a DTM cell of a millimetre: no point is far from the others,
+    so the message names the cell size that fits instead of advising to class stray points."""
+    from groundsieve.core.errors import MemoryBudgetError
+    from groundsieve.core.grids.spec import memory_budget
+    rng = np.random.default_rng(0)
+    x, y = rng.uniform(0, 200, 5000), rng.uniform(0, 200, 5000)
+    with memory_budget(1 << 30), pytest.raises(MemoryBudgetError) as err:
+        GridSpec.covering(x, y, 0.01, what="DTM", bytes_per_cell=40)
+    text = str(err.value)
+    assert "The points themselves span this extent: use a larger cell size (" in text
+    assert "noise" not in text
+    fits = float(text.split("larger cell size (")[1].split(" m")[0])
+    with memory_budget(1 << 30):
+        GridSpec.covering(x, y, fits, what="DTM", bytes_per_cell=40)  # the cell named fits
+    with memory_budget(1 << 30):
+        with pytest.raises(MemoryBudgetError):
+            GridSpec.covering(x, y, fits * 0.9, what="DTM", bytes_per_cell=40)
