@@ -158,9 +158,9 @@ def load_or_log(context, feedback, path, layer_name, output_name):
         context.addLayerToLoadOnCompletion(path, details)
         undrawn = _members_not_opened(path)
         if undrawn:
-            feedback.pushInfo(f"{layer_name}: {path} is loaded, but this QGIS has no point-cloud provider that "
-                              f"opens its {'/'.join(undrawn)} files (QGIS builds with PDAL, as on Windows and "
-                              "macOS, do): the layer shows the files' extents only, not their points.")
+            feedback.pushInfo(f"{layer_name}: {path}: this QGIS has no point-cloud provider that opens its "
+                              f"{'/'.join(undrawn)} files (QGIS builds with PDAL, as on Windows and macOS, do): "
+                              "loaded as a layer, it shows the files' extents only, not their points.")
         return keys[0]
     ext = _suffix(path)
     feedback.pushInfo(f"{layer_name}: written to {path}. Not loaded: this QGIS has no point-cloud provider "
