@@ -155,7 +155,8 @@ def explain_parameter(param, value, strictly_positive=(), largest=None):
     if isinstance(param, QgsProcessingParameterFile) and isinstance(value, str):
         if param.behavior() != QgsProcessingParameterFile.Behavior.File:
             return None
-        if os.path.isdir(value) and "folder" in (param.fileFilter() or "").lower():
+        from .pointclouds import takes_folders
+        if os.path.isdir(value) and takes_folders(param):
             return None  # the survey inputs take a folder of LAS/LAZ files too
         if param.name() == "PRESET" and not os.path.isfile(value):
             from .presets import shipped_preset_problem

@@ -266,6 +266,13 @@ def offer_point_clouds_in_modeler(param, folders=False):
     return param
 
 
+def takes_folders(param):
+    """Whether the input ``param`` takes a folder of LAS/LAZ files (offer_point_clouds_in_modeler's
+    ``folders``)."""
+    wrapper = param.metadata().get("widget_wrapper")
+    return isinstance(wrapper, dict) and bool(wrapper.get("folders"))
+
+
 class PointCloudInputWidget:
     """The ``widget_wrapper`` of the point-cloud inputs (Processing's WidgetWrapperFactory builds
     it with (parameter, dialog, row, col)). It returns QGIS's own widget for the dialog at hand,

@@ -21,7 +21,7 @@ PRESET_NAMES = ("C5H", "C1", "C2", "C3", "C4", "C5", "custom", "HYBRID")
 CRITERIA = ("gini", "entropy")
 SCALERS = ("none", "standard", "robust")
 CLOUD_FILTER = "Point clouds (*.las *.laz *.LAS *.LAZ)"
-SURVEY_FILTER = CLOUD_FILTER + ";;Virtual point clouds (*.vpc)"
+SURVEY_FILTER = CLOUD_FILTER + ";;Virtual point clouds (*.vpc);;All files and folders (*)"
 
 
 def _rf(extra=None):

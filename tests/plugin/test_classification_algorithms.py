@@ -122,15 +122,18 @@ def test_rfclassify_on_a_vpc_equals_the_file_run(groundsieve_provider, labelled_
     las = laspy.read(test)
     west = np.asarray(las.x) < np.median(np.asarray(las.x))
     halves = []
+    (tmp_path / "tiles").mkdir()
     for name, part in (("west.laz", west), ("east.laz", ~west)):
         piece = laspy.LasData(las.header)
         piece.points = las.points[part]
-        piece.write(tmp_path / name)
-        halves.append(str(tmp_path / name))
+        piece.write(tmp_path / "tiles" / name)
+        halves.append(str(tmp_path / "tiles" / name))
     write_vpc(str(tmp_path / "survey.vpc"), [scan_header(p) for p in halves], halves)
-    (tmp_path / "out").mkdir()
-    _run("rfclassify", {"INPUT": str(tmp_path / "survey.vpc"), "MODEL": str(model),
-                        "OUTPUT": str(tmp_path / "out" / "classified.vpc")})
-    for name, part in (("west.laz", west), ("east.laz", ~west)):
-        got = classes_of(tmp_path / "out" / "classified" / name)
-        assert np.mean(got == whole[part]) >= 0.999, name
+    # a .vpc, and the folder of the two files (its label says it takes one: it once was refused)
+    for source, out in ((tmp_path / "survey.vpc", "out"), (tmp_path / "tiles", "out_folder")):
+        (tmp_path / out).mkdir()
+        _run("rfclassify", {"INPUT": str(source), "MODEL": str(model),
+                            "OUTPUT": str(tmp_path / out / "classified.vpc")})
+        for name, part in (("west.laz", west), ("east.laz", ~west)):
+            got = classes_of(tmp_path / out / "classified" / name)
+            assert np.mean(got == whole[part]) >= 0.999, (source, name)
