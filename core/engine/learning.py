@@ -126,6 +126,10 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
     timings = {}
     t0 = time.perf_counter()
     cloud = _without_withheld(read_cloud(input_path), log)
+    from ..raster.crs import unit_warning
+    warning = unit_warning(input_path, cloud.crs_wkt, "the features' radii and the blocks' size")
+    if warning and cloud.crs_wkt:
+        log("Warning: " + warning)
     keep, classes = _labelled(cloud, options.classes, log)
     names = resolve_features(options.features, cloud, log)
     X = feature_matrix(cloud, names, steps.sub(0.0, 0.3))
@@ -166,7 +170,10 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
                      "intensity is the class code): the scores below would then mean nothing.")
         log(notes[-1])
     steps.report(0.35)
+    from ..raster.crs import horizontal_unit
     meta = dict(groundsieve_trained_from=os.path.basename(input_path), preset_features=list(options.features))
+    if horizontal_unit(cloud.crs_wkt):  # the unit its lengths (radii, heights) were read in
+        meta["crs_unit"] = horizontal_unit(cloud.crs_wkt)
     candidates = [options.params]
     if options.grid:
         candidates = [ForestParams(n_trees=t, criterion=c, scaler=s, max_depth=options.params.max_depth,
@@ -264,6 +271,21 @@ class ModelGround(Hybrid):
         return HybridResult(predicted == GROUND_CLASS, ground.astype(np.float32))
 
 
+def check_model_unit(model, model_path: str, input_path: str, crs_wkt: Optional[str], log) -> None:
+    """Refuse a cloud whose CRS unit is not the one the model was trained in (its features' radii
+    and heights would be read in another unit: 'metres' against 'US survey foot' misclassifies most
+    points without an error); warn when the model does not say and the cloud is not in metres."""
+    from ..raster.crs import horizontal_unit, unit_warning
+    unit, trained = horizontal_unit(crs_wkt), model.meta.get("crs_unit")
+    if unit and trained and unit != trained:
+        raise InputError(f"{input_path}: the CRS's unit is {unit}, but the model {model_path} was trained on a "
+                         f"cloud in {trained}: its features (neighbourhood radii, heights) would be read in "
+                         f"another unit. Reproject the cloud to a CRS in {trained} first")
+    if not trained and unit and unit != "metres":
+        log("Warning: " + unit_warning(input_path, crs_wkt, "the model's features (radii and heights, learnt "
+                                       "in the training cloud's unit)"))
+
+
 def classify_survey(input_path: str, output_path: str, model_path: str, *, dtm_path: Optional[str] = None,
                     dtm=None, ignore_classes=(7, 18), tiling=None, progress=None, is_cancelled=None, log=None):
     """rfclassify on a survey (a folder, a .vpc, a tile size set or a cloud beyond the memory
@@ -275,7 +297,11 @@ def classify_survey(input_path: str, output_path: str, model_path: str, *, dtm_p
     from ..learn.hybrid import unknown_features
     from .tiles import TileOptions
     from .workflow import DTMOptions, FilterOptions, run_ground_filter
+    from ..io.lasfiles import expand_inputs, scan_header
     model = load_model(model_path)
+    files = expand_inputs(input_path)
+    check_model_unit(model, model_path, input_path, scan_header(files[0]).crs_wkt if files else None,
+                     log or (lambda _msg: None))
     classes = sorted(int(c) for c in model.classes)
     if GROUND_CLASS not in classes or not set(classes) <= {1, GROUND_CLASS}:
         raise InputError(f"{model_path}: on a survey (a folder, a .vpc or a cloud larger than the memory), "
@@ -325,6 +351,9 @@ def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_pat
         raise InputError(f"{model_path}: this model has no ground class (2) (its classes: "
                          f"{', '.join(map(str, model.classes))}): it cannot make a DTM; leave the DTM out or "
                          "train a model with ground points")
+    if input_path.lower().endswith((".las", ".laz")) and os.path.isfile(input_path):
+        from ..io.lasfiles import scan_header  # before reading the points: a wrong unit is said at once
+        check_model_unit(model, model_path, input_path, scan_header(input_path).crs_wkt, log)
     cloud = read_cloud(input_path)
     for note in cloud.notes:
         log(note)

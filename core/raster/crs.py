@@ -27,14 +27,14 @@ def lonlat_box(x0: float, y0: float, x1: float, y1: float, crs_wkt: Optional[str
     return min(lons), min(lats), max(lons), max(lats)
 
 
-def unit_warning(path: str, crs_wkt: Optional[str], lengths: str = "every length parameter") -> Optional[str]:
-    """What to tell the user when the cloud has no CRS, or one whose unit is not the metre (the
-    filters read their lengths in the CRS's unit); None for a CRS in metres."""
+def horizontal_unit(crs_wkt: Optional[str]) -> Optional[str]:
+    """The unit lengths are read in under ``crs_wkt``: "metres", "degrees", or GDAL's name of the
+    linear unit (e.g. "US survey foot"); None when there is no CRS or it cannot be read (no GDAL)."""
     if not crs_wkt:
-        return f"{path}: no CRS in the file; outputs have none either."
+        return None
     try:
         from osgeo import osr
-    except ImportError:  # the command line without GDAL: the CRS cannot be read, nothing to say
+    except ImportError:  # the command line without GDAL: the CRS cannot be read
         return None
     ref = osr.SpatialReference()
     try:
@@ -43,9 +43,18 @@ def unit_warning(path: str, crs_wkt: Optional[str], lengths: str = "every length
     except RuntimeError:
         return None
     if ref.IsGeographic():
-        unit = "degrees"
-    elif ref.IsProjected() and abs(ref.GetLinearUnits() - 1.0) > 1e-12:
-        unit = ref.GetLinearUnitsName() or f"{ref.GetLinearUnits():g} m"
-    else:
+        return "degrees"
+    if ref.IsProjected() and abs(ref.GetLinearUnits() - 1.0) > 1e-12:
+        return ref.GetLinearUnitsName() or f"{ref.GetLinearUnits():g} m"
+    return "metres"
+
+
+def unit_warning(path: str, crs_wkt: Optional[str], lengths: str = "every length parameter") -> Optional[str]:
+    """What to tell the user when the cloud has no CRS, or one whose unit is not the metre (the
+    filters read their lengths in the CRS's unit); None for a CRS in metres."""
+    if not crs_wkt:
+        return f"{path}: no CRS in the file; outputs have none either."
+    unit = horizontal_unit(crs_wkt)
+    if unit is None or unit == "metres":
         return None
     return f"{path}: the CRS's unit is {unit}, not metres: {lengths} was read in that unit."

@@ -70,3 +70,51 @@ def test_rfclassify_reports_and_honours_cancel_while_it_predicts(tmp_path):
         learning.classify_file(str(path), str(tmp_path / "d.laz"), DEFAULT_MODEL, progress=seen.append,
                                is_cancelled=lambda: bool(seen) and seen[-1] > 0.5)
     assert max(seen) < 0.7 and not os.path.exists(tmp_path / "d.laz")
+
+
+def test_a_cloud_in_another_unit_than_the_models_is_refused_before_the_work(scene, tmp_path):
+    """A model trained on a cloud in metres, applied to the same points in a CRS in feet or degrees,
+    would read its features' radii and heights in another unit and misclassify most points without
+    an error (a reviewer saw 87 % Type I): rftrain now records the unit, rfclassify refuses the
+    other, before reading the points (file and survey alike). A model that does not say (trained
+    before, or on a cloud without CRS) gets a warning in the log instead."""
+    import pyproj
+    from groundsieve.core.learn.model_file import load_model
+    from groundsieve.core.engine.learning import TrainOptions
+    from groundsieve.core.learn.rf import ForestParams
+    model = str(tmp_path / "m.npz")
+    learning.train_file(scene, model, options=TrainOptions(params=ForestParams(n_trees=4)))
+    assert load_model(model).meta["crs_unit"] == "metres"
+    for epsg, unit in ((2263, "US survey foot"), (4326, "degrees")):
+        las = laspy.read(scene)
+        las.header.add_crs(pyproj.CRS.from_epsg(epsg))
+        other = str(tmp_path / f"in_{epsg}.laz")
+        las.write(other)
+        stages = []
+        with pytest.raises(InputError, match=rf"in_{epsg}\.laz: the CRS's unit is {unit}, but the model .*m\.npz "
+                                             r"was trained on a cloud in metres"):
+            learning.classify_file(other, str(tmp_path / "c.laz"), model, progress=stages.append)
+        assert stages == [] and not os.path.exists(tmp_path / "c.laz")
+        if epsg == 4326:  # training on it says which unit its lengths are read in
+            lines = []
+            learning.train_file(other, str(tmp_path / "deg.npz"), log=lines.append,
+                                options=TrainOptions(params=ForestParams(n_trees=2), block_m=0.0002))
+            assert any("the CRS's unit is degrees, not metres: the features' radii and the blocks' size" in line
+                       for line in lines), lines
+        with pytest.raises(InputError, match="was trained on a cloud in metres"):  # a folder survey too
+            folder = tmp_path / f"survey_{epsg}"
+            folder.mkdir()
+            os.replace(other, folder / "a.laz")
+            learning.classify_file(str(folder), str(tmp_path / "c.vpc"), model)
+    # a model without the unit (trained on a cloud without CRS): a warning, and the run goes on
+    las = laspy.read(scene)
+    las.header.add_crs(pyproj.CRS.from_epsg(2263))
+    feet = str(tmp_path / "feet.laz")
+    las.write(feet)
+    X = np.random.default_rng(1).normal(size=(200, 1)).astype(np.float32)
+    bare = train_forest(X, np.where(X[:, 0] > 0, 2, 1), ["above_smrf"], ForestParams(n_trees=2), n_jobs=1)
+    save_model(bare, str(tmp_path / "bare.npz"))
+    lines = []
+    learning.classify_file(feet, str(tmp_path / "d.laz"), str(tmp_path / "bare.npz"), log=lines.append)
+    assert any(line.startswith("Warning: ") and "the CRS's unit is US survey foot, not metres" in line
+               for line in lines), lines
