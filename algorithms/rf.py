@@ -90,7 +90,8 @@ paper's small spheres hold few points. <i>custom</i>: a comma-separated list suc
 <code>intensity,return_number,number_of_returns,planarity_r0p6,height_above_min_r2p5</code>. <b>HYBRID</b> (default): the features of
 <i>Ground filter (learned hybrid)</i> (heights above SMRF's provisional surface and above the minimum
 surface opened with 2, 6 and 18 m windows, that surface's slope and curvature; x, y, z only): train
-ground (2) against other classes on your own data and use the model there or here. Geometric
+ground (2) against the other classes on your own data (with <i>Classes to learn</i> empty, every class
+but 2 is learnt as 1: a ground model, which also runs on surveys) and use the model there or here. Geometric
 features already in the file (from <i>Compute point features</i>) are used as they are.</p>
 <p><b>Split</b>: training / validation / test sets are square blocks of <i>Block size</i> drawn at
 random (60/20/20 %), so neighbouring points do not leak between sets; or give validation and test

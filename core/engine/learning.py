@@ -10,7 +10,7 @@ from typing import List, Optional
 import numpy as np
 
 from ..errors import InputError
-from ..io import atomic_path
+from ..io import CLASS_GROUND, atomic_path
 from ..learn.hybrid import GROUND_CLASS, Hybrid, HybridResult, hybrid_features
 from ..learn.model_file import MODEL_EXTENSION, load_model, save_model
 from ..learn.rf import (CRITERIA, DEFAULT_PRESET, PRESETS, SCALERS, ForestParams, Model, feature_matrix,
@@ -34,6 +34,15 @@ class TrainOptions:
     grid: bool = False                   #: run the paper's grid, keep the best on validation
     permutation_points: int = 20_000     #: test points used for permutation importance
     permutation_repeats: int = 2
+    #: train ground (2) against every other class learnt (as 1): a ground model, which runs in the
+    #: hybrid filter and tile by tile on surveys. None: when the features are the HYBRID preset's
+    #: and no classes are named (the default)
+    ground_vs_rest: Optional[bool] = None
+
+    def ground_model(self) -> bool:
+        if self.ground_vs_rest is not None:
+            return bool(self.ground_vs_rest)
+        return self.classes is None and tuple(self.features) == tuple(PRESETS["HYBRID"])
 
 
 @dataclass
@@ -131,9 +140,21 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
     if warning and cloud.crs_wkt:
         log("Warning: " + warning)
     keep, classes = _labelled(cloud, options.classes, log)
+    target, learnt = (lambda labels: labels), classes  # noqa: E731
+    if options.ground_model():
+        if CLASS_GROUND not in classes:
+            raise InputError(f"{input_path}: a ground model learns ground (class 2) against the other classes, "
+                             f"and the file has no point of class 2 among those learnt ({', '.join(map(str, classes))})")
+        others = [c for c in classes if c != CLASS_GROUND]
+        if others != [1]:
+            log(f"Learning ground (2) against the other classes ({', '.join(map(str, others))}, learnt as 1): a "
+                "ground model, as the HYBRID features are meant for (it runs in the learned hybrid filter and on "
+                "surveys); name the classes to learn them apart.")
+        target = lambda labels: np.where(labels == CLASS_GROUND, CLASS_GROUND, 1).astype(labels.dtype)  # noqa: E731
+        learnt = (1, CLASS_GROUND)
     names = resolve_features(options.features, cloud, log)
     X = feature_matrix(cloud, names, steps.sub(0.0, 0.3))
-    y = cloud.classification
+    y = target(cloud.classification)
     timings["features (training cloud)"] = time.perf_counter() - t0
     sets = {}
     if validation_path or test_path:
@@ -147,7 +168,7 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
                 if other_names != names:
                     raise InputError(f"{path}: gives the features {other_names}, the training cloud {names}")
                 Xo = feature_matrix(other, names)
-                sets[label] = (Xo[other_keep], other.classification[other_keep])
+                sets[label] = (Xo[other_keep], target(other.classification[other_keep]))
                 timings[f"features ({label} file)"] = time.perf_counter() - t1
     if not ("validation" in sets and "test" in sets):
         split = spatial_split(cloud.x, cloud.y, options.block_m, options.fractions, seed=options.params.seed)
@@ -187,7 +208,7 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
         t_fit = time.perf_counter()
         model = train_forest(*sets["train"], names, params, meta=meta)
         Xv, yv = sets["validation"]
-        report = class_report(yv, model.predict(Xv), classes)
+        report = class_report(yv, model.predict(Xv), learnt)
         score = report.weighted(report.f1)
         if grid_rows is not None:
             grid_rows.append(dict(criterion=params.criterion, n_trees=params.n_trees, scaler=params.scaler,
@@ -201,7 +222,7 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
     evaluations = {}
     for label in ("validation", "test"):
         Xs, ys = sets[label]
-        evaluations[f"{label} set"] = class_report(ys, model.predict(Xs), classes)
+        evaluations[f"{label} set"] = class_report(ys, model.predict(Xs), learnt)
     timings["prediction (validation + test)"] = time.perf_counter() - t2
     Xt, yt = sets["test"]
     if len(Xt) > options.permutation_points:
@@ -210,11 +231,12 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
     t3 = time.perf_counter()
     perm = permutation_importance(model, Xt, yt, options.permutation_repeats)
     timings["permutation importance"] = time.perf_counter() - t3
-    model.meta.update(classes_learned=list(classes), test_accuracy=evaluations["test set"].accuracy)
+    model.meta.update(classes_learned=list(learnt), test_accuracy=evaluations["test set"].accuracy)
     steps.check()
     settings = None
     if report_path:
-        settings = dict(input=input_path, features=", ".join(names), classes=", ".join(map(str, classes)),
+        settings = dict(input=input_path, features=", ".join(names), classes=", ".join(map(str, learnt)) + (
+                            f" (ground against {', '.join(map(str, classes))})" if learnt != classes else ""),
                         criterion=model.meta["params"]["criterion"], trees=model.meta["params"]["n_trees"],
                         scaler=model.meta["params"]["scaler"], max_depth=model.meta["params"]["max_depth"],
                         samples_per_tree=model.meta["params"]["max_samples"],
@@ -306,7 +328,8 @@ def classify_survey(input_path: str, output_path: str, model_path: str, *, dtm_p
     if GROUND_CLASS not in classes or not set(classes) <= {1, GROUND_CLASS}:
         raise InputError(f"{model_path}: on a survey (a folder, a .vpc or a cloud larger than the memory), "
                          f"only a ground model (classes 2 and 1) runs tile by tile; this model has the classes "
-                         f"{', '.join(map(str, classes))}: classify each file on its own")
+                         f"{', '.join(map(str, classes))}: classify each file on its own, or train a ground model "
+                         "(the HYBRID features with no classes named learn ground against the rest)")
     other = unknown_features(model.features)
     if other:
         raise InputError(f"{model_path}: on a survey, the model's features must come from x, y, z (the HYBRID "

@@ -304,7 +304,17 @@ def test_rfclassify_on_a_folder_and_in_tiles_equals_the_whole_run(tmp_path):
     write_scene(three, str(tmp_path / "three.laz"))
     assert len(set(np.unique(three.classification))) >= 3
     learning.train_file(str(tmp_path / "three.laz"), str(tmp_path / "three.npz"), None,
-                        learning.TrainOptions(params=rf.ForestParams(n_trees=3), block_m=15.0))
+                        learning.TrainOptions(params=rf.ForestParams(n_trees=3), block_m=15.0, ground_vs_rest=False))
     with pytest.raises(InputError, match="only a ground model"):
         learning.classify_file(str(folder), str(tmp_path / "again.vpc"), str(tmp_path / "three.npz"))
     assert not (tmp_path / "again.vpc").exists()
+    # With the defaults (HYBRID features, no classes named) the same labels make a ground model:
+    # ground against the rest, which runs on the survey (a reviewer's 2/3/5 labels were refused)
+    lines = []
+    learning.train_file(str(tmp_path / "three.laz"), str(tmp_path / "ground.npz"), None,
+                        learning.TrainOptions(params=rf.ForestParams(n_trees=3), block_m=15.0), log=lines.append)
+    from groundsieve.core.learn.model_file import load_model
+    assert sorted(int(c) for c in load_model(str(tmp_path / "ground.npz")).classes) == [1, 2]
+    assert any("Learning ground (2) against the other classes" in line for line in lines), lines
+    run = learning.classify_file(str(folder), str(tmp_path / "ground.vpc"), str(tmp_path / "ground.npz"))
+    assert isinstance(run, TiledRun) and run.ground_count > 0
