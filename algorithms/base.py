@@ -158,7 +158,7 @@ def explain_parameter(param, value, strictly_positive=(), largest=None):
         from .pointclouds import takes_folders
         if os.path.isdir(value) and takes_folders(param):
             return None  # the survey inputs take a folder of LAS/LAZ files too
-        if param.name() == "PRESET" and not os.path.isfile(value):
+        if param.name() in ("PRESET", "START_PRESET") and not os.path.isfile(value):
             from .presets import shipped_preset_problem
             return shipped_preset_problem(label, value)
         if not os.path.isfile(value):

@@ -6,7 +6,7 @@ from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException, QgsProces
                        QgsProcessingParameterFileDestination, QgsProcessingParameterNumber)
 from qgis.PyQt.QtGui import QIcon
 
-from .base import core_modules, dialog_help, feedback_callables
+from .base import check_parameter_values, core_modules, dialog_help, feedback_callables
 from .discovery import COMMON_TAGS, FILTER_TAGS, Discoverable
 from .presets import PRESET_FILTER
 
@@ -120,6 +120,12 @@ sensitivity) and every set tried.</p>""")
         self.addOutput(QgsProcessingOutputNumber(self.CV_TOTAL_ERROR, "Cross-validated total error (0-1)"))
         self.addOutput(QgsProcessingOutputNumber(self.CV_KAPPA, "Cross-validated kappa"))
 
+    def checkParameterValues(self, parameters, context):  # noqa: N802
+        """QGIS's checks, said in the dialog's words (the first wrong value, named by its label); a
+        shipped preset is taken by its name as the filters' PRESET is."""
+        ok, message = super().checkParameterValues(parameters, context)
+        return check_parameter_values(self, parameters, context, ok, message)
+
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         errors, _workflow = core_modules()
         from ..core.engine import presets, tune
@@ -148,7 +154,7 @@ sensitivity) and every set tried.</p>""")
         cv = result.cv
         feedback.pushInfo(f"{len(result.trials)} sets in {result.seconds:.0f} s. Cross-validated: {cv.summary()}. "
                           f"Chosen set on the whole patch: {result.best_accuracy.summary()}.")
-        if result.range_end_note():
-            feedback.pushWarning(result.range_end_note())
+        for _title, text in result.warnings:
+            feedback.pushWarning(text)
         return {self.OUTPUT_PRESET: preset_path, self.OUTPUT_HTML: report_path,
                 self.CV_TOTAL_ERROR: cv.total, self.CV_KAPPA: cv.kappa}

@@ -195,8 +195,8 @@ def run_tune(args, out) -> int:
     best = ", ".join(f"{table[dim.name].option} {result.best_values[dim.field]}" for dim in result.dims)
     print(f"{len(result.trials)} sets in {result.seconds:.0f} s; cross-validated total error "
           f"{100 * result.cv.total:.2f} % (kappa {100 * result.cv.kappa:.2f} %); chosen: {best}", file=out)
-    if result.range_end_note():
-        print(f"WARNING: {result.range_end_note()}", file=out)
+    for _title, text in result.warnings:
+        print(f"WARNING: {text}", file=out)
     return 0
 
 

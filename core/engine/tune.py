@@ -249,6 +249,7 @@ class TuneResult:
     default_trial: int = 0      #: index of the starting set (defaults or the starting preset)
     runs: int = 0               #: filter runs (the budget's unit; re-scored sets cost none)
     selection: str = "best"     #: how the preset's and the folds' sets were chosen (SELECTIONS)
+    extent: Tuple[float, float] = (0.0, 0.0)  #: the patch's width and height (m) of the points scored
 
     @property
     def cv(self) -> GroundAccuracy:
@@ -292,6 +293,13 @@ class TuneResult:
                 out.append((d, "upper"))
         return out
 
+    @property
+    def warnings(self) -> List[Tuple[str, str]]:
+        """(title, sentence) of what the user should know about the chosen set: values at an end of
+        their searched range, sizes wider than the patch."""
+        notes = [("At the end of a range", self.range_end_note()), ("Beyond the patch", beyond_patch_note(self))]
+        return [(title, text) for title, text in notes if text]
+
     def range_end_note(self) -> str:
         """A sentence on the parameters chosen at an end of their searched range ("" when none)."""
         ends = self.at_range_ends
@@ -301,6 +309,31 @@ class TuneResult:
                  f"({_number(d.low)} to {_number(d.high)})" for d, end in ends]
         return ("; ".join(items) + ": the best value may lie beyond. The ranges are those the papers explored; to "
                 "try beyond, run the filter with this preset and the value set by hand, and compare on the patch.")
+
+
+#: searched sizes that a patch shows only up to its own size: (filter, dialog name) -> how many times
+#: the value spans (SMRF's window is a radius: twice it across)
+PATCH_SIZED = {("smrf", "WINDOW"): 2.0, ("pmf", "MAX_WINDOW"): 1.0, ("ptd", "SEED_CELL"): 1.0}
+
+
+def beyond_patch_note(result: "TuneResult") -> str:
+    """A sentence on the chosen sizes wider than the patch ("" when none): on the patch, sizes that
+    large all act alike, so the value chosen there says little of what the survey needs."""
+    side = max(result.extent)
+    if side <= 0:
+        return ""
+    values = result.best_values
+    items = []
+    for d in result.dims:
+        across = PATCH_SIZED.get((result.filter, d.name))
+        if across and float(values[d.field]) * across > side:
+            items.append(f"{d.name} ({_number(values[d.field])} m{', a radius' if across == 2 else ''})")
+    if not items:
+        return ""
+    return (" and ".join(items) + f" reaches beyond the patch ({result.extent[0]:.0f} x {result.extent[1]:.0f} m): "
+            "on the patch, sizes that large act alike, so this value is not really tuned. On the survey it should "
+            "be about the size of the largest non-ground object (e.g. a building's radius for SMRF's window); "
+            "tune on a larger patch, or set it by hand over the preset.")
 
 
 def _distance(values: Mapping[str, object], start: Mapping[str, object], dims: Sequence[Dim]) -> float:
@@ -565,7 +598,9 @@ def tune(cloud, name: str, options: TuneOptions = TuneOptions(), *, base: Option
                       trials=trials, best=best, folds=folds, block_grid=grid,
                       block_sizes=[int(v) for v in np.bincount(block, minlength=k)],
                       seconds=time.monotonic() - t0, budget=options.budget, stopped=stopped[0],
-                      default_trial=start_index, runs=runs[0], selection=options.selection)
+                      default_trial=start_index, runs=runs[0], selection=options.selection,
+                      extent=(float(np.ptp(cloud.x[idx])) if len(idx) else 0.0,
+                              float(np.ptp(cloud.y[idx])) if len(idx) else 0.0))
 
 
 def preset_values(result: TuneResult) -> Dict[str, object]:

@@ -169,8 +169,8 @@ f"; the starting set (filter defaults or starting preset): {_pct(start.total)}"}
                      f"<td><b>{_fmt(best_values[p.field])}</b></td><td>{_fmt(result.fixed[p.field])}</td>"
                      f"<td>{rng or 'kept'}</td></tr>")
     parts.append("</table>")
-    if result.range_end_note():
-        parts.append(f"<p class='warn'><b>At the end of a range:</b> {html.escape(result.range_end_note())}</p>")
+    for title, text in result.warnings:
+        parts.append(f"<p class='warn'><b>{html.escape(title)}:</b> {html.escape(text)}</p>")
     parts.append("<h2>Confusion matrices</h2>")
     parts.append(_confusion(cv, "Cross-validated (held-out blocks)"))
     parts.append(_confusion(fit, "Chosen set on the whole patch"))

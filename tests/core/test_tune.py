@@ -266,3 +266,27 @@ def test_a_choice_at_an_end_of_its_range_is_said_in_the_report(result, tmp_path)
     if not inside.at_range_ends:
         write_report(str(path), inside)
         assert "At the end of a range" not in path.read_text(encoding="utf-8")
+
+
+def test_a_window_wider_than_the_patch_is_said_in_the_report(result, tmp_path):
+    """SMRF's window is a radius: one whose disk spans more than the patch acts on the patch as any
+    larger one would, so its tuned value says little of the survey's; the report (and the command
+    line and the dialog's log, from the same list) says so. A window inside the patch does not."""
+    import dataclasses
+    d = next(d for d in result.dims if d.name == "WINDOW")
+    best = result.trials[result.best]
+    side = max(result.extent)
+    assert side > 10  # the patch's extent is known
+
+    def choosing(value):
+        trials = list(result.trials)
+        trials[result.best] = dataclasses.replace(best, values=dict(best.values, **{d.field: value}))
+        return dataclasses.replace(result, trials=trials)
+    wide, narrow = choosing(side * 0.6), choosing(side * 0.4)
+    titles = [title for title, _text in wide.warnings]
+    assert "Beyond the patch" in titles and "Beyond the patch" not in [t for t, _ in narrow.warnings]
+    text = dict(wide.warnings)["Beyond the patch"]
+    assert text.startswith(f"WINDOW ({side * 0.6:g} m, a radius) reaches beyond the patch (")
+    path = tmp_path / "wide.html"
+    write_report(str(path), wide)
+    assert "Beyond the patch:" in path.read_text(encoding="utf-8")

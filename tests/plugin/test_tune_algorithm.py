@@ -127,6 +127,12 @@ def test_a_shipped_preset_runs_through_processing_and_a_foreign_one_is_refused(g
     ok, message = algorithm.checkParameterValues({"INPUT": patch, "PRESET": "forest-smrf", "OUTPUT": by_name},
                                                  QgsProcessingContext())
     assert not ok and message.endswith("give the shipped preset's name with .json: forest-smrf.json")
+    # tune's starting preset takes a shipped name the same way (it was refused as 'not a file')
+    tune = QgsApplication.processingRegistry().algorithmById("groundsieve:tune")
+    common = {"INPUT": patch, "OUTPUT_PRESET": str(tmp_path / "t.json"), "OUTPUT_HTML": str(tmp_path / "t.html")}
+    assert tune.checkParameterValues(dict(common, START_PRESET="uav-lidar-smrf.json"), QgsProcessingContext())[0]
+    ok, message = tune.checkParameterValues(dict(common, START_PRESET="uav-lidar-smrf"), QgsProcessingContext())
+    assert not ok and message.endswith("give the shipped preset's name with .json: uav-lidar-smrf.json")
 
     pmf = str(tmp_path / "for-pmf.json")
     write_preset(pmf, "pmf", {"slope": 0.5})
