@@ -193,6 +193,9 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
     steps.report(0.35)
     from ..raster.crs import horizontal_unit
     meta = dict(groundsieve_trained_from=os.path.basename(input_path), preset_features=list(options.features))
+    if "gps_time" in names:
+        from ..learn.rf import GPS_TIME_OF_WEEK
+        meta["gps_time"] = GPS_TIME_OF_WEEK
     if horizontal_unit(cloud.crs_wkt):  # the unit its lengths (radii, heights) were read in
         meta["crs_unit"] = horizontal_unit(cloud.crs_wkt)
     candidates = [options.params]
@@ -397,7 +400,9 @@ def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_pat
         raise InputError(f"{input_path}: this cloud gives the features {names} but the model "
                          f"{model_path} was trained on {list(model.features)} (e.g. colour present in one "
                          "and not the other)")
-    X = feature_matrix(part, names, steps.sub(0.0, 0.5))
+    from ..learn.rf import GPS_TIME_OF_WEEK
+    X = feature_matrix(part, names, steps.sub(0.0, 0.5),
+                       gps_time_of_week=model.meta.get("gps_time") == GPS_TIME_OF_WEEK)
     predicted_part = model.predict(X, steps=steps.sub(0.5, 0.7)).astype(np.uint8)
     predicted = cloud.classification.astype(np.uint8)  # a copy: withheld and ignored points as read
     predicted[may] = predicted_part

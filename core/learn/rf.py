@@ -284,7 +284,13 @@ def resolve_features(names: Sequence[str], cloud, log=None) -> List[str]:
     return out
 
 
-def _attribute(cloud, name: str) -> np.ndarray:
+#: seconds of a GPS week: the gps_time feature is the time within its week (see _attribute)
+GPS_WEEK_S = 604800.0
+#: the model metadata that says so (models trained before it read the raw time in float32)
+GPS_TIME_OF_WEEK = "seconds of the GPS week"
+
+
+def _attribute(cloud, name: str, gps_time_of_week: bool = True) -> np.ndarray:
     las = cloud.las
     if name in ("return_number", "number_of_returns"):
         return getattr(cloud, name).astype(np.float32)
@@ -296,16 +302,21 @@ def _attribute(cloud, name: str) -> np.ndarray:
             return (np.asarray(las.scan_angle, dtype=np.float32) * np.float32(0.006))
         if "scan_angle_rank" in dims:
             return np.asarray(las.scan_angle_rank, dtype=np.float32)
+    if name == "gps_time" and name in dims and gps_time_of_week:
+        # adjusted standard GPS time is about 1e9 s: in float32 (the forest's type) its step is 64 s, so a
+        # flight's times became a few values; within the week (< 604,800 s) the step is at most 0.06 s
+        return np.mod(np.asarray(las[name], dtype=np.float64), GPS_WEEK_S).astype(np.float32)
     if name in dims:
         return np.asarray(las[name], dtype=np.float32)
     raise InputError(f"{cloud.path}: the feature '{name}' is not in this file (dimensions: "
                      f"{', '.join(sorted(dims))})")
 
 
-def feature_matrix(cloud, names: Sequence[str], steps=None) -> np.ndarray:
+def feature_matrix(cloud, names: Sequence[str], steps=None, *, gps_time_of_week: bool = True) -> np.ndarray:
     """(n, len(names)) float32 matrix of the named features of ``cloud``. Attributes are read from
     the file; geometric features (``<feature>_r<radius>``) are taken from the file's extra bytes when
-    present (e.g. written by groundsieve:features) and computed otherwise."""
+    present (e.g. written by groundsieve:features) and computed otherwise. ``gps_time_of_week``:
+    the GPS time as seconds within its week (False: as read, for models trained before)."""
     from ..progress import Steps
     from .features import FeatureSpec, compute_features, parse_feature_name
     from .hybrid import GRID_FEATURES, hybrid_features, opening_radius
@@ -321,7 +332,7 @@ def feature_matrix(cloud, names: Sequence[str], steps=None) -> np.ndarray:
         if name in columns:
             continue
         if name in ATTRIBUTE_FEATURES or name in ("scan_angle",):
-            columns[name] = _attribute(cloud, name)
+            columns[name] = _attribute(cloud, name, gps_time_of_week)
         elif name in dims:
             columns[name] = np.asarray(cloud.las[name], dtype=np.float32)
         else:
