@@ -34,7 +34,10 @@ def confusion_svg(report: ClassReport, size: int = 44) -> str:
     rows = cm.sum(axis=1, keepdims=True)
     share = np.divide(cm, rows, out=np.zeros(cm.shape), where=rows > 0)
     left, top = 150, 110
-    width, height = left + k * size + 10, top + k * size + 10
+    # the column labels lean 45 degrees to the right: room for the last one's length (about 0.6 em a
+    # character at 11 px, times cos 45)
+    lean = max(len(class_name(c)) for c in report.classes) * 11 * 0.6 * 0.71 if k else 0
+    width, height = int(left + k * size - size / 2 + max(size / 2, lean) + 10), top + k * size + 10
     parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
              f'font-family="sans-serif" font-size="11">',
              f'<text x="{left + k * size / 2}" y="14" text-anchor="middle" font-weight="bold">predicted</text>',
