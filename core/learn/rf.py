@@ -231,8 +231,40 @@ def train_forest(X: np.ndarray, y: np.ndarray, features: Sequence[str], params: 
     forest.fit(Xs, y)
     info = dict(meta or {}, params=asdict(params), trained_on=int(X.shape[0]),
                 training_seconds=round(time.perf_counter() - t0, 3), sklearn_version=sklearn.__version__,
-                impurity_importance=[float(v) for v in forest.feature_importances_])
+                impurity_importance=[float(v) for v in forest.feature_importances_],
+                feature_ranges=feature_ranges(X))
     return from_sklearn(forest, features, forest.classes_, scaler, info)
+
+
+def feature_ranges(X: np.ndarray) -> list:
+    """[1st, 99th] percentile of each feature column (NaN ignored; None when a column has none)."""
+    out = []
+    for j in range(X.shape[1]):
+        column = X[:, j][np.isfinite(X[:, j])]
+        out.append([float(v) for v in np.percentile(column, [1, 99])] if column.size else None)
+    return out
+
+
+def out_of_range_features(model, X: np.ndarray, share: float = 0.9) -> list:
+    """[(feature, share outside, (low, high), median)] of the features whose values in ``X`` lie
+    outside the range the model learnt them in ([1st, 99th] percentile) for at least ``share`` of the
+    points, all on one side (e.g. 8-bit colour given to a model trained on 16-bit colour)."""
+    ranges = model.meta.get("feature_ranges")
+    found = []
+    if not ranges:
+        return found
+    for j, (name, span) in enumerate(zip(model.features, ranges)):
+        if span is None:
+            continue
+        column = X[:, j][np.isfinite(X[:, j])]
+        if not column.size:
+            continue
+        low, high = span
+        for outside in (column < low, column > high):
+            part = float(outside.mean())
+            if part >= share:
+                found.append((name, part, (low, high), float(np.median(column))))
+    return found
 
 
 # -- features of a cloud -----------------------------------------------------------------------

@@ -346,3 +346,28 @@ def test_gps_time_keeps_its_resolution_as_seconds_of_the_week(tmp_path):
                         learning.TrainOptions(features=("gps_time", "intensity"), params=rf.ForestParams(n_trees=2),
                                               block_m=10.0))
     assert load_model(str(model)).meta["gps_time"] == rf.GPS_TIME_OF_WEEK
+
+
+def test_a_feature_far_outside_the_range_it_was_learnt_in_is_warned_about(tmp_path):
+    """A model trained on 16-bit colour given 8-bit colour predicted nothing of one class without a
+    word (a reviewer's case): the model keeps each feature's learnt range (1st-99th percentile), and
+    rfclassify warns when nearly all points lie beyond it on one side; colour in range says nothing."""
+    rng = np.random.default_rng(5)
+    n = 4000
+    x, y = rng.uniform(0, 60, n), rng.uniform(0, 60, n)
+    cls = np.where(rng.random(n) < 0.5, 2, 1).astype(np.uint8)
+    red = np.where(cls == 2, rng.uniform(20000, 40000, n), rng.uniform(40000, 65000, n)).astype(np.uint16)
+    kw = dict(point_format=2, classification=cls, green=red, blue=red)
+    write_las(new_las(x, y, rng.normal(0, 0.1, n), red=red, **kw), str(tmp_path / "sixteen.las"))
+    kw.update(green=red // 256, blue=red // 256)
+    write_las(new_las(x, y, rng.normal(0, 0.1, n), red=red // 256, **kw), str(tmp_path / "eight.las"))
+    model = str(tmp_path / "c1.npz")
+    learning.train_file(str(tmp_path / "sixteen.las"), model, None,
+                        learning.TrainOptions(features=("red", "green", "blue"), params=rf.ForestParams(n_trees=2),
+                                              block_m=10.0))
+    for name, warned in (("sixteen.las", False), ("eight.las", True)):
+        lines = []
+        learning.classify_file(str(tmp_path / name), str(tmp_path / f"out_{name}"), model, log=lines.append)
+        said = [line for line in lines if "lies outside the range the model learnt it in" in line]
+        assert bool(said) == warned, (name, lines)
+    assert "the feature 'red'" in said[0] and "100% of the points" in said[0]
