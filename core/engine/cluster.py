@@ -212,6 +212,12 @@ class Cluster:
             raise InvalidParameterError("no Dask scheduler given")
         distributed = import_distributed()
         self.local = None
+        import logging
+        # While the run holds its client, Dask's client logger is quiet: a lost scheduler makes it log
+        # tens of lines of tracebacks (as it tries to reconnect) that the run says in one line itself.
+        self._quiet = logging.getLogger("distributed.client")
+        self._level = self._quiet.level
+        self._quiet.setLevel(logging.CRITICAL)
         try:
             if kind == "local":
                 import dask
@@ -243,10 +249,15 @@ class Cluster:
 
     def close(self):
         client = getattr(self, "client", None)
-        if client is not None:
-            client.close()
-        if self.local is not None:
-            self.local.close()
+        try:
+            if client is not None:
+                client.close()
+            if self.local is not None:
+                self.local.close()
+        finally:
+            if getattr(self, "_quiet", None) is not None:
+                self._quiet.setLevel(self._level)
+                self._quiet = None
 
     def __enter__(self):
         return self
@@ -411,6 +422,17 @@ def _set_spawn_executable():
         multiprocessing.set_executable(exe)
 
 
+def _cause_hint(err: BaseException) -> str:
+    """What a Dask failure usually means, when its words say (appended to the message)."""
+    text = str(err)
+    if "deserialization of the task graph" in text or "No module named 'groundsieve'" in text:
+        return (". The scheduler (not only the workers) unpickles the jobs: start the Dask scheduler with "
+                "GroundSieve importable too, e.g. with the same PYTHONPATH as the workers")
+    if "scheduler-connection-lost" in text:
+        return ". The connection to the scheduler was lost: run again once it is back to resume"
+    return ""
+
+
 def run_jobs(scheduler: str, function, jobs: List[dict], record: Callable[[object], None], *,
              is_cancelled: Callable[[], bool], paths: Sequence[str], writable: Sequence[str],
              names: Callable[[dict], str], log: Callable[[str], None] = lambda _m: None,
@@ -438,21 +460,32 @@ def run_jobs(scheduler: str, function, jobs: List[dict], record: Callable[[objec
                     done = distributed.wait(pending, timeout=0.5, return_when="FIRST_COMPLETED").done
                 except (TimeoutError, distributed.TimeoutError):
                     continue
+                except Exception as err:  # the scheduler gone: its futures are cancelled
+                    raise ClusterError(f"the connection to the Dask scheduler {client.scheduler.address} was lost "
+                                       f"({type(err).__name__}); the tiles done so far are kept in the working "
+                                       "folder: run again once the scheduler is back to resume") from err
                 for fut in done:
                     pending.discard(fut)
+                    job = futures.pop(fut)  # let the result go once recorded (Dask frees it on the worker)
                     try:
                         result = fut.result()
                     except GroundSieveError:
                         raise
                     except distributed.KilledWorker as err:
-                        raise ClusterError(f"{names(futures[fut])}: the Dask workers running it died "
+                        raise ClusterError(f"{names(job)}: the Dask workers running it died "
                                            f"repeatedly ({err}); too little memory per worker?") from err
+                    except (distributed.comm.CommClosedError, OSError) as err:
+                        raise ClusterError(f"the connection to the Dask scheduler {client.scheduler.address} was "
+                                           f"lost ({type(err).__name__}); the tiles done so far are kept in the "
+                                           "working folder: run again once the scheduler is back to resume") from err
                     except Exception as err:
-                        raise ClusterError(f"{names(futures[fut])} failed on the Dask cluster: "
-                                           f"{type(err).__name__}: {err}") from err
+                        raise ClusterError(f"{names(job)} failed on the Dask cluster: "
+                                           f"{type(err).__name__}: {err}{_cause_hint(err)}") from err
+                    del fut
                     if isinstance(result, Failed):
                         raise result.error
                     record(result)
+                    del result
         except BaseException:
             client.cancel(list(pending))
             raise

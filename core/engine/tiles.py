@@ -586,14 +586,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             record(_tile_job(job))
     else:
         with _pool(workers, use_processes, pool) as tile_pool:
-            futures = [tile_pool.submit(_tile_job, job) for job in jobs]
-            try:
-                for fut in as_completed(futures):
-                    record(fut.result())
-            except BaseException:
-                for fut in futures:
-                    fut.cancel()
-                raise
+            _record_as_completed([tile_pool.submit(_tile_job, job) for job in jobs], record)
     for k, info in enumerate(infos):
         if assigned[k] != info.count:
             raise InputError(f"{info.path}: {assigned[k]:,} of {info.count:,} points were classified; "
@@ -769,9 +762,31 @@ def keep_freed_memory() -> bool:
     return bool(mallopt(M_MMAP_MAX, 0)) and bool(mallopt(M_TRIM_THRESHOLD, 2 ** 31 - 1))
 
 
-def _init_worker(environ: Dict[str, str]) -> None:
+def _init_worker(environ: Dict[str, str], parent: int = 0) -> None:
     os.environ.update(environ)  # before the job imports numba or starts lazrs's thread pool
     keep_freed_memory()
+    if parent:
+        _exit_with_parent(parent)
+
+
+#: how often a worker process looks whether the run that started it is still there (s)
+PARENT_POLL_S = 0.5
+
+
+def _exit_with_parent(parent: int) -> None:
+    """End this worker process when the process that started it ends: a run killed (kill -9, or a
+    SIGTERM from systemd, timeout or a batch scheduler, which Python does not turn into cleanup) would
+    otherwise leave its workers waiting for jobs for ever, holding their memory and the run's output
+    pipe. POSIX: the parent's end re-parents this process (os.getppid() changes)."""
+    if os.name != "posix":
+        return
+    import threading
+
+    def watch():
+        while os.getppid() == parent:
+            time.sleep(PARENT_POLL_S)
+        os._exit(1)
+    threading.Thread(target=watch, name="groundsieve-parent-watch", daemon=True).start()
 
 
 def _worker_pool(workers: int, use_processes: bool):
@@ -786,7 +801,7 @@ def _worker_pool(workers: int, use_processes: bool):
         ctx.set_executable(exe)
     share = max(1, (os.cpu_count() or 1) // workers)
     return ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
-                               initargs=(worker_thread_environ(share),))
+                               initargs=(worker_thread_environ(share), os.getpid()))
 
 
 def _pool(workers: int, use_processes: bool, shared=None):
@@ -820,15 +835,28 @@ def _map_files(function, jobs, record, tiling, steps, log, *, paths, writable, p
             record(function(job))
         return
     with _pool(workers, mode == "processes", pool) as file_pool:
-        futures = [file_pool.submit(function, job) for job in jobs]
-        try:
-            for fut in as_completed(futures):
-                steps.check()
-                record(fut.result())
-        except BaseException:
-            for fut in futures:
-                fut.cancel()
-            raise
+        _record_as_completed([file_pool.submit(function, job) for job in jobs], record, steps.check)
+
+
+def _record_as_completed(futures, record, check=None) -> None:
+    """``record`` each future's result as it comes, then let it go: a list of done futures would
+    keep every result (a tile's DTM block) alive in the client until the last one. On an error or a
+    cancel the futures not started are cancelled."""
+    pending = set(futures)
+    del futures
+    try:
+        for fut in as_completed(pending):
+            pending.discard(fut)
+            if check is not None:
+                check()
+            result = fut.result()
+            del fut
+            record(result)
+            del result
+    except BaseException:
+        for fut in pending:
+            fut.cancel()
+        raise
 
 
 def _tile_job(job) -> Optional[dict]:

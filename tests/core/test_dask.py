@@ -250,3 +250,15 @@ def test_a_copc_input_on_the_cluster_gets_the_classes_its_tiles_wrote(tmp_path):
     want, got = (laspy.read(tmp_path / f"{n}.laz").classification for n in ("threads", "dask"))
     assert 0.3 < np.mean(want == 2) < 0.95
     assert np.array_equal(got, want)
+
+
+def test_dask_failures_say_what_they_usually_mean():
+    """A scheduler without GroundSieve on its path fails every job with 'Error during deserialization
+    of the task graph' (a reviewer's first run of the README's example): the message says that the
+    scheduler needs the package too; other failures get no invented hint."""
+    from groundsieve.core.engine.cluster import _cause_hint
+    hint = _cause_hint(RuntimeError("Error during deserialization of the task graph. This frequently occurs if "
+                                    "the Scheduler and Client have different environments."))
+    assert "start the Dask scheduler with GroundSieve importable too" in hint
+    assert "run again once it is back" in _cause_hint(RuntimeError("... scheduler-connection-lost ..."))
+    assert _cause_hint(ValueError("something else")) == ""
