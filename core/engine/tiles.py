@@ -45,7 +45,7 @@ from ..errors import Cancelled, GroundSieveError, InputError, InvalidParameterEr
 from ..io.lasfiles import (CHUNK_POINTS, VPC_EXTENSION, LasInfo, TileGrid, assemble_classified, bin_file,
                            check_survey, expand_inputs, iter_chunks, piece_cuts, read_part, scan_header, tile_cloud,
                            write_classified_piece, write_classified_stream, write_vpc)
-from ..io.outputs import LAS_EXTENSIONS, _ext, _reason, check_output_path
+from ..io.outputs import LAS_EXTENSIONS, StagedOutputs, _ext, _reason, check_output_path
 from ..progress import Steps
 
 #: Memory a point costs in a whole-cloud run with a DTM (measured: 321 bytes/point at 50 M points
@@ -598,14 +598,45 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             for name in (part.index_path, part.copy_path):
                 if name and os.path.exists(name):
                     os.remove(name)
-    # 3. write the outputs: every classified file to a temporary name first (atomic_path), then the vpc
+    # 3. write the outputs: every classified file, the .vpc and the DTM under temporary names, put in
+    # place together once all are complete (StagedOutputs): a run that fails or is stopped here leaves
+    # none of them, and the previous run's set of the same names untouched
     write_steps = steps.sub(0.85, 1.0)
     t_write = time.perf_counter()
     written = []
     for out in outs:
         if out:
             os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
+    with StagedOutputs() as staging:
+        staged = [staging.stage(out) if out else None for out in outs]
+        _write_classified(infos, outs, staged, work, class_paths, class_parts, tiling, steps, log, write_steps,
+                          written, cluster, pool)
+        log(f"Wrote {len(written)} classified file(s) in {time.perf_counter() - t_write:.1f} s.")
+        if output_path and _ext(output_path) == VPC_EXTENSION:
+            from ..raster.crs import lonlat_box
+            write_vpc(staging.stage(output_path), [scan_header(o) for o in staged], outs, lonlat=lonlat_box)
+        if dtm_writer is not None:
+            from .workflow import kept_out_note
+            note = kept_out_note(kept_out)
+            if note:
+                log(note)
+            dtm_writer.finish(staging.stage(dtm_path))
+        steps.check()
+        staging.commit()
+    if dtm_writer is not None:
+        g = dtm_writer.grid
+        log(f"Wrote the DTM {dtm_path} ({g.ncols:,} x {g.nrows:,} cells of {g.cell:g} m).")
+    steps.report(1.0)
+    log(f"Done in {time.perf_counter() - t_start:.1f} s.")
+    return TiledRun(inputs, [o for o in outs if o], sum(i.count for i in infos), ground_total, crs_wkt,
+                    grid.size, grid.buffer, len(tile_log), dtm_path, tile_log=tile_log,
+                    copc_inputs=[i.path for i in infos if i.copc])
 
+
+def _write_classified(infos, outs, staged, work, class_paths, class_parts, tiling, steps, log, write_steps,
+                      written, cluster, pool) -> None:
+    """Each input's classified copy, written to its staged name ``staged[k]`` (``outs[k]`` is the
+    name it will have)."""
     # Each input's records were kept in file order by the binning: the classified copy is written
     # from them without decoding the input again, in pieces of consecutive points (a big single
     # file: one per worker, each on LAZ chunk boundaries) compressed on the workers, then put
@@ -628,30 +659,13 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     def record_write(result):
         written.append(result)
         write_steps.report((len(write_jobs) + len(written)) / total_jobs)
-    assemble_jobs = [dict(key=("assemble", k), path=info.path, out=outs[k], pieces=pieces.get(k, []),
+    assemble_jobs = [dict(key=("assemble", k), path=info.path, out=staged[k], pieces=pieces.get(k, []),
                           class_path=class_paths[k], class_parts=sorted(class_parts[k]), count=info.count)
                      for k, info in enumerate(infos) if outs[k]]
     _map_files(_assemble_job, assemble_jobs, record_write, tiling, steps, log, points=sum(i.count for i in infos),
                paths=[info.path for info in infos] + [work],
                writable=sorted({os.path.dirname(os.path.abspath(o)) for o in outs if o} | {work}), cluster=cluster,
                pool=pool)
-    log(f"Wrote {len(written)} classified file(s) in {time.perf_counter() - t_write:.1f} s.")
-    if output_path and _ext(output_path) == VPC_EXTENSION:
-        from ..raster.crs import lonlat_box
-        write_vpc(output_path, [scan_header(o) for o in outs], outs, lonlat=lonlat_box)
-    if dtm_writer is not None:
-        from .workflow import kept_out_note
-        note = kept_out_note(kept_out)
-        if note:
-            log(note)
-        dtm_writer.finish(dtm_path)
-        g = dtm_writer.grid
-        log(f"Wrote the DTM {dtm_path} ({g.ncols:,} x {g.nrows:,} cells of {g.cell:g} m).")
-    steps.report(1.0)
-    log(f"Done in {time.perf_counter() - t_start:.1f} s.")
-    return TiledRun(inputs, [o for o in outs if o], sum(i.count for i in infos), ground_total, crs_wkt,
-                    grid.size, grid.buffer, len(tile_log), dtm_path, tile_log=tile_log,
-                    copc_inputs=[i.path for i in infos if i.copc])
 
 
 def _bin_job(job) -> dict:

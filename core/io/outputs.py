@@ -119,6 +119,56 @@ def remove_stale_temporaries(path: str, *, max_age_s: float = 86400.0) -> list:
     return removed
 
 
+class StagedOutputs:
+    """Several outputs put in place together: each is written under the temporary name
+    :func:`atomic_path` would give it (``.NAME.EXT.gs<pid>-<random>.partEXT``, beside it), and
+    :meth:`commit` renames them all once every one is complete; :meth:`discard` (or leaving the
+    ``with`` block on an error) deletes them. A survey's classified files, its .vpc and its DTM
+    therefore appear together or not at all, and a failed run leaves the previous set untouched.
+    A killed run's temporaries are removed by the next run writing the same outputs."""
+
+    def __init__(self):
+        self._pairs = []
+
+    def stage(self, path: str) -> str:
+        """The temporary name ``path`` is written under (created empty, so that it is reserved)."""
+        path = os.fspath(path)
+        remove_stale_temporaries(path)
+        try:
+            fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.gs{os.getpid()}-",
+                                       suffix=f".part{_ext(path)}", dir=os.path.dirname(os.path.abspath(path)))
+        except OSError as err:
+            raise OutputError(f"{path}: cannot be written ({_reason(err)})") from err
+        os.close(fd)
+        self._pairs.append((tmp, path))
+        return tmp
+
+    def commit(self) -> None:
+        """Rename every staged file to its output name, in the order staged."""
+        umask = os.umask(0)
+        os.umask(umask)
+        for tmp, path in self._pairs:
+            try:
+                os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; the output follows the umask
+                os.replace(tmp, path)
+            except OSError as err:
+                raise OutputError(f"{path}: cannot be written ({_reason(err)})") from err
+        self._pairs = []
+
+    def discard(self) -> None:
+        for tmp, _path in self._pairs:
+            with contextlib.suppress(OSError):
+                os.remove(tmp)
+        self._pairs = []
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, kind, _value, _tb):
+        if kind is not None:
+            self.discard()
+
+
 @contextlib.contextmanager
 def atomic_path(path: str):
     """Yield a temporary path beside ``path`` (same extension); rename it to ``path`` on success,

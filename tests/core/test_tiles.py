@@ -588,3 +588,43 @@ def test_results_are_let_go_as_they_are_recorded():
     with ThreadPoolExecutor(2) as pool:
         _record_as_completed([pool.submit(np.ones, 100_000) for _ in range(6)], record)
     assert len(seen) == 6
+
+
+def test_a_survey_puts_its_outputs_in_place_together_or_not_at_all(tmp_path, monkeypatch):
+    """The classified files, the .vpc and the DTM of a survey are renamed into place together once
+    all are written: a run that fails at the DTM (a full disk, in a reviewer's run) leaves none of
+    them and no temporary, and the previous run's complete set stays as it was (a reviewer's
+    interrupted re-run had left new classified files beside the old DTM)."""
+    from groundsieve.core.errors import OutputError
+    from groundsieve.core.raster import geotiff
+    folder = tmp_path / "tiles"
+    folder.mkdir()
+    scene = make_scene(SceneSpec(size_m=100.0, density_per_m2=2.0, seed=6))
+    west = scene.x < 50
+    for name, part in (("w.laz", west), ("e.laz", ~west)):
+        write_las(new_las(scene.x[part], scene.y[part], scene.z[part]), str(folder / name))
+    out = tmp_path / "out"
+    out.mkdir()
+    opts = FilterOptions(tiling=TileOptions(tile_size_m=50.0, workers=1, parallel="threads"))
+
+    def run(**kw):
+        run_ground_filter(str(folder), str(out / "c.vpc"), SMRF(**kw), dtm_path=str(out / "d.tif"), options=opts)
+
+    def failing_finish(self, path):
+        self.close()
+        raise OutputError(f"{path}: cannot write the DTM (No space left on device)")
+
+    with monkeypatch.context() as m:
+        m.setattr(geotiff.BlockGeoTIFF, "finish", failing_finish)
+        with pytest.raises(OutputError, match="No space left on device"):
+            run()
+    assert sorted(p.name for p in out.rglob("*") if p.is_file()) == []  # nothing, not even a temporary
+    run()
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert sorted(p.name for p in before) == ["c.vpc", "d.tif", "e.laz", "w.laz"]
+    with monkeypatch.context() as m:
+        m.setattr(geotiff.BlockGeoTIFF, "finish", failing_finish)
+        with pytest.raises(OutputError):
+            run(elevation_threshold_m=0.7)  # another result, which fails at its DTM
+    after = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert after == before  # the previous set, untouched
