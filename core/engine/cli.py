@@ -138,7 +138,10 @@ def build_parser() -> argparse.ArgumentParser:
         description="Ground filtering of point clouds (LAS/LAZ, folders, .vpc) without QGIS: classified "
                     "LAS/LAZ (ground = 2, other = 1) and an optional DTM GeoTIFF. Lengths in the unit of "
                     "the cloud's CRS (metres for a metric CRS). `python -m groundsieve FILTER --help` lists "
-                    "a filter's parameters.")
+                    "a filter's parameters.",
+        epilog="Exit status: 0 done, 1 refused or failed (one line saying why), 2 bad usage, 130 interrupted "
+               "(Ctrl-C or SIGTERM; a survey's finished tiles are kept in --work-folder, when given, for the "
+               "next run to resume). The log goes to stderr.")
     sub = parser.add_subparsers(title="filters", metavar="FILTER", required=True)
     for name in P.FILTERS:
         _add_filter(sub, name)
@@ -238,8 +241,13 @@ def options_from(args, log=None):
                                           classes=args.dtm_classes, max_distance_m=args.dtm_max_distance)
 
 
+#: the exit status of an interrupted run (128 + SIGINT, as shells report Ctrl-C)
+INTERRUPTED = 130
+
+
 def main(argv: Optional[List[str]] = None, out=None) -> int:
-    """Run the command; 0 = done, 1 = refused or failed (the message, no traceback), 2 = bad usage."""
+    """Run the command; 0 = done, 1 = refused or failed (the message, no traceback), 2 = bad usage,
+    130 = interrupted (Ctrl-C; SIGTERM too under ``python -m groundsieve``)."""
     from .workflow import run_ground_filter
     out = out or sys.stderr
     args = build_parser().parse_args(argv)
@@ -248,7 +256,7 @@ def main(argv: Optional[List[str]] = None, out=None) -> int:
             return run_tune(args, out)
         except KeyboardInterrupt:
             print("groundsieve: interrupted", file=out)
-            return 1
+            return INTERRUPTED
         except GroundSieveError as err:
             print(f"groundsieve: {err}", file=out)
             return 1
@@ -267,7 +275,7 @@ def main(argv: Optional[List[str]] = None, out=None) -> int:
                                 progress=progress, log=log)
     except KeyboardInterrupt:
         print("groundsieve: interrupted", file=out)
-        return 1
+        return INTERRUPTED
     except Cancelled as err:
         print(f"groundsieve: {err}", file=out)
         return 1

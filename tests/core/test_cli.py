@@ -219,3 +219,32 @@ def test_the_command_runs_without_gdal_and_then_says_nothing_of_the_crs(scene, t
     out = io.StringIO()
     assert main(["smrf", "--input", scene, "--output", str(tmp_path / "c.laz")], out=out) == 0, out.getvalue()
     assert "ground." in out.getvalue() and "WARNING" not in out.getvalue()
+
+
+def test_sigterm_ends_the_command_as_ctrl_c_does(tmp_path):
+    """systemd, timeout and batch schedulers stop a job with SIGTERM, which Python does not turn
+    into cleanup (the run died at once, its workers orphaned): `python -m groundsieve` treats it as
+    Ctrl-C, says so in one line and exits with 130."""
+    import signal
+    import subprocess
+    import sys
+    import time
+    from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+    cloud = tmp_path / "big.laz"
+    write_scene(make_scene(SceneSpec(size_m=400.0, density_per_m2=10.0, seed=3)), str(cloud))
+    import groundsieve
+    plugins = os.path.dirname(os.path.dirname(os.path.abspath(groundsieve.__file__)))
+    proc = subprocess.Popen([sys.executable, "-m", "groundsieve", "ptd", "--input", str(cloud), "--output",
+                             str(tmp_path / "o.laz"), "--dtm", str(tmp_path / "d.tif")], cwd=plugins,
+                            stderr=subprocess.PIPE, text=True)
+    text = ""
+    while "Filtering" not in text:  # the run is under way
+        line = proc.stderr.readline()
+        assert line, text
+        text += line
+    time.sleep(0.3)
+    proc.send_signal(signal.SIGTERM)
+    rest = proc.stderr.read()
+    assert proc.wait(30) == 130, text + rest
+    assert "groundsieve: interrupted" in rest and "Traceback" not in rest, rest
+    assert not (tmp_path / "o.laz").exists() and not (tmp_path / "d.tif").exists()
