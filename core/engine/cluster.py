@@ -109,6 +109,9 @@ def parse_scheduler(text: str) -> Tuple[str, object]:
                 if scheme in ("http", "https") else f"Dask cannot connect to a {scheme}:// address")
         raise InvalidParameterError(f"Dask scheduler address {text!r}: {what}; {usage} "
                                     f"(Dask accepts {accepted})")
+    m = re.fullmatch(r"([A-Za-z0-9.-]+|\[[0-9A-Fa-f:]+\]):(\d+)", text)
+    if m:  # host:port, as Dask itself takes it: TCP
+        return "address", f"tcp://{text}"
     raise InvalidParameterError(f"Dask scheduler address {text!r}: {usage}")
 
 

@@ -577,7 +577,9 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     if tiling.scheduler:
         from .cluster import run_jobs
         run_jobs(tiling.scheduler, _tile_job, jobs, record, is_cancelled=steps.is_cancelled,
-                 paths=[info.path for info in infos] + [work], writable=[done_dir], log=log,
+                 paths=[info.path for info in infos] + [work], log=log,
+                 # the output folders too: the workers write the classified files there at the end
+                 writable=[done_dir] + sorted({_existing_folder(o) for o in outs if o}),
                  names=lambda job: job_name(job["bounds"], job["names"]),
                  **({"cluster": cluster} if cluster is not None else {}))
     elif workers == 1:
@@ -601,7 +603,9 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     # 3. write the outputs: every classified file, the .vpc and the DTM under temporary names, put in
     # place together once all are complete (StagedOutputs): a run that fails or is stopped here leaves
     # none of them, and the previous run's set of the same names untouched
-    write_steps = steps.sub(0.85, 1.0)
+    # (with a DTM to write after them, the classified files do not take the bar to 100 %: the DTM's
+    # cloud-optimised copy takes a while at fine cells, and 100 % means every output is in place)
+    write_steps = steps.sub(0.85, 0.95 if dtm_writer is not None else 0.99)
     t_write = time.perf_counter()
     written = []
     for out in outs:
@@ -631,6 +635,15 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     return TiledRun(inputs, [o for o in outs if o], sum(i.count for i in infos), ground_total, crs_wkt,
                     grid.size, grid.buffer, len(tile_log), dtm_path, tile_log=tile_log,
                     copc_inputs=[i.path for i in infos if i.copc])
+
+
+def _existing_folder(path: str) -> str:
+    """The folder of ``path``, or its nearest ancestor that exists (a survey's output folder is
+    made at the write)."""
+    folder = os.path.dirname(os.path.abspath(path))
+    while not os.path.isdir(folder) and os.path.dirname(folder) != folder:
+        folder = os.path.dirname(folder)
+    return folder
 
 
 def _write_classified(infos, outs, staged, work, class_paths, class_parts, tiling, steps, log, write_steps,

@@ -159,7 +159,10 @@ def test_scheduler_addresses_are_checked_without_dask():
     assert parse_scheduler("") == ("", None)
     assert parse_scheduler("local:3") == ("local", 3)
     assert parse_scheduler("tcp://10.0.0.5:8786") == ("address", "tcp://10.0.0.5:8786")
-    for bad in ("local:0", "10.0.0.5", "local:x", "tcp://a b"):
+    # host:port without a scheme, as Dask takes it (a reviewer's address was refused)
+    assert parse_scheduler("10.0.0.5:8786") == ("address", "tcp://10.0.0.5:8786")
+    assert parse_scheduler("node-7.cluster:8786") == ("address", "tcp://node-7.cluster:8786")
+    for bad in ("local:0", "10.0.0.5", "local:x", "tcp://a b", "host:port", "a b:1"):
         with pytest.raises(InvalidParameterError):
             TileOptions(scheduler=bad)
 
