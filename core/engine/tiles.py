@@ -364,6 +364,7 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     work = os.path.join(parent, ".groundsieve-tiles-" + _fingerprint(infos, grid, algorithm, options,
                                                                      dtm if dtm_path else None))
     if os.path.isdir(work):
+        lock = _lock_working_folder(work)  # another run still using it is refused, its folder left alone
         log(f"Resuming the interrupted run in {work}.")
     else:
         # Made before the free space is read: a read-only folder is refused for what it is (a
@@ -373,11 +374,60 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
         except OSError as err:
             raise OutputError(f"{parent}: the working folder cannot be written to ({_reason(err)}); "
                               "choose a folder where you may create files") from err
+        lock = _lock_working_folder(work)
         try:
             _check_disk(parent, [i for i in infos if not i.copc], buffer_m, size)  # COPC files are not binned
         except OutputError:
-            os.rmdir(work)
+            lock.close()
+            _remove_tree(work)
             raise
+    try:
+        return _run_locked(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling,
+                           steps, log, workflow, total, dtm_grid)
+    finally:
+        lock.close()
+
+
+class _NoLock:
+    def close(self):
+        pass
+
+
+def _lock_working_folder(work: str):
+    """Hold the working folder for this run (an exclusive lock on ``work/.lock``; closing the returned
+    object releases it). Two runs of the same inputs and parameters share one folder name: a second
+    run started while the first is alive would resume from tiles the first then deletes. Where the
+    file system has no locks (some network file systems, Windows) nothing is held."""
+    try:
+        import fcntl
+    except ImportError:
+        return _NoLock()
+    path = os.path.join(work, ".lock")
+    try:
+        f = open(path, "a+")
+    except OSError:
+        return _NoLock()
+    try:
+        fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        f.seek(0)
+        holder = f.read().strip() or "another process"
+        f.close()
+        raise OutputError(f"{work}: another run of the same inputs and parameters ({holder}) is using this "
+                          "working folder; wait for it to end, or give this run another working folder")
+    except OSError:
+        f.close()
+        return _NoLock()
+    f.seek(0)
+    f.truncate()
+    f.write(f"process {os.getpid()} on {os.uname().nodename if hasattr(os, 'uname') else 'this machine'}")
+    f.flush()
+    return f
+
+
+def _run_locked(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling, steps,
+                log, workflow, total, dtm_grid):
+    """run_tiled's run once the working folder is held."""
     cluster = None
     pool = None
     rasters = []  # the DTM writer, released at once if the run fails
@@ -460,7 +510,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                 tiles[tuple(entry["key"])] = [TilePart(**part) for part in entry["parts"]]
     else:
         for name in os.listdir(work):  # a run killed while binning left partial parts
-            os.remove(os.path.join(work, name))
+            if name != ".lock":  # (this run's hold on the folder)
+                os.remove(os.path.join(work, name))
         total = sum(i.count for i in infos)
         done_points = 0
         bin_steps = steps.sub(0.0, 0.3)

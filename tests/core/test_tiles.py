@@ -628,3 +628,35 @@ def test_a_survey_puts_its_outputs_in_place_together_or_not_at_all(tmp_path, mon
             run(elevation_threshold_m=0.7)  # another result, which fails at its DTM
     after = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
     assert after == before  # the previous set, untouched
+
+
+def test_a_second_run_on_a_working_folder_in_use_is_refused(scene_laz, tmp_path):
+    """Two runs of the same inputs and parameters share one working folder name: a second run
+    started while the first was alive 'resumed' from it and failed when the first deleted it (a
+    reviewer's case). The folder is held by a lock while a run uses it: the second run is refused
+    in words, and the first one's folder is left alone."""
+    from groundsieve.core.engine import tiles
+    src = scene_laz
+    opts = FilterOptions(tiling=TileOptions(tile_size_m=60.0, workers=1, parallel="threads",
+                                            work_dir=str(tmp_path)))
+    held = {}
+    real = tiles._run
+
+    def run_and_look(work, *args, **kw):  # while the first run works: a second one starts
+        if "work" in held:  # (the second run, when nothing refuses it)
+            return real(work, *args, **kw)
+        held["work"] = work
+        with pytest.raises(OutputError, match="another run of the same inputs and parameters .*is using this "
+                                              "working folder"):
+            run_ground_filter(str(src), str(tmp_path / "second.laz"), SMRF(), options=opts)
+        assert os.path.isdir(work)  # not removed by the refused run
+        return real(work, *args, **kw)
+
+    tiles._run = run_and_look
+    try:
+        run_ground_filter(str(src), str(tmp_path / "first.laz"), SMRF(), options=opts)
+    finally:
+        tiles._run = real
+    assert (tmp_path / "first.laz").exists() and not (tmp_path / "second.laz").exists()
+    assert not os.path.exists(held["work"])  # removed by the first run as it ended
+    run_ground_filter(str(src), str(tmp_path / "third.laz"), SMRF(), options=opts)  # the lock is released
