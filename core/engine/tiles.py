@@ -349,6 +349,12 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     size = plan_tile_size(infos, tiling, buffer_m, density, multiple_of=dtm.cell_size_m if dtm_path else 1.0)
     if dtm_path:
         size = fit_dtm_blocks(size, buffer_m, dtm.cell_size_m, tiling, log)
+    if not tiling.tile_size_m:  # the planned tiles cannot be smaller than 50 m: say when the budget asked for less
+        need = (size + 2 * buffer_m) ** 2 * density * BYTES_PER_POINT * tiling.worker_count
+        if need > 1.05 * tiling.budget_bytes:
+            log(f"The memory budget ({tiling.budget_bytes / 2**20:,.0f} MB) is below what the smallest tiles "
+                f"need: tiles of {size:g} m and their buffer take about {need / 2**20:,.0f} MB on "
+                f"{tiling.worker_count} worker(s), which the run may use.")
     grid = TileGrid(size, buffer_m)
     total = sum(i.count for i in infos)
     log(f"{len(inputs)} file(s), {total:,} points; tiles of {size:g} m with a buffer of {buffer_m:g} m "
@@ -454,6 +460,8 @@ def _run_locked(work, inputs, infos, outs, output_path, grid, algorithm, options
         # Kept for a restart when the user chose the working folder; removed otherwise.
         if not tiling.work_dir:
             _remove_tree(work)
+            log("The tiles done so far are deleted with the run's temporary working folder; name a working "
+                "folder to keep them for the next run to resume from.")
         else:
             log(f"The tiles done so far are kept in {work}: run again to resume, or delete it.")
         raise

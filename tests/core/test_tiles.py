@@ -660,3 +660,26 @@ def test_a_second_run_on_a_working_folder_in_use_is_refused(scene_laz, tmp_path)
     assert (tmp_path / "first.laz").exists() and not (tmp_path / "second.laz").exists()
     assert not os.path.exists(held["work"])  # removed by the first run as it ended
     run_ground_filter(str(src), str(tmp_path / "third.laz"), SMRF(), options=opts)  # the lock is released
+
+
+def test_a_budget_below_the_smallest_tiles_and_a_discarded_working_folder_are_said(scene_laz, tmp_path):
+    """A memory budget of a few MB floored silently at 50 m tiles (a reviewer's runs at 16 and 64 MB);
+    and a failed run without a working folder deleted its finished tiles without a word, where the
+    README says a killed run resumes: the log says both."""
+    from groundsieve.core.errors import Cancelled
+    lines = []
+    run_ground_filter(scene_laz, str(tmp_path / "o.laz"), SMRF(), log=lines.append,
+                      options=FilterOptions(tiling=TileOptions(memory_budget_mb=4, workers=1, parallel="threads")))
+    said = [line for line in lines if line.startswith("The memory budget (4 MB) is below what the smallest tiles need")]
+    assert len(said) == 1, lines
+    lines = []
+    calls = []
+
+    def cancel():
+        calls.append(1)
+        return len(calls) > 40
+    with pytest.raises(Cancelled):
+        run_ground_filter(scene_laz, str(tmp_path / "p.laz"), SMRF(), log=lines.append, is_cancelled=cancel,
+                          options=FilterOptions(tiling=TileOptions(tile_size_m=60.0, workers=1, parallel="threads")))
+    assert any(line.startswith("The tiles done so far are deleted with the run's temporary working folder")
+               for line in lines), lines
