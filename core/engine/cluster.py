@@ -425,6 +425,12 @@ def _set_spawn_executable():
         multiprocessing.set_executable(exe)
 
 
+def _scheduler_lost(client, err: BaseException) -> ClusterError:
+    return ClusterError(f"the connection to the Dask scheduler {client.scheduler.address} was lost "
+                        f"({type(err).__name__}); the tiles done so far are kept in the working folder: run again "
+                        "once the scheduler is back to resume")
+
+
 def _cause_hint(err: BaseException) -> str:
     """What a Dask failure usually means, when its words say (appended to the message)."""
     text = str(err)
@@ -464,9 +470,7 @@ def run_jobs(scheduler: str, function, jobs: List[dict], record: Callable[[objec
                 except (TimeoutError, distributed.TimeoutError):
                     continue
                 except Exception as err:  # the scheduler gone: its futures are cancelled
-                    raise ClusterError(f"the connection to the Dask scheduler {client.scheduler.address} was lost "
-                                       f"({type(err).__name__}); the tiles done so far are kept in the working "
-                                       "folder: run again once the scheduler is back to resume") from err
+                    raise _scheduler_lost(client, err) from err
                 for fut in done:
                     pending.discard(fut)
                     job = futures.pop(fut)  # let the result go once recorded (Dask frees it on the worker)
@@ -478,9 +482,7 @@ def run_jobs(scheduler: str, function, jobs: List[dict], record: Callable[[objec
                         raise ClusterError(f"{names(job)}: the Dask workers running it died "
                                            f"repeatedly ({err}); too little memory per worker?") from err
                     except (distributed.comm.CommClosedError, OSError) as err:
-                        raise ClusterError(f"the connection to the Dask scheduler {client.scheduler.address} was "
-                                           f"lost ({type(err).__name__}); the tiles done so far are kept in the "
-                                           "working folder: run again once the scheduler is back to resume") from err
+                        raise _scheduler_lost(client, err) from err
                     except Exception as err:
                         raise ClusterError(f"{names(job)} failed on the Dask cluster: "
                                            f"{type(err).__name__}: {err}{_cause_hint(err)}") from err

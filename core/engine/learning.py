@@ -196,8 +196,9 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
     if "gps_time" in names:
         from ..learn.rf import GPS_TIME_OF_WEEK
         meta["gps_time"] = GPS_TIME_OF_WEEK
-    if horizontal_unit(cloud.crs_wkt):  # the unit its lengths (radii, heights) were read in
-        meta["crs_unit"] = horizontal_unit(cloud.crs_wkt)
+    unit = horizontal_unit(cloud.crs_wkt)
+    if unit:  # the unit its lengths (radii, heights) were read in
+        meta["crs_unit"] = unit
     candidates = [options.params]
     if options.grid:
         candidates = [ForestParams(n_trees=t, criterion=c, scaler=s, max_depth=options.params.max_depth,

@@ -27,14 +27,14 @@ def lonlat_box(x0: float, y0: float, x1: float, y1: float, crs_wkt: Optional[str
     return min(lons), min(lats), max(lons), max(lats)
 
 
-def horizontal_unit(crs_wkt: Optional[str]) -> Optional[str]:
-    """The unit lengths are read in under ``crs_wkt``: "metres", "degrees", or GDAL's name of the
-    linear unit (e.g. "US survey foot"); None when there is no CRS or it cannot be read (no GDAL)."""
+def _spatial_reference(crs_wkt: Optional[str]):
+    """``crs_wkt`` as GDAL's ``osr.SpatialReference``; None when there is no CRS, no GDAL (the
+    command line can run without it) or a WKT GDAL cannot read."""
     if not crs_wkt:
         return None
     try:
         from osgeo import osr
-    except ImportError:  # the command line without GDAL: the CRS cannot be read
+    except ImportError:
         return None
     ref = osr.SpatialReference()
     try:
@@ -42,11 +42,33 @@ def horizontal_unit(crs_wkt: Optional[str]) -> Optional[str]:
             return None
     except RuntimeError:
         return None
+    return ref
+
+
+def horizontal_unit(crs_wkt: Optional[str]) -> Optional[str]:
+    """The unit lengths are read in under ``crs_wkt``: "metres", "degrees", or GDAL's name of the
+    linear unit (e.g. "US survey foot"); None when there is no CRS or it cannot be read (no GDAL)."""
+    ref = _spatial_reference(crs_wkt)
+    if ref is None:
+        return None
     if ref.IsGeographic():
         return "degrees"
     if ref.IsProjected() and abs(ref.GetLinearUnits() - 1.0) > 1e-12:
         return ref.GetLinearUnitsName() or f"{ref.GetLinearUnits():g} m"
     return "metres"
+
+
+def elevation_unit(crs_wkt: Optional[str]) -> str:
+    """A raster band's unit type for elevations read in the CRS's linear unit (the unit every length
+    of a run is read in): "m", "ft" or "US survey foot"; "" when there is no CRS or it is not linear."""
+    ref = _spatial_reference(crs_wkt)
+    if ref is None or not ref.IsProjected():
+        return ""
+    factor = ref.GetLinearUnits()
+    for unit, metres in (("m", 1.0), ("ft", 0.3048), ("US survey foot", 1200.0 / 3937.0)):
+        if abs(factor - metres) < 1e-9:
+            return unit
+    return ""
 
 
 def unit_warning(path: str, crs_wkt: Optional[str], lengths: str = "every length parameter") -> Optional[str]:

@@ -10,6 +10,7 @@ import numpy as np
 from ..errors import OutputError
 from ..grids.spec import GridSpec
 from ..io import atomic_path
+from .crs import elevation_unit
 
 NODATA = -9999.0
 RASTER_EXTENSIONS = (".tif", ".tiff")
@@ -58,26 +59,6 @@ def write_geotiff(path: str, values: np.ndarray, grid: GridSpec, *, crs_wkt: Opt
         raise OutputError(f"{path}: cannot write the GeoTIFF ({err})") from err
     if not os.path.exists(path):
         raise OutputError(f"{path}: the GeoTIFF was not written")
-
-
-def elevation_unit(crs_wkt: Optional[str]) -> str:
-    """The raster's unit type for elevations read in the CRS's linear unit (the unit every length of
-    a run is read in): "m", "ft" or "US survey foot"; "" when there is no CRS or it is not linear."""
-    if not crs_wkt:
-        return ""
-    from osgeo import osr
-    srs = osr.SpatialReference()
-    try:
-        srs.ImportFromWkt(crs_wkt)
-    except RuntimeError:
-        return ""
-    if not srs.IsProjected():
-        return ""
-    factor = srs.GetLinearUnits()
-    for unit, metres in (("m", 1.0), ("ft", 0.3048), ("US survey foot", 1200.0 / 3937.0)):
-        if abs(factor - metres) < 1e-9:
-            return unit
-    return ""
 
 
 def _set_categories(band, categories) -> None:
