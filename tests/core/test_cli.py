@@ -232,10 +232,8 @@ def test_sigterm_ends_the_command_as_ctrl_c_does(tmp_path):
     from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
     cloud = tmp_path / "big.laz"
     write_scene(make_scene(SceneSpec(size_m=400.0, density_per_m2=10.0, seed=3)), str(cloud))
-    import groundsieve
-    plugins = os.path.dirname(os.path.dirname(os.path.abspath(groundsieve.__file__)))
     proc = subprocess.Popen([sys.executable, "-m", "groundsieve", "ptd", "--input", str(cloud), "--output",
-                             str(tmp_path / "o.laz"), "--dtm", str(tmp_path / "d.tif")], cwd=plugins,
+                             str(tmp_path / "o.laz"), "--dtm", str(tmp_path / "d.tif")], cwd=PLUGINS,
                             stderr=subprocess.PIPE, text=True)
     text = ""
     while "Filtering" not in text:  # the run is under way

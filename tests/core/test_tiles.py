@@ -543,8 +543,8 @@ def test_worker_processes_end_when_the_run_is_killed(tmp_path):
     import subprocess
     import sys
     import time
-    from groundsieve.core.engine import tiles
-    plugins = os.path.dirname(os.path.dirname(os.path.abspath(tiles.__file__ + "/../..")))
+    import groundsieve
+    plugins = os.path.dirname(os.path.dirname(os.path.abspath(groundsieve.__file__)))  # the folder holding it
     client = subprocess.Popen([sys.executable, "-c", CLIENT, plugins], stdout=subprocess.PIPE, text=True)
     try:
         pids = [int(p) for p in client.stdout.readline().split()]
