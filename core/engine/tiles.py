@@ -34,8 +34,10 @@ import math
 import os
 import shutil
 import sys
+import threading
 import time
-from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures import wait as futures_wait
 from dataclasses import dataclass, field
 from typing import Callable, Dict, List, Optional, Sequence
 
@@ -449,7 +451,8 @@ def _run_locked(work, inputs, infos, outs, output_path, grid, algorithm, options
         run = _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling,
                    steps, log, workflow, cluster=cluster, rasters=rasters, pool=pool, dtm_grid=dtm_grid)
     except BaseException:
-        if pool is not None:
+        if pool is not None:  # its workers' tiles are not waited for: the run says why at once
+            stop_workers(pool)
             pool.shutdown(wait=True, cancel_futures=True)
             pool = None
         for writer in rasters:  # closed at once, not by the garbage collector (GDAL may crash then)
@@ -592,6 +595,10 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     mode = tiling.parallel if tiling.parallel != "auto" else _auto_parallel(sum(i.count for i in infos))
     use_processes = workers > 1 and mode == "processes"
     done_before = [_load_done(done_dir, key) for key in keys]
+    failed = threading.Event()  # a tile failed: the tiles running in other threads stop at their next check
+
+    def tile_cancelled() -> bool:
+        return failed.is_set() or steps.is_cancelled()
     if any(d is not None for d in done_before):
         log(f"{sum(d is not None for d in done_before)} of {len(keys)} tile(s) were done before; skipping them.")
     jobs = [dict(key=key, parts=tiles.get(key, []), copc=copc_tiles.get(key, []), bounds=grid.bounds(key),
@@ -600,7 +607,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                                for p in tiles.get(key, []) + copc_tiles.get(key, [])}),
                  class_paths=class_paths, algorithm=algorithm, options=options, dtm=dtm if dtm_path else None,
                  dtm_grid=dtm_writer.grid if dtm_writer is not None else None,
-                 is_cancelled=None if use_processes or tiling.scheduler else steps.is_cancelled,
+                 is_cancelled=None if use_processes or tiling.scheduler else tile_cancelled,
                  own_classes=bool(tiling.scheduler))
             for key, before in zip(keys, done_before) if before is None]
     if not tiling.scheduler:  # (a cluster run says where its tiles go)
@@ -647,7 +654,12 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             record(_tile_job(job))
     else:
         with _pool(workers, use_processes, pool) as tile_pool:
-            _record_as_completed([tile_pool.submit(_tile_job, job) for job in jobs], record)
+            try:
+                _record_as_completed(tile_pool, _tile_job, jobs, record, steps.check,
+                                     stage=f"tiles of {_few({n for job in jobs for n in job['names']})}")
+            except BaseException:
+                failed.set()  # (worker processes are stopped by the run: stop_workers)
+                raise
     for k, info in enumerate(infos):
         if assigned[k] != info.count:
             raise InputError(f"{info.path}: {assigned[k]:,} of {info.count:,} points were classified; "
@@ -851,6 +863,10 @@ def keep_freed_memory() -> bool:
 def _init_worker(environ: Dict[str, str], parent: int = 0) -> None:
     os.environ.update(environ)  # before the job imports numba or starts lazrs's thread pool
     keep_freed_memory()
+    import signal
+    # Ctrl-C in a terminal reaches every process of the group: the run that started this worker
+    # decides (it stops its workers, see stop_workers), not a KeyboardInterrupt traceback per worker
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     if parent:
         _exit_with_parent(parent)
 
@@ -866,7 +882,6 @@ def _exit_with_parent(parent: int) -> None:
     pipe. POSIX: the parent's end re-parents this process (os.getppid() changes)."""
     if os.name != "posix":
         return
-    import threading
 
     def watch():
         while os.getppid() == parent:
@@ -888,6 +903,20 @@ def _worker_pool(workers: int, use_processes: bool):
     share = max(1, (os.cpu_count() or 1) // workers)
     return ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
                                initargs=(worker_thread_environ(share), os.getpid()))
+
+
+def stop_workers(pool) -> None:
+    """End a process pool's worker processes now, with the tiles they are running: a run that fails
+    (a tile's error) or is stopped (cancel, Ctrl-C, SIGTERM) does not wait for tiles whose results
+    it will not use before it says why and cleans up (a worker's files are written atomically, so
+    a killed tile leaves nothing a resumed run would take for done). The pool is broken after this;
+    the run shuts it down. Threads cannot be stopped from outside: a thread pool is left alone."""
+    processes = getattr(pool, "_processes", None)  # (ProcessPoolExecutor's; no public way before 3.14)
+    for process in list((processes or {}).values()):
+        try:
+            process.terminate()
+        except (OSError, AttributeError, ValueError):
+            continue
 
 
 def _pool(workers: int, use_processes: bool, shared=None):
@@ -921,24 +950,54 @@ def _map_files(function, jobs, record, tiling, steps, log, *, paths, writable, p
             record(function(job))
         return
     with _pool(workers, mode == "processes", pool) as file_pool:
-        _record_as_completed([file_pool.submit(function, job) for job in jobs], record, steps.check)
+        stage = {"_bin_job": "binning", "_write_piece_job": "writing", "_assemble_job": "writing"}.get(
+            function.__name__, "run")
+        _record_as_completed(file_pool, function, jobs, record, steps.check,
+                             stage=f"{stage} of {_few({os.path.basename(j['path']) for j in jobs})}")
 
 
-def _record_as_completed(futures, record, check=None) -> None:
-    """``record`` each future's result as it comes, then let it go: a list of done futures would
-    keep every result (a tile's DTM block) alive in the client until the last one. On an error or a
-    cancel the futures not started are cancelled."""
-    pending = set(futures)
-    del futures
+def _few(names) -> str:
+    """A few file names for a message, or how many there are."""
+    names = sorted(names)
+    return ", ".join(names) if len(names) <= 3 else f"{len(names)} files"
+
+
+#: how often the client looks at the cancel callable while its workers run (s)
+CHECK_EVERY_S = 0.2
+
+
+def _record_as_completed(pool, function, jobs, record, check=None, stage="jobs") -> None:
+    """Run ``function`` on each job in ``pool`` and ``record`` each result as it comes, then let it
+    go: a list of done futures would keep every result (a tile's DTM block) alive in the client
+    until the last one. ``check`` is called every :data:`CHECK_EVERY_S` while the workers run (a
+    worker process does not see the cancel; its run stops it). On an error or a cancel the jobs not
+    started are cancelled. A worker process that dies (killed by the system for lack of memory,
+    a crash in native code) fails the run with the ``stage`` it was in and the likely cause, not a
+    traceback (every job of the pool fails then, so the one that ran in it is not known)."""
+    from concurrent.futures.process import BrokenProcessPool
+    pending = {pool.submit(function, job): job for job in jobs}
+    del jobs
     try:
-        for fut in as_completed(pending):
-            pending.discard(fut)
+        while pending:
             if check is not None:
                 check()
-            result = fut.result()
-            del fut
-            record(result)
-            del result
+            done, _ = futures_wait(pending, timeout=CHECK_EVERY_S, return_when=FIRST_COMPLETED)
+            while done:  # (popped: a future in ``done`` would keep its result)
+                fut = done.pop()
+                job = pending.pop(fut)
+                if check is not None:
+                    check()
+                try:
+                    result = fut.result()
+                except BrokenProcessPool as err:
+                    raise GroundSieveError(
+                        f"a worker process ended abruptly during the {stage} (most often the system stops one "
+                        "for lack of memory: see its log, e.g. dmesg); use a smaller memory budget or fewer "
+                        "workers") from err
+                del fut, job
+                record(result)
+                del result
+            del done
     except BaseException:
         for fut in pending:
             fut.cancel()

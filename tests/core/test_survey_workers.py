@@ -243,3 +243,68 @@ def test_one_big_file_is_written_in_pieces_on_the_workers_with_the_serial_output
     assert [(j["first"], j["stop"] > j["first"]) for j in write_jobs][0] == (0, True) and len(write_jobs) == 2
     assert write_jobs[1]["first"] % 50_000 == 0 and write_jobs[1]["first"] > 0
     assert got == ref
+
+
+def _nap_or_fail(seconds):
+    """A job for the worker pool: sleeps, or fails at once when ``seconds`` is negative."""
+    import time
+    if seconds < 0:
+        raise InputError("a tile that fails")
+    time.sleep(seconds)
+    return seconds
+
+
+def test_a_failed_run_does_not_wait_for_the_tiles_its_workers_are_running():
+    """A tile's error (a reviewer's: out of memory under ``ulimit -v``) reached the user only once
+    the other worker had finished its own tile, minutes later: the run now stops its worker
+    processes (``stop_workers``) and says why at once. Here the other job would sleep 10 minutes;
+    without stopping the workers the pool's shutdown waits for it (the join below times out)."""
+    import threading
+    from groundsieve.core.engine.tiles import _record_as_completed, _worker_pool, stop_workers
+    pool = _worker_pool(2, True)
+    with pytest.raises(InputError, match="a tile that fails"):
+        _record_as_completed(pool, _nap_or_fail, [600, -1], lambda result: None)
+    stop_workers(pool)
+    ended = threading.Thread(target=pool.shutdown, kwargs=dict(wait=True, cancel_futures=True), daemon=True)
+    ended.start()
+    ended.join(60)
+    assert not ended.is_alive(), "the pool waited for the sleeping job"
+
+
+def test_a_worker_process_that_dies_fails_the_run_in_words():
+    """A worker process killed by the system (the OOM killer; ``ulimit -v`` in a reviewer's run)
+    ended the run with concurrent.futures' BrokenProcessPool traceback: now one error that says
+    what stage it was and what to change."""
+    from groundsieve.core.engine.tiles import _record_as_completed, _worker_pool
+    from groundsieve.core.errors import GroundSieveError
+    with _worker_pool(1, True) as pool:
+        with pytest.raises(GroundSieveError, match=r"worker process ended abruptly during the tiles of a\.laz "
+                                                   r".*smaller memory budget or fewer workers"):
+            _record_as_completed(pool, os._exit, [3], lambda result: None, stage="tiles of a.laz")
+
+
+def test_the_client_sees_a_cancel_while_its_workers_run():
+    """With worker processes the tiles do not see the cancel themselves: the client looked at it
+    only when a tile finished (a cancelled CLI run went on for a whole tile). It now looks every
+    CHECK_EVERY_S while the jobs run: the cancel is raised with the job still running."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+    from groundsieve.core.engine.tiles import _record_as_completed
+    from groundsieve.core.errors import Cancelled
+    release, finished, calls = threading.Event(), [], []
+
+    def job(_):
+        release.wait(60)
+        finished.append(True)
+
+    def check():
+        calls.append(1)
+        if len(calls) >= 3:
+            raise Cancelled("cancelled")
+    with ThreadPoolExecutor(1) as pool:
+        try:
+            with pytest.raises(Cancelled):
+                _record_as_completed(pool, job, [0], lambda result: None, check)
+            assert not finished, "the cancel came only after the job"
+        finally:
+            release.set()

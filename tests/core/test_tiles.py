@@ -586,7 +586,7 @@ def test_results_are_let_go_as_they_are_recorded():
         seen.append(weakref.ref(result))
 
     with ThreadPoolExecutor(2) as pool:
-        _record_as_completed([pool.submit(np.ones, 100_000) for _ in range(6)], record)
+        _record_as_completed(pool, np.ones, [100_000] * 6, record)
     assert len(seen) == 6
 
 
