@@ -10,19 +10,46 @@ tiles to a Dask cluster (``local:N`` or ``tcp://host:port``; engine/cluster.py).
 defaults; options given with a value other than the default win over it.
 ``python -m groundsieve tune --input patch.laz --filter smrf --preset-out smrf.json --report
 tune.html`` tunes a filter on a labelled patch (engine/tune.py).
+
+``--json`` (every command) writes one JSON document to stdout at the end, for scripts and job
+schedulers: what the run made (:func:`filter_document`, :func:`tune_document`), or
+``{"status": "failed" | "interrupted", "error": "..."}``; the log stays on stderr, and while the run
+works whatever else would reach stdout goes to stderr, so stdout holds the document alone.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
+import json
+import math
+import os
 import sys
 import time
 from typing import List, Optional
 
-from ..errors import Cancelled, GroundSieveError
+from ..errors import GroundSieveError
 from . import parameters as P
 from .tiles import TileOptions
 from .workflow import DTMOptions, FilterOptions
+
+
+class UsageExit(SystemExit):
+    """argparse's exit on bad usage (status 2, the message already on stderr), with its message."""
+
+    def __init__(self, code, message: str):
+        super().__init__(code)
+        self.message = message
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser (its subcommands' too) whose bad-usage exit keeps the message (``--json``)."""
+
+    def error(self, message):
+        try:
+            super().error(message)
+        except SystemExit as err:
+            raise UsageExit(err.code, message) from None
 
 
 def _defaults(cls):
@@ -40,6 +67,7 @@ def _add_common(parser: argparse.ArgumentParser) -> None:
                     help="LAS/LAZ (1.2-1.4, point formats 0-10), a folder of them, a .vpc, or an ISPRS .txt")
     io.add_argument("--output", metavar="PATH", help="classified LAS/LAZ (a .vpc for several input files)")
     io.add_argument("--dtm", metavar="PATH", help="DTM GeoTIFF (optional)")
+    _add_json(io)
     io.add_argument("--dtm-cell", type=float, default=dt["cell_size_m"], metavar="M",
                     help="DTM cell size (m; default %(default)s)")
     io.add_argument("--dtm-fill", action=argparse.BooleanOptionalAction, default=dt["fill_outside_hull"],
@@ -77,6 +105,21 @@ def _add_common(parser: argparse.ArgumentParser) -> None:
                        help="Dask scheduler: empty = this machine, local:N = a local Dask cluster of N worker "
                             "processes, tcp://host:port = a running scheduler (needs dask[distributed]; the "
                             "workers must see the input and working folder at the same paths)")
+
+
+JSON_HELP = ("write one JSON document to stdout at the end, nothing else (the log stays on stderr): "
+             "{\"status\": \"done\", %s}, or {\"status\": \"failed\" or \"interrupted\", \"error\": the one-line "
+             "message} when the exit status is not 0")
+FILTER_JSON = ("\"input\", \"output\", \"outputs\" (the classified files), \"dtm\" (or null), \"points\", "
+               "\"ground\", \"seconds\", \"tiles\" (null without tiles), \"algorithm\", \"parameters\" (the "
+               "filter's, as run), \"warnings\"")
+TUNE_JSON = ("\"input\", \"filter\", \"metric\", \"parameters\" (chosen), \"searched\", \"cv\" (cross-validated "
+             "total_error, kappa, f1), \"patch\" (in-sample), \"sets\", \"runs\", \"seconds\", \"stopped\", "
+             "\"preset\", \"report\", \"warnings\"")
+
+
+def _add_json(group, fields: str = FILTER_JSON) -> None:
+    group.add_argument("--json", action="store_true", help=(JSON_HELP % fields).replace("%", "%%"))
 
 
 def _add_filter(sub, name: str) -> None:
@@ -133,7 +176,7 @@ def _add_param(group, name, field, option, title, choices) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="python -m groundsieve",
         description="Ground filtering of point clouds (LAS/LAZ, folders, .vpc) without QGIS: classified "
                     "LAS/LAZ (ground = 2, other = 1) and an optional DTM GeoTIFF. Lengths in the unit of "
@@ -141,7 +184,12 @@ def build_parser() -> argparse.ArgumentParser:
                     "a filter's parameters.",
         epilog="Exit status: 0 done, 1 refused or failed (one line saying why), 2 bad usage, 130 interrupted "
                "(Ctrl-C or SIGTERM; a survey's finished tiles are kept in --work-folder, when given, for the "
-               "next run to resume). The log goes to stderr.")
+               "next run to resume). The log goes to stderr. With --json, stdout holds one JSON document "
+               "alone: for a filter {\"status\": \"done\", \"input\", \"output\", \"outputs\", \"dtm\", \"points\", "
+               "\"ground\", \"seconds\", \"tiles\" (null for a run without tiles), \"algorithm\", "
+               "\"parameters\", \"warnings\"}; for tune the chosen \"parameters\" and the cross-validated "
+               "\"cv\" figures; when the exit status is not 0, {\"status\": \"failed\" (1, 2) or "
+               "\"interrupted\" (130), \"error\": the one-line message}.")
     sub = parser.add_subparsers(title="filters", metavar="FILTER", required=True)
     for name in P.FILTERS:
         _add_filter(sub, name)
@@ -174,16 +222,21 @@ def _add_tune(sub) -> None:
     parser.add_argument("--start", metavar="FILE", help="a preset to start from (its other parameters are kept)")
     parser.add_argument("--preset-out", metavar="PATH", help="the preset file to write (.json)")
     parser.add_argument("--report", metavar="PATH", help="the HTML report to write")
+    _add_json(parser, TUNE_JSON)
     parser.set_defaults(filter="tune")
 
 
-def run_tune(args, out) -> int:
+class _Usage(Exception):
+    """Bad usage found after parsing (exit status 2), with its one-line message."""
+
+
+def run_tune(args, out) -> dict:
+    """Run ``tune``; return its JSON document (the summary is also logged to ``out``)."""
     from .presets import load_preset, write_preset
     from .tune import TuneOptions, preset_source, preset_values, tune
     from .tune_report import write_report
     if not args.preset_out and not args.report:
-        print("groundsieve: give --preset-out and/or --report", file=out)
-        return 2
+        raise _Usage("give --preset-out and/or --report")
     base = load_preset(args.start, args.tune_filter).values if args.start else None
     result = tune(args.input, args.tune_filter,
                   TuneOptions(metric=args.metric, budget=args.budget, blocks=args.blocks, seconds=args.seconds,
@@ -200,7 +253,112 @@ def run_tune(args, out) -> int:
           f"{100 * result.cv.total:.2f} % (kappa {100 * result.cv.kappa:.2f} %); chosen: {best}", file=out)
     for _title, text in result.warnings:
         print(f"WARNING: {text}", file=out)
-    return 0
+    return tune_document(args, result)
+
+
+def tune_document(args, result) -> dict:
+    """The ``--json`` document of a tune run: the preset's parameters (field -> value), the searched
+    fields, the cross-validated figures (the honest ones) and the in-sample ones on the patch."""
+    from .tune import preset_values
+    cv, fit = result.cv, result.best_accuracy
+    return {"status": "done", "input": args.input, "filter": result.filter, "metric": result.metric,
+            "selection": result.selection, "parameters": preset_values(result),
+            "searched": [dim.field for dim in result.dims],
+            "cv": {"total_error": cv.total, "kappa": cv.kappa, "f1": cv.f1, "blocks": len(result.folds)},
+            "patch": {"points": result.points, "total_error": fit.total, "kappa": fit.kappa, "f1": fit.f1},
+            "sets": len(result.trials), "runs": result.runs, "budget": result.budget,
+            "seconds": round(result.seconds, 3), "stopped": result.stopped or None,
+            "preset": args.preset_out, "report": args.report, "warnings": [text for _t, text in result.warnings]}
+
+
+def run_filter(args, out) -> dict:
+    """Run a filter (or the hybrid); return its JSON document (the summary is also logged to ``out``)."""
+    from .workflow import run_ground_filter
+    if not args.output and not args.dtm:
+        raise _Usage("give --output and/or --dtm")
+    for flag, unset in (("--dtm-cell", args.dtm_cell == _defaults(DTMOptions)["cell_size_m"]),
+                        ("--dtm-classes", not args.dtm_classes), ("--dtm-max-distance", not args.dtm_max_distance)):
+        if not args.dtm and not unset:
+            print(f"groundsieve: {flag} is set but no --dtm is named: no DTM is made", file=out)
+    log = lambda msg: print(msg, file=out, flush=True)  # noqa: E731
+    algorithm, options, dtm = options_from(args, log)
+    start = time.monotonic()
+    run = run_ground_filter(args.input, args.output, algorithm, options=options, dtm_path=args.dtm, dtm=dtm,
+                            progress=_progress_printer(out), log=log)
+    seconds = time.monotonic() - start
+    from ..raster.crs import unit_warning
+    warning = unit_warning(args.input, run.crs_wkt, "every length parameter (cell sizes, windows, thresholds)")
+    if warning:
+        print(f"WARNING: {warning}", file=out)
+    document = filter_document(args, algorithm, run, seconds, [warning] if warning else [])
+    print(f"{document['points']:,} points, {document['ground']:,} ground.", file=out)
+    return document
+
+
+def filter_document(args, algorithm, run, seconds: float, warnings=()) -> dict:
+    """The ``--json`` document of a filter run, from what the run returned: a ``FilterRun`` (one
+    cloud in memory: ``tiles`` is null) or a tiled run's ``TiledRun``."""
+    tiled = run.cloud is None
+    return {"status": "done", "input": args.input, "output": args.output,
+            "outputs": list(run.outputs) if tiled else [p for p in [args.output] if p],
+            "dtm": (run.dtm_path if tiled else None) or args.dtm or None,
+            "points": int(run.point_count if tiled else len(run.cloud)), "ground": int(run.ground_count),
+            "seconds": round(seconds, 3), "tiles": int(run.tiles) if tiled else None,
+            "tile_size": float(run.tile_size_m) if tiled else None,
+            "tile_buffer": float(run.buffer_m) if tiled else None,
+            "algorithm": args.filter, "parameters": filter_parameters(algorithm), "warnings": list(warnings)}
+
+
+def filter_parameters(algorithm) -> dict:
+    """field -> value of a filter object's parameters (its dataclass fields set by the caller)."""
+    return {f.name: getattr(algorithm, f.name) for f in dataclasses.fields(algorithm) if f.init}
+
+
+def _jsonable(value):
+    """``value`` as plain JSON: numpy scalars as Python numbers, NaN and infinities as null, tuples
+    and sets as lists, paths as text."""
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, set, frozenset)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    if type(value).__module__ == "numpy" and hasattr(value, "item"):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def write_json(stream, document: dict) -> None:
+    """Write ``document`` as one line of strict JSON (no NaN) to ``stream``."""
+    stream.write(json.dumps(_jsonable(document), allow_nan=False) + "\n")
+    stream.flush()
+
+
+@contextlib.contextmanager
+def _stdout_to(log):
+    """While a ``--json`` run works, whatever would reach stdout goes to ``log`` instead: Python's
+    prints, and (when stdout is a real file descriptor, as under ``python -m groundsieve``) what
+    a library or a worker process started meanwhile writes to descriptor 1; stdout is then left
+    to the JSON document alone."""
+    moved = None
+    try:
+        fd, log_fd = sys.stdout.fileno(), log.fileno()
+    except (AttributeError, OSError, ValueError):  # a StringIO (tests), a closed stream: Python's level only
+        fd = log_fd = None
+    if fd is not None and fd != log_fd:
+        sys.stdout.flush()
+        moved = os.dup(fd)
+        os.dup2(log_fd, fd)
+    try:
+        with contextlib.redirect_stdout(log):
+            yield
+    finally:
+        if moved is not None:
+            sys.stdout.flush()
+            os.dup2(moved, fd)
+            os.close(moved)
 
 
 def _progress_printer(out):
@@ -245,47 +403,45 @@ def options_from(args, log=None):
 INTERRUPTED = 130
 
 
-def main(argv: Optional[List[str]] = None, out=None) -> int:
-    """Run the command; 0 = done, 1 = refused or failed (the message, no traceback), 2 = bad usage,
-    130 = interrupted (Ctrl-C; SIGTERM too under ``python -m groundsieve``)."""
-    from .workflow import run_ground_filter
-    out = out or sys.stderr
-    args = build_parser().parse_args(argv)
-    if args.filter == "tune":
-        try:
-            return run_tune(args, out)
-        except KeyboardInterrupt:
-            print("groundsieve: interrupted", file=out)
-            return INTERRUPTED
-        except GroundSieveError as err:
-            print(f"groundsieve: {err}", file=out)
-            return 1
-    if not args.output and not args.dtm:
-        print("groundsieve: give --output and/or --dtm", file=out)
-        return 2
-    for flag, unset in (("--dtm-cell", args.dtm_cell == _defaults(DTMOptions)["cell_size_m"]),
-                        ("--dtm-classes", not args.dtm_classes), ("--dtm-max-distance", not args.dtm_max_distance)):
-        if not args.dtm and not unset:
-            print(f"groundsieve: {flag} is set but no --dtm is named: no DTM is made", file=out)
-    progress = _progress_printer(out)
+def _wants_json(argv: List[str]) -> bool:
+    """Whether the raw arguments ask for ``--json`` (or an abbreviation argparse takes for it)."""
+    return any(a.startswith("--j") and "--json".startswith(a) for a in argv)
+
+
+def _run(args, out):
+    """(exit status, JSON document) of the command, the log and the one-line errors on ``out``."""
     try:
-        log = lambda msg: print(msg, file=out, flush=True)  # noqa: E731
-        algorithm, options, dtm = options_from(args, log)
-        run = run_ground_filter(args.input, args.output, algorithm, options=options, dtm_path=args.dtm, dtm=dtm,
-                                progress=progress, log=log)
+        return 0, (run_tune if args.filter == "tune" else run_filter)(args, out)
+    except _Usage as err:
+        print(f"groundsieve: {err}", file=out)
+        return 2, {"status": "failed", "error": str(err)}
     except KeyboardInterrupt:
         print("groundsieve: interrupted", file=out)
-        return INTERRUPTED
-    except Cancelled as err:
+        return INTERRUPTED, {"status": "interrupted", "error": "interrupted"}
+    except GroundSieveError as err:  # Cancelled too
         print(f"groundsieve: {err}", file=out)
-        return 1
-    except GroundSieveError as err:
-        print(f"groundsieve: {err}", file=out)
-        return 1
-    from ..raster.crs import unit_warning
-    warning = unit_warning(args.input, run.crs_wkt, "every length parameter (cell sizes, windows, thresholds)")
-    if warning:
-        print(f"WARNING: {warning}", file=out)
-    points = run.point_count if run.cloud is None else len(run.cloud)
-    print(f"{points:,} points, {run.ground_count:,} ground.", file=out)
-    return 0
+        return 1, {"status": "failed", "error": str(err)}
+
+
+def main(argv: Optional[List[str]] = None, out=None, stdout=None) -> int:
+    """Run the command; 0 = done, 1 = refused or failed (the message, no traceback), 2 = bad usage,
+    130 = interrupted (Ctrl-C; SIGTERM too under ``python -m groundsieve``). The log goes to ``out``
+    (stderr); with ``--json`` one JSON document goes to ``stdout`` (sys.stdout) at the end."""
+    out = out or sys.stderr
+    argv = sys.argv[1:] if argv is None else list(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except UsageExit as err:  # bad usage (2): argparse has said why on stderr
+        if _wants_json(argv):
+            write_json(stdout or sys.stdout, {"status": "failed", "error": err.message})
+        raise
+    if not args.json:
+        return _run(args, out)[0]
+    try:
+        with _stdout_to(out):
+            code, document = _run(args, out)
+    except Exception as err:  # not a refusal: the traceback as without --json, and the document still
+        write_json(stdout or sys.stdout, {"status": "failed", "error": f"{type(err).__name__}: {err}"})
+        raise
+    write_json(stdout or sys.stdout, document)
+    return code

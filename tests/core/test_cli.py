@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import io
+import json
 import os
 import subprocess
 import sys
@@ -100,12 +101,21 @@ def test_defaults_read_without_importing_the_filter_are_the_filter_s(name):
 
 def test_tune_writes_a_preset_that_every_run_of_the_filter_takes(scene, tmp_path):
     preset, report = str(tmp_path / "smrf.json"), str(tmp_path / "tune.html")
-    out = io.StringIO()
+    out, stdout = io.StringIO(), io.StringIO()
     assert main(["tune", "--input", scene, "--filter", "smrf", "--budget", "4", "--blocks", "2",
-                 "--preset-out", preset, "--report", report], out=out) == 0, out.getvalue()
+                 "--preset-out", preset, "--report", report, "--json"], out=out, stdout=stdout) == 0, out.getvalue()
     assert "cross-validated total error" in out.getvalue()
     assert "<svg" in open(report, encoding="utf-8").read()
     from groundsieve.core.engine.presets import load_preset
+    # --json: the chosen set and the cross-validated figures the preset records
+    doc = json.loads(stdout.getvalue())
+    saved = json.load(open(preset, encoding="utf-8"))
+    assert doc["status"] == "done" and doc["filter"] == "smrf" and doc["preset"] == preset
+    assert doc["parameters"] == load_preset(preset, "smrf").values
+    assert round(doc["cv"]["total_error"], 5) == saved["source"]["cv_total_error"]
+    assert round(doc["cv"]["kappa"], 5) == saved["source"]["cv_kappa"] and doc["cv"]["blocks"] == 2
+    assert doc["sets"] == saved["source"]["sets_tried"] and doc["runs"] <= 4
+    assert f"cross-validated total error {100 * doc['cv']['total_error']:.2f} %" in out.getvalue()
     tuned = load_preset(preset, "smrf").build()
     algorithm, _options, _dtm = options_from(build_parser().parse_args(
         ["smrf", "--input", scene, "--output", "o.laz", "--preset", preset]))
@@ -246,3 +256,108 @@ def test_sigterm_ends_the_command_as_ctrl_c_does(tmp_path):
     assert proc.wait(30) == 130, text + rest
     assert "groundsieve: interrupted" in rest and "Traceback" not in rest, rest
     assert not (tmp_path / "o.laz").exists() and not (tmp_path / "d.tif").exists()
+
+
+# -- --json: one document on stdout for scripts and job schedulers ------------------------------
+
+def counts_of(path):
+    classes = np.asarray(laspy.read(path).classification)
+    return len(classes), int((classes == 2).sum())
+
+
+@pytest.mark.parametrize("name", [*P.FILTERS, "hybrid", "tune"])
+def test_json_is_in_every_command_s_help(name):
+    text = help_of(name)
+    assert "--json write one JSON document to stdout" in text and '"status": "failed" or "interrupted"' in text
+
+
+def test_json_reports_the_run_as_the_output_file_holds_it(scene, tmp_path):
+    out, stdout = io.StringIO(), io.StringIO()
+    output, dtm = str(tmp_path / "c.laz"), str(tmp_path / "d.tif")
+    assert main(["smrf", "--input", scene, "--output", output, "--dtm", dtm, "--slope", "0.2", "--json"],
+                out=out, stdout=stdout) == 0, out.getvalue()
+    doc = json.loads(stdout.getvalue())  # the document alone: any other text would not parse
+    points, ground = counts_of(output)
+    assert (doc["points"], doc["ground"]) == (points, ground) and 0 < ground < points
+    assert doc["status"] == "done" and doc["input"] == scene and doc["output"] == output and doc["dtm"] == dtm
+    assert doc["outputs"] == [output] and doc["tiles"] is None and doc["algorithm"] == "smrf"
+    assert doc["parameters"] == dataclasses.asdict(SMRF(slope=0.2)) and doc["warnings"] == []
+    assert 0 < doc["seconds"] < 300
+    assert f"{points:,} points, {ground:,} ground." in out.getvalue()  # the log as without --json
+
+    # a tiled run: its tiles counted, its counts those of its file; no DTM: null
+    out, stdout = io.StringIO(), io.StringIO()
+    tiled = str(tmp_path / "t.laz")
+    assert main(["pmf", "--input", scene, "--output", tiled, "--tile-size", "30", "--json"], out=out,
+                stdout=stdout) == 0, out.getvalue()
+    doc = json.loads(stdout.getvalue())
+    assert (doc["points"], doc["ground"]) == counts_of(tiled) and doc["dtm"] is None
+    assert doc["tiles"] >= 4 and doc["tile_size"] == 30.0 and doc["algorithm"] == "pmf"
+    assert f"{doc['tiles']} tile(s) on" in out.getvalue()
+
+
+def test_json_failures_give_the_message_and_the_exit_status(tmp_path, monkeypatch):
+    missing = str(tmp_path / "missing.laz")
+    out, stdout = io.StringIO(), io.StringIO()
+    assert main(["pmf", "--input", missing, "--output", str(tmp_path / "o.laz"), "--json"], out=out,
+                stdout=stdout) == 1
+    doc = json.loads(stdout.getvalue())
+    assert doc == {"status": "failed", "error": f"{missing}: no such file or folder"}
+    assert out.getvalue().strip().endswith(f"groundsieve: {doc['error']}")
+    # bad usage, found by argparse or after it: 2, as without --json
+    stdout = io.StringIO()
+    assert main(["smrf", "--input", missing, "--json"], out=io.StringIO(), stdout=stdout) == 2
+    assert json.loads(stdout.getvalue()) == {"status": "failed", "error": "give --output and/or --dtm"}
+    stdout = io.StringIO()
+    with pytest.raises(SystemExit) as exit_:
+        main(["smrf", "--input", missing, "--output", "o.laz", "--cell", "wide", "--json"], stdout=stdout)
+    assert exit_.value.code == 2
+    assert json.loads(stdout.getvalue()) == {"status": "failed",
+                                             "error": "argument --cell: invalid float value: 'wide'"}
+    # without --json, nothing on stdout
+    stdout = io.StringIO()
+    assert main(["pmf", "--input", missing, "--output", "o.laz"], out=io.StringIO(), stdout=stdout) == 1
+    assert stdout.getvalue() == ""
+    # interrupted: 130
+    from groundsieve.core.engine import workflow
+
+    def interrupted(*_a, **_k):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(workflow, "run_ground_filter", interrupted)
+    out, stdout = io.StringIO(), io.StringIO()
+    assert main(["smrf", "--input", missing, "--output", "o.laz", "--json"], out=out, stdout=stdout) == 130
+    assert json.loads(stdout.getvalue()) == {"status": "interrupted", "error": "interrupted"}
+    assert "groundsieve: interrupted" in out.getvalue()
+    # not a refusal (a bug): the traceback as without --json, and the document still says failed
+    def broken(*_a, **_k):
+        raise RuntimeError("a bug")
+    monkeypatch.setattr(workflow, "run_ground_filter", broken)
+    stdout = io.StringIO()
+    with pytest.raises(RuntimeError):
+        main(["smrf", "--input", missing, "--output", "o.laz", "--json"], out=io.StringIO(), stdout=stdout)
+    assert json.loads(stdout.getvalue()) == {"status": "failed", "error": "RuntimeError: a bug"}
+
+
+def test_json_stdout_holds_the_document_alone_even_when_something_writes_to_it(scene, tmp_path):
+    """Under `python -m groundsieve`, a print or a library writing to descriptor 1 during the run
+    goes to stderr: stdout is the JSON document and nothing else."""
+    probe = ("import os, runpy, sys\n"
+             "from groundsieve.core.engine import workflow\n"
+             "real = workflow.run_ground_filter\n"
+             "def noisy(*a, **k):\n"
+             "    print('PRINTED'); sys.stdout.flush(); os.write(1, b'FD1\\n')\n"
+             "    return real(*a, **k)\n"
+             "workflow.run_ground_filter = noisy\n"
+             "sys.argv = ['groundsieve'] + sys.argv[1:]\n"
+             "runpy.run_module('groundsieve', run_name='__main__')\n")
+    output = str(tmp_path / "c.laz")
+    done = subprocess.run([sys.executable, "-c", probe, "smrf", "--input", scene, "--output", output, "--json"],
+                          cwd=PLUGINS, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    doc = json.loads(done.stdout)
+    assert (doc["points"], doc["ground"]) == counts_of(output)
+    assert "PRINTED" in done.stderr and "FD1" in done.stderr and "ground." in done.stderr
+    # a refusal: the document, and the exit status
+    done = subprocess.run([sys.executable, "-m", "groundsieve", "smrf", "--input", str(tmp_path / "none.laz"),
+                           "--output", output, "--json"], cwd=PLUGINS, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 1 and json.loads(done.stdout)["status"] == "failed", done.stderr
