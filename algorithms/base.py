@@ -448,7 +448,7 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         if sink_id is not None:
             results[self.GROUND_POINTS] = sink_id
         pointclouds.load_or_log(context, feedback, output_path, self.parameterDefinition(self.OUTPUT).description().split(" (")[0],
-                                self.OUTPUT)
+                                self.OUTPUT, parameters.get(self.OUTPUT))
         styles.style_when_loaded(context, dtm_path, styles.DTM_STYLE)
         for name, (path, _make) in rasters.items():
             styles.style_when_loaded(context, path, self.rasterStyles(run).get(name))

@@ -11,7 +11,8 @@ Every decision below comes from the file patterns the registered point-cloud pro
   layer* parameter is offered beside it (its source file is read);
 - the classified cloud is loaded as a point-cloud layer when the run ends where a provider opens
   the file written (a .las/.laz with ``pdal``, a .vpc with ``vpc``); elsewhere the log says where it
-  was written and why it is not loaded;
+  was written and why it is not loaded; the cloud of a graphical model's step that is not a model
+  output is never loaded, as QGIS loads none of its own (``is_model_intermediate``);
 - in the graphical modeler, the point-cloud inputs offer only what can be a point cloud (see
   ``point_cloud_sources``): QGIS's modeler keys a file parameter's choices on output *types* alone
   (``availableSourcesForChild``, 3.22 to 3.40), so it would offer a DTM raster, a vector layer or an
@@ -114,6 +115,18 @@ def is_survey_input(path):
         return False
 
 
+def _in_temporary_folder(path, context):
+    """True when ``path`` lies in Processing's temporary folder, where it generates the temporary
+    destinations (``QgsProcessingUtils.generateTempFilename``)."""
+    folders = {QgsProcessingUtils.tempFolder()}
+    try:
+        folders.add(QgsProcessingUtils.tempFolder(context))  # QGIS >= 3.32 takes the context's setting
+    except TypeError:
+        pass
+    return bool(path) and any(os.path.abspath(path).startswith(os.path.abspath(folder) + os.sep)
+                              for folder in folders if folder)
+
+
 def _temporary(value, path, context):
     """True when an output is Processing's temporary one: the dialog's default "[Save to temporary
     file]", ``TEMPORARY_OUTPUT`` in qgis_process, a graphical model's intermediate step."""
@@ -122,11 +135,19 @@ def _temporary(value, path, context):
         value = sink.staticValue()
     if value == QgsProcessing.TEMPORARY_OUTPUT:
         return True
-    try:
-        folder = QgsProcessingUtils.tempFolder(context)  # QGIS >= 3.32 takes the context's setting
-    except TypeError:
-        folder = QgsProcessingUtils.tempFolder()
-    return bool(path) and os.path.abspath(path).startswith(os.path.abspath(folder) + os.sep)
+    return _in_temporary_folder(path, context)
+
+
+def is_model_intermediate(value, context):
+    """True when the value of a destination parameter is the one a graphical model gives an output
+    of a child that is not a model output: QgsProcessingModelAlgorithm.parametersForChildAlgorithm
+    (3.22 to 3.40) passes such a child ``generateTemporaryDestination()``, a plain path in
+    Processing's temporary folder, already resolved. Every other run's value differs: a model
+    output (final) is the model's own value (a path or a QgsProcessingOutputLayerDefinition); the
+    dialog passes a QgsProcessingOutputLayerDefinition, its "[Save to temporary file]" and
+    qgis_process ``TEMPORARY_OUTPUT`` unresolved; a script the path it names."""
+    return (isinstance(value, str) and value != QgsProcessing.TEMPORARY_OUTPUT
+            and _in_temporary_folder(value, context))
 
 
 def classified_output_path(algorithm, parameters, context, name, input_path):
@@ -147,10 +168,19 @@ def make_input_optional(param):
 
 
 # -- output ---------------------------------------------------------------------------------
-def load_or_log(context, feedback, path, layer_name, output_name):
+def load_or_log(context, feedback, path, layer_name, output_name, value=None):
     """Load the point cloud written at ``path`` when the run ends, where a provider of this QGIS
     opens it; else say in the log where it is and why it is not loaded. Returns the provider key
-    used, or None. (Under qgis_process nothing is loaded either way.)"""
+    used, or None. (Under qgis_process nothing is loaded either way.)
+
+    ``value``, the output parameter's value as the run was given it: the intermediate output of a
+    graphical model's step (``is_model_intermediate``) is never loaded, as QGIS loads none of its
+    own (its layer outputs are loaded only when their value is a QgsProcessingOutputLayerDefinition
+    with a destination project, QgsProcessingParameters.parameterAsOutputLayer, which a model gives
+    its final outputs alone)."""
+    if is_model_intermediate(value, context):
+        feedback.pushDebugInfo(f"{layer_name}: {path}: an intermediate output of the model, not loaded.")
+        return None
     keys = providers_opening(path)
     if keys:
         details = QgsProcessingContext.LayerDetails(layer_name, context.project(), output_name,

@@ -1,0 +1,149 @@
+"""What a graphical model loads into the project: as QGIS does for its own algorithms, the output of
+a step that is not a model output (QGIS gives it a temporary destination) is never loaded; a model
+output is loaded as in a plain run. QgsProcessingModelAlgorithm passes such a step
+``generateTemporaryDestination()`` (a plain path in Processing's temporary folder), its final outputs
+the model's own values (algorithms/pointclouds.py ``is_model_intermediate``).
+
+The classified cloud loads only where a point-cloud provider opens it: LAS/LAZ with PDAL (Windows and
+macOS builds, simulated here by its declared patterns), .vpc with QGIS >= 3.32 (3.40 here, for real)."""
+import pytest
+
+from .conftest import classes_of
+
+#: what a build with PDAL declares (test_layers.py): the same code then loads .laz outputs
+PDAL = {"pdal": ["*.las", "*.laz"]}
+
+
+def _model(first_is_output, **static):
+    """smrf -> pmf on smrf's classified cloud, and smrf's DTM -> a QGIS raster algorithm. pmf's
+    cloud is a model output; smrf's cloud only when ``first_is_output``; smrf's DTM never.
+    ``static``: values of both filters' other parameters."""
+    from qgis.core import (QgsApplication, QgsProcessingModelAlgorithm, QgsProcessingModelChildAlgorithm,
+                           QgsProcessingModelChildParameterSource as Source, QgsProcessingModelOutput,
+                           QgsProcessingModelParameter, QgsProcessingParameterFile)
+    model = QgsProcessingModelAlgorithm("two steps", "tests")
+    model.addModelParameter(QgsProcessingParameterFile("cloud", "Point cloud"), QgsProcessingModelParameter("cloud"))
+    fixed = {name: Source.fromStaticValue(value) for name, value in static.items()}
+    steps = [("groundsieve:smrf", "smrf", {"INPUT": Source.fromModelParameter("cloud"), **fixed},
+              {"classified": "OUTPUT"} if first_is_output else {}),
+             ("groundsieve:pmf", "pmf", {"INPUT": Source.fromChildOutput("smrf", "OUTPUT"), **fixed},
+              {"second": "OUTPUT"}),
+             ("native:rasterlayerstatistics", "stats", {"INPUT": Source.fromChildOutput("smrf", "DTM")}, {})]
+    for alg_id, child_id, sources, outputs in steps:
+        child = QgsProcessingModelChildAlgorithm(alg_id)
+        child.setChildId(child_id)
+        # As the modeler's dialog does: every parameter not wired gets its default as a static value.
+        for definition in QgsApplication.processingRegistry().algorithmById(alg_id).parameterDefinitions():
+            if not definition.isDestination() and definition.name() not in sources:
+                sources[definition.name()] = Source.fromStaticValue(definition.defaultValue())
+        for name, source in sources.items():
+            child.addParameterSources(name, [source])
+        model_outputs = {}
+        for model_name, child_output in outputs.items():
+            out = QgsProcessingModelOutput(model_name)
+            out.setChildId(child_id)
+            out.setChildOutputName(child_output)
+            model_outputs[model_name] = out
+        child.setModelOutputs(model_outputs)
+        model.addChildAlgorithm(child)
+    ok, problems = model.validate()
+    assert ok, problems
+    return model
+
+
+def _context():
+    from qgis.core import QgsProcessingContext, QgsProject
+    context = QgsProcessingContext()
+    context.setProject(QgsProject.instance())
+    return context
+
+
+def _to_load(context):
+    return {path: details.outputName for path, details in context.layersToLoadOnCompletion().items()}
+
+
+def _run(model, params):
+    from qgis.core import QgsProcessingFeedback
+    context = _context()
+    results, ok = model.run(params, context, QgsProcessingFeedback())
+    assert ok
+    return results, context
+
+
+def _as_dialog(path):
+    """A destination as the dialog passes it, "Open output file after running" ticked."""
+    from qgis.core import QgsProcessingOutputLayerDefinition, QgsProject
+    return QgsProcessingOutputLayerDefinition(str(path), QgsProject.instance())
+
+
+def test_a_model_loads_its_outputs_not_its_intermediate_steps(groundsieve_provider, scene_laz, tmp_path, monkeypatch):
+    from groundsieve.algorithms import pointclouds
+    monkeypatch.setattr(pointclouds, "point_cloud_patterns", lambda: PDAL)
+    src, scene = scene_laz
+    second = tmp_path / "second.laz"
+    results, context = _run(_model(first_is_output=False), {"cloud": str(src), "pmf:second": _as_dialog(second)})
+    intermediate = results["CHILD_INPUTS"]["smrf"]["OUTPUT"]
+    assert pointclouds.is_model_intermediate(intermediate, context)
+    assert classes_of(intermediate).size == len(scene.x)  # written, and read by the next step
+    dtm = results["CHILD_RESULTS"]["smrf"]["DTM"]
+    assert results["CHILD_RESULTS"]["stats"]["MAX"] > results["CHILD_RESULTS"]["stats"]["MIN"]
+    # only the model's output: neither smrf's cloud nor its DTM (QGIS's own rule for rasters)
+    assert _to_load(context) == {str(second): "OUTPUT"}, (intermediate, dtm)
+    assert not context.willLoadLayerOnCompletion(intermediate) and not context.willLoadLayerOnCompletion(dtm)
+
+    # The same model with smrf's cloud a model output: it loads, named by the user or by path.
+    first = tmp_path / "first.laz"
+    for value in (_as_dialog(first), str(first)):
+        results, context = _run(_model(first_is_output=True),
+                                {"cloud": str(src), "smrf:classified": value, "pmf:second": str(second)})
+        assert results["CHILD_INPUTS"]["pmf"]["INPUT"] == str(first)
+        assert _to_load(context) == {str(first): "OUTPUT", str(second): "OUTPUT"}
+        assert not context.willLoadLayerOnCompletion(results["CHILD_RESULTS"]["smrf"]["DTM"])
+    # A model output left at "[Save to temporary file]" in the dialog loads too.
+    results, context = _run(_model(first_is_output=True), {"cloud": str(src), "smrf:classified":
+                                                           _as_dialog("TEMPORARY_OUTPUT"), "pmf:second": str(second)})
+    assert context.willLoadLayerOnCompletion(results["smrf:classified"])
+
+
+def test_a_plain_run_still_loads_its_cloud(groundsieve_provider, scene_laz, tmp_path, monkeypatch):
+    """Outside a model nothing changes: a named path, the dialog's value and its temporary output
+    (``TEMPORARY_OUTPUT``, resolved into the same temporary folder a model's steps write to) load."""
+    import processing
+    from qgis.core import QgsProcessingFeedback
+    from groundsieve.algorithms import pointclouds
+    monkeypatch.setattr(pointclouds, "point_cloud_patterns", lambda: PDAL)
+    src, _scene = scene_laz
+    for value in (str(tmp_path / "a.laz"), _as_dialog(tmp_path / "b.laz"), "TEMPORARY_OUTPUT",
+                  _as_dialog("TEMPORARY_OUTPUT")):
+        context = _context()
+        out = processing.run("groundsieve:smrf", {"INPUT": str(src), "OUTPUT": value},
+                             context=context, feedback=QgsProcessingFeedback())["OUTPUT"]
+        assert _to_load(context) == {out: "OUTPUT"}, value
+
+
+def test_a_model_does_not_load_an_intermediate_vpc(groundsieve_provider, scene_laz, tmp_path):
+    """Where QGIS opens .vpc for real (3.40 here), a survey's intermediate step (a temporary .vpc) is
+    not loaded into the project when the model's results are handled as the dialog does; the
+    model's output is."""
+    from processing.gui.Postprocessing import handleAlgorithmResults
+    from qgis.core import QgsProcessingFeedback, QgsProject
+    from groundsieve.algorithms import pointclouds
+    from .test_survey_inputs import _split
+    if not pointclouds.providers_opening("x.vpc"):
+        pytest.skip("this QGIS has no point-cloud provider for .vpc (QGIS < 3.32)")
+    src, _scene = scene_laz
+    _split(src, tmp_path / "in")
+    second = tmp_path / "out" / "second.vpc"
+    second.parent.mkdir()
+    model = _model(first_is_output=False, TILE_SIZE=50.0)
+    results, context = _run(model, {"cloud": str(tmp_path / "in"), "pmf:second": _as_dialog(second)})
+    intermediate = results["CHILD_RESULTS"]["smrf"]["OUTPUT"]
+    assert intermediate.endswith(".vpc") and pointclouds.is_model_intermediate(
+        results["CHILD_INPUTS"]["smrf"]["OUTPUT"], context)
+    assert _to_load(context) == {str(second): "OUTPUT"}
+    try:
+        assert handleAlgorithmResults(model, context, QgsProcessingFeedback())
+        sources = [layer.source().split("|")[0] for layer in QgsProject.instance().mapLayers().values()]
+        assert sources == [str(second)]
+    finally:
+        QgsProject.instance().removeAllMapLayers()
