@@ -292,7 +292,8 @@ def survey_dtm_grid(infos: Sequence[LasInfo], cell: float):
     from ..grids.spec import GridSpec
     xs = np.array([v for i in infos if i.count for v in (i.mins[0], i.maxs[0])])
     ys = np.array([v for i in infos if i.count for v in (i.mins[1], i.maxs[1])])
-    return GridSpec.covering(xs, ys, cell, what="DTM", bytes_per_cell=0.0, max_cells=MAX_SURVEY_DTM_CELLS)
+    return GridSpec.covering(xs, ys, cell, what="DTM", bytes_per_cell=0.0, max_cells=MAX_SURVEY_DTM_CELLS,
+                             closed=True)
 
 
 def fit_dtm_blocks(size: float, buffer_m: float, cell: float, tiling: "TileOptions",
@@ -560,8 +561,11 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         del classes
         os.makedirs(done_dir)
         _save_json(binned, [dict(key=list(k), parts=[dataclasses.asdict(p) for p in v]) for k, v in tiles.items()])
-    # a tile with buffer points only (its own area empty) is no tile
-    keys = sorted(k for k, parts in tiles.items() if sum(p.own_count for p in parts))
+    # a tile with buffer points only (its own area empty: a lake, a gap in the data) is no tile,
+    # unless it is in the DTM: its cells are then interpolated from the ground around it, as a run
+    # of the whole cloud does (it filters the buffer's points for their ground, and classifies none)
+    keys = sorted(k for k, parts in tiles.items()
+                  if sum(p.own_count for p in parts) or (dtm_grid is not None and _in_grid(dtm_grid, grid.bounds(k))))
     from ..io.copc import plan_tiles
     copc_tiles = plan_tiles(infos, grid.size, grid.buffer)  # the tiles COPC inputs may have points in
     keys = sorted(set(keys) | set(copc_tiles))
@@ -1024,7 +1028,7 @@ def _tile_job(job) -> Optional[dict]:
         index = np.concatenate(indices)
         file_of = np.concatenate(files)
         own = index >= 0
-        if not own.any():
+        if not own.any() and job["dtm"] is None:  # (with a DTM: the tile's block, from its buffer)
             return None
         cloud = tile_cloud(clouds, path=where)
         del clouds
@@ -1072,6 +1076,12 @@ def _tile_job(job) -> Optional[dict]:
         raise type(err)(f"{where}: {err}") from err
     except Exception as err:  # an unexpected failure still names the tile
         raise GroundSieveError(f"{where} failed: {type(err).__name__}: {err}") from err
+
+
+def _in_grid(grid, bounds) -> bool:
+    """Whether a tile's area holds a cell centre of ``grid``."""
+    x0, y0, x1, y1 = bounds
+    return x0 < grid.x0 + grid.ncols * grid.cell and x1 > grid.x0 and y0 < grid.top and y1 > grid.top - grid.nrows * grid.cell
 
 
 def job_name(bounds, names) -> str:

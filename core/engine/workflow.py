@@ -276,7 +276,8 @@ def check_dtm_memory(x, y, options: DTMOptions) -> GridSpec:
     """The DTM grid over the points ``x, y`` (those that may enter it), its memory checked against
     the budget: called before the filter runs, so that a DTM too large is refused before any work."""
     with memory_budget(options.memory_budget_bytes):
-        return GridSpec.covering(x, y, options.cell_size_m, what="DTM", bytes_per_cell=DTM_BYTES_PER_CELL)
+        return GridSpec.covering(x, y, options.cell_size_m, what="DTM", bytes_per_cell=DTM_BYTES_PER_CELL,
+                                 closed=True)
 
 
 def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions, why_none: str = "", path: str = "",
@@ -287,7 +288,8 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions, why_none: str = "
     it found no ground point (quoted in the refusal); ``path``: the input, named in it."""
     from ..grids.rasterize import tin_dtm
     with memory_budget(options.memory_budget_bytes):
-        grid = GridSpec.covering(x, y, options.cell_size_m, what="DTM", bytes_per_cell=DTM_BYTES_PER_CELL)
+        grid = GridSpec.covering(x, y, options.cell_size_m, what="DTM", bytes_per_cell=DTM_BYTES_PER_CELL,
+                                 closed=True)
     if not ground.any():
         raise InvalidParameterError((f"{path}: " if path else "")
                                     + "the filter found no ground point: no DTM can be made"

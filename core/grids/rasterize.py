@@ -284,8 +284,13 @@ def tin_dtm(x, y, z, grid: GridSpec, *, fill_outside: bool = False, points_per_c
         raise InputError("no ground points to make a DTM from")
     steps = steps or Steps()
     out = np.full(grid.shape, np.nan, dtype=np.float64)
+    # The thinning and the cells holding a point on the grid grown by a cell: a point on a closed
+    # grid's eastern or southern edge (GridSpec.covering(closed=True)) lies just outside it, as the
+    # points of a tile's buffer lie outside its block (engine/tiles.py _dtm_block): the same points
+    # are kept, whole or tiled.
+    around = grid.padded(1)
     if points_per_cell:
-        keep = thin_for_grid(x, y, z, grid, points_per_cell, steps.sub(0.0, 0.1))  # also unique positions
+        keep = thin_for_grid(x, y, z, around, points_per_cell, steps.sub(0.0, 0.1))  # also unique positions
         xs, ys, zs = x[keep], y[keep], z[keep]
     else:
         # Unique planimetric positions (lowest z first).
@@ -333,9 +338,9 @@ def tin_dtm(x, y, z, grid: GridSpec, *, fill_outside: bool = False, points_per_c
             out = out[tuple(idx)]
     if max_distance > 0:
         steps.check()
-        empty = np.ones(grid.shape, dtype=bool)
-        empty[grid.row_of(ys), grid.col_of(xs)] = False
-        far = distance_transform_edt(empty, sampling=grid.cell) > max_distance
+        empty = np.ones(around.shape, dtype=bool)
+        empty[around.row_of(ys), around.col_of(xs)] = False
+        far = distance_transform_edt(empty, sampling=grid.cell)[1:-1, 1:-1] > max_distance
         out[far] = np.nan
     steps.report(1.0)
     return out

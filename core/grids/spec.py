@@ -179,8 +179,14 @@ class GridSpec:
     @classmethod
     def covering(cls, x: np.ndarray, y: np.ndarray, cell: float, *, what: str = "grid",
                  bytes_per_cell: float = 8.0, bytes_per_empty_cell: float = 0.0,
-                 max_cells: int = MAX_CELLS) -> "GridSpec":
+                 max_cells: int = MAX_CELLS, closed: bool = False) -> "GridSpec":
         """The smallest grid with edges on multiples of ``cell`` that holds every point.
+
+        ``closed``: a point on the grid's eastern or southern edge (x = x0 + ncols * cell, y = top -
+        nrows * cell) counts as in it, though it lies on the next cell's edge, so that points in
+        [500000, 501000] give 1000 columns of 1 m, not 1001 (a DTM of a vendor's 1 km tile, whose
+        points include its edges); :meth:`col_of` and :meth:`row_of` put such points in the last
+        column and row. The filters' grids are not closed: their kernels want every point inside.
 
         Refused before anything is allocated when its estimated peak memory,
         ``cells * bytes_per_cell + max(0, cells - points) * bytes_per_empty_cell`` (what the
@@ -197,13 +203,23 @@ class GridSpec:
         top = math.ceil(ymax / cell) * cell
         if top < ymax:  # floating-point rounding of the product
             top += cell
-        ncols = int(math.floor((xmax - x0) / cell)) + 1
-        nrows = int(math.floor((top - ymin) / cell)) + 1
-        # Rounding at exact edges can leave the last point one cell out: grow by one if so.
-        if x0 + ncols * cell <= xmax:
-            ncols += 1
-        if top - nrows * cell >= ymin:
-            nrows += 1
+        if closed:
+            if x0 > xmin:  # floating-point rounding of the product
+                x0 -= cell
+            ncols = max(1, int(math.ceil((xmax - x0) / cell)))
+            nrows = max(1, int(math.ceil((top - ymin) / cell)))
+            if x0 + ncols * cell < xmax:  # floating-point rounding of the quotient
+                ncols += 1
+            if top - nrows * cell > ymin:
+                nrows += 1
+        else:
+            ncols = int(math.floor((xmax - x0) / cell)) + 1
+            nrows = int(math.floor((top - ymin) / cell)) + 1
+            # Rounding at exact edges can leave the last point one cell out: grow by one if so.
+            if x0 + ncols * cell <= xmax:
+                ncols += 1
+            if top - nrows * cell >= ymin:
+                nrows += 1
         cells = nrows * ncols
         estimate = cells * float(bytes_per_cell) + max(0, cells - int(np.size(x))) * float(bytes_per_empty_cell)
         check_memory(estimate, what=what, shape=(nrows, ncols), cell=cell, x=x, y=y)
@@ -220,6 +236,11 @@ class GridSpec:
     @property
     def geotransform(self) -> tuple:
         return (self.x0, self.cell, 0.0, self.top, 0.0, -self.cell)
+
+    def padded(self, cells: int) -> "GridSpec":
+        """This grid with ``cells`` more cells on every side (the same cell edges)."""
+        return GridSpec(self.x0 - cells * self.cell, self.top + cells * self.cell, self.cell,
+                        self.nrows + 2 * cells, self.ncols + 2 * cells)
 
     def col_of(self, x: np.ndarray) -> np.ndarray:
         return np.clip(np.floor((x - self.x0) / self.cell).astype(np.int64), 0, self.ncols - 1)

@@ -71,7 +71,7 @@ def test_dtm_is_checked_in_bytes_not_cells():
     # 2e8 cells were accepted by the cell-count guard (about 8 GB for the raster alone).
     x = np.array([0.0, 20_000.0, 0.0])
     y = np.array([0.0, 0.0, 10_000.0])
-    with pytest.raises(MemoryBudgetError, match=r"DTM: 20,001 x 10,001 cells of 1 m .* need about 7.5 GB"):
+    with pytest.raises(MemoryBudgetError, match=r"DTM: 20,000 x 10,000 cells of 1 m .* need about 7.5 GB"):
         make_dtm(x, y, np.zeros(3), np.ones(3, dtype=bool), DTMOptions(memory_budget_bytes=1 << 30))
 
 

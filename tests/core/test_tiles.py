@@ -154,6 +154,61 @@ def test_dtm_mosaic_equals_the_whole_cloud_dtm(scene_laz, tmp_path):
     assert np.array_equal(np.isnan(mosaic[inner]), np.isnan(whole[inner]))
 
 
+def _dtm_values(path):
+    from osgeo import gdal
+    ds = gdal.Open(str(path))
+    values = ds.ReadAsArray().astype(float)
+    values[values == ds.GetRasterBand(1).GetNoDataValue()] = np.nan
+    return values, ds.GetGeoTransform()
+
+
+def test_a_gap_wider_than_a_tile_keeps_its_dtm_in_a_tiled_run(scene_laz, tmp_path):
+    """A tile whose own area holds no point (a lake, a data gap) was no tile, so a tiled run left
+    its DTM cells empty where the whole run interpolates across the gap (a reviewer's "diamond"):
+    such a tile now makes its block from the ground of its buffer."""
+    las = laspy.read(scene_laz)
+    x, y = np.asarray(las.x), np.asarray(las.y)
+    x0, y0 = las.header.mins[:2]
+    gap = (x > x0 + 70) & (x < x0 + 170) & (y > y0 + 70) & (y < y0 + 170)  # holds the tile at 80-160
+    las.points = las.points[~gap]
+    holed = tmp_path / "holed.laz"
+    las.write(holed)
+    cell = DTMOptions(cell_size_m=1.0)
+    run_ground_filter(str(holed), None, SMRF(), dtm_path=str(tmp_path / "whole.tif"), dtm=cell)
+    run = run_ground_filter(str(holed), None, SMRF(), options=tiled(), dtm_path=str(tmp_path / "tiled.tif"), dtm=cell)
+    whole, gt_whole = _dtm_values(tmp_path / "whole.tif")
+    mosaic, gt_tiled = _dtm_values(tmp_path / "tiled.tif")
+    assert gt_tiled == gt_whole and mosaic.shape == whole.shape
+    assert not np.isnan(whole[100:140, 100:140]).any()  # the whole run's TIN spans the gap
+    assert np.array_equal(np.isnan(mosaic), np.isnan(whole))
+    assert run.point_count == las.header.point_count  # (a tile in the gap classifies no point)
+    assert any(t["points"] == 0 and t["read"] > 0 for t in run.tile_log)  # such a tile ran, on its buffer
+
+
+def test_points_on_the_eastern_and_southern_edges_add_no_column_or_row(tmp_path):
+    """Points in [x0, x0 + 100] x [y0, y0 + 100] with some on the edges (a vendor's tile) make a
+    DTM of 100 x 100 cells of 1 m, whole and tiled, the same values: the edge points gave an
+    101st column and row of nodata (a reviewer's flood model saw them between survey DTMs)."""
+    scene = make_scene(SceneSpec(size_m=100.0, density_per_m2=3.0, seed=11, buildings_per_ha=0.0))
+    x, y = scene.x.copy(), scene.y.copy()
+    x0, y0 = np.floor(x.min()), np.floor(y.min())
+    east, south = x > x0 + 99.0, y < y0 + 1.0
+    x[east] = x0 + 100.0  # every point of the last metre moved onto the edge itself
+    y[south] = y0
+    path = tmp_path / "edges.laz"
+    write_las(new_las(x, y, scene.z, classification=scene.classification, return_number=scene.return_number,
+                      number_of_returns=scene.number_of_returns), str(path))
+    cell = DTMOptions(cell_size_m=1.0)
+    run_ground_filter(str(path), None, SMRF(), dtm_path=str(tmp_path / "whole.tif"), dtm=cell)
+    run_ground_filter(str(path), None, SMRF(), options=tiled(tile=50.0), dtm_path=str(tmp_path / "tiled.tif"), dtm=cell)
+    whole, gt = _dtm_values(tmp_path / "whole.tif")
+    mosaic, gt_tiled = _dtm_values(tmp_path / "tiled.tif")
+    assert whole.shape == mosaic.shape == (100, 100) and gt == gt_tiled
+    assert gt[0] == x0 and gt[3] == y0 + 100.0
+    assert np.isnan(whole[:, -1]).sum() <= 3 and np.isnan(whole[-1, :]).sum() <= 3  # terrain (but at a corner)
+    np.testing.assert_allclose(mosaic, whole, atol=1e-3)
+
+
 def _split_files(scene_laz, folder, at_x):
     las = laspy.read(scene_laz)
     folder.mkdir()

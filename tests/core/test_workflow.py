@@ -243,7 +243,7 @@ def test_dtm_geotiff(scene, tmp_path, cell):
     ds, band, values = open_raster(dtm)
     # The DTM covers every point but the ignored noise (a noise point lies 15 m east of the rest).
     kept = ~scene.mask("noise_low", "noise_high")
-    grid = GridSpec.covering(scene.x[kept], scene.y[kept], cell)
+    grid = GridSpec.covering(scene.x[kept], scene.y[kept], cell, closed=True)
     assert run.dtm_grid == grid
     assert (ds.RasterYSize, ds.RasterXSize) == grid.shape
     gt = ds.GetGeoTransform()
@@ -258,8 +258,11 @@ def test_dtm_geotiff(scene, tmp_path, cell):
     assert band.DataType == 6  # GDT_Float32
     assert band.GetUnitType() == "m"  # heights in the CRS's unit (UTM: metres)
     assert ds.GetMetadata("IMAGE_STRUCTURE").get("PREDICTOR") == "3"  # floating-point predictor
+    # The ground lies on [Y0, Y0 + 59.9] with points on y = Y0 exactly: that southern edge adds no
+    # row of nodata (a closed grid: 60 m of points give 60 m of DTM, at 1 and at 2 m)
+    assert ds.RasterYSize == round(SIZE / cell)
     inside, X = expected_hull(scene, grid, run.ground)
-    assert inside.any() and (~inside).any()
+    assert inside.any() and (cell != 1.0 or (~inside).any())
     np.testing.assert_allclose(values[inside], ground_z(X)[inside], atol=1e-3)  # the ground plane
     assert (values[~inside] == -9999.0).all()
 
