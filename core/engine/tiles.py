@@ -29,6 +29,7 @@ classes into per-file memmaps and returning its DTM block; the working folder is
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import os
@@ -370,7 +371,7 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
         raise OutputError(f"{parent}: the working folder does not exist")
     # The working folder is named after everything the tiles' results depend on: a run killed or
     # crashed midway finds it again and skips the tiles already done.
-    work = os.path.join(parent, ".groundsieve-tiles-" + _fingerprint(infos, grid, algorithm, options,
+    work = os.path.join(parent, WORK_PREFIX + _fingerprint(infos, grid, algorithm, options,
                                                                      dtm if dtm_path else None))
     if os.path.isdir(work):
         lock = _lock_working_folder(work)  # another run still using it is refused, its folder left alone
@@ -390,11 +391,53 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
             lock.close()
             _remove_tree(work)
             raise
+    stale = _stale_working_folders(parent, work)
+    if stale:
+        log(f"{len(stale)} working folder(s) of earlier runs that were killed hold {_gb(sum(b for _p, b in stale))} "
+            f"in {parent} ({', '.join(os.path.basename(p) for p, _b in stale[:3])}{', ...' if len(stale) > 3 else ''}); "
+            "only a run of the same inputs and parameters resumes from one: delete those you will not run again.")
     try:
         return _run_locked(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling,
                            steps, log, workflow, total, dtm_grid)
     finally:
         lock.close()
+
+
+WORK_PREFIX = ".groundsieve-tiles-"
+
+
+def _gb(nbytes: int) -> str:
+    return f"{nbytes / 1e9:.1f} GB" if nbytes >= 1e8 else f"{nbytes / 1e6:.1f} MB"
+
+
+def _stale_working_folders(parent: str, current: str) -> List[tuple]:
+    """The working folders in ``parent`` other than ``current`` that no live run holds (a run killed
+    with kill -9, by the system or a power cut leaves its folder, named after its inputs and
+    parameters, for a run of the same to resume from), with their sizes in bytes, largest first.
+    A folder whose lock cannot be tested (no flock) is not listed."""
+    try:
+        import fcntl
+        names = os.listdir(parent)
+    except (ImportError, OSError):
+        return []
+    stale = []
+    for name in names:
+        path = os.path.join(parent, name)
+        if not name.startswith(WORK_PREFIX) or os.path.abspath(path) == os.path.abspath(current) \
+                or not os.path.isdir(path):
+            continue
+        try:
+            with open(os.path.join(path, ".lock"), "a+") as f:
+                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)  # released when closed
+        except OSError:  # held by a live run (BlockingIOError), or not ours to test
+            continue
+        size = 0
+        for root, _dirs, files in os.walk(path):
+            for file in files:
+                with contextlib.suppress(OSError):
+                    size += os.path.getsize(os.path.join(root, file))
+        stale.append((path, size))
+    return sorted(stale, key=lambda item: -item[1])
 
 
 class _NoLock:

@@ -738,3 +738,29 @@ def test_a_budget_below_the_smallest_tiles_and_a_discarded_working_folder_are_sa
                           options=FilterOptions(tiling=TileOptions(tile_size_m=60.0, workers=1, parallel="threads")))
     assert any(line.startswith("The tiles done so far are deleted with the run's temporary working folder")
                for line in lines), lines
+
+
+def test_working_folders_left_by_killed_runs_are_named_with_their_size(scene_laz, tmp_path):
+    """A run killed without cleanup (kill -9, the OOM killer, a power cut) leaves its working folder,
+    the binned copy of the survey, for a run of the same inputs and parameters to resume from; a run
+    with other parameters never used it and nothing said it was there (a reviewer found GBs of
+    them). A run now names such folders that no live run holds, with their size."""
+    from groundsieve.core.errors import Cancelled
+    opts = FilterOptions(tiling=TileOptions(tile_size_m=60.0, workers=1, parallel="threads", work_dir=str(tmp_path)))
+    seen = []
+
+    def cancel_after_two_tiles():
+        return sum(line.startswith("Tile ") for line in seen) >= 2
+    with pytest.raises(Cancelled):  # a named working folder is kept, as a killed run leaves it
+        run_ground_filter(scene_laz, str(tmp_path / "a.laz"), SMRF(), options=opts, log=seen.append,
+                          is_cancelled=cancel_after_two_tiles)
+    left = [n for n in os.listdir(tmp_path) if n.startswith(".groundsieve-tiles-")]
+    assert len(left) == 1
+    lines = []
+    run_ground_filter(scene_laz, str(tmp_path / "b.laz"), SMRF(slope=0.2), options=opts, log=lines.append)
+    said = [line for line in lines if "working folder(s) of earlier runs that were killed" in line]
+    assert len(said) == 1 and left[0] in said[0] and " MB in " in said[0], lines
+    lines = []  # the same parameters again: it resumes from that folder, which is then not stale
+    run_ground_filter(scene_laz, str(tmp_path / "a.laz"), SMRF(), options=opts, log=lines.append)
+    assert any(line.startswith("Resuming the interrupted run") for line in lines)
+    assert not any("earlier runs that were killed" in line for line in lines), lines
