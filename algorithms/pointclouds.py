@@ -177,7 +177,13 @@ def load_or_log(context, feedback, path, layer_name, output_name, value=None):
     graphical model's step (``is_model_intermediate``) is never loaded, as QGIS loads none of its
     own (its layer outputs are loaded only when their value is a QgsProcessingOutputLayerDefinition
     with a destination project, QgsProcessingParameters.parameterAsOutputLayer, which a model gives
-    its final outputs alone)."""
+    its final outputs alone).
+
+    The layer is named ``layer_name`` unless ``value`` names its destination: a model output's
+    value carries the model output's name (QgsProcessingOutputLayerDefinition.destinationName, set
+    by QgsProcessingModelAlgorithm), which QGIS's own outputs take as their layer's name, so that
+    two outputs of one model are told apart in the Layers panel."""
+    layer_name = getattr(value, "destinationName", None) or layer_name
     if is_model_intermediate(value, context):
         feedback.pushDebugInfo(f"{layer_name}: {path}: an intermediate output of the model, not loaded.")
         return None

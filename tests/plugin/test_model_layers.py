@@ -4,6 +4,10 @@ output is loaded as in a plain run. QgsProcessingModelAlgorithm passes such a st
 ``generateTemporaryDestination()`` (a plain path in Processing's temporary folder), its final outputs
 the model's own values (algorithms/pointclouds.py ``is_model_intermediate``).
 
+A model output's layer is named after the model output, as QGIS names its own (the model gives its
+value the output's name, ``QgsProcessingOutputLayerDefinition.destinationName``); elsewhere the layer
+keeps the output's label, "Classified point cloud".
+
 The classified cloud loads only where a point-cloud provider opens it: LAS/LAZ with PDAL (Windows and
 macOS builds, simulated here by its declared patterns), .vpc with QGIS >= 3.32 (3.40 here, for real)."""
 import pytest
@@ -60,6 +64,11 @@ def _context():
 
 def _to_load(context):
     return {path: details.outputName for path, details in context.layersToLoadOnCompletion().items()}
+
+
+def _names(context):
+    """{path: the name its layer will have} of the layers to load."""
+    return {path: details.name for path, details in context.layersToLoadOnCompletion().items()}
 
 
 def _run(model, params):
@@ -119,6 +128,7 @@ def test_a_plain_run_still_loads_its_cloud(groundsieve_provider, scene_laz, tmp_
         out = processing.run("groundsieve:smrf", {"INPUT": str(src), "OUTPUT": value},
                              context=context, feedback=QgsProcessingFeedback())["OUTPUT"]
         assert _to_load(context) == {out: "OUTPUT"}, value
+        assert _names(context) == {out: "Classified point cloud"}, value  # nothing names it: the label
 
 
 def test_a_model_does_not_load_an_intermediate_vpc(groundsieve_provider, scene_laz, tmp_path):
@@ -145,5 +155,50 @@ def test_a_model_does_not_load_an_intermediate_vpc(groundsieve_provider, scene_l
         assert handleAlgorithmResults(model, context, QgsProcessingFeedback())
         sources = [layer.source().split("|")[0] for layer in QgsProject.instance().mapLayers().values()]
         assert sources == [str(second)]
+    finally:
+        QgsProject.instance().removeAllMapLayers()
+
+
+def test_model_outputs_are_named_after_the_model_outputs(groundsieve_provider, scene_laz, tmp_path, monkeypatch):
+    """Two classified clouds of one model, both model outputs: each layer carries its model output's
+    name (as QGIS's own outputs do), not twice "Classified point cloud"."""
+    from groundsieve.algorithms import pointclouds
+    monkeypatch.setattr(pointclouds, "point_cloud_patterns", lambda: PDAL)
+    src, _scene = scene_laz
+    first, second = tmp_path / "first.laz", tmp_path / "second.laz"
+    model = _model(first_is_output=True)
+    _results, context = _run(model, {"cloud": str(src), "smrf:classified": _as_dialog(first),
+                                     "pmf:second": _as_dialog(second)})
+    assert _names(context) == {str(first): "classified", str(second): "second"}
+    # "[Save to temporary file]" on a model output: named the same way
+    results, context = _run(model, {"cloud": str(src), "smrf:classified": _as_dialog("TEMPORARY_OUTPUT"),
+                                    "pmf:second": _as_dialog(second)})
+    assert _names(context) == {results["smrf:classified"]: "classified", str(second): "second"}
+    # A plain path (a script, qgis_process) carries no name: the layer keeps the output's label.
+    _results, context = _run(model, {"cloud": str(src), "smrf:classified": str(first),
+                                     "pmf:second": _as_dialog(second)})
+    assert _names(context) == {str(first): "Classified point cloud", str(second): "second"}
+
+
+def test_a_model_loads_its_vpc_outputs_under_their_names(groundsieve_provider, scene_laz, tmp_path):
+    """Where QGIS opens .vpc for real (3.40 here), the project holds the two model outputs' layers,
+    each named after its model output, once the results are handled as the dialog does."""
+    from processing.gui.Postprocessing import handleAlgorithmResults
+    from qgis.core import QgsProcessingFeedback, QgsProject
+    from groundsieve.algorithms import pointclouds
+    from .test_survey_inputs import _split
+    if not pointclouds.providers_opening("x.vpc"):
+        pytest.skip("this QGIS has no point-cloud provider for .vpc (QGIS < 3.32)")
+    src, _scene = scene_laz
+    _split(src, tmp_path / "in")
+    (tmp_path / "out").mkdir()
+    first, second = tmp_path / "out" / "first.vpc", tmp_path / "out" / "second.vpc"
+    model = _model(first_is_output=True, TILE_SIZE=50.0)
+    _results, context = _run(model, {"cloud": str(tmp_path / "in"), "smrf:classified": _as_dialog(first),
+                                     "pmf:second": _as_dialog(second)})
+    try:
+        assert handleAlgorithmResults(model, context, QgsProcessingFeedback())
+        layers = {layer.source().split("|")[0]: layer.name() for layer in QgsProject.instance().mapLayers().values()}
+        assert layers == {str(first): "classified", str(second): "second"}
     finally:
         QgsProject.instance().removeAllMapLayers()
