@@ -250,13 +250,28 @@ class Cluster:
             self.close()
             raise
 
+    def memory_per_task(self) -> Tuple[Optional[int], int]:
+        """The memory a task may have on the cluster (bytes: the smallest worker memory limit over its
+        threads, a worker running that many tasks at once; None when no worker states a limit, or
+        none is connected yet) and the cluster's number of threads."""
+        try:
+            workers = list(self.client.scheduler_info().get("workers", {}).values())
+        except Exception:  # (a reply without workers: planned as without a cluster)
+            return None, 0
+        threads = sum(max(1, int(w.get("nthreads") or 1)) for w in workers)
+        shares = [int(w.get("memory_limit") or 0) // max(1, int(w.get("nthreads") or 1)) for w in workers]
+        shares = [share for share in shares if share > 0]
+        return (min(shares) if shares else None), threads
+
     def close(self):
-        client = getattr(self, "client", None)
+        """Close the client (and the LocalCluster); again is a no-op."""
+        client, local = getattr(self, "client", None), getattr(self, "local", None)
+        self.client = self.local = None
         try:
             if client is not None:
                 client.close()
-            if self.local is not None:
-                self.local.close()
+            if local is not None:
+                local.close()
         finally:
             if getattr(self, "_quiet", None) is not None:
                 self._quiet.setLevel(self._level)

@@ -350,6 +350,34 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     # filters' grids (edges on multiples of their cell) put theirs without floating-point doubt.
     buffer_m = math.ceil(filter_reach_m(algorithm)) if tiling.buffer_m is None else float(tiling.buffer_m)
     density = sample_density(next(i.path for i in infos if i.count))
+    cluster = None
+    from .cluster import parse_scheduler
+    if parse_scheduler(tiling.scheduler)[0] == "address" and not tiling.tile_size_m and not tiling.memory_budget_mb:
+        # tiles sized for the cluster's workers, not for this machine: connected now (the run keeps
+        # the connection, one LocalCluster, for the binning, the tiles and the writing)
+        from .cluster import Cluster
+        cluster = Cluster(tiling.scheduler, log, steps.is_cancelled)
+    try:
+        return _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path, dtm, dtm_grid, buffer_m,
+                             density, tiling, steps, log, workflow, cluster)
+    except BaseException:
+        if cluster is not None:
+            cluster.close()
+        raise
+
+
+def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path, dtm, dtm_grid, buffer_m, density,
+                  tiling, steps, log, workflow, cluster):
+    """run_tiled's run once its inputs are checked: the tiles planned, the working folder held."""
+    per_task, threads = cluster.memory_per_task() if cluster is not None else (None, 0)
+    if per_task:
+        # a tile within its share of the smallest task's memory, and at least TILES_PER_THREAD tiles
+        # for each of the cluster's threads where the survey is big enough
+        total = sum(i.count for i in infos)
+        tile_bytes = min(CLUSTER_TASK_SHARE * per_task, total * BYTES_PER_POINT / (TILES_PER_THREAD * max(threads, 1)))
+        tiling = dataclasses.replace(tiling, memory_budget_mb=tile_bytes * tiling.worker_count / (1 << 20))
+        log(f"Tiles planned for the Dask cluster's {threads} thread(s), each with {per_task / 2**30:.1f} GB or more "
+            f"(its worker's memory limit over its threads): at most {tile_bytes / 2**20:,.0f} MB a tile.")
     size = plan_tile_size(infos, tiling, buffer_m, density, multiple_of=dtm.cell_size_m if dtm_path else 1.0)
     if dtm_path:
         size = fit_dtm_blocks(size, buffer_m, dtm.cell_size_m, tiling, log)
@@ -398,7 +426,7 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
             "only a run of the same inputs and parameters resumes from one: delete those you will not run again.")
     try:
         return _run_locked(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling,
-                           steps, log, workflow, total, dtm_grid)
+                           steps, log, workflow, total, dtm_grid, cluster)
     finally:
         lock.close()
 
@@ -478,13 +506,13 @@ def _lock_working_folder(work: str):
 
 
 def _run_locked(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling, steps,
-                log, workflow, total, dtm_grid):
-    """run_tiled's run once the working folder is held."""
-    cluster = None
+                log, workflow, total, dtm_grid, cluster=None):
+    """run_tiled's run once the working folder is held (on ``cluster`` when connected already: the
+    run closes it)."""
     pool = None
     rasters = []  # the DTM writer, released at once if the run fails
     try:
-        if tiling.scheduler:  # one connection (one LocalCluster) for the binning, the tiles and the writing
+        if tiling.scheduler and cluster is None:  # one connection (one LocalCluster) for the whole run
             from .cluster import Cluster
             cluster = Cluster(tiling.scheduler, log, steps.is_cancelled)
         elif tiling.worker_count > 1 and (tiling.parallel if tiling.parallel != "auto"
@@ -916,6 +944,15 @@ def _init_worker(environ: Dict[str, str], parent: int = 0) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     if parent:
         _exit_with_parent(parent)
+
+
+#: the share of a Dask task's memory (a worker's memory limit over its threads) a tile is planned to
+#: use: Dask starts spilling at 60 % of a worker's limit and pauses it at 80 %, and a worker process
+#: holds its imports (numba, scipy, laspy: about 0.4 GB) besides
+CLUSTER_TASK_SHARE = 0.5
+#: tiles planned for each thread of a Dask cluster, at least (where the tiles stay above 50 m): a
+#: survey is spread over every worker, and a slow tile does not hold the run's end alone
+TILES_PER_THREAD = 4
 
 
 #: how often a worker process looks whether the run that started it is still there (s)

@@ -265,3 +265,34 @@ def test_dask_failures_say_what_they_usually_mean():
     assert "start the Dask scheduler with GroundSieve importable too" in hint
     assert "run again once it is back" in _cause_hint(RuntimeError("... scheduler-connection-lost ..."))
     assert _cause_hint(ValueError("something else")) == ""
+
+
+@needs_dask
+def test_tiles_are_planned_for_the_clusters_workers_not_this_machine(tmp_path):
+    """With a scheduler's address, the automatic tile size came from this machine's memory and cores
+    (a reviewer's laptop planned for a cluster it knew nothing of: tiles too big for small workers,
+    or too few for many): it now comes from the workers' memory limit per thread, and leaves a few
+    tiles for each of the cluster's threads."""
+    (tmp_path / "survey").mkdir()
+    path = tmp_path / "survey" / "scene.laz"  # (a folder: a survey, run in tiles)
+    write_scene(make_scene(SceneSpec(size_m=400.0, density_per_m2=2.0, seed=4)), path)
+    from groundsieve.core.engine.tiles import plan_tile_size
+    from groundsieve.core.io.lasfiles import scan_header
+    here = plan_tile_size([scan_header(str(path))], TileOptions(workers=1), 20.0, 2.0)
+    assert here >= 400.0  # this machine's plan: the whole scene in one tile
+    alone = run_ground_filter(str(path), str(tmp_path / "alone.laz"), SMRF())
+    import dask
+    with dask.config.set({"distributed.nanny.environ": {"NUMBA_NUM_THREADS": "1"}}), \
+            distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, memory_limit="2GiB",
+                                     dashboard_address=None, silence_logs=50) as cluster:
+        logs = []
+        run = run_ground_filter(str(tmp_path / "survey"), str(tmp_path / "dask.laz"), SMRF(), log=logs.append,
+                                options=FilterOptions(tiling=TileOptions(workers=1, parallel="threads",
+                                                                         scheduler=cluster.scheduler_address)))
+    said = [line for line in logs if line.startswith("Tiles planned for the Dask cluster's 2 thread(s), each "
+                                                     "with 2.0 GB or more")]
+    assert said, logs
+    assert run.tiles >= 4  # 4 a thread wanted; the 50 m floor and the 400 m scene allow them
+    assert run.point_count == len(alone.cloud)
+    agree = (laspy.read(tmp_path / "dask.laz").classification == laspy.read(tmp_path / "alone.laz").classification)
+    assert agree.mean() > 0.999
