@@ -271,6 +271,9 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
         except errors.GroundSieveError as err:
             raise QgsProcessingException(str(err)) from err
         results = {self.OUTPUT: output}
+        # loaded as the ground filters load theirs (the same rules for a model's intermediate step)
+        pointclouds.load_or_log(context, feedback, output, self.parameterDefinition(self.OUTPUT).description().split(" (")[0],
+                                self.OUTPUT, parameters.get(self.OUTPUT))
         if dtm_path:
             from . import styles
             results[self.DTM] = dtm_path

@@ -1,6 +1,6 @@
-"""What a graphical model loads into the project: as QGIS does for its own algorithms, the output of
-a step that is not a model output (QGIS gives it a temporary destination) is never loaded; a model
-output is loaded as in a plain run. QgsProcessingModelAlgorithm passes such a step
+"""What a graphical model loads into the project (the ground filters and rfclassify, one rule): as
+QGIS does for its own algorithms, the output of a step that is not a model output (QGIS gives it a
+temporary destination) is never loaded; a model output is loaded as in a plain run. QgsProcessingModelAlgorithm passes such a step
 ``generateTemporaryDestination()`` (a plain path in Processing's temporary folder), its final outputs
 the model's own values (algorithms/pointclouds.py ``is_model_intermediate``).
 
@@ -18,26 +18,28 @@ from .conftest import classes_of
 PDAL = {"pdal": ["*.las", "*.laz"]}
 
 
-def _model(first_is_output, **static):
-    """smrf -> pmf on smrf's classified cloud, and smrf's DTM -> a QGIS raster algorithm. pmf's
-    cloud is a model output; smrf's cloud only when ``first_is_output``; smrf's DTM never.
-    ``static``: values of both filters' other parameters."""
+def _model(first_is_output, first="smrf", **static):
+    """``first`` (smrf) -> pmf on its classified cloud, and its DTM -> a QGIS raster algorithm. pmf's
+    cloud is a model output; the first step's cloud only when ``first_is_output``; its DTM never.
+    ``static``: values of both steps' other parameters (each takes those it has)."""
     from qgis.core import (QgsApplication, QgsProcessingModelAlgorithm, QgsProcessingModelChildAlgorithm,
                            QgsProcessingModelChildParameterSource as Source, QgsProcessingModelOutput,
                            QgsProcessingModelParameter, QgsProcessingParameterFile)
     model = QgsProcessingModelAlgorithm("two steps", "tests")
     model.addModelParameter(QgsProcessingParameterFile("cloud", "Point cloud"), QgsProcessingModelParameter("cloud"))
-    fixed = {name: Source.fromStaticValue(value) for name, value in static.items()}
-    steps = [("groundsieve:smrf", "smrf", {"INPUT": Source.fromModelParameter("cloud"), **fixed},
+    steps = [(f"groundsieve:{first}", first, {"INPUT": Source.fromModelParameter("cloud")},
               {"classified": "OUTPUT"} if first_is_output else {}),
-             ("groundsieve:pmf", "pmf", {"INPUT": Source.fromChildOutput("smrf", "OUTPUT"), **fixed},
+             ("groundsieve:pmf", "pmf", {"INPUT": Source.fromChildOutput(first, "OUTPUT")},
               {"second": "OUTPUT"}),
-             ("native:rasterlayerstatistics", "stats", {"INPUT": Source.fromChildOutput("smrf", "DTM")}, {})]
+             ("native:rasterlayerstatistics", "stats", {"INPUT": Source.fromChildOutput(first, "DTM")}, {})]
     for alg_id, child_id, sources, outputs in steps:
         child = QgsProcessingModelChildAlgorithm(alg_id)
         child.setChildId(child_id)
+        definitions = QgsApplication.processingRegistry().algorithmById(alg_id).parameterDefinitions()
+        sources.update({definition.name(): Source.fromStaticValue(static[definition.name()])
+                        for definition in definitions if definition.name() in static})
         # As the modeler's dialog does: every parameter not wired gets its default as a static value.
-        for definition in QgsApplication.processingRegistry().algorithmById(alg_id).parameterDefinitions():
+        for definition in definitions:
             if not definition.isDestination() and definition.name() not in sources:
                 sources[definition.name()] = Source.fromStaticValue(definition.defaultValue())
         for name, source in sources.items():
@@ -200,5 +202,74 @@ def test_a_model_loads_its_vpc_outputs_under_their_names(groundsieve_provider, s
         assert handleAlgorithmResults(model, context, QgsProcessingFeedback())
         layers = {layer.source().split("|")[0]: layer.name() for layer in QgsProject.instance().mapLayers().values()}
         assert layers == {str(first): "classified", str(second): "second"}
+    finally:
+        QgsProject.instance().removeAllMapLayers()
+
+
+@pytest.fixture(scope="module")
+def rf_model(scene_laz, tmp_path_factory):
+    """A small ground model (rftrain's default features, x, y, z: it runs on surveys too)."""
+    import processing
+    from qgis.core import QgsProcessingFeedback
+    src, _scene = scene_laz
+    folder = tmp_path_factory.mktemp("rf")
+    model = folder / "model.npz"
+    processing.run("groundsieve:rftrain", {"INPUT": str(src), "MODEL": str(model), "TREES": 4,
+                                           "REPORT": str(folder / "r.html")}, feedback=QgsProcessingFeedback())
+    return model
+
+
+def test_rfclassify_loads_its_cloud_as_the_filters_do(groundsieve_provider, scene_laz, rf_model, tmp_path,
+                                                     monkeypatch):
+    """rfclassify's classified cloud loads where a provider opens it (it once never did), by the
+    filters' rules: a plain run loads it as "Classified point cloud"; a model's intermediate step
+    does not; a model output loads under the model output's name."""
+    import processing
+    from qgis.core import QgsProcessingFeedback
+    from groundsieve.algorithms import pointclouds
+    monkeypatch.setattr(pointclouds, "point_cloud_patterns", lambda: PDAL)
+    src, _scene = scene_laz
+    for value in (str(tmp_path / "a.laz"), _as_dialog(tmp_path / "b.laz"), "TEMPORARY_OUTPUT"):
+        context = _context()
+        out = processing.run("groundsieve:rfclassify", {"INPUT": str(src), "MODEL": str(rf_model), "OUTPUT": value},
+                             context=context, feedback=QgsProcessingFeedback())["OUTPUT"]
+        assert _to_load(context) == {out: "OUTPUT"} and _names(context) == {out: "Classified point cloud"}, value
+    first, second = tmp_path / "first.laz", tmp_path / "second.laz"
+    results, context = _run(_model(first_is_output=False, first="rfclassify", MODEL=str(rf_model)),
+                            {"cloud": str(src), "pmf:second": _as_dialog(second)})
+    intermediate = results["CHILD_INPUTS"]["rfclassify"]["OUTPUT"]
+    assert pointclouds.is_model_intermediate(intermediate, context)
+    assert classes_of(results["CHILD_RESULTS"]["rfclassify"]["OUTPUT"]).size == classes_of(src).size
+    assert _to_load(context) == {str(second): "OUTPUT"}
+    _results, context = _run(_model(first_is_output=True, first="rfclassify", MODEL=str(rf_model)),
+                             {"cloud": str(src), "rfclassify:classified": _as_dialog(first),
+                              "pmf:second": _as_dialog(second)})
+    assert _names(context) == {str(first): "classified", str(second): "second"}
+
+
+def test_rfclassify_loads_a_survey_vpc(groundsieve_provider, scene_laz, rf_model, tmp_path):
+    """Where QGIS opens .vpc for real (3.40 here), rfclassify's survey output is in the project once
+    the results are handled as the dialog does."""
+    import processing
+    from processing.gui.Postprocessing import handleAlgorithmResults
+    from qgis.core import QgsApplication, QgsPointCloudLayer, QgsProcessingFeedback, QgsProject
+    from groundsieve.algorithms import pointclouds
+    from .test_survey_inputs import _split
+    if not pointclouds.providers_opening("x.vpc"):
+        pytest.skip("this QGIS has no point-cloud provider for .vpc (QGIS < 3.32)")
+    src, _scene = scene_laz
+    _split(src, tmp_path / "in")
+    out = tmp_path / "out" / "classified.vpc"
+    out.parent.mkdir()
+    context, feedback = _context(), QgsProcessingFeedback()
+    processing.run("groundsieve:rfclassify", {"INPUT": str(tmp_path / "in"), "MODEL": str(rf_model),
+                                              "OUTPUT": _as_dialog(out)}, context=context, feedback=feedback)
+    try:
+        assert handleAlgorithmResults(QgsApplication.processingRegistry().algorithmById("groundsieve:rfclassify"),
+                                      context, feedback)
+        layers = list(QgsProject.instance().mapLayers().values())
+        assert [(layer.source().split("|")[0], layer.name()) for layer in layers] == [
+            (str(out), "Classified point cloud")]
+        assert isinstance(layers[0], QgsPointCloudLayer) and layers[0].isValid()
     finally:
         QgsProject.instance().removeAllMapLayers()
