@@ -406,9 +406,11 @@ def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_pat
                        gps_time_of_week=model.meta.get("gps_time") == GPS_TIME_OF_WEEK)
     from ..learn.rf import out_of_range_features
     for name, part_out, (low, high), median in out_of_range_features(model, X):
+        example = ("16-bit colour given to a model trained on 8-bit colour" if median > high else
+                   "8-bit colour given to a model trained on 16-bit colour")
         log(f"Warning: {input_path}: the feature '{name}' lies outside the range the model learnt it in on "
-            f"{part_out:.0%} of the points (learnt: {low:,.4g} to {high:,.4g}; here the median is {median:,.4g}), "
-            "e.g. 8-bit colour given to a model trained on 16-bit colour: its predictions may mean little.")
+            f"{part_out:.0%} of the points (learnt: {low:,.4g} to {high:,.4g}; here the median is {median:,.4g}; "
+            f"e.g. {example}): its predictions may mean little.")
     predicted_part = model.predict(X, steps=steps.sub(0.5, 0.7)).astype(np.uint8)
     predicted = cloud.classification.astype(np.uint8)  # a copy: withheld and ignored points as read
     predicted[may] = predicted_part

@@ -384,8 +384,14 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     if needs_tiling(input_path, options.tiling):
         # A folder, a .vpc, a set tile size or a cloud beyond the memory budget: buffered tiles.
         if rasters:
-            raise InvalidParameterError("the filter's intermediate grids are written for a single cloud that fits "
-                                        "in memory only, not in a tiled run; leave those outputs empty")
+            from .tiles import is_survey_input
+            why = ("it is a survey (a folder or a .vpc), run in tiles" if is_survey_input(input_path) else
+                   "a tile size is set" if options.tiling is not None and options.tiling.tile_size_m else
+                   "it is beyond the memory budget, so it would be run in tiles")
+            raise InvalidParameterError(
+                f"{input_path}: the filter's intermediate grids are made for one cloud in memory, and {why}; "
+                "leave those outputs empty, or (for one file) set a larger memory budget (e.g. 8000 MB) "
+                "and no tile size")
         return run_tiled(input_path, output_path, algorithm, options=options, dtm_path=dtm_path, dtm=dtm,
                          steps=steps, log=log)
     if not os.path.exists(input_path):  # before the outputs: a mistyped input explains the rest

@@ -764,3 +764,17 @@ def test_working_folders_left_by_killed_runs_are_named_with_their_size(scene_laz
     run_ground_filter(scene_laz, str(tmp_path / "a.laz"), SMRF(), options=opts, log=lines.append)
     assert any(line.startswith("Resuming the interrupted run") for line in lines)
     assert not any("earlier runs that were killed" in line for line in lines), lines
+
+
+def test_a_filters_grids_asked_of_a_tiled_run_are_refused_with_the_reason(scene_laz, tmp_path):
+    """evcrasters on a cloud beyond the memory budget said only that its grids need 'a single cloud
+    that fits in memory' (a reviewer's 10 M points): the refusal names the file, why it would be
+    tiled, and what to set."""
+    from groundsieve.core.errors import InvalidParameterError
+    grids = {str(tmp_path / "evc.tif"): lambda run: None}
+    with pytest.raises(InvalidParameterError, match=r"scene\.laz: .*beyond the memory budget.*larger memory budget"):
+        run_ground_filter(scene_laz, str(tmp_path / "o.laz"), EVC(), rasters=grids,
+                          options=FilterOptions(tiling=TileOptions(memory_budget_mb=1)))
+    with pytest.raises(InvalidParameterError, match=r"a tile size is set"):
+        run_ground_filter(scene_laz, str(tmp_path / "o.laz"), EVC(), rasters=grids, options=tiled())
+    assert not os.listdir(tmp_path)
