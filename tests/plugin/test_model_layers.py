@@ -273,3 +273,16 @@ def test_rfclassify_loads_a_survey_vpc(groundsieve_provider, scene_laz, rf_model
         assert isinstance(layers[0], QgsPointCloudLayer) and layers[0].isValid()
     finally:
         QgsProject.instance().removeAllMapLayers()
+
+
+def test_the_user_guide_says_what_a_model_loads():
+    """The guide's modeler paragraph and its rfclassify section say what the tests above check."""
+    import re
+    from pathlib import Path
+    guide = (Path(__file__).resolve().parents[2] / "docs" / "USER_GUIDE.md").read_text()
+    text = re.sub(r"\s+", " ", guide)
+    modeler = text[text.index("In the **graphical modeler**"):text.index("Where your QGIS opens point clouds")]
+    assert "intermediate classified clouds are not loaded" in modeler
+    assert "named after its model output" in modeler
+    rfclassify = text[text.index("*Classify with Random Forest model* applies"):text.index("## Tune")]
+    assert "classified cloud is loaded as the filters' is" in rfclassify
