@@ -39,6 +39,10 @@ SCENES = {
     # image matching sees from above: no ground under the shrubs), 3 cm of matching noise, no returns
     "uav-photo": dict(size_m=40.0, density_per_m2=60.0, trees_per_ha=0.0, shrub_fraction=0.35,
                       buildings_per_ha=0.0, relief_m=2.0, slope_pct=3.0),
+    # the same with what a real UAV photogrammetry site often holds besides (a reviewer's case): 2
+    # buildings/ha (10-40 m sides) and 10 trees/ha, on 100 m
+    "uav-photo-mixed": dict(size_m=100.0, density_per_m2=60.0, trees_per_ha=10.0, shrub_fraction=0.3,
+                            buildings_per_ha=2.0, relief_m=2.0, slope_pct=3.0),
     "urban": dict(size_m=150.0, density_per_m2=4.0, trees_per_ha=20.0, shrub_fraction=0.05, buildings_per_ha=12.0,
                   relief_m=2.0, slope_pct=2.0),
     "steep": dict(size_m=60.0, density_per_m2=8.0, trees_per_ha=100.0, shrub_fraction=0.2, buildings_per_ha=0.0,
@@ -71,10 +75,16 @@ PRESETS = {
                     "tuned on seed 100)", "scene:forest:100", ["scene:forest:1", "scene:forest:2", "scene:forest:3"]),
     "uav-photogrammetry-evc": ("evc", "UAV photogrammetry over low vegetation: surface points only, no returns "
                                "(fan2023's setting; generated scenes; tuned on seed 100)", "scene:uav-photo:100",
-                               ["scene:uav-photo:1", "scene:uav-photo:2", "scene:uav-photo:3"]),
-    "uav-photogrammetry-smrf": ("smrf", "UAV photogrammetry over low vegetation: surface points only, no "
-                                "returns (fan2023's setting; generated scenes; tuned on seed 100)",
-                                "scene:uav-photo:100", ["scene:uav-photo:1", "scene:uav-photo:2", "scene:uav-photo:3"]),
+                               ["scene:uav-photo:1", "scene:uav-photo:2", "scene:uav-photo:3",
+                                "scene:uav-photo-mixed:1", "scene:uav-photo-mixed:2", "scene:uav-photo-mixed:3"]),
+    # tuned on a site with buildings and trees besides the low vegetation (2026-11-25, sixth session): the
+    # first version, tuned on scene:uav-photo:100 (no building, no tree; WINDOW 3 m), kept roofs as
+    # ground on such sites and was replaced by the rule in docs/BENCHMARKS.md
+    "uav-photogrammetry-smrf": ("smrf", "UAV photogrammetry: surface points only, no returns; low "
+                                "vegetation with some buildings and trees (generated scenes; tuned on seed 100)",
+                                "scene:uav-photo-mixed:100",
+                                ["scene:uav-photo:1", "scene:uav-photo:2", "scene:uav-photo:3",
+                                 "scene:uav-photo-mixed:1", "scene:uav-photo-mixed:2", "scene:uav-photo-mixed:3"]),
     "uav-lidar-smrf": ("smrf", "UAV LiDAR: dense, multi-return (generated scenes; tuned on seed 100)",
                        "scene:uav-lidar:100", ["scene:uav-lidar:1", "scene:uav-lidar:2", "scene:uav-lidar:3"]),
 }
@@ -87,7 +97,7 @@ def load(source: str, data: str) -> PointCloud:
     name, _, seed = rest.partition(":")
     s = make_scene(SceneSpec(seed=int(seed), **SCENES[name]))
     ground = np.asarray(s.classification) == 2
-    if name == "uav-photo":
+    if name.startswith("uav-photo"):
         top = np.asarray(s.return_number) == 1
         x, y, z, ground = s.x[top], s.y[top], s.z[top], ground[top]
         z = z + np.random.default_rng(int(seed)).normal(0.0, 0.03, z.size)
