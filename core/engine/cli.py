@@ -7,7 +7,7 @@ filters' finer settings the dialog does not show are offered too. ``--scheduler`
 tiles to a Dask cluster (``local:N`` or ``tcp://host:port``; engine/cluster.py).
 
 ``--preset FILE`` (every filter) takes a preset (engine/presets.py): it replaces the filter's
-defaults; options given with a value other than the default win over it.
+defaults; the options typed win over it, even at their default value (argparse knows what was typed).
 ``python -m groundsieve tune --input patch.laz --filter smrf --preset-out smrf.json --report
 tune.html`` tunes a filter on a labelled patch (engine/tune.py).
 
@@ -129,7 +129,7 @@ def _add_filter(sub, name: str) -> None:
     group = parser.add_argument_group(f"{name} parameters (as in the Processing dialog)")
     group.add_argument("--preset", metavar="FILE",
                        help="a preset file of this filter (groundsieve tune, or a shipped preset's name): it "
-                            "replaces the defaults; options set to other values than the defaults win")
+                            "replaces the defaults; the options you type win, even at their default value")
     for p in P.params(name):
         _add_param(group, name, p.field, p.option, p.title() + (
             " (" + " | ".join(f"{v} = {label}" for v, label in zip(p.choices, p.choice_labels)) + ")"
@@ -163,14 +163,30 @@ def _add_hybrid(sub) -> None:
     parser.set_defaults(filter="hybrid")
 
 
+def _typed_action(base):
+    """``base`` (an argparse action class) that also notes its field in ``namespace.typed``: a value
+    typed on the command line wins over a preset even when it equals the filter's default."""
+    class Typed(base):
+        def __call__(self, parser, namespace, values, option_string=None):
+            super().__call__(parser, namespace, values, option_string)
+            typed = set(getattr(namespace, "typed", None) or ())
+            typed.add(self.dest[2:])
+            namespace.typed = typed
+    return Typed
+
+
+_TYPED_STORE = _typed_action(argparse._StoreAction)
+_TYPED_BOOL = _typed_action(argparse.BooleanOptionalAction)
+
+
 def _add_param(group, name, field, option, title, choices) -> None:
     value = P.default(name, field)
     kind = P.field_type(name, field)
     if kind is bool:
-        group.add_argument(option, dest="f_" + field, action=argparse.BooleanOptionalAction, default=value,
+        group.add_argument(option, dest="f_" + field, action=_TYPED_BOOL, default=value,
                            help=f"{title}; default {'on' if value else 'off'}")
     else:
-        group.add_argument(option, dest="f_" + field, type=_number(kind), default=value,
+        group.add_argument(option, dest="f_" + field, action=_TYPED_STORE, type=_number(kind), default=value,
                            choices=list(choices) or None, metavar=None if choices else "X",
                            help=f"{title}; default {value}")
 
@@ -383,11 +399,11 @@ def options_from(args, log=None):
         algorithm = Hybrid(**given)
     elif getattr(args, "preset", None):
         preset = load_preset(args.preset, args.filter)
-        algorithm = preset.build(given)
+        algorithm = preset.build(given, typed=getattr(args, "typed", None) or ())
     else:
         algorithm = P.filter_class(args.filter)(**given)
     if log is not None and args.filter != "hybrid":
-        for line in describe(args.filter, algorithm, preset):
+        for line in describe(args.filter, algorithm, preset, typed_wins=True):  # (what is typed wins)
             log(line)
     tiling = TileOptions(tile_size_m=args.tile_size, buffer_m=None if args.tile_buffer < 0 else args.tile_buffer,
                          memory_budget_mb=args.memory_budget, workers=args.workers,

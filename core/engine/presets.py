@@ -23,7 +23,7 @@ import json
 import math
 import os
 from dataclasses import dataclass, field
-from typing import Dict, List, Mapping, Optional
+from typing import Dict, Iterable, List, Mapping, Optional
 
 from ..errors import InputError
 from ..io.outputs import atomic_path
@@ -49,23 +49,27 @@ class Preset:
     source: Dict[str, object] = field(default_factory=dict)
     groundsieve: str = ""
 
-    def build(self, given: Optional[Mapping[str, object]] = None):
+    def build(self, given: Optional[Mapping[str, object]] = None, typed: Iterable[str] = ()):
         """The filter with this preset's values over its defaults and, over both, the ``given``
-        values (field -> value) that differ from the filter's defaults."""
-        return P.filter_class(self.filter)(**merge(self.filter, self.values, given or {}))
+        values (field -> value) that differ from the filter's defaults, and those of the fields in
+        ``typed`` whatever their value (the command line knows what was typed)."""
+        return P.filter_class(self.filter)(**merge(self.filter, self.values, given or {}, typed))
 
 
-def merge(name: str, preset_values: Mapping[str, object], given: Mapping[str, object]) -> Dict[str, object]:
-    """Keyword arguments of the filter: defaults < preset < values given that differ from the default."""
+def merge(name: str, preset_values: Mapping[str, object], given: Mapping[str, object],
+          typed: Iterable[str] = ()) -> Dict[str, object]:
+    """Keyword arguments of the filter: defaults < preset < values given that differ from the default
+    (or whose field is in ``typed``: given on purpose, even at the default)."""
+    typed = set(typed)
     out = {f.name: f.default for f in P.filter_fields(name)}
     out.update(preset_values)
     for key, value in given.items():
-        if value != P.default(name, key):
+        if value != P.default(name, key) or key in typed:
             out[key] = value
     return out
 
 
-def describe(name: str, built, preset: Optional["Preset"] = None) -> List[str]:
+def describe(name: str, built, preset: Optional["Preset"] = None, typed_wins: bool = False) -> List[str]:
     """Log lines saying which parameters the filter ``built`` (of filter ``name``) runs with: the
     dialog's, and the finer settings (by their preset names) where they are not the defaults; with
     a preset, which fields come from it and which the run changed (the dialog, the command line, or
@@ -88,7 +92,7 @@ def describe(name: str, built, preset: Optional["Preset"] = None) -> List[str]:
         lines.append(f"From the preset {os.path.basename(preset.path) or preset.path}: "
                      + (", ".join(show(f) for f in given if f not in changed) or "nothing")
                      + ("; changed from the preset: " + ", ".join(show(f) for f in changed) if changed else "")
-                     + " (a value equal to the filter's default never replaces the preset's)")
+                     + ("" if typed_wins else " (a value equal to the filter's default never replaces the preset's)"))
     return lines
 
 
