@@ -296,17 +296,18 @@ def run_filter(args, out) -> dict:
                         ("--dtm-classes", not args.dtm_classes), ("--dtm-max-distance", not args.dtm_max_distance)):
         if not args.dtm and not unset:
             print(f"groundsieve: {flag} is set but no --dtm is named: no DTM is made", file=out)
-    log = lambda msg: print(msg, file=out, flush=True)  # noqa: E731
+    warnings = []  # the run's warnings (the CRS's unit, said before the work), for --json too
+
+    def log(msg):
+        if msg.startswith("Warning: "):
+            warnings.append(msg[len("Warning: "):])
+        print(msg, file=out, flush=True)
     algorithm, options, dtm = options_from(args, log)
     start = time.monotonic()
     run = run_ground_filter(args.input, args.output, algorithm, options=options, dtm_path=args.dtm, dtm=dtm,
                             progress=_progress_printer(out), log=log)
     seconds = time.monotonic() - start
-    from ..raster.crs import unit_warning
-    warning = unit_warning(args.input, run.crs_wkt, "every length parameter (cell sizes, windows, thresholds)")
-    if warning:
-        print(f"WARNING: {warning}", file=out)
-    document = filter_document(args, algorithm, run, seconds, [warning] if warning else [])
+    document = filter_document(args, algorithm, run, seconds, warnings)
     print(f"{document['points']:,} points, {document['ground']:,} ground.", file=out)
     return document
 

@@ -343,6 +343,7 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     check_survey(infos)
     if not any(i.count for i in infos):
         raise InputError(f"{input_path}: the input holds no points")
+    workflow.warn_about_units(input_path, infos, log)
     outs = check_tiled_outputs(inputs, output_path, dtm_path)
     # the DTM's grid from the headers: a DTM cell far too small for the survey is refused now
     dtm_grid = survey_dtm_grid(infos, dtm.cell_size_m) if dtm_path else None

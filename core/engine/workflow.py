@@ -272,6 +272,18 @@ def kept_out_note(counts: dict) -> str:
             "surface, for a flood model), name it in the DTM classes.")
 
 
+def warn_about_units(path: str, infos, log) -> None:
+    """Before any work: refuse a cloud in longitudes and latitudes, and say when the CRS is missing
+    or not in metres (every length is read in its unit), from the files' headers ``infos``."""
+    from ..raster.crs import check_lengths_unit
+    infos = [i for i in infos if i.count] or list(infos)
+    bounds = (min(i.mins[0] for i in infos), min(i.mins[1] for i in infos),
+              max(i.maxs[0] for i in infos), max(i.maxs[1] for i in infos))
+    warning = check_lengths_unit(path, infos[0].crs_wkt, bounds)
+    if warning:
+        log("Warning: " + warning)
+
+
 def check_dtm_memory(x, y, options: DTMOptions) -> GridSpec:
     """The DTM grid over the points ``x, y`` (those that may enter it), its memory checked against
     the budget: called before the filter runs, so that a DTM too large is refused before any work."""
@@ -397,6 +409,9 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     if not os.path.exists(input_path):  # before the outputs: a mistyped input explains the rest
         raise InputError(f"{input_path}: no such file or folder")
     check_outputs(input_path, output_path, [dtm_path, *rasters])
+    if os.path.splitext(input_path)[1].lower() in (".las", ".laz"):
+        from ..io.lasfiles import scan_header
+        warn_about_units(input_path, [scan_header(input_path)], log)
     steps.check()
     w_read, w_filter, w_dtm, _w_write = stage_weights(input_path, output_path, algorithm, bool(dtm_path),
                                                       len(rasters))

@@ -71,12 +71,38 @@ def elevation_unit(crs_wkt: Optional[str]) -> str:
     return ""
 
 
-def unit_warning(path: str, crs_wkt: Optional[str], lengths: str = "every length parameter") -> Optional[str]:
+def unit_warning(path: str, crs_wkt: Optional[str], lengths: str = "every length parameter",
+                 bounds: Optional[Tuple[float, float, float, float]] = None) -> Optional[str]:
     """What to tell the user when the cloud has no CRS, or one whose unit is not the metre (the
-    filters read their lengths in the CRS's unit); None for a CRS in metres."""
+    filters read their lengths in the CRS's unit); None for a CRS in metres. With the points'
+    ``bounds`` (x0, y0, x1, y1), a geographic CRS whose coordinates cannot be degrees is said to be
+    wrong instead."""
     if not crs_wkt:
         return f"{path}: no CRS in the file; outputs have none either."
     unit = horizontal_unit(crs_wkt)
     if unit is None or unit == "metres":
         return None
+    if unit == "degrees" and bounds is not None and not in_degree_range(bounds):
+        return (f"{path}: the file's CRS is geographic (degrees), but its coordinates (x {bounds[0]:,.0f} to "
+                f"{bounds[2]:,.0f}) cannot be longitudes: the CRS is likely wrong, and the lengths were read in "
+                "the coordinates' own unit. Assign the right CRS to the file (outputs keep the wrong one).")
     return f"{path}: the CRS's unit is {unit}, not metres: {lengths} was read in that unit."
+
+
+def in_degree_range(bounds: Tuple[float, float, float, float]) -> bool:
+    """Whether (x0, y0, x1, y1) can be longitudes and latitudes."""
+    x0, y0, x1, y1 = bounds
+    return -360.0 <= x0 <= x1 <= 360.0 and -90.0 <= y0 <= y1 <= 90.0
+
+
+def check_lengths_unit(path: str, crs_wkt: Optional[str], bounds: Tuple[float, float, float, float],
+                       lengths: str = "every length parameter (cells, windows, thresholds)") -> Optional[str]:
+    """Before any work: refuse a cloud in longitudes and latitudes (a geographic CRS, coordinates in
+    degrees): the filters' lengths are metres (1 m of cell would be 1 degree, 111 km); else what
+    :func:`unit_warning` says (None for metres). Raises the core's ``InputError``."""
+    if horizontal_unit(crs_wkt) == "degrees" and in_degree_range(bounds):
+        from ..errors import InputError
+        raise InputError(f"{path}: its coordinates are longitudes and latitudes in degrees (a geographic CRS), and "
+                         f"{lengths} are lengths in metres: reproject the cloud to a projected CRS in metres (its "
+                         "UTM zone, e.g. with PDAL's filters.reprojection or LAStools' las2las) first")
+    return unit_warning(path, crs_wkt, lengths, bounds)

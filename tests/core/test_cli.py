@@ -207,8 +207,23 @@ def test_ignored_classes_a_degree_crs_and_a_dtm_cell_without_dtm_as_in_the_dialo
     assert main(["smrf", "--input", str(degrees), "--output", str(tmp_path / "d.laz"), "--dtm-cell", "0.5"],
                 out=out) == 0, out.getvalue()
     text = out.getvalue()
-    assert f"WARNING: {degrees}: the CRS's unit is degrees, not metres: every length parameter" in text
+    # UTM coordinates under a geographic CRS: the CRS is wrong, the run goes on, and says so before the work
+    assert f"Warning: {degrees}: the file's CRS is geographic (degrees), but its coordinates (x 500,000 to" in text
+    assert text.index("Warning: ") < text.index("Filtering")
     assert "--dtm-cell is set but no --dtm is named: no DTM is made" in text
+    # longitudes and latitudes: refused before any work (a reviewer's run wrote a 1 x 1 cell DTM)
+    lonlat = laspy.read(scene)
+    lonlat.header.offsets, lonlat.header.scales = [9.0, 47.0, 0.0], [1e-7, 1e-7, 0.01]
+    lonlat.x, lonlat.y = 9.0 + (np.asarray(las.x) - las.x.min()) * 1e-5, 47.0 + (np.asarray(las.y) - las.y.min()) * 1e-5
+    lonlat.header.add_crs(pyproj.CRS.from_epsg(4326))
+    lonlat.write(str(tmp_path / "lonlat.laz"))
+    out = io.StringIO()
+    assert main(["smrf", "--input", str(tmp_path / "lonlat.laz"), "--output", str(tmp_path / "l.laz")], out=out) == 1
+    assert out.getvalue().strip().splitlines()[-1] == (
+        f"groundsieve: {tmp_path / 'lonlat.laz'}: its coordinates are longitudes and latitudes in degrees (a geographic "
+        "CRS), and every length parameter (cells, windows, thresholds) are lengths in metres: reproject the cloud to "
+        "a projected CRS in metres (its UTM zone, e.g. with PDAL's filters.reprojection or LAStools' las2las) first")
+    assert not (tmp_path / "l.laz").exists() and "Reading" not in out.getvalue()
     # the DTM classes: a bad list in words; named without --dtm, said
     out = io.StringIO()
     assert main(["smrf", "--input", str(degrees), "--dtm", str(tmp_path / "e.tif"), "--dtm-classes", "water"],
