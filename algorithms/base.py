@@ -116,8 +116,12 @@ def core_modules(extra=None):
 
 def feedback_callables(feedback):
     """The core's plain callables for a Processing feedback: progress, is_cancelled, log."""
-    return dict(progress=lambda f: feedback.setProgress(100.0 * f), is_cancelled=feedback.isCanceled,
-                log=feedback.pushInfo)
+    def log(line):  # the core's warnings ("Warning: ...", e.g. the CRS's unit, said before the work) as warnings
+        if line.startswith("Warning: "):
+            feedback.pushWarning(line[len("Warning: "):])
+        else:
+            feedback.pushInfo(line)
+    return dict(progress=lambda f: feedback.setProgress(100.0 * f), is_cancelled=feedback.isCanceled, log=log)
 
 
 def _file_extensions(file_filter):
@@ -430,8 +434,7 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         except errors.GroundSieveError as err:
             raise QgsProcessingException(str(err)) from err
         tiled = run.cloud is None  # a tiled run (survey scale) holds no cloud in memory
-        warn_about_crs(feedback, input_path, run.crs_wkt,
-                       "every length parameter (cell sizes, windows, thresholds)")
+        # (the CRS's unit was said before the work, by the core's log: see feedback_callables)
         results = {self.OUTPUT: output_path, self.GROUND_COUNT: run.ground_count,
                    self.POINT_COUNT: run.point_count if tiled else len(run.cloud)}
         if dtm_path:

@@ -111,3 +111,44 @@ def test_plugin_registers_its_provider_without_iface(groundsieve_plugin):
     assert registry.providerById("groundsieve") is groundsieve_plugin.provider
     groundsieve_plugin.initProcessing()  # a second call must not register a second provider
     assert [p.id() for p in registry.providers()].count("groundsieve") == 1
+
+
+def test_the_crs_unit_is_said_before_the_work_and_degrees_are_refused(groundsieve_provider, scene_laz, tmp_path):
+    """A cloud in feet is warned about as a warning of the dialog's log, before the filtering (it came
+    after the outputs); a cloud in longitudes and latitudes is refused, with nothing written."""
+    import laspy
+    import pyproj
+    import processing
+    from qgis.core import QgsProcessingContext, QgsProcessingException, QgsProcessingFeedback
+    src, _scene = scene_laz
+
+    class Recorder(QgsProcessingFeedback):
+        def __init__(self):
+            super().__init__()
+            self.lines = []
+
+        def pushWarning(self, text):
+            self.lines.append(("warning", text))
+
+        def pushInfo(self, text):
+            self.lines.append(("info", text))
+    las = laspy.read(str(src))
+    las.header.add_crs(pyproj.CRS.from_epsg(2263))  # NY Long Island, US survey foot
+    feet = tmp_path / "feet.laz"
+    las.write(str(feet))
+    feedback = Recorder()
+    processing.run("groundsieve:smrf", {"INPUT": str(feet), "OUTPUT": str(tmp_path / "f.laz")},
+                   context=QgsProcessingContext(), feedback=feedback)
+    warned = [i for i, (kind, text) in enumerate(feedback.lines)
+              if kind == "warning" and "the CRS's unit is US survey foot, not metres" in text]
+    filtering = [i for i, (_kind, text) in enumerate(feedback.lines) if text.startswith("Filtering")]
+    assert len(warned) == 1 and filtering and warned[0] < filtering[0], feedback.lines
+    lonlat = laspy.read(str(src))
+    lonlat.header.offsets, lonlat.header.scales = [9.0, 47.0, 0.0], [1e-7, 1e-7, 0.01]
+    x, y = np.asarray(las.x), np.asarray(las.y)
+    lonlat.x, lonlat.y = 9.0 + (x - x.min()) * 1e-5, 47.0 + (y - y.min()) * 1e-5
+    lonlat.header.add_crs(pyproj.CRS.from_epsg(4326))
+    lonlat.write(str(tmp_path / "lonlat.laz"))
+    with pytest.raises(QgsProcessingException, match=r"lonlat\.laz: its coordinates are longitudes and latitudes"):
+        _run({"INPUT": str(tmp_path / "lonlat.laz"), "OUTPUT": str(tmp_path / "l.laz")})
+    assert not (tmp_path / "l.laz").exists()
