@@ -389,6 +389,9 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
                 f"need: tiles of {size:g} m and their buffer take about {need / 2**20:,.0f} MB on "
                 f"{tiling.worker_count} worker(s), which the run may use.")
     grid = TileGrid(size, buffer_m)
+    note = getattr(algorithm, "tiled_note", "")
+    if note:
+        log(note)
     total = sum(i.count for i in infos)
     log(f"{len(inputs)} file(s), {total:,} points; tiles of {size:g} m with a buffer of {buffer_m:g} m "
         f"({'set' if tiling.buffer_m is not None else 'the filter reach'}); {tiling.worker_count} worker(s).")

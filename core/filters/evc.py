@@ -122,10 +122,22 @@ class EVC:
         per tile."""
         return 3.0 * self.large_scale_m + (self.max_radius + 1) * self.small_scale_m
 
+    #: the engine passes ``log`` to :meth:`run` (it says the threshold natural breaks chose)
+    wants_log = True
+
+    @property
+    def tiled_note(self) -> str:
+        """What a tiled run should say of this filter's settings ("" = nothing)."""
+        if not self.auto_threshold:
+            return ""
+        return ("EVC: natural breaks picks its threshold in each tile, from that tile's cells, so tiles may "
+                "differ from one another and from a run of the whole cloud; for a survey, set the threshold "
+                "(e.g. the one natural breaks chose on a typical part, which a run on it logs) instead.")
+
     def __call__(self, xyz, steps=None, **_fields) -> np.ndarray:
         return self.run(xyz, steps).ground
 
-    def run(self, xyz, steps: Optional[Steps] = None, **_fields) -> EVCResult:
+    def run(self, xyz, steps: Optional[Steps] = None, log=None, **_fields) -> EVCResult:
         from scipy.ndimage import distance_transform_edt
 
         from ._evc_kernels import _focal_cv_kernel
@@ -172,6 +184,8 @@ class EVC:
             evc = std / (mean + self.ground_offset_m)
         steps.report(0.8)
         threshold = natural_break(evc) if self.auto_threshold else float(self.threshold)
+        if self.auto_threshold and log is not None:
+            log(f"EVC: natural breaks chose the threshold {threshold:.4g}.")
         classes = np.full(evc.shape, VEGETATION_BOUNDARY, dtype=np.uint8)  # also: no EVC
         if self.ground_offset_m > 0:
             shifted = mean + self.ground_offset_m

@@ -517,3 +517,28 @@ def test_through_the_driver():
     np.testing.assert_array_equal(done.ground[5:], direct.ground)
     assert not done.ground[:5].any() and (done.classification[:5] == 7).all()
     np.testing.assert_array_equal(done.detail.classes, direct.classes)
+
+
+def test_the_threshold_natural_breaks_chose_is_said_and_a_tiled_run_warns(tmp_path):
+    """A reviewer never saw the threshold natural breaks picked (the log said THRESHOLD 1.5), and a
+    tiled run picked one per tile without a word: a run logs the value, a tiled run says what
+    per-tile thresholds mean."""
+    from groundsieve.core.engine.tiles import TileOptions
+    from groundsieve.core.engine.workflow import FilterOptions, run_ground_filter
+    from groundsieve.core.io import new_las, write_las
+    xyz, _, _ = shrub_scene(SHRUBS["4m"][0], density=10.0)
+    path = str(tmp_path / "shrubs.laz")
+    write_las(new_las(xyz[:, 0] + 500000.0, xyz[:, 1] + 5400000.0, xyz[:, 2]), path)
+    from groundsieve.core.io import read_cloud
+    chosen = EVC(auto_threshold=True, ground_offset_m=0.1).run(read_cloud(path).xyz).threshold  # (as written)
+    lines = []
+    run_ground_filter(path, str(tmp_path / "o.laz"), EVC(auto_threshold=True, ground_offset_m=0.1), log=lines.append)
+    assert f"EVC: natural breaks chose the threshold {chosen:.4g}." in lines
+    lines = []
+    run_ground_filter(path, str(tmp_path / "t.laz"), EVC(auto_threshold=True, ground_offset_m=0.1), log=lines.append,
+                      options=FilterOptions(tiling=TileOptions(tile_size_m=20.0, workers=1, parallel="threads")))
+    assert any(line.startswith("EVC: natural breaks picks its threshold in each tile") for line in lines)
+    lines = []
+    run_ground_filter(path, str(tmp_path / "u.laz"), EVC(), log=lines.append,
+                      options=FilterOptions(tiling=TileOptions(tile_size_m=20.0, workers=1, parallel="threads")))
+    assert not any("natural breaks" in line for line in lines)
