@@ -111,17 +111,16 @@ def expand_inputs(path: str) -> List[str]:
 
 
 def check_survey(infos: Sequence[LasInfo]) -> None:
-    """Refuse inputs that cannot be one survey: different CRS or point formats, duplicates."""
+    """Refuse inputs that cannot be one survey: different CRS, duplicates. Different point formats
+    (and LAS versions) are one survey: a tile needs only what every format has (x, y, z, returns,
+    classes and flags), and each file's classified copy is written from its own records, in its own
+    format."""
     seen = {}
     for info in infos:
         real = os.path.realpath(info.path)
         if real in seen:
             raise InputError(f"{info.path}: given twice (also as {seen[real]})")
         seen[real] = info.path
-    formats = {i.point_format for i in infos}
-    if len(formats) > 1:
-        listing = ", ".join(f"{os.path.basename(i.path)}: {i.point_format}" for i in infos)
-        raise InputError(f"the input files have different point formats ({listing}); convert them to one first")
     crss = {i.crs_wkt for i in infos}
     if len(crss) > 1:
         import collections

@@ -221,6 +221,32 @@ def _split_files(scene_laz, folder, at_x):
     return paths
 
 
+def test_a_survey_of_files_in_different_point_formats_and_versions_is_one_survey(scene_laz, tmp_path):
+    """Pix4D and Metashape flights, or LAS 1.2 and 1.4 deliveries, differ in point format; a folder of
+    them was refused ("convert them to one first"). A tile needs only what every format has: the
+    survey runs, each classified file keeps its own format and version (and its colour and GPS time),
+    and the classes are those of the same points in one format."""
+    xs = laspy.read(scene_laz).x
+    at_x = float(np.floor(np.median(xs))) + 0.5
+    west, east = _split_files(scene_laz, tmp_path / "same", at_x)
+    (tmp_path / "mixed").mkdir()
+    a = laspy.read(west)  # point format 1, LAS 1.2 (the scene's)
+    a.write(str(tmp_path / "mixed" / "west.laz"))
+    b = laspy.convert(laspy.read(east), point_format_id=7, file_version="1.4")  # RGB, 1.4
+    b.red[:] = 1000
+    b.write(str(tmp_path / "mixed" / "east.laz"))
+    ref = run_ground_filter(str(tmp_path / "same"), str(tmp_path / "ref.vpc"), SMRF(), options=tiled())
+    run = run_ground_filter(str(tmp_path / "mixed"), str(tmp_path / "mix.vpc"), SMRF(),
+                            options=tiled(parallel="processes"))  # (the worker processes' paths too)
+    assert run.point_count == ref.point_count and run.ground_count == ref.ground_count
+    for name, fmt, version in (("west.laz", 1, "1.2"), ("east.laz", 7, "1.4")):
+        got = laspy.read(tmp_path / "mix" / name)
+        want = laspy.read(tmp_path / "ref" / name)
+        assert got.header.point_format.id == fmt and str(got.header.version) == version
+        np.testing.assert_array_equal(got.classification, want.classification)
+    assert (laspy.read(tmp_path / "mix" / "east.laz").red == 1000).all()
+
+
 def test_folder_and_vpc_inputs_make_one_seamless_survey(scene_laz, tmp_path):
     xs = laspy.read(scene_laz).x
     at_x = float(np.floor(np.median(xs))) + 0.5  # a file seam inside a tile, off the tile edges
@@ -274,10 +300,6 @@ def test_bad_surveys_are_refused_before_work(scene_laz, tmp_path):
     folder.mkdir()
     las = laspy.read(scene_laz)
     write_las(new_las(las.x[:100], las.y[:100], las.z[:100], point_format=1), str(folder / "a.las"))
-    write_las(new_las(las.x[100:200], las.y[100:200], las.z[100:200], point_format=3), str(folder / "b.las"))
-    with pytest.raises(InputError, match="different point formats"):
-        run_ground_filter(str(folder), str(tmp_path / "o.vpc"), SMRF())
-    os.remove(folder / "b.las")
     write_las(new_las(las.x[100:200], las.y[100:200], las.z[100:200], point_format=1), str(folder / "b.las"))
     with pytest.raises(OutputError, match="must name a .vpc"):
         run_ground_filter(str(folder), str(tmp_path / "o.laz"), SMRF())
