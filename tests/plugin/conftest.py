@@ -31,6 +31,34 @@ def scene_laz(tmp_path_factory):
     return path, scene
 
 
+def add_child(model, alg_id, child_id, sources, outputs, static=None):
+    """Add the step ``alg_id`` (named ``child_id``) to a QgsProcessingModelAlgorithm: ``sources`` its
+    wired inputs (name -> QgsProcessingModelChildParameterSource), ``outputs`` its model outputs
+    (model name -> its output's name), ``static`` values for any of its other parameters; every
+    parameter left gets its default as a static value, as the modeler's dialog does."""
+    from qgis.core import (QgsApplication, QgsProcessingModelChildAlgorithm,
+                           QgsProcessingModelChildParameterSource as Source, QgsProcessingModelOutput)
+    child = QgsProcessingModelChildAlgorithm(alg_id)
+    child.setChildId(child_id)
+    sources = dict(sources)
+    definitions = QgsApplication.processingRegistry().algorithmById(alg_id).parameterDefinitions()
+    for definition in definitions:
+        if definition.name() in (static or {}):
+            sources[definition.name()] = Source.fromStaticValue(static[definition.name()])
+        elif not definition.isDestination() and definition.name() not in sources:
+            sources[definition.name()] = Source.fromStaticValue(definition.defaultValue())
+    for name, source in sources.items():
+        child.addParameterSources(name, [source])
+    model_outputs = {}
+    for model_name, child_output in outputs.items():
+        out = QgsProcessingModelOutput(model_name)
+        out.setChildId(child_id)
+        out.setChildOutputName(child_output)
+        model_outputs[model_name] = out
+    child.setModelOutputs(model_outputs)
+    model.addChildAlgorithm(child)
+
+
 def classes_of(path):
     import laspy
     return np.asarray(laspy.read(str(path)).classification)

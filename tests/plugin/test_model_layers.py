@@ -12,7 +12,7 @@ The classified cloud loads only where a point-cloud provider opens it: LAS/LAZ w
 macOS builds, simulated here by its declared patterns), .vpc with QGIS >= 3.32 (3.40 here, for real)."""
 import pytest
 
-from .conftest import classes_of
+from .conftest import add_child, classes_of
 
 #: what a build with PDAL declares (test_layers.py): the same code then loads .laz outputs
 PDAL = {"pdal": ["*.las", "*.laz"]}
@@ -22,8 +22,7 @@ def _model(first_is_output, first="smrf", **static):
     """``first`` (smrf) -> pmf on its classified cloud, and its DTM -> a QGIS raster algorithm. pmf's
     cloud is a model output; the first step's cloud only when ``first_is_output``; its DTM never.
     ``static``: values of both steps' other parameters (each takes those it has)."""
-    from qgis.core import (QgsApplication, QgsProcessingModelAlgorithm, QgsProcessingModelChildAlgorithm,
-                           QgsProcessingModelChildParameterSource as Source, QgsProcessingModelOutput,
+    from qgis.core import (QgsProcessingModelAlgorithm, QgsProcessingModelChildParameterSource as Source,
                            QgsProcessingModelParameter, QgsProcessingParameterFile)
     model = QgsProcessingModelAlgorithm("two steps", "tests")
     model.addModelParameter(QgsProcessingParameterFile("cloud", "Point cloud"), QgsProcessingModelParameter("cloud"))
@@ -33,25 +32,7 @@ def _model(first_is_output, first="smrf", **static):
               {"second": "OUTPUT"}),
              ("native:rasterlayerstatistics", "stats", {"INPUT": Source.fromChildOutput(first, "DTM")}, {})]
     for alg_id, child_id, sources, outputs in steps:
-        child = QgsProcessingModelChildAlgorithm(alg_id)
-        child.setChildId(child_id)
-        definitions = QgsApplication.processingRegistry().algorithmById(alg_id).parameterDefinitions()
-        sources.update({definition.name(): Source.fromStaticValue(static[definition.name()])
-                        for definition in definitions if definition.name() in static})
-        # As the modeler's dialog does: every parameter not wired gets its default as a static value.
-        for definition in definitions:
-            if not definition.isDestination() and definition.name() not in sources:
-                sources[definition.name()] = Source.fromStaticValue(definition.defaultValue())
-        for name, source in sources.items():
-            child.addParameterSources(name, [source])
-        model_outputs = {}
-        for model_name, child_output in outputs.items():
-            out = QgsProcessingModelOutput(model_name)
-            out.setChildId(child_id)
-            out.setChildOutputName(child_output)
-            model_outputs[model_name] = out
-        child.setModelOutputs(model_outputs)
-        model.addChildAlgorithm(child)
+        add_child(model, alg_id, child_id, sources, outputs, static)
     ok, problems = model.validate()
     assert ok, problems
     return model

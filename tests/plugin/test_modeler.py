@@ -2,34 +2,17 @@
 child to the next (classified cloud -> another filter; DTM -> a QGIS raster algorithm)."""
 import numpy as np
 
-from .conftest import classes_of
+from .conftest import add_child, classes_of
 
 
 def _model():
-    from qgis.core import (QgsProcessingModelAlgorithm, QgsProcessingModelChildAlgorithm,
-                           QgsProcessingModelChildParameterSource as Source, QgsProcessingModelOutput,
+    from qgis.core import (QgsProcessingModelAlgorithm, QgsProcessingModelChildParameterSource as Source,
                            QgsProcessingModelParameter, QgsProcessingParameterFile)
     model = QgsProcessingModelAlgorithm("groundsieve chain", "tests")
     model.addModelParameter(QgsProcessingParameterFile("cloud", "Point cloud"), QgsProcessingModelParameter("cloud"))
 
     def child(alg_id, child_id, sources, outputs):
-        from qgis.core import QgsApplication
-        c = QgsProcessingModelChildAlgorithm(alg_id)
-        c.setChildId(child_id)
-        # As the modeler's dialog does: every parameter not wired gets its default as a static value.
-        for definition in QgsApplication.processingRegistry().algorithmById(alg_id).parameterDefinitions():
-            if not definition.isDestination() and definition.name() not in sources:
-                sources[definition.name()] = Source.fromStaticValue(definition.defaultValue())
-        for name, source in sources.items():
-            c.addParameterSources(name, [source])
-        model_outputs = {}
-        for model_name, child_output in outputs.items():
-            out = QgsProcessingModelOutput(model_name)
-            out.setChildId(child_id)
-            out.setChildOutputName(child_output)
-            model_outputs[model_name] = out
-        c.setModelOutputs(model_outputs)
-        model.addChildAlgorithm(c)
+        add_child(model, alg_id, child_id, sources, outputs)
 
     child("groundsieve:smrf", "smrf", {"INPUT": Source.fromModelParameter("cloud")},
           {"classified": "OUTPUT", "dtm": "DTM"})
