@@ -16,7 +16,8 @@ threshold automatically (Jenks, as the paper did).</p>
 <p><b>Which settings?</b> The paper's method, kept faithful: on generated photogrammetry-like
 clouds its defaults misclassify 40-44 % of the points, its shipped preset
 <i>uav-photogrammetry-evc.json</i> (field <i>Preset</i>) 22-28 %, and <b>SMRF with the preset
-uav-photogrammetry-smrf.json</b> 3.9-5.6 % (the README's "Which ground filter?" table). On your own data, tune either on a
+uav-photogrammetry-smrf.json</b> 4.5-5.5 %, and 1.8-2.0 % where there are buildings and trees too
+(the README's "Which ground filter?" table). On your own data, tune either on a
 labelled patch (<i>Tune a ground filter</i>).</p>
 <p><b>Empty small cells</b> (normal below about 25 points/m² at 0.2 m) are left out of every window;
 where a window holds fewer than <i>Minimum non-empty cells</i>, it grows up to <i>Maximum radius</i>.
