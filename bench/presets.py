@@ -27,7 +27,7 @@ from groundsieve.core.engine.presets import SHIPPED_DIR, load_preset, write_pres
 from groundsieve.core.io import read_cloud  # noqa: E402
 from groundsieve.core.io.clouds import PointCloud  # noqa: E402
 from groundsieve.core.metrics import ground_accuracy  # noqa: E402
-from groundsieve.core.synthetic import SceneSpec, make_scene  # noqa: E402
+from groundsieve.core.synthetic import SceneSpec, make_scene, photogrammetric  # noqa: E402
 
 #: scene kinds of core/synthetic.py used for the presets without real data
 SCENES = {
@@ -96,13 +96,12 @@ def load(source: str, data: str) -> PointCloud:
         return read_cloud(os.path.join(data, rest + ".txt"))
     name, _, seed = rest.partition(":")
     s = make_scene(SceneSpec(seed=int(seed), **SCENES[name]))
+    if name.startswith("uav-photo"):
+        s = photogrammetric(s)  # the first return of each pulse, 3 cm of matching noise
     ground = np.asarray(s.classification) == 2
     if name.startswith("uav-photo"):
-        top = np.asarray(s.return_number) == 1
-        x, y, z, ground = s.x[top], s.y[top], s.z[top], ground[top]
-        z = z + np.random.default_rng(int(seed)).normal(0.0, 0.03, z.size)
-        n = x.size
-        return PointCloud(path=source, x=x, y=y, z=z, classification=np.zeros(n, np.uint8),
+        n = len(s.x)
+        return PointCloud(path=source, x=s.x, y=s.y, z=s.z, classification=np.zeros(n, np.uint8),
                           return_number=np.ones(n, np.uint8), number_of_returns=np.ones(n, np.uint8),
                           has_return_info=False, reference_label=(~ground).astype(np.uint8))
     n = len(s.x)

@@ -686,6 +686,19 @@ def make_scene(spec: Optional[SceneSpec] = None) -> Scene:
 
 # --------------------------------------------------------------------------- output
 
+def photogrammetric(scene: Scene, noise_m: float = 0.03) -> Scene:
+    """The surface image matching sees of ``scene``: the first return of each pulse only (no ground
+    under vegetation), ``noise_m`` of Gaussian matching noise on z (seeded by the scene's seed), one
+    return per point and no GPS time, the truth kept in ``classification`` (UAV photogrammetry as in
+    fan2023; bench/presets.py's ``uav-photo`` scenes)."""
+    top = scene.return_number == 1
+    n = int(top.sum())
+    z = scene.z[top] + np.random.default_rng(int(scene.spec.seed)).normal(0.0, float(noise_m), n)
+    one = np.ones(n, dtype=np.uint8)
+    return Scene(scene.x[top], scene.y[top], z, scene.classification[top], one, one.copy(),
+                 scene.intensity[top], np.zeros(n), scene.spec, scene.terrain, scene.buildings)
+
+
 def scene_crs_wkt() -> str:
     """WKT of EPSG:32632 (WGS 84 / UTM zone 32N), the coordinate system of every scene."""
     import pyproj

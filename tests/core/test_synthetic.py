@@ -255,3 +255,21 @@ def test_for_points_invalid(n_points):
 def test_for_points_validates_knobs():
     with pytest.raises(InvalidParameterError, match="density_per_m2 must be > 0"):
         SceneSpec.for_points(1000, density_per_m2=-3)
+
+
+def test_a_photogrammetric_scene_is_the_surface_seen_from_above():
+    """photogrammetric(): the first return of each pulse (no ground under vegetation), one return a
+    point, 3 cm of matching noise, the truth kept; the same scene twice gives the same points."""
+    from groundsieve.core.synthetic import SceneSpec, make_scene, photogrammetric
+    scene = make_scene(SceneSpec(size_m=40.0, density_per_m2=20.0, seed=9, shrub_fraction=0.3))
+    photo = photogrammetric(scene)
+    first = scene.return_number == 1
+    assert len(photo) == int(first.sum()) < len(scene)
+    assert (photo.return_number == 1).all() and (photo.number_of_returns == 1).all() and not photo.gps_time.any()
+    np.testing.assert_array_equal(photo.x, scene.x[first])
+    np.testing.assert_array_equal(photo.classification, scene.classification[first])
+    noise = photo.z - scene.z[first]
+    assert 0.025 < noise.std() < 0.035 and abs(noise.mean()) < 0.005
+    np.testing.assert_array_equal(photogrammetric(scene).z, photo.z)
+    # under a tree crown the first return is the crown: fewer ground points than the LiDAR scene keeps
+    assert photo.ground.mean() < scene.ground[scene.return_number == scene.number_of_returns].mean()
