@@ -141,6 +141,21 @@ def _version_of(root: str) -> str:
 # The probe runs on every worker before any tile. It is pickled by value (defined outside any
 # importable module), so that it runs even where GroundSieve itself does not import.
 _PROBE_SOURCE = '''
+def core_digest(root):
+    """A digest of the Python sources of GroundSieve's core/ under ``root`` (same code, same digest)."""
+    import hashlib, os
+    h = hashlib.sha1()
+    core = os.path.join(root, "core")
+    for folder, dirs, files in os.walk(core):
+        dirs[:] = sorted(d for d in dirs if d != "__pycache__")
+        for name in sorted(f for f in files if f.endswith(".py")):
+            path = os.path.join(folder, name)
+            h.update(os.path.relpath(path, core).replace(os.sep, "/").encode())
+            with open(path, "rb") as f:
+                h.update(f.read())
+    return h.hexdigest()
+
+
 def probe(paths, writable):
     import os, socket, sys
     out = dict(host=socket.gethostname(), python="%d.%d" % sys.version_info[:2], missing=[], version=None,
@@ -157,12 +172,20 @@ def probe(paths, writable):
         with open(os.path.join(root, "metadata.txt"), encoding="utf-8") as f:
             m = re.search(r"^version\\s*=\\s*(\\S+)", f.read(), re.M)
         out["version"] = m.group(1) if m else "unknown"
+        out["code"] = core_digest(root)
     except Exception as err:
         out["import_error"] = "%s: %s" % (type(err).__name__, err)
     out["unseen"] = [p for p in paths if not os.path.exists(p)]
     out["unwritable"] = [p for p in writable if os.path.isdir(p) and not os.access(p, os.W_OK)]
     return out
 '''
+
+
+def _core_digest() -> str:
+    """This client's core/ digest, by the probe's own function."""
+    namespace = {"__name__": "groundsieve_cluster_probe"}
+    exec(compile(_PROBE_SOURCE, "<groundsieve worker probe>", "exec"), namespace)
+    return namespace["core_digest"](os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 
 
 def _probe_function():
@@ -180,6 +203,7 @@ def check_workers(client, paths: Sequence[str], writable: Sequence[str] = ()) ->
         raise ClusterError(f"The Dask scheduler {client.scheduler.address} has no worker; start some "
                            "(dask worker <scheduler address>) and run again")
     mine = package_version()
+    code = _core_digest()
     here = "%d.%d" % sys.version_info[:2]
     for worker, r in sorted(reports.items()):
         who = f"Dask worker {worker} (host {r['host']})"
@@ -192,6 +216,10 @@ def check_workers(client, paths: Sequence[str], writable: Sequence[str] = ()) ->
         if r["version"] != mine:
             raise ClusterError(f"{who} runs GroundSieve {r['version']}, this client {mine}; every worker must "
                                "run the same version")
+        if r.get("code") and r["code"] != code:
+            raise ClusterError(f"{who} runs GroundSieve {mine} with other code than this client (its core/ differs: "
+                               "a changed or older copy of the same version); install the same groundsieve "
+                               "folder on every worker (e.g. one copy on the shared file system)")
         if r["python"] != here:
             raise ClusterError(f"{who} runs Python {r['python']}, this client {here}; use the same Python "
                                "on the client and the workers")

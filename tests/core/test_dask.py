@@ -154,6 +154,29 @@ def test_a_worker_with_another_groundsieve_version_is_refused(tmp_path, monkeypa
             cl.check_workers(c.client, [str(tmp_path)])
 
 
+@needs_dask
+def test_a_worker_with_the_same_version_but_other_code_is_refused(tmp_path, monkeypatch):
+    """The version check read metadata.txt only: a worker with a changed or older copy of the same
+    version passed and ran other code. The probe now compares a digest of core/'s sources."""
+    import shutil
+    from groundsieve.core.engine import cluster as cl
+    repo = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    copy = tmp_path / "copy"
+    shutil.copytree(os.path.join(repo, "core"), copy / "core", ignore=shutil.ignore_patterns("__pycache__"))
+    digest = cl._core_digest()
+    namespace = {}
+    exec(compile(cl._PROBE_SOURCE, "probe", "exec"), namespace)
+    assert namespace["core_digest"](str(copy)) == digest  # the same sources, the same digest
+    with open(copy / "core" / "metrics.py", "a") as f:
+        f.write("\n# changed\n")
+    assert namespace["core_digest"](str(copy)) != digest
+    with cl.Cluster("local:1") as c:
+        assert cl.check_workers(c.client, [str(tmp_path)]) == 1
+        monkeypatch.setattr(cl, "_core_digest", lambda: namespace["core_digest"](str(copy)))
+        with pytest.raises(cl.ClusterError, match=r"Dask worker tcp://.* runs GroundSieve .* with other code"):
+            cl.check_workers(c.client, [str(tmp_path)])
+
+
 def test_scheduler_addresses_are_checked_without_dask():
     from groundsieve.core.engine.cluster import parse_scheduler
     assert parse_scheduler("") == ("", None)
