@@ -283,7 +283,11 @@ class Cluster:
         threads, a worker running that many tasks at once; None when no worker states a limit, or
         none is connected yet) and the cluster's number of threads."""
         try:
-            workers = list(self.client.scheduler_info().get("workers", {}).values())
+            try:  # every worker: some distributed versions (2025.4 to mid-2026) list 5 by default
+                info = self.client.scheduler_info(n_workers=-1)
+            except TypeError:  # (older ones take no argument and list them all)
+                info = self.client.scheduler_info()
+            workers = list(info.get("workers", {}).values())
         except Exception:  # (a reply without workers: planned as without a cluster)
             return None, 0
         threads = sum(max(1, int(w.get("nthreads") or 1)) for w in workers)

@@ -53,8 +53,8 @@ def horizontal_unit(crs_wkt: Optional[str]) -> Optional[str]:
         return None
     if ref.IsGeographic():
         return "degrees"
-    if ref.IsProjected() and abs(ref.GetLinearUnits() - 1.0) > 1e-12:
-        return ref.GetLinearUnitsName() or f"{ref.GetLinearUnits():g} m"
+    if (ref.IsProjected() or ref.IsLocal()) and abs(ref.GetLinearUnits() - 1.0) > 1e-12:
+        return ref.GetLinearUnitsName() or f"{ref.GetLinearUnits():g} m"  # (a local CRS in feet too)
     return "metres"
 
 
@@ -84,15 +84,22 @@ def unit_warning(path: str, crs_wkt: Optional[str], lengths: str = "every length
         return None
     if unit == "degrees" and bounds is not None and not in_degree_range(bounds):
         return (f"{path}: the file's CRS is geographic (degrees), but its coordinates (x {bounds[0]:,.0f} to "
-                f"{bounds[2]:,.0f}) cannot be longitudes: the CRS is likely wrong, and the lengths were read in "
-                "the coordinates' own unit. Assign the right CRS to the file (outputs keep the wrong one).")
+                f"{bounds[2]:,.0f}, y {bounds[1]:,.0f} to {bounds[3]:,.0f}) cannot be one survey's longitudes and "
+                "latitudes: the CRS is likely wrong, and the lengths were read in the coordinates' own unit. "
+                "Assign the right CRS to the file (outputs keep the wrong one).")
     return f"{path}: the CRS's unit is {unit}, not metres: {lengths} was read in that unit."
 
 
+#: the widest span (degrees) a cloud in longitudes and latitudes is taken to have: a local survey in
+#: metres labelled with a geographic CRS (a terrestrial scan from 0 to 50 m exported as WGS 84) spans more
+DEGREE_SPAN_MAX = 5.0
+
+
 def in_degree_range(bounds: Tuple[float, float, float, float]) -> bool:
-    """Whether (x0, y0, x1, y1) can be longitudes and latitudes."""
+    """Whether (x0, y0, x1, y1) can be longitudes and latitudes of one survey."""
     x0, y0, x1, y1 = bounds
-    return -360.0 <= x0 <= x1 <= 360.0 and -90.0 <= y0 <= y1 <= 90.0
+    return (-360.0 <= x0 <= x1 <= 360.0 and -90.0 <= y0 <= y1 <= 90.0
+            and x1 - x0 <= DEGREE_SPAN_MAX and y1 - y0 <= DEGREE_SPAN_MAX)
 
 
 def check_lengths_unit(path: str, crs_wkt: Optional[str], bounds: Tuple[float, float, float, float],
