@@ -214,13 +214,17 @@ def _cell_lookup_kernel(x, y, grid, x0, top, cell, out):
 
 
 @njit(cache=True, nogil=True)
-def _thin_dense_kernel(x, y, z, x0, top, sub, nrows_sub, ncols_sub, best):
+def _thin_dense_kernel(x, y, z, col0, row0, sub, nrows_sub, ncols_sub, best):
     """For each sub-cell (row-major in ``best``, -1 = empty), the index of the point nearest
-    its centre, the lowest on a tie, then the first. False when a point falls off the grid
-    (``best`` then incomplete)."""
+    its centre, the lowest on a tie, then the first. Sub-cells by their index on the lattice of
+    multiples of ``sub`` (column ``floor(x / sub) - col0``, row ``row0 + floor(-y / sub)``), so that
+    a point falls in the same sub-cell whatever grid it is thinned on (a survey's DTM and a tile's
+    block agree). False when a point falls off the grid (``best`` then incomplete)."""
     for i in range(x.shape[0]):
-        col = math.floor((x[i] - x0) / sub)
-        row = math.floor((top - y[i]) / sub)
+        gx = math.floor(x[i] / sub)
+        gy = math.floor(-y[i] / sub)
+        col = gx - col0
+        row = row0 + gy
         if row < 0 or col < 0 or row >= nrows_sub or col >= ncols_sub:
             return False
         key = int(row) * ncols_sub + int(col)
@@ -228,8 +232,8 @@ def _thin_dense_kernel(x, y, z, x0, top, sub, nrows_sub, ncols_sub, best):
         if j == -1:
             best[key] = i
             continue
-        cx = x0 + (col + 0.5) * sub
-        cy = top - (row + 0.5) * sub
+        cx = (gx + 0.5) * sub
+        cy = -(gy + 0.5) * sub
         di = (x[i] - cx) ** 2 + (cy - y[i]) ** 2
         dj = (x[j] - cx) ** 2 + (cy - y[j]) ** 2
         if di < dj or (di == dj and (z[i] < z[j] or (z[i] == z[j] and i < j))):

@@ -83,21 +83,34 @@ def thin_for_grid(x, y, z, grid: GridSpec, points_per_cell: int, steps: Optional
     nrows_sub, ncols_sub = grid.nrows * k, grid.ncols * k
     if nrows_sub * ncols_sub <= 4 * x.size + 1_000_000:
         best = np.full(nrows_sub * ncols_sub, -1, dtype=np.int64)
-        if run_cancellable(_thin_dense_kernel, x, y, z, grid.x0, grid.top, grid.cell / k, nrows_sub, ncols_sub,
-                           best, steps=steps):
+        sub = grid.cell / k
+        if run_cancellable(_thin_dense_kernel, x, y, z, int(round(grid.x0 / sub)), int(round(grid.top / sub)), sub,
+                           nrows_sub, ncols_sub, best, steps=steps):
             return _compact_kernel(best)
     if steps is not None:
         steps.check()
     return _thin_sorted(x, y, z, grid, k)
 
 
+def _lattice_cells(grid: GridSpec, x, y):
+    """(rows, columns) of the points' cells by their index on the lattice of multiples of the cell
+    (as the thinning finds them: the same cell whatever grid the points are on), clipped to ``grid``."""
+    rows = np.floor(-np.asarray(y) / grid.cell) + round(grid.top / grid.cell)
+    cols = np.floor(np.asarray(x) / grid.cell) - round(grid.x0 / grid.cell)
+    return (np.clip(rows, 0, grid.nrows - 1).astype(np.int64), np.clip(cols, 0, grid.ncols - 1).astype(np.int64))
+
+
 def _thin_sorted(x, y, z, grid: GridSpec, k: int):
+    """The sort's way to :func:`thin_for_grid`'s result (sub-cells on the lattice of multiples of
+    the sub-cell, as in ``_thin_dense_kernel``; points off the grid in no sub-cell of it)."""
     sub = grid.cell / k
-    col = np.floor((x - grid.x0) / sub)
-    row = np.floor((grid.top - y) / sub)
+    gx, gy = np.floor(x / sub), np.floor(-y / sub)
+    col = gx - round(grid.x0 / sub)
+    row = gy + round(grid.top / sub)
     ncols = grid.ncols * k
-    key = (row * ncols + col).astype(np.int64)
-    dist = (x - (grid.x0 + (col + 0.5) * sub)) ** 2 + (grid.top - (row + 0.5) * sub - y) ** 2
+    inside = (col >= 0) & (col < ncols) & (row >= 0) & (row < grid.nrows * k)
+    key = np.where(inside, row * ncols + col, -1 - np.arange(x.size)).astype(np.int64)  # (off: a key each)
+    dist = (x - (gx + 0.5) * sub) ** 2 + (-(gy + 0.5) * sub - y) ** 2
     order = np.lexsort((z, dist, key))
     first = np.ones(order.size, dtype=bool)
     first[1:] = key[order[1:]] != key[order[:-1]]
@@ -339,7 +352,7 @@ def tin_dtm(x, y, z, grid: GridSpec, *, fill_outside: bool = False, points_per_c
     if max_distance > 0:
         steps.check()
         empty = np.ones(around.shape, dtype=bool)
-        empty[around.row_of(ys), around.col_of(xs)] = False
+        empty[_lattice_cells(around, xs, ys)] = False
         far = distance_transform_edt(empty, sampling=grid.cell)[1:-1, 1:-1] > max_distance
         out[far] = np.nan
     steps.report(1.0)

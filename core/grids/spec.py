@@ -168,6 +168,15 @@ def check_memory(nbytes: float, *, what: str, shape: tuple, cell: float, x=None,
     raise MemoryBudgetError(message)
 
 
+def _lattice_index(value: float, rounding) -> int:
+    """``rounding(value)`` (math.floor or math.ceil), or the nearest integer when ``value`` is one
+    but for floating-point noise (a coordinate on a cell edge divided by the cell size)."""
+    nearest = round(value)
+    if abs(value - nearest) <= max(1e-9, 1e-12 * abs(value)):
+        return int(nearest)
+    return int(rounding(value))
+
+
 @dataclass(frozen=True)
 class GridSpec:
     x0: float
@@ -204,14 +213,13 @@ class GridSpec:
         if top < ymax:  # floating-point rounding of the product
             top += cell
         if closed:
-            if x0 > xmin:  # floating-point rounding of the product
-                x0 -= cell
-            ncols = max(1, int(math.ceil((xmax - x0) / cell)))
-            nrows = max(1, int(math.ceil((top - ymin) / cell)))
-            if x0 + ncols * cell < xmax:  # floating-point rounding of the quotient
-                ncols += 1
-            if top - nrows * cell > ymin:
-                nrows += 1
+            # Cell edges by their index on the lattice of multiples of ``cell``: an edge a point lies on
+            # (within floating-point noise: 500000.3 / 0.1 is 5000002.9999999995) is that point's edge,
+            # so that it adds no column or row on any side.
+            k0, k1 = _lattice_index(xmin / cell, math.floor), _lattice_index(xmax / cell, math.ceil)
+            t0, t1 = _lattice_index(ymin / cell, math.floor), _lattice_index(ymax / cell, math.ceil)
+            x0, top = k0 * cell, t1 * cell
+            ncols, nrows = max(1, k1 - k0), max(1, t1 - t0)
         else:
             ncols = int(math.floor((xmax - x0) / cell)) + 1
             nrows = int(math.floor((top - ymin) / cell)) + 1

@@ -800,3 +800,38 @@ def test_a_filters_grids_asked_of_a_tiled_run_are_refused_with_the_reason(scene_
     with pytest.raises(InvalidParameterError, match=r"a tile size is set"):
         run_ground_filter(scene_laz, str(tmp_path / "o.laz"), EVC(), rasters=grids, options=tiled())
     assert not os.listdir(tmp_path)
+
+
+class _AllGround:
+    """Every point ground: the DTM alone is compared (the filter plays no part)."""
+    reach_m = 10.0
+
+    def __call__(self, xyz, steps=None, **_fields):
+        return np.ones(len(xyz), dtype=bool)
+
+    def __repr__(self):
+        return "_AllGround()"
+
+
+@pytest.mark.parametrize("max_distance", [0.0, 0.3])
+def test_fine_dtm_cells_off_whole_metres_are_the_same_whole_and_tiled(tmp_path, max_distance):
+    """At 0.1 m cells on a cloud starting at x = ...0.3, coordinates on 0.01 m fell in different
+    thinning sub-cells from the whole DTM's origin and from a tile's (a reviewer: 1,305 cells 12 m
+    inside the survey differed by up to 9 cm, and 4,226 were nodata in one DTM only): the sub-cells
+    are now indexed on the lattice of their multiples, and both DTMs agree cell for cell."""
+    from osgeo import gdal
+    sc = make_scene(SceneSpec(size_m=60.0, density_per_m2=2.0, seed=3, buildings_per_ha=0.0, trees_per_ha=0.0,
+                              shrub_fraction=0.0))
+    x, y = sc.x - sc.x.min() + 500000.3, sc.y - sc.y.min() + 5400000.7
+    path = str(tmp_path / "c.las")
+    write_las(new_las(x, y, sc.z, return_number=sc.return_number, number_of_returns=sc.number_of_returns), path)
+    dtm = DTMOptions(cell_size_m=0.1, max_distance_m=max_distance)
+    run_ground_filter(path, None, _AllGround(), dtm_path=str(tmp_path / "w.tif"), dtm=dtm)
+    run_ground_filter(path, None, _AllGround(), dtm_path=str(tmp_path / "t.tif"), dtm=dtm,
+                      options=FilterOptions(tiling=TileOptions(tile_size_m=30.0, buffer_m=10.0, workers=1,
+                                                               parallel="threads")))
+    whole, tiled = (gdal.Open(str(tmp_path / name)).ReadAsArray() for name in ("w.tif", "t.tif"))
+    assert whole.shape == tiled.shape == (600, 600)  # 60 m of points from ...0.3: no extra column or row
+    inner = (slice(100, -100), slice(100, -100))
+    assert np.array_equal(whole[inner] == -9999, tiled[inner] == -9999)
+    assert np.abs(whole[inner].astype(float) - tiled[inner]).max() <= 1e-3
