@@ -11,7 +11,8 @@ Every decision below comes from the file patterns the registered point-cloud pro
   layer* parameter is offered beside it (its source file is read);
 - the classified cloud is loaded as a point-cloud layer when the run ends where a provider opens
   the file written (a .las/.laz with ``pdal``, a .vpc with ``vpc``); elsewhere the log says where it
-  was written and why it is not loaded; the cloud of a graphical model's step that is not a model
+  was written and why it is not loaded, with a warning when it is a temporary file (deleted when
+  QGIS closes); the cloud of a graphical model's step that is not a model
   output is never loaded, as QGIS loads none of its own (``is_model_intermediate``);
 - in the graphical modeler, the point-cloud inputs offer only what can be a point cloud (see
   ``point_cloud_sources``): QGIS's modeler keys a file parameter's choices on output *types* alone
@@ -170,7 +171,9 @@ def make_input_optional(param):
 # -- output ---------------------------------------------------------------------------------
 def load_or_log(context, feedback, path, layer_name, output_name, value=None):
     """Load the point cloud written at ``path`` when the run ends, where a provider of this QGIS
-    opens it; else say in the log where it is and why it is not loaded. Returns the provider key
+    opens it; else say in the log where it is and why it is not loaded, and warn when it is
+    Processing's temporary output (``_temporary``: the dialog's "[Save to temporary file]"), which
+    QGIS deletes at exit: not loaded, nothing else would tell the user. Returns the provider key
     used, or None. (Under qgis_process nothing is loaded either way.)
 
     ``value``, the output parameter's value as the run was given it: the intermediate output of a
@@ -202,6 +205,10 @@ def load_or_log(context, feedback, path, layer_name, output_name, value=None):
     feedback.pushInfo(f"{layer_name}: written to {path}. Not loaded: this QGIS has no point-cloud provider "
                       f"that opens {ext} files (QGIS builds with PDAL, as on Windows and macOS, do); "
                       "open it there or in CloudCompare.")
+    if _temporary(value, path, context):
+        feedback.pushWarning(f"{layer_name}: {path} is a temporary file: QGIS deletes it when it closes. "
+                             "To keep it, give the output a file name (instead of [Save to temporary file]) "
+                             "and run again, or copy the file elsewhere before closing QGIS.")
     return None
 
 

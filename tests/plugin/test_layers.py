@@ -4,6 +4,7 @@ classified cloud is loaded where one opens it and logged where none does, the EV
 and the DTM are styled when they load. Run on 3.40 with
 ``env $(scripts/qgis-340 --env) GROUNDSIEVE_EXPECT_QGIS=3.40 .venv/bin/python -m pytest tests/plugin/test_layers.py``."""
 import json
+import os
 
 import pytest
 
@@ -67,11 +68,15 @@ class _Feedback:
         class Feedback(QgsProcessingFeedback):
             def __init__(self):
                 super().__init__()
-                self.infos = []
+                self.infos, self.warnings = [], []
 
             def pushInfo(self, info):  # noqa: N802
                 self.infos.append(info)
                 super().pushInfo(info)
+
+            def pushWarning(self, warning):  # noqa: N802
+                self.warnings.append(warning)
+                super().pushWarning(warning)
         return Feedback()
 
 
@@ -92,6 +97,45 @@ def test_classified_laz_is_logged_where_no_provider_opens_it(groundsieve_provide
     assert not context.willLoadLayerOnCompletion(str(out))
     said = [i for i in feedback.infos if str(out) in i and "Not loaded" in i]
     assert len(said) == 1 and "no point-cloud provider that opens .laz files" in said[0]
+    assert not [w for w in feedback.warnings if "temporary" in w]  # a file the user named stays
+
+
+def test_a_temporary_classified_cloud_not_loaded_is_said_to_be_deleted_at_exit(groundsieve_provider, scene_laz):
+    """The dialog's default "[Save to temporary file]" where no provider opens .laz (no PDAL, both
+    QGIS here): the cloud is written to Processing's temporary folder, which QGIS deletes when it
+    closes; the log warns so, and says how to keep it."""
+    import processing
+    from qgis.core import QgsProcessing, QgsProcessingOutputLayerDefinition
+    src, _scene = scene_laz
+    context, feedback = _context(), _Feedback()
+    dialog_value = QgsProcessingOutputLayerDefinition(QgsProcessing.TEMPORARY_OUTPUT, context.project())
+    result = processing.run("groundsieve:smrf", {"INPUT": str(src), "OUTPUT": dialog_value, "DTM": None},
+                            context=context, feedback=feedback)
+    out = result["OUTPUT"]
+    assert out.endswith(".laz") and os.path.isfile(out) and not context.willLoadLayerOnCompletion(out)
+    warned = [w for w in feedback.warnings if out in w]
+    assert len(warned) == 1, feedback.warnings
+    assert "temporary file" in warned[0] and "deletes it when it closes" in warned[0]
+    assert "give the output a file name" in warned[0]
+
+
+def test_temporary_warning_follows_the_output_value(groundsieve_provider, tmp_path):
+    """Which runs are warned: the temporary outputs (the dialog's, qgis_process's TEMPORARY_OUTPUT),
+    not a named file, nor a model's intermediate step (QGIS loads none of those)."""
+    from qgis.core import QgsProcessing, QgsProcessingOutputLayerDefinition, QgsProcessingUtils
+    from groundsieve.algorithms import pointclouds
+    temp = QgsProcessingUtils.generateTempFilename("OUTPUT.laz")
+    named = str(tmp_path / "kept.laz")
+
+    def warnings(path, value):
+        feedback = _Feedback()
+        assert pointclouds.load_or_log(_context(), feedback, path, "Classified point cloud", "OUTPUT", value) is None
+        return feedback.warnings
+
+    assert len(warnings(temp, QgsProcessingOutputLayerDefinition(QgsProcessing.TEMPORARY_OUTPUT))) == 1
+    assert len(warnings(temp, QgsProcessing.TEMPORARY_OUTPUT)) == 1  # qgis_process
+    assert warnings(named, named) == [] and warnings(named, QgsProcessingOutputLayerDefinition(named)) == []
+    assert warnings(temp, temp) == []  # a model's intermediate step: not loaded by design, nothing to keep
 
 
 def _load_results(alg_id, context, feedback):
