@@ -459,9 +459,11 @@ def _stale_working_folders(parent: str, current: str) -> List[tuple]:
                 or not os.path.isdir(path):
             continue
         try:
-            with open(os.path.join(path, ".lock"), "a+") as f:
-                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)  # released when closed
-        except OSError:  # held by a live run (BlockingIOError), or not ours to test
+            # read-only (nothing created) and shared: a live run holds its folder exclusively; a run
+            # taking a folder at this instant retries (_lock_working_folder)
+            with open(os.path.join(path, ".lock"), "r") as f:
+                fcntl.flock(f, fcntl.LOCK_SH | fcntl.LOCK_NB)  # released when closed
+        except OSError:  # held by a live run (BlockingIOError), no lock file (being made), not ours
             continue
         size = 0
         for root, _dirs, files in os.walk(path):
@@ -470,6 +472,10 @@ def _stale_working_folders(parent: str, current: str) -> List[tuple]:
                     size += os.path.getsize(os.path.join(root, file))
         stale.append((path, size))
     return sorted(stale, key=lambda item: -item[1])
+
+
+#: tries of a working folder's lock, 0.05 s apart, before another run is said to be using it
+LOCK_ATTEMPTS = 10
 
 
 class _NoLock:
@@ -492,7 +498,14 @@ def _lock_working_folder(work: str):
     except OSError:
         return _NoLock()
     try:
-        fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        for attempt in range(LOCK_ATTEMPTS):  # (another run's look at stale folders holds it an instant)
+            try:
+                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                if attempt == LOCK_ATTEMPTS - 1:
+                    raise
+                time.sleep(0.05)
     except BlockingIOError:
         f.seek(0)
         holder = f.read().strip() or "another process"

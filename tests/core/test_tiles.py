@@ -835,3 +835,25 @@ def test_fine_dtm_cells_off_whole_metres_are_the_same_whole_and_tiled(tmp_path, 
     inner = (slice(100, -100), slice(100, -100))
     assert np.array_equal(whole[inner] == -9999, tiled[inner] == -9999)
     assert np.abs(whole[inner].astype(float) - tiled[inner]).max() <= 1e-3
+
+
+def test_the_look_at_other_working_folders_creates_nothing_and_blocks_no_run(tmp_path):
+    """The stale-folder look created a .lock in folders it looked at and held it exclusively an
+    instant: a run taking that folder then could be refused as if another run held it (a review).
+    It now opens an existing lock read-only and shares it; a run taking a folder retries a moment."""
+    import fcntl
+    import threading
+    from groundsieve.core.engine import tiles
+    being_made = tmp_path / ".groundsieve-tiles-aaaa"
+    being_made.mkdir()  # (made, its lock not yet taken)
+    assert tiles._stale_working_folders(str(tmp_path), str(tmp_path / "mine")) == []
+    assert not (being_made / ".lock").exists()
+    held = tiles._lock_working_folder(str(being_made))
+    assert tiles._stale_working_folders(str(tmp_path), str(tmp_path / "mine")) == []  # a live run's
+    held.close()
+    assert [p for p, _size in tiles._stale_working_folders(str(tmp_path), str(tmp_path / "mine"))] == [str(being_made)]
+    with open(being_made / ".lock") as look:  # another run's look, 0.2 s long, as a run takes the folder
+        fcntl.flock(look, fcntl.LOCK_SH)
+        threading.Timer(0.2, lambda: fcntl.flock(look, fcntl.LOCK_UN)).start()
+        taken = tiles._lock_working_folder(str(being_made))
+    taken.close()
