@@ -23,11 +23,27 @@ TRAINING = {"sklearn": "scikit-learn"}
 #: what pip cannot install into QGIS's Python: it comes with QGIS (or the system's GDAL bindings)
 NOT_PIP = {"GDAL (python3-gdal)"}
 
-INSTALL_HINT = ("Install them into QGIS's Python: Plugins > GroundSieve offers to do it (the message bar's "
-                "'Install…' button), or run the command it shows in the QGIS log (Log Messages > GroundSieve), "
-                "e.g. on Debian/Ubuntu: /usr/bin/python3 -m pip install --user --break-system-packages "
-                "laspy lazrs numba scikit-learn numpy==<the numpy version QGIS runs>; on Windows, from the "
-                "OSGeo4W shell: python -m pip install --user laspy lazrs numba scikit-learn")
+#: where the installer is in the desktop (plugin.py adds this menu entry)
+MENU_ENTRY = "Plugins > GroundSieve > Install Python packages…"
+
+#: what to do when QGIS's Python has no pip (Debian and Ubuntu package it apart: python3-pip)
+NO_PIP_HINT = ("QGIS's Python has no pip. On Debian/Ubuntu install it with: sudo apt install python3-pip, "
+               f"then click Install… again (or {MENU_ENTRY}); on other systems see the README's "
+               "'Install into desktop QGIS'.")
+
+
+def install_hint():
+    """How to install the missing packages, in words: the desktop's menu entry, and the commands
+    by hand with numpy pinned to the version QGIS runs (read from the running numpy)."""
+    try:
+        numpy_pin = f" numpy=={importlib.import_module('numpy').__version__}"
+    except Exception:  # absent or broken: nothing to pin
+        numpy_pin = ""
+    return ("Install them into QGIS's Python: in desktop QGIS with " + MENU_ENTRY + " (or the message bar's "
+            "Install… button), or by hand (the command is also in Log Messages > GroundSieve), e.g. on "
+            "Debian/Ubuntu (pip comes with python3-pip): /usr/bin/python3 -m pip install --user "
+            f"--break-system-packages laspy lazrs numba scikit-learn{numpy_pin}; on Windows, from the "
+            "OSGeo4W shell: python -m pip install --user laspy lazrs numba scikit-learn")
 
 
 def missing_dependencies(extra=None):
@@ -40,7 +56,7 @@ def require_dependencies(extra=None):
     missing = missing_dependencies(extra)
     if missing:
         raise ImportError(f"GroundSieve needs the Python package(s) {', '.join(missing)}, "
-                          f"not found in QGIS's Python. {INSTALL_HINT}")
+                          f"not found in QGIS's Python. {install_hint()}")
 
 
 def qgis_python():
@@ -112,13 +128,33 @@ def command_text(cmd):
     return " ".join(f'"{a}"' if " " in a else a for a in cmd)
 
 
+def pip_available(python=None, run=subprocess.run):
+    """(True, pip's version line) when ``python -m pip --version`` works for QGIS's Python
+    (``python``, default :func:`qgis_python`); else (False, why). Debian and Ubuntu ship pip apart
+    (python3-pip), and QGIS does not depend on it."""
+    python = python or qgis_python()
+    if python is None:
+        return False, f"QGIS's Python interpreter was not found next to {sys.exec_prefix}"
+    try:
+        done = run([python, "-m", "pip", "--version"], capture_output=True, text=True, timeout=60,
+                   env=dict(os.environ, PIP_NO_INPUT="1"))
+    except (OSError, subprocess.TimeoutExpired) as err:
+        return False, f"{python} -m pip --version: {err}"
+    output = ((done.stdout or "") + (done.stderr or "")).strip()
+    return done.returncode == 0, output or f"{python} -m pip --version exited with {done.returncode}"
+
+
 def install(packages, log=print, run=subprocess.run, timeout=1800):
     """Install ``packages`` (pip names) into QGIS's Python; return (ok, what pip printed).
-    Blocking: call it off the GUI thread. Activates the user site afterwards."""
+    Blocking: call it off the GUI thread. Activates the user site afterwards. Without pip, nothing
+    runs: (False, what pip's check said and :data:`NO_PIP_HINT`)."""
     packages = [p for p in packages if p not in NOT_PIP]
     if not packages:
         return True, ""
     cmd = install_command(packages)
+    has_pip, said = pip_available(cmd[0], run=run)
+    if not has_pip:
+        return False, f"{said}\n{NO_PIP_HINT}"
     log(f"Running: {command_text(cmd)}")
     try:
         done = run(cmd, capture_output=True, text=True, timeout=timeout, env=dict(os.environ, PIP_NO_INPUT="1"))

@@ -56,18 +56,163 @@ def test_not_pip_packages_are_never_handed_to_pip():
     assert ok and ran == []
 
 
+def test_without_pip_nothing_runs_and_the_words_say_what_to_do(tmp_path):
+    """Debian/Ubuntu's python3 has no pip unless python3-pip is installed (QGIS does not depend on
+    it): the check says so, and install() runs nothing else."""
+    assert deps.pip_available(sys.executable)[0]  # the venv's Python has pip
+    bare = tmp_path / "python3"  # answers as Debian's python3 without python3-pip does
+    bare.write_text("#!/bin/sh\necho \"$0: No module named pip\" >&2\nexit 1\n")
+    bare.chmod(0o755)
+    ok, said = deps.pip_available(str(bare))
+    assert not ok and "No module named pip" in said
+    ran = []
+
+    def run(cmd, **kwargs):
+        ran.append(cmd)
+        return subprocess.CompletedProcess(cmd, 1, "", "/usr/bin/python3: No module named pip")
+    ok, output = deps.install(["laspy"], run=run)
+    assert not ok and len(ran) == 1 and ran[0][1:] == ["-m", "pip", "--version"]  # never pip install
+    assert "No module named pip" in output and "sudo apt install python3-pip" in output
+    assert "Install… again" in deps.NO_PIP_HINT and deps.MENU_ENTRY in deps.NO_PIP_HINT
+
+
+def test_install_hint_names_the_menu_and_the_numpy_qgis_runs():
+    import numpy
+    hint = deps.install_hint()
+    assert "Plugins > GroundSieve > Install Python packages…" in hint
+    assert f"numpy=={numpy.__version__}" in hint and "<" not in hint  # no placeholder left
+    assert "--user --break-system-packages" in hint
+    with pytest.raises(ImportError, match="Install Python packages…"):
+        deps.require_dependencies({"groundsieve_surely_absent_module": "absent-package"})
+
+
 class _Iface:
-    """What the plugin uses of QGIS's iface, with a real message bar."""
+    """What the plugin uses of QGIS's iface, with a real message bar and a record of the menu."""
 
     def __init__(self):
         from qgis.gui import QgsMessageBar
         self.bar = QgsMessageBar()
+        self.menu = []
 
     def messageBar(self):  # noqa: N802
         return self.bar
 
     def mainWindow(self):  # noqa: N802
         return None
+
+    def addPluginToMenu(self, name, action):  # noqa: N802
+        self.menu.append((name, action))
+
+    def removePluginMenu(self, name, action):  # noqa: N802
+        self.menu.remove((name, action))
+
+
+def _buttons(item):
+    from qgis.PyQt.QtWidgets import QPushButton
+    return [w for w in item.findChildren(QPushButton) if w.text().startswith("Install")]
+
+
+def test_the_menu_entry_runs_the_installer_and_goes_at_unload(qgis_app, monkeypatch):
+    import groundsieve
+    from groundsieve import plugin as plugin_module
+    monkeypatch.setattr(deps, "missing_dependencies", lambda extra=None: ["numba", "GDAL (python3-gdal)"])
+    iface = _Iface()
+    plugin = groundsieve.classFactory(iface)
+    asked = []
+    monkeypatch.setattr(plugin, "ask_and_install", lambda packages, confirm=None: asked.append(packages))
+    try:
+        plugin.initGui()
+        [(menu, action)] = iface.menu
+        assert menu == plugin_module.MENU == "&GroundSieve"
+        # the entry the messages name is the one there
+        assert deps.MENU_ENTRY == f"Plugins > {menu.replace('&', '')} > {action.text()}"
+        iface.bar.popWidget(iface.bar.currentItem())  # the user closed the bar's item: the menu still installs
+        action.trigger()
+        assert asked == [["numba"]]  # what pip can install (GDAL comes with QGIS)
+        monkeypatch.setattr(deps, "missing_dependencies", lambda extra=None: [])
+        action.trigger()
+        assert len(asked) == 1 and "every Python package it needs is installed" in iface.bar.currentItem().text()
+    finally:
+        plugin.unload()
+    assert iface.menu == []
+
+
+def test_without_pip_the_bar_says_what_to_do_and_keeps_install(qgis_app, monkeypatch, tmp_path):
+    """Install… on a QGIS Python without pip: no task, the words (python3-pip), and a button to
+    try again once it is installed, without restarting QGIS."""
+    from qgis.core import QgsApplication
+
+    import groundsieve
+    logged = []
+    QgsApplication.messageLog().messageReceived.connect(lambda msg, tag, level: logged.append((tag, msg)))
+    bare = tmp_path / "python3"
+    bare.write_text("#!/bin/sh\necho \"$0: No module named pip\" >&2\nexit 1\n")
+    bare.chmod(0o755)
+    monkeypatch.setattr(deps, "qgis_python", lambda: str(bare))
+    monkeypatch.setattr(deps, "missing_dependencies", lambda extra=None: ["numba"])
+    iface = _Iface()
+    plugin = groundsieve.classFactory(iface)
+    try:
+        plugin.check_dependencies()
+        assert plugin.ask_and_install(["numba"], confirm=True) is None
+        assert not plugin.installing and plugin.task is None
+        item = iface.bar.currentItem()
+        assert "sudo apt install python3-pip" in item.text() and "again" in item.text()
+        assert len(item.text()) < 130  # the bar cuts longer text: the rest is in the log
+        qgis_app.processEvents()
+        text = " ".join(msg for tag, msg in logged if tag == "GroundSieve")
+        assert "No module named pip" in text and deps.NO_PIP_HINT in text
+        assert len(_buttons(item)) == 1 and len(iface.bar.items()) == 1  # replaces the first item, one button
+    finally:
+        plugin.unload()
+    assert iface.bar.items() == []
+
+
+def test_one_install_at_a_time_and_a_short_failure_message(qgis_app, monkeypatch):
+    """A second click while pip runs starts nothing (it is said); a failure is short in the bar, with
+    pip's output in the log and a button to try again."""
+    import threading
+    import time
+    from qgis.core import QgsApplication
+
+    import groundsieve
+    monkeypatch.setattr(deps, "missing_dependencies", lambda extra=None: ["numba"])
+    monkeypatch.setattr(deps, "pip_available", lambda python=None, run=None: (True, "pip 23.0"))
+    release, calls = threading.Event(), []
+
+    def slow_failing_pip(packages, log=print, **kwargs):
+        calls.append(list(packages))
+        release.wait(60)
+        return False, "ERROR: " + "x" * 3000 + " no matching distribution found for numba"
+    monkeypatch.setattr(deps, "install", slow_failing_pip)
+    logged = []
+    QgsApplication.messageLog().messageReceived.connect(lambda msg, tag, level: logged.append((tag, msg)))
+    iface = _Iface()
+    plugin = groundsieve.classFactory(iface)
+    try:
+        plugin.initGui()
+        [(_menu, action)] = iface.menu
+        task = plugin.ask_and_install(["numba"], confirm=True)
+        assert task is not None and plugin.installing and not action.isEnabled()
+        assert plugin.ask_and_install(["numba"], confirm=True) is None  # the second click
+        assert "already installing" in iface.bar.currentItem().text()
+        assert plugin.task is task
+        release.set()
+        deadline = time.time() + 60
+        while plugin.installing and time.time() < deadline:
+            qgis_app.processEvents()
+            time.sleep(0.02)
+        assert not plugin.installing and action.isEnabled()
+        assert calls == [["numba"]]  # one pip only
+        item = iface.bar.currentItem()
+        assert "failed" in item.text() and "Log Messages > GroundSieve" in item.text() and len(item.text()) < 100
+        assert len(_buttons(item)) == 1  # try again
+        qgis_app.processEvents()
+        text = " ".join(msg for tag, msg in logged if tag == "GroundSieve")
+        assert "no matching distribution found for numba" in text and "Still missing: numba" in text
+    finally:
+        release.set()
+        plugin.unload()
 
 
 def test_missing_packages_message_stays_offers_install_and_logs_the_command(qgis_app, monkeypatch):
