@@ -32,3 +32,28 @@ def test_zip_is_installable_and_lean(tmp_path):
     listing = subprocess.run([QGIS_PROCESS, "list"], env=env, capture_output=True, text=True,
                              timeout=300)
     assert "groundsieve:smrf" in listing.stdout, listing.stdout[-2000:] + listing.stderr[-2000:]
+
+
+def test_metadata_reads_as_qgis_reads_it_and_says_how_to_install():
+    """QGIS's plugin manager reads metadata.txt with configparser (interpolation on: a '%' breaks
+    it) and shows ``about`` as HTML (a '<' would be eaten). The about text names the installer the
+    plugin has and the command by hand that the README gives (pip -r requirements.txt fails on
+    Debian 12: externally-managed-environment)."""
+    import configparser
+    import re
+
+    import groundsieve.dependencies as deps
+    parser = configparser.ConfigParser()
+    with open(REPO / "metadata.txt", encoding="utf-8") as f:
+        parser.read_file(f)
+    fields = {key: parser.get("general", key) for key in parser.options("general")}
+    for key in ("name", "qgisminimumversion", "description", "about", "version", "author", "email",
+                "repository", "hasprocessingprovider"):
+        assert fields.get(key), key
+    about = fields["about"]
+    assert "<" not in about and "requirements.txt" not in about
+    assert "Install…" in about and deps.MENU_ENTRY in about
+    readme = (REPO / "README.md").read_text(encoding="utf-8")
+    debian = re.search(r"^- Debian/Ubuntu: `([^`]+)`", readme, re.M)
+    assert debian and "--break-system-packages" in debian.group(1)
+    assert debian.group(1) in about  # the README's command, word for word
