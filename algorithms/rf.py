@@ -24,8 +24,8 @@ CLOUD_FILTER = "Point clouds (*.las *.laz *.LAS *.LAZ)"
 SURVEY_FILTER = CLOUD_FILTER + ";;Virtual point clouds (*.vpc);;All files and folders (*)"
 
 
-def _rf(extra=None):
-    errors, _workflow = core_modules(extra)
+def _rf(extra=None, feedback=None):
+    errors, _workflow = core_modules(extra, feedback)
     from ..core.engine import learning
     from ..core.learn import rf
     return errors, rf, learning
@@ -156,7 +156,7 @@ importances, timings) with the same figures in a CSV beside it.</p>""")
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         from ..dependencies import TRAINING
-        errors, rf, learning = _rf(TRAINING)
+        errors, rf, learning = _rf(TRAINING, feedback)
         try:
             preset = PRESET_NAMES[self.parameterAsEnum(parameters, self.PRESET, context)]
             if preset == "custom":
@@ -253,7 +253,7 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
         self.addParameter(dtm_max_distance_parameter(self.DTM_MAX_DISTANCE))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        errors, rf, learning = _rf()
+        errors, rf, learning = _rf(feedback=feedback)
         from ..core.engine.workflow import DTMOptions
         input_path = self.parameterAsFile(parameters, self.INPUT, context)
         output = pointclouds.classified_output_path(self, parameters, context, self.OUTPUT, input_path)

@@ -127,7 +127,7 @@ sensitivity) and every set tried.</p>""")
         return check_parameter_values(self, parameters, context, ok, message)
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        errors, _workflow = core_modules()
+        errors, _workflow = core_modules(feedback=feedback)
         from ..core.engine import presets, tune
         from ..core.engine.tune_report import write_report
         name = FILTERS[self.parameterAsEnum(parameters, self.FILTER, context)]
