@@ -45,7 +45,8 @@ the DTM (whose grid spans only the other points), their class kept.</p>
 <p>Where this QGIS opens point clouds (a point-cloud provider for LAS/LAZ, COPC or .vpc: PDAL in the
 Windows and macOS builds), <i>or a loaded point-cloud layer</i> takes a layer of the project instead
 of a path, and the classified cloud is loaded as a point-cloud layer when the run ends; where it cannot
-(Debian's builds have no PDAL), the log says where the classified cloud was written.</p>
+(Debian's builds have no PDAL), the log says where the classified cloud was written, with a warning when it
+is a temporary file ("[Save to temporary file]"), which QGIS deletes when it closes: give it a file name to keep it.</p>
 <p><b>DTM</b> (on by default; untick or leave empty in qgis_process to skip it): a GeoTIFF of the ground points interpolated linearly on their Delaunay
 triangulation, cell size <i>DTM cell size</i>, the cloud's CRS, nodata -9999 outside the hull of
 the ground points unless <i>DTM: fill cells outside the ground hull</i> is ticked (nearest value).
