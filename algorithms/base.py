@@ -309,6 +309,11 @@ def dtm_max_distance_parameter(name):
     return param
 
 
+#: the GeoPackage's "Undefined Cartesian SRS" (srs_id -1), for outputs of a cloud without a CRS
+UNDEFINED_CARTESIAN_WKT = ('LOCAL_CS["Undefined cartesian SRS",LOCAL_DATUM["Unknown engineering datum",32767],'
+                           'UNIT["metre",1],AXIS["Easting",EAST],AXIS["Northing",NORTH]]')
+
+
 class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
     """Base class of the ground filters. Subclasses declare their own parameters in
     ``initFilterParameters`` and build the core filter object in ``buildFilter``."""
@@ -626,8 +631,9 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         fields = QgsFields()
         fields.append(_int_field("return_number"))
         fields.append(_int_field("intensity"))
-        crs = QgsCoordinateReferenceSystem.fromWkt(run.cloud.crs_wkt) if run.cloud.crs_wkt else \
-            QgsCoordinateReferenceSystem()
+        # A cloud without a CRS: an undefined *Cartesian* CRS (a GeoPackage's srs_id -1), not QGIS's invalid
+        # CRS, which OGR writes as "Undefined geographic SRS" (srs_id 0): metres taken for degrees
+        crs = QgsCoordinateReferenceSystem.fromWkt(run.cloud.crs_wkt or UNDEFINED_CARTESIAN_WKT)
         sink, sink_id = self.parameterAsSink(parameters, self.GROUND_POINTS, context, fields,
                                              QgsWkbTypes.Type.PointZ, crs)
         if sink is None:

@@ -152,3 +152,18 @@ def test_the_crs_unit_is_said_before_the_work_and_degrees_are_refused(groundsiev
     with pytest.raises(QgsProcessingException, match=r"lonlat\.laz: its coordinates are longitudes and latitudes"):
         _run({"INPUT": str(tmp_path / "lonlat.laz"), "OUTPUT": str(tmp_path / "l.laz")})
     assert not (tmp_path / "l.laz").exists()
+
+
+def test_ground_points_of_a_cloud_without_crs_are_not_said_to_be_geographic(groundsieve_provider, tmp_path):
+    """The ground-point GeoPackage of a LAZ without a CRS carried "Undefined geographic SRS" (srs_id
+    0) over coordinates in metres, which QGIS takes for a valid geographic CRS (a reviewer): it is
+    the GeoPackage's undefined Cartesian SRS (srs_id -1)."""
+    import sqlite3
+    from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+    src = tmp_path / "nocrs.laz"
+    write_scene(make_scene(SceneSpec(size_m=40.0, density_per_m2=2.0, seed=2)), str(src), crs_wkt="")
+    gpkg = tmp_path / "ground.gpkg"
+    _run({"INPUT": str(src), "OUTPUT": str(tmp_path / "o.laz"), "GROUND_POINTS": str(gpkg)})
+    with sqlite3.connect(str(gpkg)) as db:
+        (srs_id,), = db.execute("select srs_id from gpkg_geometry_columns").fetchall()
+    assert srs_id == -1
