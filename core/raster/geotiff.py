@@ -12,6 +12,9 @@ from ..grids.spec import GridSpec
 from ..io import atomic_path
 from .crs import elevation_unit
 
+#: a DTM band's description (QGIS names the band after it in the legend: "Band 1: elevation")
+ELEVATION_BAND = "elevation"
+
 NODATA = -9999.0
 RASTER_EXTENSIONS = (".tif", ".tiff")
 
@@ -50,6 +53,7 @@ def write_geotiff(path: str, values: np.ndarray, grid: GridSpec, *, crs_wkt: Opt
             band.SetNoDataValue(nodata)
             if elevation:
                 band.SetUnitType(elevation_unit(crs_wkt))
+                band.SetDescription(ELEVATION_BAND)
             if categories:
                 _set_categories(band, categories)
             band.WriteArray(data)
@@ -97,6 +101,7 @@ class BlockGeoTIFF:
             self._band = self._ds.GetRasterBand(1)
             self._band.SetNoDataValue(nodata)
             self._band.SetUnitType(elevation_unit(crs_wkt))
+            self._band.SetDescription(ELEVATION_BAND)
         except RuntimeError as err:
             raise OutputError(f"{work_path}: cannot create the temporary raster ({err})") from err
 

@@ -147,6 +147,7 @@ def test_dtm_mosaic_equals_the_whole_cloud_dtm(scene_laz, tmp_path):
     assert ds.GetGeoTransform() == grid.geotransform
     assert ds.GetRasterBand(1).GetBlockSize() != [ds.RasterXSize, 1]  # tiled, not striped
     assert ds.GetMetadataItem("LAYOUT", "IMAGE_STRUCTURE") == "COG"
+    assert ds.GetRasterBand(1).GetDescription() == "elevation"
     mosaic = ds.ReadAsArray().astype(float)
     mosaic[mosaic == -9999] = np.nan
     inner = (slice(10, -10), slice(10, -10))  # away from the survey border

@@ -257,6 +257,7 @@ def test_dtm_geotiff(scene, tmp_path, cell):
     assert band.GetNoDataValue() == -9999.0
     assert band.DataType == 6  # GDT_Float32
     assert band.GetUnitType() == "m"  # heights in the CRS's unit (UTM: metres)
+    assert band.GetDescription() == "elevation"  # (QGIS's legend: "Band 1: elevation", not "Band 1 (Gray)")
     assert ds.GetMetadata("IMAGE_STRUCTURE").get("PREDICTOR") == "3"  # floating-point predictor
     # The ground lies on [Y0, Y0 + 59.9] with points on y = Y0 exactly: that southern edge adds no
     # row of nodata (a closed grid: 60 m of points give 60 m of DTM, at 1 and at 2 m)
