@@ -728,10 +728,24 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             f"(+{result['read'] - result['own']:,} buffer), {result['ground']:,} ground; "
             f"about {elapsed / done_frac - elapsed:.0f} s left.")
         filter_steps.report(done_frac)
+        pace["done"] += 1
+        pace["last"] = time.perf_counter()
+
+    # Between two finished tiles the bar moves on at the pace of those finished so far in this run
+    # (never past the next one): with few large tiles on worker processes it stood still for minutes.
+    pace = {"done": 0, "last": None}
+
+    def tick():
+        steps.check()
+        if pace["done"]:
+            per_tile = (pace["last"] - pace["start"]) / pace["done"]
+            ahead = min(0.9, (time.perf_counter() - pace["last"]) / max(per_tile, 1e-6))
+            filter_steps.report(min(1.0, (len(tile_log) + ahead) / len(keys)))
 
     for before in done_before:
         if before is not None:
             record(before)
+    pace.update(done=0, start=time.perf_counter())  # (the pace of this run's tiles only)
     if tiling.scheduler:
         from .cluster import run_jobs
         run_jobs(tiling.scheduler, _tile_job, jobs, record, is_cancelled=steps.is_cancelled,
@@ -747,7 +761,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     else:
         with _pool(workers, use_processes, pool) as tile_pool:
             try:
-                _record_as_completed(tile_pool, _tile_job, jobs, record, steps.check,
+                _record_as_completed(tile_pool, _tile_job, jobs, record, tick,
                                      stage=f"tiles of {_few({n for job in jobs for n in job['names']})}")
             except BaseException:
                 failed.set()  # (worker processes are stopped by the run: stop_workers)

@@ -858,3 +858,27 @@ def test_the_look_at_other_working_folders_creates_nothing_and_blocks_no_run(tmp
         threading.Timer(0.2, lambda: fcntl.flock(look, fcntl.LOCK_UN)).start()
         taken = tiles._lock_working_folder(str(being_made))
     taken.close()
+
+
+class _SlowGround(_AllGround):
+    """Every point ground, after 0.6 s a tile (a slow filter)."""
+
+    def __call__(self, xyz, steps=None, **_fields):
+        import time
+        time.sleep(0.6)
+        return super().__call__(xyz)
+
+
+def test_the_bar_moves_between_finished_tiles(scene_laz, tmp_path):
+    """With a few slow tiles the bar moved only when one finished (minutes apart on large tiles in
+    worker processes): between two it moves on at the pace of the tiles finished so far, never
+    past the next one."""
+    shown = []
+    run = run_ground_filter(scene_laz, str(tmp_path / "o.laz"), _SlowGround(), progress=shown.append,
+                            options=tiled(tile=120.0, buffer_m=10.0))
+    n = run.tiles
+    assert n >= 4
+    tiles = [(v - 0.3) / 0.55 * n for v in shown if 0.3 < v < 0.85]  # the tiles stage, in tiles done
+    between = [t for t in tiles if abs(t - round(t)) > 0.05]
+    assert between, shown  # values between two finished tiles
+    assert all(b >= a for a, b in zip(shown, shown[1:]))  # never back
