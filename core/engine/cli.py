@@ -416,6 +416,10 @@ def options_from(args, log=None):
                                           classes=args.dtm_classes, max_distance_m=args.dtm_max_distance)
 
 
+#: set once the run has ended (its outputs in place or its error said): a SIGTERM then changes nothing
+#: (``python -m groundsieve`` ignores it instead of ending a finished run as killed)
+FINISHED = [False]
+
 #: the exit status of an interrupted run (128 + SIGINT, as shells report Ctrl-C)
 INTERRUPTED = 130
 
@@ -445,6 +449,7 @@ def main(argv: Optional[List[str]] = None, out=None, stdout=None) -> int:
     130 = interrupted (Ctrl-C; SIGTERM too under ``python -m groundsieve``). The log goes to ``out``
     (stderr); with ``--json`` one JSON document goes to ``stdout`` (sys.stdout) at the end."""
     out = out or sys.stderr
+    FINISHED[0] = False
     argv = sys.argv[1:] if argv is None else list(argv)
     try:
         args = build_parser().parse_args(argv)
@@ -453,10 +458,13 @@ def main(argv: Optional[List[str]] = None, out=None, stdout=None) -> int:
             write_json(stdout or sys.stdout, {"status": "failed", "error": err.message})
         raise
     if not args.json:
-        return _run(args, out)[0]
+        code = _run(args, out)[0]
+        FINISHED[0] = True
+        return code
     try:
         with _stdout_to(out):
             code, document = _run(args, out)
+            FINISHED[0] = True
     except Exception as err:  # not a refusal: the traceback as without --json, and the document still
         write_json(stdout or sys.stdout, {"status": "failed", "error": f"{type(err).__name__}: {err}"})
         raise

@@ -57,17 +57,31 @@ class Failed:
         self.error = error
 
 
-def no_retry(function):
+def no_retry(function, code: str = ""):
     """``function`` for a cluster job: its deliberate errors (a ``GroundSieveError`` raised by the core
-    on purpose, i.e. not wrapping an unexpected exception) come back as :class:`Failed`."""
-    return _NoRetry(function)
+    on purpose, i.e. not wrapping an unexpected exception) come back as :class:`Failed`. With the
+    client's ``code`` (its core/ digest), a worker whose own code differs refuses the job: a worker
+    that joined the cluster after the run checked its workers runs no tile with other code."""
+    return _NoRetry(function, code)
+
+
+_WORKER_CODE = []  # this process's core/ digest, once made
 
 
 class _NoRetry:
-    def __init__(self, function):
+    def __init__(self, function, code: str = ""):
         self.function = function
+        self.code = code
 
     def __call__(self, job):
+        if self.code:
+            if not _WORKER_CODE:
+                _WORKER_CODE.append(_core_digest())
+            if _WORKER_CODE[0] != self.code:
+                return Failed(ClusterError(f"Dask worker {_worker_address()} runs GroundSieve {package_version()} "
+                                           "with other code than this client (it joined after the workers were "
+                                           "checked; its core/ differs); install the same groundsieve folder on "
+                                           "every worker (e.g. one copy on the shared file system)"))
         try:
             return self.function(job)
         except Cancelled:
@@ -179,6 +193,15 @@ def probe(paths, writable):
     out["unwritable"] = [p for p in writable if os.path.isdir(p) and not os.access(p, os.W_OK)]
     return out
 '''
+
+
+def _worker_address() -> str:
+    try:
+        from distributed import get_worker
+        worker = get_worker()
+        return f"{worker.address} (host {os.uname().nodename if hasattr(os, 'uname') else '?'})"
+    except Exception:  # (not in a Dask worker)
+        return "(unknown)"
 
 
 def _core_digest() -> str:
@@ -502,9 +525,10 @@ def run_jobs(scheduler: str, function, jobs: List[dict], record: Callable[[objec
         client = cluster.client
         n = check_workers(client, paths, writable)
         log(f"{len(jobs)} job(s) on the Dask cluster's {n} worker(s) ({client.scheduler.address}).")
+        code = _core_digest()  # (a worker joining later checks it before each job)
         futures = {}
         for job in jobs:
-            fut = client.submit(no_retry(function), job, retries=RETRIES, pure=False,
+            fut = client.submit(no_retry(function, code), job, retries=RETRIES, pure=False,
                                 key=f"groundsieve-tile-{job['key'][0]}_{job['key'][1]}-{os.urandom(4).hex()}")
             futures[fut] = job
         pending = set(futures)

@@ -425,7 +425,7 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
             raise
     stale = _stale_working_folders(parent, work)
     if stale:
-        log(f"{len(stale)} working folder(s) of earlier runs that were killed hold {_gb(sum(b for _p, b in stale))} "
+        log(f"Warning: {len(stale)} working folder(s) of earlier runs that were killed hold {_gb(sum(b for _p, b in stale))} "
             f"in {parent} ({', '.join(os.path.basename(p) for p, _b in stale[:3])}{', ...' if len(stale) > 3 else ''}); "
             "only a run of the same inputs and parameters resumes from one: delete those you will not run again.")
     try:
@@ -549,11 +549,15 @@ def _run_locked(work, inputs, infos, outs, output_path, grid, algorithm, options
         if cluster is not None:  # first: a LocalCluster's workers still running a tile stop writing
             cluster.close()
             cluster = None
-        # Kept for a restart when the user chose the working folder; removed otherwise.
+        # Kept for a restart when the user chose the working folder and the binning is done (a restart
+        # deletes a partial binning anyway); removed otherwise.
         if not tiling.work_dir:
             _remove_tree(work)
             log("The tiles done so far are deleted with the run's temporary working folder; name a working "
                 "folder to keep them for the next run to resume from.")
+        elif not os.path.exists(os.path.join(work, "binned.json")):
+            _remove_tree(work)
+            log(f"Nothing a run could resume from was done; the working folder {work} is removed.")
         else:
             log(f"The tiles done so far are kept in {work}: run again to resume, or delete it.")
         raise

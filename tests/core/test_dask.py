@@ -177,6 +177,26 @@ def test_a_worker_with_the_same_version_but_other_code_is_refused(tmp_path, monk
             cl.check_workers(c.client, [str(tmp_path)])
 
 
+@needs_dask
+def test_a_worker_that_joins_after_the_check_runs_no_job_with_other_code(monkeypatch):
+    """Workers were checked once, at the start: one with other code that joined mid-run (dask-jobqueue
+    adds workers over time) ran tiles, and a resumed run reused them (a reviewer). Each job now
+    carries the client's code digest, and a worker whose own differs refuses it in words."""
+    from groundsieve.core.engine import cluster as cl
+    monkeypatch.setattr(cl, "check_workers", lambda *a, **k: 1)  # (as if the worker had joined after)
+    monkeypatch.setattr(cl, "_core_digest", lambda: "the client's other code")
+    got = []
+    with pytest.raises(cl.ClusterError, match=r"Dask worker tcp://.* with other code than this client \(it joined "
+                                              r"after the workers were checked"):
+        cl.run_jobs("local:1", len, [{"key": (0, 0)}, {"key": (0, 1)}], got.append, is_cancelled=lambda: False,
+                    paths=[], writable=[], names=lambda job: str(job["key"]))
+    assert got == []
+    monkeypatch.undo()
+    cl._WORKER_CODE.clear()  # (this process's own digest, made again unpatched)
+    assert isinstance(cl.no_retry(len, "other code")({"key": (0, 0)}), cl.Failed)
+    assert cl.no_retry(len, cl._core_digest())({"key": (0, 0)}) == 1  # the same code: the job runs
+
+
 def test_scheduler_addresses_are_checked_without_dask():
     from groundsieve.core.engine.cluster import parse_scheduler
     assert parse_scheduler("") == ("", None)

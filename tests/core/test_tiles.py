@@ -882,3 +882,20 @@ def test_the_bar_moves_between_finished_tiles(scene_laz, tmp_path):
     between = [t for t in tiles if abs(t - round(t)) > 0.05]
     assert between, shown  # values between two finished tiles
     assert all(b >= a for a, b in zip(shown, shown[1:]))  # never back
+
+
+def test_a_run_stopped_before_its_binning_ends_leaves_no_working_folder(scene_laz, tmp_path):
+    """A run refused or stopped before any tile (a reviewer's: a cluster worker refused) said "the
+    tiles done so far are kept ... run again to resume" and left an empty working folder, which the
+    next run then reported as a killed run's: with nothing to resume from, it is removed."""
+    from groundsieve.core.errors import Cancelled
+    lines = []
+
+    def binning_begun():  # (once the run has made its working folder)
+        return any(n.startswith(".groundsieve-tiles-") for n in os.listdir(tmp_path))
+    with pytest.raises(Cancelled):
+        run_ground_filter(scene_laz, str(tmp_path / "o.laz"), SMRF(), log=lines.append, is_cancelled=binning_begun,
+                          options=FilterOptions(tiling=TileOptions(tile_size_m=60.0, workers=1, parallel="threads",
+                                                                   work_dir=str(tmp_path))))
+    assert not [n for n in os.listdir(tmp_path) if n.startswith(".groundsieve-tiles-")], os.listdir(tmp_path)
+    assert any(line.startswith("Nothing a run could resume from was done") for line in lines), lines
