@@ -59,6 +59,20 @@ def add_child(model, alg_id, child_id, sources, outputs, static=None):
     model.addChildAlgorithm(child)
 
 
+def vpc_survey(scene_laz, tmp_path, name="classified.vpc"):
+    """The scene split into a folder of two files, and a .vpc output path in a folder made for it;
+    skips the test where this QGIS opens no .vpc (before 3.32)."""
+    from groundsieve.algorithms import pointclouds
+    from .test_survey_inputs import _split
+    if not pointclouds.providers_opening("x.vpc"):
+        pytest.skip("this QGIS has no point-cloud provider for .vpc (QGIS < 3.32)")
+    src, _scene = scene_laz
+    _split(src, tmp_path / "in")
+    out = tmp_path / "out" / name
+    out.parent.mkdir()
+    return tmp_path / "in", out
+
+
 def classes_of(path):
     import laspy
     return np.asarray(laspy.read(str(path)).classification)

@@ -8,6 +8,8 @@ import os
 
 import pytest
 
+from .conftest import vpc_survey
+
 FILTERS = ["smrf", "csf", "ptd", "pmf", "echogrid", "evc", "evcrasters", "hybrid"]
 
 
@@ -227,15 +229,9 @@ def test_vpc_output_loads_and_a_loaded_layer_is_an_input(groundsieve_provider, s
     import processing
     from qgis.core import QgsPointCloudLayer, QgsProject
     from groundsieve.algorithms import pointclouds
-    from .test_survey_inputs import _split
-    if not pointclouds.providers_opening("x.vpc"):
-        pytest.skip("this QGIS has no point-cloud provider for .vpc (QGIS < 3.32)")
-    src, _scene = scene_laz
-    _split(src, tmp_path / "in")
-    out = tmp_path / "out" / "classified.vpc"
-    out.parent.mkdir()
+    folder, out = vpc_survey(scene_laz, tmp_path, "classified.vpc")
     context, feedback = _context(), _Feedback()
-    processing.run("groundsieve:smrf", {"INPUT": str(tmp_path / "in"), "OUTPUT": str(out), "TILE_SIZE": 50.0},
+    processing.run("groundsieve:smrf", {"INPUT": str(folder), "OUTPUT": str(out), "TILE_SIZE": 50.0},
                    context=context, feedback=feedback)
     assert context.willLoadLayerOnCompletion(str(out))
     assert not [i for i in feedback.infos if "Not loaded" in i]

@@ -12,7 +12,7 @@ The classified cloud loads only where a point-cloud provider opens it: LAS/LAZ w
 macOS builds, simulated here by its declared patterns), .vpc with QGIS >= 3.32 (3.40 here, for real)."""
 import pytest
 
-from .conftest import add_child, classes_of
+from .conftest import add_child, classes_of, vpc_survey
 
 #: what a build with PDAL declares (test_layers.py): the same code then loads .laz outputs
 PDAL = {"pdal": ["*.las", "*.laz"]}
@@ -121,15 +121,9 @@ def test_a_model_does_not_load_an_intermediate_vpc(groundsieve_provider, scene_l
     from processing.gui.Postprocessing import handleAlgorithmResults
     from qgis.core import QgsProcessingFeedback, QgsProject
     from groundsieve.algorithms import pointclouds
-    from .test_survey_inputs import _split
-    if not pointclouds.providers_opening("x.vpc"):
-        pytest.skip("this QGIS has no point-cloud provider for .vpc (QGIS < 3.32)")
-    src, _scene = scene_laz
-    _split(src, tmp_path / "in")
-    second = tmp_path / "out" / "second.vpc"
-    second.parent.mkdir()
+    folder, second = vpc_survey(scene_laz, tmp_path, "second.vpc")
     model = _model(first_is_output=False, TILE_SIZE=50.0)
-    results, context = _run(model, {"cloud": str(tmp_path / "in"), "pmf:second": _as_dialog(second)})
+    results, context = _run(model, {"cloud": str(folder), "pmf:second": _as_dialog(second)})
     intermediate = results["CHILD_RESULTS"]["smrf"]["OUTPUT"]
     assert intermediate.endswith(".vpc") and pointclouds.is_model_intermediate(
         results["CHILD_INPUTS"]["smrf"]["OUTPUT"], context)
@@ -234,16 +228,9 @@ def test_rfclassify_loads_a_survey_vpc(groundsieve_provider, scene_laz, rf_model
     import processing
     from processing.gui.Postprocessing import handleAlgorithmResults
     from qgis.core import QgsApplication, QgsPointCloudLayer, QgsProcessingFeedback, QgsProject
-    from groundsieve.algorithms import pointclouds
-    from .test_survey_inputs import _split
-    if not pointclouds.providers_opening("x.vpc"):
-        pytest.skip("this QGIS has no point-cloud provider for .vpc (QGIS < 3.32)")
-    src, _scene = scene_laz
-    _split(src, tmp_path / "in")
-    out = tmp_path / "out" / "classified.vpc"
-    out.parent.mkdir()
+    folder, out = vpc_survey(scene_laz, tmp_path, "classified.vpc")
     context, feedback = _context(), QgsProcessingFeedback()
-    processing.run("groundsieve:rfclassify", {"INPUT": str(tmp_path / "in"), "MODEL": str(rf_model),
+    processing.run("groundsieve:rfclassify", {"INPUT": str(folder), "MODEL": str(rf_model),
                                               "OUTPUT": _as_dialog(out)}, context=context, feedback=feedback)
     try:
         assert handleAlgorithmResults(QgsApplication.processingRegistry().algorithmById("groundsieve:rfclassify"),
