@@ -205,7 +205,8 @@ def build_parser() -> argparse.ArgumentParser:
                "\"ground\", \"seconds\", \"tiles\" (null for a run without tiles), \"algorithm\", "
                "\"parameters\", \"warnings\"}; for tune the chosen \"parameters\" and the cross-validated "
                "\"cv\" figures; when the exit status is not 0, {\"status\": \"failed\" (1, 2) or "
-               "\"interrupted\" (130), \"error\": the one-line message}.")
+               "\"interrupted\" (130), \"kind\" (usage, input, parameter, memory, output, cluster, cancelled, "
+               "interrupted, other), \"error\": the one-line message}.")
     sub = parser.add_subparsers(title="filters", metavar="FILTER", required=True)
     for name in P.FILTERS:
         _add_filter(sub, name)
@@ -435,13 +436,25 @@ def _run(args, out):
         return 0, (run_tune if args.filter == "tune" else run_filter)(args, out)
     except _Usage as err:
         print(f"groundsieve: {err}", file=out)
-        return 2, {"status": "failed", "error": str(err)}
+        return 2, {"status": "failed", "kind": "usage", "error": str(err)}
     except KeyboardInterrupt:
         print("groundsieve: interrupted", file=out)
-        return INTERRUPTED, {"status": "interrupted", "error": "interrupted"}
+        return INTERRUPTED, {"status": "interrupted", "kind": "interrupted", "error": "interrupted"}
     except GroundSieveError as err:  # Cancelled too
         print(f"groundsieve: {err}", file=out)
-        return 1, {"status": "failed", "error": str(err)}
+        return 1, {"status": "failed", "kind": error_kind(err), "error": str(err)}
+
+
+def error_kind(err: BaseException) -> str:
+    """A failure's kind for scripts (``--json``'s "kind"): "input", "parameter", "memory", "output",
+    "cluster" (the Dask cluster: often worth a retry once it is back), "cancelled" or "other"."""
+    from ..errors import Cancelled, InputError, InvalidParameterError, MemoryBudgetError, OutputError
+    from .cluster import ClusterError
+    for cls, kind in ((Cancelled, "cancelled"), (MemoryBudgetError, "memory"), (ClusterError, "cluster"),
+                      (InputError, "input"), (InvalidParameterError, "parameter"), (OutputError, "output")):
+        if isinstance(err, cls):
+            return kind
+    return "other"
 
 
 def main(argv: Optional[List[str]] = None, out=None, stdout=None) -> int:
@@ -455,7 +468,7 @@ def main(argv: Optional[List[str]] = None, out=None, stdout=None) -> int:
         args = build_parser().parse_args(argv)
     except UsageExit as err:  # bad usage (2): argparse has said why on stderr
         if _wants_json(argv):
-            write_json(stdout or sys.stdout, {"status": "failed", "error": err.message})
+            write_json(stdout or sys.stdout, {"status": "failed", "kind": "usage", "error": err.message})
         raise
     if not args.json:
         code = _run(args, out)[0]
@@ -466,7 +479,7 @@ def main(argv: Optional[List[str]] = None, out=None, stdout=None) -> int:
             code, document = _run(args, out)
             FINISHED[0] = True
     except Exception as err:  # not a refusal: the traceback as without --json, and the document still
-        write_json(stdout or sys.stdout, {"status": "failed", "error": f"{type(err).__name__}: {err}"})
+        write_json(stdout or sys.stdout, {"status": "failed", "kind": "other", "error": f"{type(err).__name__}: {err}"})
         raise
     write_json(stdout or sys.stdout, document)
     return code

@@ -317,17 +317,17 @@ def test_json_failures_give_the_message_and_the_exit_status(tmp_path, monkeypatc
     assert main(["pmf", "--input", missing, "--output", str(tmp_path / "o.laz"), "--json"], out=out,
                 stdout=stdout) == 1
     doc = json.loads(stdout.getvalue())
-    assert doc == {"status": "failed", "error": f"{missing}: no such file or folder"}
+    assert doc == {"status": "failed", "kind": "input", "error": f"{missing}: no such file or folder"}
     assert out.getvalue().strip().endswith(f"groundsieve: {doc['error']}")
     # bad usage, found by argparse or after it: 2, as without --json
     stdout = io.StringIO()
     assert main(["smrf", "--input", missing, "--json"], out=io.StringIO(), stdout=stdout) == 2
-    assert json.loads(stdout.getvalue()) == {"status": "failed", "error": "give --output and/or --dtm"}
+    assert json.loads(stdout.getvalue()) == {"status": "failed", "kind": "usage", "error": "give --output and/or --dtm"}
     stdout = io.StringIO()
     with pytest.raises(SystemExit) as exit_:
         main(["smrf", "--input", missing, "--output", "o.laz", "--cell", "wide", "--json"], stdout=stdout)
     assert exit_.value.code == 2
-    assert json.loads(stdout.getvalue()) == {"status": "failed",
+    assert json.loads(stdout.getvalue()) == {"status": "failed", "kind": "usage",
                                              "error": "argument --cell: invalid float value: 'wide'"}
     # without --json, nothing on stdout
     stdout = io.StringIO()
@@ -341,7 +341,7 @@ def test_json_failures_give_the_message_and_the_exit_status(tmp_path, monkeypatc
     monkeypatch.setattr(workflow, "run_ground_filter", interrupted)
     out, stdout = io.StringIO(), io.StringIO()
     assert main(["smrf", "--input", missing, "--output", "o.laz", "--json"], out=out, stdout=stdout) == 130
-    assert json.loads(stdout.getvalue()) == {"status": "interrupted", "error": "interrupted"}
+    assert json.loads(stdout.getvalue()) == {"status": "interrupted", "kind": "interrupted", "error": "interrupted"}
     assert "groundsieve: interrupted" in out.getvalue()
     # not a refusal (a bug): the traceback as without --json, and the document still says failed
     def broken(*_a, **_k):
@@ -350,7 +350,7 @@ def test_json_failures_give_the_message_and_the_exit_status(tmp_path, monkeypatc
     stdout = io.StringIO()
     with pytest.raises(RuntimeError):
         main(["smrf", "--input", missing, "--output", "o.laz", "--json"], out=io.StringIO(), stdout=stdout)
-    assert json.loads(stdout.getvalue()) == {"status": "failed", "error": "RuntimeError: a bug"}
+    assert json.loads(stdout.getvalue()) == {"status": "failed", "kind": "other", "error": "RuntimeError: a bug"}
 
 
 def test_json_stdout_holds_the_document_alone_even_when_something_writes_to_it(scene, tmp_path):
@@ -414,3 +414,25 @@ def test_a_sigterm_once_the_run_has_ended_does_not_make_it_killed(scene, tmp_pat
         proc.send_signal(signal.SIGTERM)
     assert proc.wait(30) == 0
     assert (tmp_path / "o.laz").exists()
+
+
+def test_json_failures_say_their_kind(scene, tmp_path):
+    """A script could tell a retryable failure (the cluster gone) from a permanent one only by the
+    message's words (a reviewer): --json's failures carry a kind."""
+    from groundsieve.core.engine.cli import error_kind
+    from groundsieve.core.engine.cluster import ClusterError
+    from groundsieve.core.engine.presets import PresetError
+    from groundsieve.core.errors import (Cancelled, GroundSieveError, InputError, InvalidParameterError,
+                                         MemoryBudgetError, OutputError)
+    kinds = {InputError: "input", PresetError: "input", InvalidParameterError: "parameter",
+             MemoryBudgetError: "memory", OutputError: "output", ClusterError: "cluster", Cancelled: "cancelled",
+             GroundSieveError: "other"}
+    assert {cls: error_kind(cls("x")) for cls in kinds} == kinds
+    stdout = io.StringIO()
+    assert main(["smrf", "--input", scene, "--output", str(tmp_path / "o.laz"), "--slope", "-1", "--json"],
+                out=io.StringIO(), stdout=stdout) == 1
+    assert json.loads(stdout.getvalue())["kind"] == "parameter"
+    stdout = io.StringIO()
+    assert main(["smrf", "--input", scene, "--output", str(tmp_path / "no" / "o.laz"), "--json"],
+                out=io.StringIO(), stdout=stdout) == 1
+    assert json.loads(stdout.getvalue())["kind"] == "output"
