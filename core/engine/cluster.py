@@ -29,6 +29,7 @@ with the packages the core needs and the GroundSieve version.
 from __future__ import annotations
 
 import asyncio
+import functools
 import os
 import re
 import threading
@@ -65,23 +66,17 @@ def no_retry(function, code: str = ""):
     return _NoRetry(function, code)
 
 
-_WORKER_CODE = []  # this process's core/ digest, once made
-
-
 class _NoRetry:
     def __init__(self, function, code: str = ""):
         self.function = function
         self.code = code
 
     def __call__(self, job):
-        if self.code:
-            if not _WORKER_CODE:
-                _WORKER_CODE.append(_core_digest())
-            if _WORKER_CODE[0] != self.code:
-                return Failed(ClusterError(f"Dask worker {_worker_address()} runs GroundSieve {package_version()} "
-                                           "with other code than this client (it joined after the workers were "
-                                           "checked; its core/ differs); install the same groundsieve folder on "
-                                           "every worker (e.g. one copy on the shared file system)"))
+        if self.code and _core_digest() != self.code:  # (this worker process's own digest, made once)
+            return Failed(ClusterError(f"Dask worker {_worker_address()} runs GroundSieve {package_version()} "
+                                       "with other code than this client (it joined after the workers were "
+                                       "checked; its core/ differs); install the same groundsieve folder on "
+                                       "every worker (e.g. one copy on the shared file system)"))
         try:
             return self.function(job)
         except Cancelled:
@@ -138,9 +133,13 @@ def import_distributed():
     return distributed
 
 
+#: the folder of this GroundSieve package (its metadata.txt, its core/)
+PACKAGE_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
 def package_version() -> str:
     """This GroundSieve's version (metadata.txt of the package)."""
-    return _version_of(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+    return _version_of(PACKAGE_ROOT)
 
 
 def _version_of(root: str) -> str:
@@ -204,17 +203,22 @@ def _worker_address() -> str:
         return "(unknown)"
 
 
-def _core_digest() -> str:
-    """This client's core/ digest, by the probe's own function."""
+def _probe_namespace() -> dict:
+    """The probe's functions (``probe``, ``core_digest``), made from its source as the workers get it."""
     namespace = {"__name__": "groundsieve_cluster_probe"}
     exec(compile(_PROBE_SOURCE, "<groundsieve worker probe>", "exec"), namespace)
-    return namespace["core_digest"](os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+    return namespace
+
+
+@functools.lru_cache(maxsize=1)
+def _core_digest() -> str:
+    """This process's core/ digest, by the probe's own function (once: a run asks for it at each
+    stage, a worker at each job)."""
+    return _probe_namespace()["core_digest"](PACKAGE_ROOT)
 
 
 def _probe_function():
-    namespace = {"__name__": "groundsieve_cluster_probe"}
-    exec(compile(_PROBE_SOURCE, "<groundsieve worker probe>", "exec"), namespace)
-    return namespace["probe"]
+    return _probe_namespace()["probe"]
 
 
 def check_workers(client, paths: Sequence[str], writable: Sequence[str] = ()) -> int:
