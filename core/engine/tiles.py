@@ -370,11 +370,11 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
 def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path, dtm, dtm_grid, buffer_m, density,
                   tiling, steps, log, workflow, cluster):
     """run_tiled's run once its inputs are checked: the tiles planned, the working folder held."""
+    total = sum(i.count for i in infos)
     per_task, threads = cluster.memory_per_task() if cluster is not None else (None, 0)
     if per_task:
         # a tile within its share of the smallest task's memory, and at least TILES_PER_THREAD tiles
         # for each of the cluster's threads where the survey is big enough
-        total = sum(i.count for i in infos)
         tile_bytes = min(CLUSTER_TASK_SHARE * per_task, total * BYTES_PER_POINT / (TILES_PER_THREAD * max(threads, 1)))
         tiling = dataclasses.replace(tiling, memory_budget_mb=tile_bytes * tiling.worker_count / (1 << 20))
         log(f"Tiles planned for the Dask cluster's {threads} thread(s), each with {per_task / 2**30:.1f} GB or more "
@@ -392,7 +392,6 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
     note = getattr(algorithm, "tiled_note", "")
     if note:
         log(note)
-    total = sum(i.count for i in infos)
     log(f"{len(inputs)} file(s), {total:,} points; tiles of {size:g} m with a buffer of {buffer_m:g} m "
         f"({'set' if tiling.buffer_m is not None else 'the filter reach'}); {tiling.worker_count} worker(s).")
     steps.check()
@@ -641,7 +640,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             cuts = [info.count * p // pieces for p in range(pieces + 1)]
             bin_jobs += [dict(key=("bin", k, p), path=info.path, file_index=k, grid=grid, work=work, first=cuts[p],
                               stop=cuts[p + 1], piece=p, records=records) for p in range(pieces)]
-        _map_files(_bin_job, bin_jobs, record_bin, tiling, steps, log, points=total,
+        _map_files(_bin_job, bin_jobs, record_bin, tiling, steps, log, stage="binning", points=total,
                    paths=[info.path for info in infos] + [work], writable=[work], cluster=cluster, pool=pool)
         for k in sorted(binned_parts):  # in file (and piece) order, whatever order the jobs finished in
             for key, part in binned_parts[k].items():
@@ -657,7 +656,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     # unless it is in the DTM: its cells are then interpolated from the ground around it, as a run
     # of the whole cloud does (it filters the buffer's points for their ground, and classifies none)
     keys = sorted(k for k, parts in tiles.items()
-                  if sum(p.own_count for p in parts) or (dtm_grid is not None and _in_grid(dtm_grid, grid.bounds(k))))
+                  if sum(p.own_count for p in parts)
+                  or (dtm_grid is not None and _block_cells(dtm_grid, grid.bounds(k)) is not None))
     from ..io.copc import plan_tiles
     copc_tiles = plan_tiles(infos, grid.size, grid.buffer)  # the tiles COPC inputs may have points in
     keys = sorted(set(keys) | set(copc_tiles))
@@ -847,7 +847,8 @@ def _write_classified(infos, outs, staged, work, class_paths, class_parts, tilin
         pieces.setdefault(result["file_index"], []).append(result)
         write_steps.report(sum(map(len, pieces.values())) / total_jobs)
 
-    _map_files(_write_piece_job, write_jobs, record_piece, tiling, steps, log, points=sum(i.count for i in infos),
+    _map_files(_write_piece_job, write_jobs, record_piece, tiling, steps, log, stage="writing",
+               points=sum(i.count for i in infos),
                paths=[info.path for info in infos] + [work], writable=[work], cluster=cluster, pool=pool)
 
     def record_write(result):
@@ -856,7 +857,8 @@ def _write_classified(infos, outs, staged, work, class_paths, class_parts, tilin
     assemble_jobs = [dict(key=("assemble", k), path=info.path, out=staged[k], pieces=pieces.get(k, []),
                           class_path=class_paths[k], class_parts=sorted(class_parts[k]), count=info.count)
                      for k, info in enumerate(infos) if outs[k]]
-    _map_files(_assemble_job, assemble_jobs, record_write, tiling, steps, log, points=sum(i.count for i in infos),
+    _map_files(_assemble_job, assemble_jobs, record_write, tiling, steps, log, stage="writing",
+               points=sum(i.count for i in infos),
                paths=[info.path for info in infos] + [work],
                writable=sorted({os.path.dirname(os.path.abspath(o)) for o in outs if o} | {work}), cluster=cluster,
                pool=pool)
@@ -1046,11 +1048,11 @@ def _pool(workers: int, use_processes: bool, shared=None):
     return _worker_pool(workers, use_processes)
 
 
-def _map_files(function, jobs, record, tiling, steps, log, *, paths, writable, points, cluster=None,
+def _map_files(function, jobs, record, tiling, steps, log, *, stage, paths, writable, points, cluster=None,
                pool=None) -> None:
     """Run one job per input file (binning, writing) on the run's workers: the Dask cluster, worker
     processes or threads as for the tiles (of a run of ``points`` points), ``record``-ing each result
-    in the client as it comes."""
+    in the client as it comes; ``stage`` ("binning", "writing") names it when a worker process dies."""
     if not jobs:
         return
     workers = max(1, min(tiling.worker_count, len(jobs)))
@@ -1069,8 +1071,6 @@ def _map_files(function, jobs, record, tiling, steps, log, *, paths, writable, p
             record(function(job))
         return
     with _pool(workers, mode == "processes", pool) as file_pool:
-        stage = {"_bin_job": "binning", "_write_piece_job": "writing", "_assemble_job": "writing"}.get(
-            function.__name__, "run")
         _record_as_completed(file_pool, function, jobs, record, steps.check,
                              stage=f"{stage} of {_few({os.path.basename(j['path']) for j in jobs})}")
 
@@ -1094,7 +1094,7 @@ def _record_as_completed(pool, function, jobs, record, check=None, stage="jobs")
     a crash in native code) fails the run with the ``stage`` it was in and the likely cause, not a
     traceback (every job of the pool fails then, so the one that ran in it is not known)."""
     from concurrent.futures.process import BrokenProcessPool
-    pending = {pool.submit(function, job): job for job in jobs}
+    pending = {pool.submit(function, job) for job in jobs}
     del jobs
     try:
         while pending:
@@ -1103,7 +1103,7 @@ def _record_as_completed(pool, function, jobs, record, check=None, stage="jobs")
             done, _ = futures_wait(pending, timeout=CHECK_EVERY_S, return_when=FIRST_COMPLETED)
             while done:  # (popped: a future in ``done`` would keep its result)
                 fut = done.pop()
-                job = pending.pop(fut)
+                pending.discard(fut)
                 if check is not None:
                     check()
                 try:
@@ -1113,7 +1113,7 @@ def _record_as_completed(pool, function, jobs, record, check=None, stage="jobs")
                         f"a worker process ended abruptly during the {stage} (most often the system stops one "
                         "for lack of memory: see its log, e.g. dmesg); use a smaller memory budget or fewer "
                         "workers") from err
-                del fut, job
+                del fut
                 record(result)
                 del result
             del done
@@ -1193,10 +1193,18 @@ def _tile_job(job) -> Optional[dict]:
         raise GroundSieveError(f"{where} failed: {type(err).__name__}: {err}") from err
 
 
-def _in_grid(grid, bounds) -> bool:
-    """Whether a tile's area holds a cell centre of ``grid``."""
+def _block_cells(full, bounds):
+    """(row0, row1, col0, col1): the cells of the DTM grid ``full`` a tile of ``bounds`` makes (cell
+    edges on multiples of the cell; tile edges on multiples of the cell too); None when it makes none."""
+    c = full.cell
     x0, y0, x1, y1 = bounds
-    return x0 < grid.x0 + grid.ncols * grid.cell and x1 > grid.x0 and y0 < grid.top and y1 > grid.top - grid.nrows * grid.cell
+    col0 = max(0, int(round((x0 - full.x0) / c)))
+    col1 = min(full.ncols, int(round((x1 - full.x0) / c)))
+    row0 = max(0, int(round((full.top - y1) / c)))
+    row1 = min(full.nrows, int(round((full.top - y0) / c)))
+    if col1 <= col0 or row1 <= row0:
+        return None
+    return row0, row1, col0, col1
 
 
 def job_name(bounds, names) -> str:
@@ -1282,14 +1290,10 @@ def _dtm_block(cloud, ground, dtm, full, bounds, buffer_m):
     from ..grids.rasterize import tin_dtm
     from ..grids.spec import GridSpec
     c = full.cell
-    x0, y0, x1, y1 = bounds
-    # the tile's cells in the full grid (cell edges on multiples of c; tile edges on multiples of c)
-    col0 = max(0, int(round((x0 - full.x0) / c)))
-    col1 = min(full.ncols, int(round((x1 - full.x0) / c)))
-    row0 = max(0, int(round((full.top - y1) / c)))
-    row1 = min(full.nrows, int(round((full.top - y0) / c)))
-    if col1 <= col0 or row1 <= row0 or not ground.any():
+    cells = _block_cells(full, bounds)
+    if cells is None or not ground.any():
         return None
+    row0, row1, col0, col1 = cells
     # one cell more than the buffer: a point on the buffer's outer edge still falls in the grid (the
     # thinning's one-pass kernel needs every point inside; same points kept, same surface)
     pad = int(math.ceil(buffer_m / c)) + 1
