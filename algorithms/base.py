@@ -183,9 +183,12 @@ def say_if_compiling(feedback):
 
 def feedback_callables(feedback):
     """The core's plain callables for a Processing feedback: progress, is_cancelled, log."""
-    def log(line):  # the core's warnings ("Warning: ...", e.g. the CRS's unit, said before the work) as warnings
-        if line.startswith("Warning: "):
-            feedback.pushWarning(line[len("Warning: "):])
+    from ..core.progress import warning_of
+
+    def log(line):  # the core's warnings (e.g. the CRS's unit, said before the work) as warnings
+        warning = warning_of(line)
+        if warning is not None:
+            feedback.pushWarning(warning)
         else:
             feedback.pushInfo(line)
     return dict(progress=lambda f: feedback.setProgress(100.0 * f), is_cancelled=feedback.isCanceled, log=log)

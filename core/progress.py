@@ -14,6 +14,15 @@ from .errors import Cancelled
 ProgressFn = Callable[[float], None]
 CancelFn = Callable[[], bool]
 
+#: how the core's log marks a warning (a CRS not in metres, a stale working folder, ...): the command
+#: line lists them in its JSON, the Processing dialog shows them as warnings
+WARNING_PREFIX = "Warning: "
+
+
+def warning_of(line: str) -> Optional[str]:
+    """The text of a log line that is a warning (without :data:`WARNING_PREFIX`), else None."""
+    return line[len(WARNING_PREFIX):] if line.startswith(WARNING_PREFIX) else None
+
 
 def _noop_progress(_fraction: float) -> None:
     return None

@@ -13,7 +13,7 @@ tune.html`` tunes a filter on a labelled patch (engine/tune.py).
 
 ``--json`` (every command) writes one JSON document to stdout at the end, for scripts and job
 schedulers: what the run made (:func:`filter_document`, :func:`tune_document`), or
-``{"status": "failed" | "interrupted", "error": "..."}``; the log stays on stderr, and while the run
+``{"status": "failed" | "interrupted", "kind": ..., "error": "..."}``; the log stays on stderr, and while the run
 works whatever else would reach stdout goes to stderr, so stdout holds the document alone.
 """
 from __future__ import annotations
@@ -29,6 +29,7 @@ import time
 from typing import List, Optional
 
 from ..errors import GroundSieveError
+from ..progress import warning_of
 from . import parameters as P
 from .tiles import TileOptions
 from .workflow import DTMOptions, FilterOptions
@@ -107,9 +108,11 @@ def _add_common(parser: argparse.ArgumentParser) -> None:
                             "workers must see the input and working folder at the same paths)")
 
 
+#: the kinds of a failed run's JSON document (:func:`error_kind`)
+JSON_KINDS = "usage, input, parameter, memory, output, cluster, cancelled, interrupted, other"
 JSON_HELP = ("write one JSON document to stdout at the end, nothing else (the log stays on stderr): "
-             "{\"status\": \"done\", %s}, or {\"status\": \"failed\" or \"interrupted\", \"error\": the one-line "
-             "message} when the exit status is not 0")
+             "{\"status\": \"done\", %s}, or {\"status\": \"failed\" or \"interrupted\", \"kind\" ("
+             + JSON_KINDS + "), \"error\": the one-line message} when the exit status is not 0")
 FILTER_JSON = ("\"input\", \"output\", \"outputs\" (the classified files), \"dtm\" (or null), \"points\", "
                "\"ground\", \"seconds\", \"tiles\" (null without tiles), \"algorithm\", \"parameters\" (the "
                "filter's, as run), \"warnings\"")
@@ -201,12 +204,9 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="Exit status: 0 done, 1 refused or failed (one line saying why), 2 bad usage, 130 interrupted "
                "(Ctrl-C or SIGTERM; a survey's finished tiles are kept in --work-folder, when given, for the "
                "next run to resume). The log goes to stderr. With --json, stdout holds one JSON document "
-               "alone: for a filter {\"status\": \"done\", \"input\", \"output\", \"outputs\", \"dtm\", \"points\", "
-               "\"ground\", \"seconds\", \"tiles\" (null for a run without tiles), \"algorithm\", "
-               "\"parameters\", \"warnings\"}; for tune the chosen \"parameters\" and the cross-validated "
-               "\"cv\" figures; when the exit status is not 0, {\"status\": \"failed\" (1, 2) or "
-               "\"interrupted\" (130), \"kind\" (usage, input, parameter, memory, output, cluster, cancelled, "
-               "interrupted, other), \"error\": the one-line message}.")
+               f"alone: for a filter {{\"status\": \"done\", {FILTER_JSON}}}; for tune the chosen \"parameters\" "
+               "and the cross-validated \"cv\" figures; when the exit status is not 0, {\"status\": \"failed\" "
+               f"(1, 2) or \"interrupted\" (130), \"kind\" ({JSON_KINDS}), \"error\": the one-line message}}.")
     sub = parser.add_subparsers(title="filters", metavar="FILTER", required=True)
     for name in P.FILTERS:
         _add_filter(sub, name)
@@ -300,8 +300,9 @@ def run_filter(args, out) -> dict:
     warnings = []  # the run's warnings (the CRS's unit, said before the work), for --json too
 
     def log(msg):
-        if msg.startswith("Warning: "):
-            warnings.append(msg[len("Warning: "):])
+        warning = warning_of(msg)
+        if warning is not None:
+            warnings.append(warning)
         print(msg, file=out, flush=True)
     algorithm, options, dtm = options_from(args, log)
     start = time.monotonic()

@@ -11,6 +11,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io import CLASS_GROUND, atomic_path
+from ..progress import WARNING_PREFIX
 from ..learn.hybrid import GROUND_CLASS, Hybrid, HybridResult, hybrid_features
 from ..learn.model_file import MODEL_EXTENSION, load_model, save_model
 from ..learn.rf import (CRITERIA, DEFAULT_PRESET, PRESETS, SCALERS, ForestParams, Model, feature_matrix,
@@ -138,7 +139,7 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
     from ..raster.crs import unit_warning
     warning = unit_warning(input_path, cloud.crs_wkt, "the features' radii and the blocks' size")
     if warning and cloud.crs_wkt:
-        log("Warning: " + warning)
+        log(WARNING_PREFIX + warning)
     keep, classes = _labelled(cloud, options.classes, log)
     target, learnt = (lambda labels: labels), classes  # noqa: E731
     if options.ground_model():
@@ -308,7 +309,7 @@ def check_model_unit(model, model_path: str, input_path: str, crs_wkt: Optional[
                          f"cloud in {trained}: its features (neighbourhood radii, heights) would be read in "
                          f"another unit. Reproject the cloud to a CRS in {trained} first")
     if not trained and unit and unit != "metres":
-        log("Warning: " + unit_warning(input_path, crs_wkt, "the model's features (radii and heights, learnt "
+        log(WARNING_PREFIX + unit_warning(input_path, crs_wkt, "the model's features (radii and heights, learnt "
                                        "in the training cloud's unit)"))
 
 
@@ -408,7 +409,7 @@ def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_pat
     for name, part_out, (low, high), median in out_of_range_features(model, X):
         example = ("16-bit colour given to a model trained on 8-bit colour" if median > high else
                    "8-bit colour given to a model trained on 16-bit colour")
-        log(f"Warning: {input_path}: the feature '{name}' lies outside the range the model learnt it in on "
+        log(f"{WARNING_PREFIX}{input_path}: the feature '{name}' lies outside the range the model learnt it in on "
             f"{part_out:.0%} of the points (learnt: {low:,.4g} to {high:,.4g}; here the median is {median:,.4g}; "
             f"e.g. {example}): its predictions may mean little.")
     predicted_part = model.predict(X, steps=steps.sub(0.5, 0.7)).astype(np.uint8)

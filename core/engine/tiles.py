@@ -49,7 +49,7 @@ from ..io.lasfiles import (CHUNK_POINTS, VPC_EXTENSION, LasInfo, TileGrid, assem
                            check_survey, expand_inputs, iter_chunks, piece_cuts, read_part, scan_header, tile_cloud,
                            write_classified_piece, write_classified_stream, write_vpc)
 from ..io.outputs import LAS_EXTENSIONS, StagedOutputs, _ext, _reason, check_output_path
-from ..progress import Steps
+from ..progress import WARNING_PREFIX, Steps
 
 #: Memory a point costs in a whole-cloud run with a DTM (measured: 321 bytes/point at 50 M points
 #: through qgis_process; docs/BENCHMARKS.md), used to size tiles.
@@ -424,7 +424,8 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
             raise
     stale = _stale_working_folders(parent, work)
     if stale:
-        log(f"Warning: {len(stale)} working folder(s) of earlier runs that were killed hold {_gb(sum(b for _p, b in stale))} "
+        log(f"{WARNING_PREFIX}{len(stale)} working folder(s) of earlier runs that were killed hold "
+            f"{_gb(sum(b for _p, b in stale))} "
             f"in {parent} ({', '.join(os.path.basename(p) for p, _b in stale[:3])}{', ...' if len(stale) > 3 else ''}); "
             "only a run of the same inputs and parameters resumes from one: delete those you will not run again.")
     try:

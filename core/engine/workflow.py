@@ -34,8 +34,8 @@ from ..grids.spec import MAX_CELL_M, GridSpec, memory_budget
 from ..io import (CLASS_GROUND, CLASS_UNCLASSIFIED, NOISE_CLASSES, PointCloud, atomic_path, check_output_path,
                  read_cloud, write_classified)
 from ..io.clouds import parse_classes
-from ..io.outputs import check_distinct_outputs
-from ..progress import Steps
+from ..io.outputs import LAS_EXTENSIONS, _ext, check_distinct_outputs
+from ..progress import WARNING_PREFIX, Steps
 from .tiles import TileOptions
 
 #: Classes a ground filter may rewrite when existing classes are kept: never classified,
@@ -281,7 +281,7 @@ def warn_about_units(path: str, infos, log) -> None:
               max(i.maxs[0] for i in infos), max(i.maxs[1] for i in infos))
     warning = check_lengths_unit(path, infos[0].crs_wkt, bounds)
     if warning:
-        log("Warning: " + warning)
+        log(WARNING_PREFIX + warning)
 
 
 def check_dtm_memory(x, y, options: DTMOptions) -> GridSpec:
@@ -303,7 +303,7 @@ def _say_stray_points(x, y, grid: GridSpec, log) -> None:
     if grid.nrows * grid.ncols < 2 * core_cells:
         return
     k = int(np.argmax(distance))
-    log(f"Warning: DTM: {far.size:,} point(s) lie far from the others (the farthest {distance[k]:,.0f} m away, at x "
+    log(f"{WARNING_PREFIX}DTM: {far.size:,} point(s) lie far from the others (the farthest {distance[k]:,.0f} m away, at x "
         f"{x[far[k]]:,.2f}, y {y[far[k]]:,.2f}): the DTM spans them, {grid.ncols:,} x {grid.nrows:,} cells, mostly "
         "empty. Class them as noise (7) to leave them out, or crop the cloud.")
 
@@ -427,7 +427,7 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     if not os.path.exists(input_path):  # before the outputs: a mistyped input explains the rest
         raise InputError(f"{input_path}: no such file or folder")
     check_outputs(input_path, output_path, [dtm_path, *rasters])
-    if os.path.splitext(input_path)[1].lower() in (".las", ".laz"):
+    if _ext(input_path) in LAS_EXTENSIONS:
         from ..io.lasfiles import scan_header
         warn_about_units(input_path, [scan_header(input_path)], log)
     steps.check()
