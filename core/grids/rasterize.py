@@ -84,7 +84,7 @@ def thin_for_grid(x, y, z, grid: GridSpec, points_per_cell: int, steps: Optional
     if nrows_sub * ncols_sub <= 4 * x.size + 1_000_000:
         best = np.full(nrows_sub * ncols_sub, -1, dtype=np.int64)
         sub = grid.cell / k
-        if run_cancellable(_thin_dense_kernel, x, y, z, int(round(grid.x0 / sub)), int(round(grid.top / sub)), sub,
+        if run_cancellable(_thin_dense_kernel, x, y, z, *_lattice_origin(grid, sub), sub,
                            nrows_sub, ncols_sub, best, steps=steps):
             return _compact_kernel(best)
     if steps is not None:
@@ -92,11 +92,18 @@ def thin_for_grid(x, y, z, grid: GridSpec, points_per_cell: int, steps: Optional
     return _thin_sorted(x, y, z, grid, k)
 
 
+def _lattice_origin(grid: GridSpec, step: float):
+    """(col0, row0): ``grid``'s first column and row on the lattice of multiples of ``step`` (the
+    cell or a sub-cell): a point's column is ``floor(x / step) - col0``, its row ``row0 + floor(-y / step)``."""
+    return int(round(grid.x0 / step)), int(round(grid.top / step))
+
+
 def _lattice_cells(grid: GridSpec, x, y):
     """(rows, columns) of the points' cells by their index on the lattice of multiples of the cell
     (as the thinning finds them: the same cell whatever grid the points are on), clipped to ``grid``."""
-    rows = np.floor(-np.asarray(y) / grid.cell) + round(grid.top / grid.cell)
-    cols = np.floor(np.asarray(x) / grid.cell) - round(grid.x0 / grid.cell)
+    col0, row0 = _lattice_origin(grid, grid.cell)
+    rows = np.floor(-np.asarray(y) / grid.cell) + row0
+    cols = np.floor(np.asarray(x) / grid.cell) - col0
     return (np.clip(rows, 0, grid.nrows - 1).astype(np.int64), np.clip(cols, 0, grid.ncols - 1).astype(np.int64))
 
 
@@ -104,9 +111,9 @@ def _thin_sorted(x, y, z, grid: GridSpec, k: int):
     """The sort's way to :func:`thin_for_grid`'s result (sub-cells on the lattice of multiples of
     the sub-cell, as in ``_thin_dense_kernel``; points off the grid in no sub-cell of it)."""
     sub = grid.cell / k
+    col0, row0 = _lattice_origin(grid, sub)
     gx, gy = np.floor(x / sub), np.floor(-y / sub)
-    col = gx - round(grid.x0 / sub)
-    row = gy + round(grid.top / sub)
+    col, row = gx - col0, gy + row0
     ncols = grid.ncols * k
     inside = (col >= 0) & (col < ncols) & (row >= 0) & (row < grid.nrows * k)
     key = np.where(inside, row * ncols + col, -1 - np.arange(x.size)).astype(np.int64)  # (off: a key each)
