@@ -187,7 +187,7 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
     log(", ".join(f"{label}: {len(v[0]):,} points" for label, v in sets.items()))
     notes = []
     for name, accuracy in leaking_features(*sets["train"], names, seed=options.params.seed):
-        notes.append(f"Warning: the feature '{name}' alone predicts {accuracy:.1%} of the training labels. "
+        notes.append(f"{WARNING_PREFIX}the feature '{name}' alone predicts {accuracy:.1%} of the training labels. "
                      "Check that it does not carry the label itself (e.g. a converted reference cloud whose "
                      "intensity is the class code): the scores below would then mean nothing.")
         log(notes[-1])

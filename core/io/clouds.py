@@ -15,7 +15,7 @@ from typing import Optional
 import numpy as np
 
 from ..errors import GroundSieveError, InputError, InvalidParameterError, OutputError, UnsupportedFormatError
-from ..progress import Steps
+from ..progress import WARNING_PREFIX, Steps
 from ..validate import check_coordinates
 from .outputs import LAS_EXTENSIONS, _ext, atomic_path, check_classes_fit, check_output_path
 
@@ -230,13 +230,13 @@ def _read_las(path: str, steps: Steps) -> PointCloud:
                 las = laspy.LasData(header=header, points=_read_points(reader, room, steps.sub(0.0, READ_SHARE)))
                 las.evlrs = reader.evlrs
                 las.update_header()
-                notes.append(f"{path}: the header announces {announced:,} points but the file holds "
+                notes.append(f"{WARNING_PREFIX}{path}: the header announces {announced:,} points but the file holds "
                              f"{room:,} point records before its extended VLRs (at byte "
                              f"{evlr_at:,}); read those {room:,}, "
                              f"{announced - room:,} missing (the header's count is wrong).")
             held = _records_held(path, header)
             if las is None and held is not None and held > int(header.point_count):
-                notes.append(f"Warning: {path}: the header announces {int(header.point_count):,} points but the "
+                notes.append(f"{WARNING_PREFIX}{path}: the header announces {int(header.point_count):,} points but the "
                              f"file holds {held:,} point records; read the {int(header.point_count):,} announced, "
                              f"{held - int(header.point_count):,} ignored (the header's count is wrong, or "
                              "something else follows the points; rewrite the file with a tool that fixes its "

@@ -11,6 +11,7 @@ import pytest
 from laspy.vlrs.vlrlist import VLRList
 
 from groundsieve.core.engine.workflow import run_ground_filter
+from groundsieve.core.progress import WARNING_PREFIX
 from groundsieve.core.errors import InputError
 from groundsieve.core.filters.smrf import SMRF
 from groundsieve.core.io import read_cloud
@@ -43,7 +44,7 @@ def test_only_the_real_records_are_read_and_the_missing_ones_are_told(tmp_path):
     cloud = read_cloud(str(src))
     assert len(cloud) == 2000
     np.testing.assert_array_equal(cloud.x, np.asarray(truth.x))   # no EVLR byte taken for a point
-    assert cloud.notes == [f"{src}: the header announces 2,100 points but the file holds 2,000 point records "
+    assert cloud.notes == [f"{WARNING_PREFIX}{src}: the header announces 2,100 points but the file holds 2,000 point records "
                            "before its extended VLRs (at byte 60,375); read those 2,000, 100 missing "
                            "(the header's count is wrong)."]
     messages = []
