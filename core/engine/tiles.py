@@ -54,6 +54,14 @@ from ..progress import WARNING_PREFIX, Steps
 #: Memory a point costs in a whole-cloud run with a DTM (measured: 321 bytes/point at 50 M points
 #: through qgis_process; docs/BENCHMARKS.md), used to size tiles.
 BYTES_PER_POINT = 330
+#: What one LAS/LAZ file run whole costs, to decide whether it fits the memory budget
+#: (:func:`whole_run_bytes`; fitted on every filter with a 1 m DTM at 10 M dense and 20 M airborne
+#: points, docs/BENCHMARKS.md): each point (its record, kept for the output, plus this much), each
+#: ground point the DTM triangulates, and each cell of the finest grid. The process itself (Python
+#: and its imports, about 0.25 GB) is not counted, as for tiles.
+WHOLE_BYTES_PER_POINT = 128
+WHOLE_BYTES_PER_TIN_POINT = 150
+WHOLE_BYTES_PER_CELL = 60
 #: A header whose bounding box is larger than this (100 km²; a 1 m grid of 10^8 cells) is tiled
 #: whatever its point count.
 SPARSE_AREA_M2 = 1e8
@@ -148,8 +156,38 @@ def is_survey_input(path: str) -> bool:
     return os.path.isdir(path) or _ext(path) == VPC_EXTENSION
 
 
-def needs_tiling(input_path: str, tiling: TileOptions) -> bool:
-    """A folder, a .vpc, a set tile size, or a LAS/LAZ whose points exceed the memory budget."""
+def finest_grid_m(algorithm) -> float:
+    """The finest grid a filter makes over the whole cloud (m): its cell, cloth or small scale; 1 m
+    for a filter with none of these (its DTM-like surfaces are on 1 m cells or coarser)."""
+    cells = [float(getattr(algorithm, name)) for name in ("cell_size_m", "cloth_resolution_m", "small_scale_m")
+             if isinstance(getattr(algorithm, name, None), (int, float)) and getattr(algorithm, name) > 0]
+    return min(cells, default=1.0)
+
+
+def whole_run_bytes(info: LasInfo, algorithm=None, dtm=None) -> int:
+    """The memory a run of one whole file takes, estimated from its header: see WHOLE_BYTES_PER_POINT,
+    plus the algorithm's own ``extra_bytes_per_point`` if it states one. Without ``algorithm`` (a
+    model's classification, whose features are not all known here), or for an algorithm whose
+    extra is None (not measured), BYTES_PER_POINT a point, the first tile engine's figure."""
+    extra = getattr(algorithm, "extra_bytes_per_point", 0) if algorithm is not None else None
+    if extra is None:
+        return int(info.count * BYTES_PER_POINT)
+    record = (info.record_size or 34) + extra
+    cells = info.area_m2 / finest_grid_m(algorithm) ** 2
+    tin = 0.0
+    if dtm is not None:
+        dtm_cells = info.area_m2 / dtm.cell_size_m ** 2
+        cells = max(cells, dtm_cells)
+        tin = min(float(info.count), dtm.points_per_cell * dtm_cells) if dtm.points_per_cell else float(info.count)
+    return int(info.count * (WHOLE_BYTES_PER_POINT + record)
+               + tin * WHOLE_BYTES_PER_TIN_POINT + cells * WHOLE_BYTES_PER_CELL)
+
+
+def needs_tiling(input_path: str, tiling: TileOptions, algorithm=None, dtm=None,
+                 log: Optional[Callable[[str], None]] = None) -> bool:
+    """A folder, a .vpc, a set tile size, or a LAS/LAZ whose run would exceed the memory budget
+    (:func:`whole_run_bytes` of ``algorithm`` with ``dtm``, a ``workflow.DTMOptions`` or None for no
+    DTM); ``log`` is told why a single file is tiled."""
     if is_survey_input(input_path):
         return True
     if _ext(input_path) not in LAS_EXTENSIONS or not os.path.isfile(input_path):
@@ -157,9 +195,20 @@ def needs_tiling(input_path: str, tiling: TileOptions) -> bool:
     if tiling.tile_size_m > 0:
         return True
     info = scan_header(input_path)
-    # Points beyond the budget; or a bounding box no 1 m grid could cover (two areas far apart, a
-    # stray point): tiles exist only where points are.
-    return info.count * BYTES_PER_POINT > tiling.budget_bytes or info.area_m2 > SPARSE_AREA_M2
+    # A bounding box no 1 m grid could cover (two areas far apart, a stray point): tiles exist only
+    # where points are.
+    if info.area_m2 > SPARSE_AREA_M2:
+        if log:
+            log(f"{input_path}: its points span {info.area_m2 / 1e6:,.0f} km²: run in buffered tiles, which "
+                "exist only where there are points.")
+        return True
+    need = whole_run_bytes(info, algorithm, dtm)
+    if need > tiling.budget_bytes:
+        if log:
+            log(f"{input_path}: run whole it would take about {need / 2**20:,.0f} MB, more than the memory budget "
+                f"({tiling.budget_bytes / 2**20:,.0f} MB): run in buffered tiles (a larger memory budget runs it whole).")
+        return True
+    return False
 
 
 def sample_density(path: str, chunk_points: int = CHUNK_POINTS, cell_m: float = 10.0) -> float:

@@ -411,7 +411,7 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     log = log or (lambda _msg: None)
     rasters = {path: fn for path, fn in (rasters or {}).items() if path}
     from .tiles import needs_tiling, run_tiled
-    if needs_tiling(input_path, options.tiling):
+    if needs_tiling(input_path, options.tiling, algorithm, dtm if dtm_path else None, log):
         # A folder, a .vpc, a set tile size or a cloud beyond the memory budget: buffered tiles.
         if rasters:
             from .tiles import is_survey_input
