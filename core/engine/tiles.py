@@ -393,6 +393,11 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     if not any(i.count for i in infos):
         raise InputError(f"{input_path}: the input holds no points")
     workflow.warn_about_units(input_path, infos, log)
+    # what a filter decides from the whole cloud (e.g. the echo grid: whether it has echoes), decided
+    # once from the headers, so that no tile decides it from what it alone holds
+    for_survey = getattr(algorithm, "for_survey", None)
+    if for_survey is not None:
+        algorithm = for_survey(infos)
     outs = check_tiled_outputs(inputs, output_path, dtm_path)
     # the DTM's grid from the headers: a DTM cell far too small for the survey is refused now
     dtm_grid = survey_dtm_grid(infos, dtm.cell_size_m) if dtm_path else None

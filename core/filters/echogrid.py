@@ -9,8 +9,12 @@ without the height test (bare terrain mostly gives single returns). The paper lo
 every point for every kernel; here one pass gathers the kernel statistics and one classifies,
 so the cost is linear in the number of points.
 
-A cloud without return information (photogrammetry, ISPRS text, every point 1 of 1) would be
-all ground under that rule: the filter then warns and applies the height test everywhere.
+A cloud without return information (photogrammetry, ISPRS text, every point 1 of 1; or first
+returns only, every return number 1 whatever the number of returns) would be all ground under that
+rule: the filter then warns and applies the height test everywhere. Whether the cloud has echoes
+(``echoes="auto"``: a return number above 1 somewhere) is decided once for a whole survey, not per
+tile: :meth:`EchoGrid.for_survey` sets ``echoes="yes"`` when an input's header counts later
+returns, so that a tile with single returns only still gets the bypass, as in a whole run.
 
 ``mode="evidence"`` is the improvement the paper's conclusion asks for, using the echoes as
 evidence rather than as a bypass:
@@ -31,6 +35,7 @@ evidence rather than as a bypass:
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -38,7 +43,7 @@ import numpy as np
 
 from ..errors import InvalidParameterError
 from ..grids.spec import MAX_CELLS, check_memory
-from ..progress import Steps, run_cancellable
+from ..progress import WARNING_PREFIX, Steps, run_cancellable
 from ..validate import check_choice, check_number, validate_xyz
 
 MODES = ("faithful", "evidence")
@@ -63,6 +68,9 @@ class EchoGrid:
     #: "grid": kernels on multiples of kernel_m (tiles agree with the whole); "cloud": from the
     #: cloud's lowest x, y (the paper's listing)
     kernel_origin: str = "grid"
+    #: "auto": the cloud has echoes when a point has a return number above 1; "yes" / "no": given
+    #: (a tiled run sets "yes" from the survey's headers, see for_survey)
+    echoes: str = "auto"
 
     name = "echogrid"
     point_fields = ("return_number", "number_of_returns")
@@ -81,6 +89,15 @@ class EchoGrid:
             raise InvalidParameterError(f"dz_m must be >= 0 (got {self.dz_m})")
         check_choice(self, "mode", MODES)
         check_choice(self, "kernel_origin", ("grid", "cloud"))
+        check_choice(self, "echoes", ("auto", "yes", "no"))
+
+    def for_survey(self, infos) -> "EchoGrid":
+        """The filter a tiled run gives every tile (``infos``: the inputs' ``LasInfo``): with
+        ``echoes="auto"``, "yes" when a header counts points beyond return 1, so that the bypass
+        does not depend on what one tile holds. Headers that count none leave "auto"."""
+        if self.echoes == "auto" and any(getattr(i, "later_returns", None) for i in infos):
+            return dataclasses.replace(self, echoes="yes")
+        return self
 
     @property
     def reach_m(self) -> float:
@@ -104,11 +121,22 @@ class EchoGrid:
         nr = np.ones(n, np.uint8) if number_of_returns is None else np.asarray(number_of_returns, np.uint8)
         if rn.shape != (n,) or nr.shape != (n,):
             raise InvalidParameterError("return_number and number_of_returns need one value per point")
-        has_returns = bool((rn > 1).any() or (nr > 1).any())
-        if not has_returns:
-            log("Echo grid: the cloud has no return information (every point is 1 of 1: photogrammetry, "
-                "or a file without returns); the single-return bypass is off and every kernel gets the "
-                "height test.")
+        if self.echoes != "auto":
+            has_returns = self.echoes == "yes"
+        elif self.mode == "faithful":  # the bypass reads the return numbers only
+            has_returns = bool((rn > 1).any())
+        else:
+            has_returns = bool((rn > 1).any() or (nr > 1).any())
+        if not has_returns and self.echoes == "auto":
+            if (nr > 1).any():
+                log(f"{WARNING_PREFIX}Echo grid: every point has return number 1 although number of returns "
+                    f"goes up to {int(nr.max())}: first returns only, or return numbers lost; the paper's "
+                    "single-return bypass would take every kernel as ground, so it is off and every kernel "
+                    "gets the height test (mode 'evidence' uses the number of returns).")
+            else:
+                log(f"{WARNING_PREFIX}Echo grid: the cloud has no return information (every point is 1 of 1: "
+                    "photogrammetry, or a file without returns); the single-return bypass is off and every "
+                    "kernel gets the height test.")
         size = float(self.kernel_m)
         # Kernels sit on multiples of kernel_m (as GridSpec cells do), not on the cloud's lowest
         # corner: a tile of a survey and the whole survey then share their kernels.

@@ -37,6 +37,8 @@ class LasInfo:
     crs_wkt: Optional[str]
     copc: bool = False  #: a COPC file (the COPC info VLR): its tiles read it by bounds (io/copc.py)
     record_size: int = 0  #: bytes per point record, extra bytes included (0 = not known)
+    #: points the header counts beyond return 1 (None: its counts by return are all 0, not filled in)
+    later_returns: Optional[int] = None
 
     @property
     def area_m2(self) -> float:
@@ -58,11 +60,21 @@ def scan_header(path: str) -> LasInfo:
             return LasInfo(path, int(h.point_count), tuple(float(v) for v in h.mins),
                            tuple(float(v) for v in h.maxs), int(h.point_format.id), str(h.version),
                            header_crs_wkt(h),
-                           copc=is_copc_header(h), record_size=int(h.point_format.size))
+                           copc=is_copc_header(h), record_size=int(h.point_format.size),
+                           later_returns=_later_returns(h))
     except (InputError, UnsupportedFormatError):
         raise
     except Exception as err:  # laspy raises many types for damaged files
         raise InputError(f"{path}: cannot read its LAS header ({err})") from err
+
+
+def _later_returns(header) -> Optional[int]:
+    """Points a header counts beyond return 1; None when its counts by return are all 0."""
+    try:
+        counts = [int(v) for v in header.number_of_points_by_return]
+    except Exception:  # noqa: BLE001 - a header without the counts
+        return None
+    return sum(counts[1:]) if any(counts) else None
 
 
 # -- inputs: a file, a folder, a .vpc --------------------------------------------------------------

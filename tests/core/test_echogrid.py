@@ -370,16 +370,21 @@ def test_no_message_when_the_cloud_has_returns(mode):
     assert messages == []
 
 
-def test_first_returns_only_count_as_return_information():
-    """A cloud of first returns only (rn 1, some nr > 1) has return information: the faithful
-    bypass is on (every kernel holds only return number 1, so everything is ground)."""
+def test_first_returns_only_keep_the_literal_bypass_only_when_asked():
+    """A cloud of first returns only (rn 1, some nr > 1): the paper's bypass, read literally, takes
+    every kernel as ground (every kernel holds only return number 1). It is now treated as a cloud
+    without echoes (height test, a warning; test_first_returns_only_are_not_all_ground_and_are_warned);
+    echoes="yes" still gives the literal rule."""
     xyz, _, _ = assemble(singles(*plane(seed=9)))
     xyz[:50, 2] += 8.0
     rn = np.ones(len(xyz), np.uint8)
     nr = np.ones(len(xyz), np.uint8)
     nr[:50] = 3
-    res = EchoGrid().run(xyz, return_number=rn, number_of_returns=nr)
+    res = EchoGrid(echoes="yes").run(xyz, return_number=rn, number_of_returns=nr)
     assert res.used_returns and res.ground.all() and res.bypassed == res.kernels
+    res = EchoGrid().run(xyz, return_number=rn, number_of_returns=nr)
+    assert not res.used_returns and not res.ground.all() and res.ground[50:].all()
+    np.testing.assert_array_equal(res.ground, EchoGrid(echoes="no").run(xyz, return_number=rn, number_of_returns=nr).ground)
 
 
 def test_log_is_optional():
@@ -579,3 +584,62 @@ def test_kernel_larger_than_the_cloud_is_reported():
     assert any("larger than the cloud" in m for m in messages), messages
     assert res.kernels == 1
     np.testing.assert_array_equal(res.ground, [True, True, False])
+
+
+def _slope_with_one_echo_patch(path):
+    """An 80 x 20 m slope of 50 %, single returns everywhere but a 5 m patch of two-return pulses."""
+    import laspy
+    rng = np.random.default_rng(0)
+    n = 16000
+    x, y = rng.uniform(0, 80, n), rng.uniform(0, 20, n)
+    z = 100 + 0.5 * x + rng.normal(0, 0.02, n)
+    rn, nr = np.ones(n, np.uint8), np.ones(n, np.uint8)
+    patch = (x < 5) & (y < 5)
+    nr[patch] = 2
+    rn[patch & (rng.random(n) < 0.5)] = 2
+    header = laspy.LasHeader(point_format=1, version="1.2")
+    header.scales, header.offsets = [0.01] * 3, [X0, Y0, 0.0]
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = x + X0, y + Y0, z
+    las.return_number, las.number_of_returns = rn, nr
+    las.write(str(path))
+
+
+def test_a_tiled_run_decides_once_whether_the_cloud_has_echoes(tmp_path):
+    """Each tile decided from its own points whether the cloud had echoes: a tile of single returns
+    in a cloud with echoes elsewhere turned the paper's bypass off and height-tested its kernels,
+    so 15 % of a reviewer's slope changed class against the whole run. The survey's headers now
+    decide it once (EchoGrid.for_survey), and the tiled run equals the whole one."""
+    import laspy
+
+    from groundsieve.core.engine.tiles import TileOptions
+    from groundsieve.core.engine.workflow import run_ground_filter
+    from groundsieve.core.io.lasfiles import scan_header
+    src = tmp_path / "slope.las"
+    _slope_with_one_echo_patch(src)
+    assert scan_header(str(src)).later_returns > 0
+    assert EchoGrid().for_survey([scan_header(str(src))]).echoes == "yes"
+    run_ground_filter(str(src), str(tmp_path / "whole.las"), EchoGrid())
+    run_ground_filter(str(src), str(tmp_path / "tiled.las"), EchoGrid(),
+                      options=FilterOptions(tiling=TileOptions(tile_size_m=20.0, workers=1, parallel="threads")))
+    whole = np.asarray(laspy.read(str(tmp_path / "whole.las")).classification)
+    tiled = np.asarray(laspy.read(str(tmp_path / "tiled.las")).classification)
+    assert (whole == 2).mean() > 0.95  # the bypass: single-return kernels are ground on the slope
+    np.testing.assert_array_equal(tiled, whole)
+
+
+def test_first_returns_only_are_not_all_ground_and_are_warned():
+    """A file of first returns only (every return number 1, number of returns up to 4; lidR's
+    MixedConifer.laz is one) passed the 'has returns' check on number_of_returns, and the faithful
+    bypass then took every kernel as ground (a forester: 100 % ground, DTM +10.8 m, no warning)."""
+    from groundsieve.core.progress import WARNING_PREFIX
+    xyz, _, _, high, _ = stepped_kernel_scene()
+    n = len(xyz)
+    rn = np.ones(n, np.uint8)
+    nr = np.where(np.arange(n) % 3 == 0, 3, 1).astype(np.uint8)
+    messages = []
+    result = EchoGrid().run(xyz, return_number=rn, number_of_returns=nr, log=messages.append)
+    assert not result.used_returns and not result.ground[high].any()
+    assert len(messages) == 1 and messages[0].startswith(WARNING_PREFIX + "Echo grid: every point has return number 1")
+    # a given answer wins over the cloud's (what a tiled run passes down)
+    assert EchoGrid(echoes="yes").run(xyz, return_number=rn, number_of_returns=nr).used_returns
