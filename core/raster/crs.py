@@ -58,13 +58,30 @@ def horizontal_unit(crs_wkt: Optional[str]) -> Optional[str]:
     return "metres"
 
 
+def vertical_unit(crs_wkt: Optional[str]) -> Optional[str]:
+    """The unit of the heights under a compound CRS (its vertical part): "metres" or GDAL's name
+    (e.g. "US survey foot"); None without a vertical part (heights then in the horizontal unit)."""
+    ref = _spatial_reference(crs_wkt)
+    if ref is None or not ref.IsCompound():
+        return None
+    factor = ref.GetTargetLinearUnits("VERT_CS")
+    if not factor:
+        return None
+    if abs(factor - 1.0) <= 1e-12:
+        return "metres"
+    return ref.GetAttrValue("VERT_CS|UNIT") or f"{factor:g} m"
+
+
 def elevation_unit(crs_wkt: Optional[str]) -> str:
-    """A raster band's unit type for elevations read in the CRS's linear unit (the unit every length
-    of a run is read in): "m", "ft" or "US survey foot"; "" when there is no CRS or it is not linear."""
+    """A raster band's unit type for elevations: the vertical part's unit under a compound CRS, else
+    the CRS's linear unit (the unit every length of a run is read in): "m", "ft" or "US survey foot";
+    "" when there is no CRS or it is not linear."""
     ref = _spatial_reference(crs_wkt)
     if ref is None or not ref.IsProjected():
         return ""
     factor = ref.GetLinearUnits()
+    if ref.IsCompound() and ref.GetTargetLinearUnits("VERT_CS"):
+        factor = ref.GetTargetLinearUnits("VERT_CS")
     for unit, metres in (("m", 1.0), ("ft", 0.3048), ("US survey foot", 1200.0 / 3937.0)):
         if abs(factor - metres) < 1e-9:
             return unit
@@ -80,6 +97,12 @@ def unit_warning(path: str, crs_wkt: Optional[str], lengths: str = "every length
     if not crs_wkt:
         return f"{path}: no CRS in the file; outputs have none either."
     unit = horizontal_unit(crs_wkt)
+    heights = vertical_unit(crs_wkt)
+    if heights is not None and heights != unit and unit != "degrees":
+        return (f"{path}: the heights are in {heights} (the CRS's vertical part), x and y in {unit}: the "
+                "filters' height thresholds and the DTM are read in the heights' unit, their cells and windows "
+                "in x and y's. Convert the heights to the horizontal unit first (e.g. PDAL's "
+                "filters.reprojection to a compound CRS in metres, or LAStools' las2las).")
     if unit is None or unit == "metres":
         return None
     if unit == "degrees" and bounds is not None and not in_degree_range(bounds):

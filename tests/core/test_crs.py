@@ -42,3 +42,36 @@ def test_a_local_crs_in_feet_is_said_to_be_in_feet():
     local_m = 'LOCAL_CS["site grid",LOCAL_DATUM["site",0],UNIT["metre",1],AXIS["X",EAST],AXIS["Y",NORTH]]'
     assert horizontal_unit(local_ft) == "foot"
     assert horizontal_unit(local_m) == "metres"
+
+
+def test_heights_in_feet_under_a_compound_crs_in_metres_are_warned_and_the_dtm_says_feet(tmp_path):
+    """A compound CRS with x, y in metres and heights in US survey feet (EPSG:2949+6360) ran without
+    a word: the height thresholds were read in feet, 8,000 of 26,600 ground points were lost, and the
+    DTM's band said metres (a geomorphologist). The run now warns, and the band's unit is the heights'."""
+    import numpy as np
+    import pyproj
+    from osgeo import gdal
+
+    from groundsieve.core.engine.workflow import DTMOptions, run_ground_filter
+    from groundsieve.core.filters.smrf import SMRF
+    from groundsieve.core.progress import WARNING_PREFIX
+    from groundsieve.core.raster.crs import elevation_unit, unit_warning, vertical_unit
+    from groundsieve.core.synthetic import SceneSpec, make_scene
+    feet = pyproj.CRS("EPSG:2949+6360").to_wkt()
+    metres = pyproj.CRS("EPSG:32632+5703").to_wkt()
+    assert vertical_unit(feet) == "US survey foot" and vertical_unit(metres) == "metres"
+    assert vertical_unit(pyproj.CRS.from_epsg(32632).to_wkt()) is None
+    assert unit_warning("a.laz", metres) is None
+    said = unit_warning("a.laz", feet)
+    assert said.startswith("a.laz: the heights are in US survey foot (the CRS's vertical part), x and y in metres")
+    assert elevation_unit(feet) == "US survey foot" and elevation_unit(metres) == "m"
+    from groundsieve.core.io import new_las, write_las
+    scene = make_scene(SceneSpec(size_m=60.0, density_per_m2=2.0, seed=3))
+    src = tmp_path / "ft.laz"  # LAS 1.4 with a WKT CRS: a compound CRS has no GeoTIFF keys of its own
+    write_las(new_las(scene.x, scene.y, scene.z, point_format=6, version="1.4", crs_wkt=feet,
+                      classification=scene.classification), src)
+    lines = []
+    run_ground_filter(str(src), str(tmp_path / "o.laz"), SMRF(), dtm_path=str(tmp_path / "o.tif"), dtm=DTMOptions(),
+                      log=lines.append)
+    assert any(line.startswith(WARNING_PREFIX) and "the heights are in US survey foot" in line for line in lines), lines
+    assert gdal.Open(str(tmp_path / "o.tif")).GetRasterBand(1).GetUnitType() == "US survey foot"
