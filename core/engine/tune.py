@@ -297,8 +297,26 @@ class TuneResult:
     def warnings(self) -> List[Tuple[str, str]]:
         """(title, sentence) of what the user should know about the chosen set: values at an end of
         their searched range, sizes wider than the patch."""
-        notes = [("At the end of a range", self.range_end_note()), ("Beyond the patch", beyond_patch_note(self))]
+        notes = [("No better than the start", self.no_gain_note()), ("At the end of a range", self.range_end_note()),
+                 ("Beyond the patch", beyond_patch_note(self))]
         return [(title, text) for title, text in notes if text]
+
+    def no_gain_note(self) -> str:
+        """A sentence when the tuned sets' cross-validated figure is no better than the starting set's
+        on the whole patch ("" otherwise): the start was fitted to nothing, so its figure is as honest
+        as the cross-validation's, and a preset then promises nothing the start did not."""
+        start = self.start_accuracy
+        if start is None or not self.folds:
+            return ""
+        cv = self.cv
+        tuned, begun = getattr(cv, self.metric), getattr(start, self.metric)
+        if (tuned < begun) if self.metric == "total" else (tuned > begun):
+            return ""
+        name = {"total": "total error", "kappa": "kappa", "f1": "F1"}[self.metric]
+        return (f"The tuned sets' cross-validated {name} ({100 * tuned:.2f} %) is no better than the starting set's "
+                f"on the whole patch ({100 * begun:.2f} %), to which nothing was fitted: on this patch the search found "
+                "nothing that carries to unseen blocks. Keep the starting parameters (the filter's defaults or the "
+                "starting preset), or tune on a larger or more typical patch.")
 
     def range_end_note(self) -> str:
         """A sentence on the parameters chosen at an end of their searched range ("" when none)."""
