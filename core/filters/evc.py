@@ -9,7 +9,9 @@
 4. Table 2 of the paper: ground where 0 < EVC <= ``threshold`` (1.5); vegetation area where
    EVC <= 0; vegetation boundary where EVC > threshold. Points take their small cell's class.
    ``auto_threshold`` picks the threshold by natural breaks (Jenks, two classes of the
-   positive EVC values), as the paper did.
+   positive EVC values), as the paper did; the values above their ``breaks_percentile`` (95)
+   are left out first, where the ratio explodes near a zero mean difference (ours: the paper
+   says natural breaks only; ``breaks_percentile=100`` keeps every value).
 
 Sign of the difference. The paper says the values "in vegetation areas were mostly negative"
 and so were their EVCs, and Table 2 calls EVC <= 0 vegetation. Vegetation raises a small cell
@@ -85,6 +87,8 @@ class EVC:
     max_radius: int = 5
     ground_offset_m: float = 0.0
     cell_origin: str = "grid"
+    #: natural breaks (auto_threshold) leave out the EVC values above this percentile (100 = none)
+    breaks_percentile: float = 95.0
 
     name = "evc"
 
@@ -112,6 +116,9 @@ class EVC:
             raise InvalidParameterError(f"ground_offset_m must be >= 0 (got {self.ground_offset_m})")
         check_choice(self, "difference", DIFFERENCES)
         check_choice(self, "cell_origin", CELL_ORIGINS)
+        check_number(self, "breaks_percentile")
+        if not (math.isfinite(self.breaks_percentile) and 0 < self.breaks_percentile <= 100):
+            raise InvalidParameterError(f"breaks_percentile must be in (0, 100] (got {self.breaks_percentile})")
 
     @property
     def reach_m(self) -> float:
@@ -183,7 +190,8 @@ class EVC:
         with np.errstate(divide="ignore", invalid="ignore"):
             evc = std / (mean + self.ground_offset_m)
         steps.report(0.8)
-        threshold = natural_break(evc) if self.auto_threshold else float(self.threshold)
+        threshold = natural_break(evc, upper_percentile=self.breaks_percentile) if self.auto_threshold \
+            else float(self.threshold)
         if self.auto_threshold and log is not None:
             log(f"EVC: natural breaks chose the threshold {threshold:.4g}.")
         classes = np.full(evc.shape, VEGETATION_BOUNDARY, dtype=np.uint8)  # also: no EVC

@@ -426,6 +426,20 @@ def test_auto_threshold_uses_natural_break():
     np.testing.assert_array_equal(res.evc, fixed.evc)
 
 
+def test_natural_breaks_keep_every_value_with_breaks_percentile_100():
+    """The trim of the EVC values above the 95th percentile before natural breaks is ours (the paper
+    says natural breaks only, and a reviewer's untrimmed break measured better on his scene): the
+    paper's untrimmed break is breaks_percentile=100."""
+    xyz, _, _ = shrub_scene(SHRUBS["4m"][0], density=10.0)
+    trimmed = EVC(auto_threshold=True, ground_offset_m=0.1).run(xyz)
+    whole = EVC(auto_threshold=True, ground_offset_m=0.1, breaks_percentile=100.0).run(xyz)
+    assert whole.threshold == natural_break(whole.evc, upper_percentile=100.0)
+    assert whole.threshold != trimmed.threshold
+    for bad in (0.0, -5.0, 101.0, math.nan):
+        with pytest.raises(InvalidParameterError, match="breaks_percentile"):
+            EVC(breaks_percentile=bad)
+
+
 # --- parameters and inputs ----------------------------------------------------------------------
 
 @pytest.mark.parametrize("kwargs, name", [
