@@ -70,7 +70,7 @@ non-ground, except noise 7 and 18 and withheld points, which are left out), or a
 <code>x y z label</code> (label 0 = ground, 1 = object). It must hold both ground and non-ground
 points; a few hundred metres square of typical terrain is enough.</p>
 <p><b>Search</b>: the filter's defaults (or the <i>Starting preset</i>), then sets spread evenly over the
-ranges the papers explored, then a local refinement around the best, until the <i>Search budget</i>
+ranges spanning the values the papers used or studied, then a local refinement around the best, until the <i>Search budget</i>
 (number of sets; each is one run of the filter on the patch) or the time limit is spent.</p>
 <p><b>Honest figure</b>: the patch is cut into spatial blocks; each block is classified with the set
 chosen on the other blocks only (by a search of its own), and the errors of these held-out blocks give

@@ -177,13 +177,15 @@ def source_defaults(name: str) -> Dict[str, object]:
 
 #: What ``groundsieve:tune`` searches, per filter: a parameter's Processing name -> its range
 #: ``(low, high)`` (numbers; an int default makes it an integer) or a tuple of allowed values
-#: (choices, on/off). The ranges are those the papers explored: SMRF the span of Pingel's
-#: per-sample ISPRS optimum (isprs_smrf_settings.txt: slope .05-.45, window 3-49 m, threshold
-#: .1-1.1 m, scalar 0-3.8); PMF Zhang et al.'s and PDAL's (slope, windows to 50 m, distances);
-#: PTD Axelsson's angles and distances and building sizes; CSF the cloth resolutions and class
-#: thresholds of Zhang et al. 2016 and the three scene rigidnesses; EchoGrid Matrone et al. 2024's
-#: kernel and dz grid; EVC Fan et al. 2023's scale study (small 0.1-1 m, large 1-10 m, radius,
-#: threshold). Parameters not listed keep the preset's / filter's value (e.g. the cell of 1 m).
+#: (choices, on/off). The ranges span the values the papers used or studied, widened where a paper
+#: gives one setting only: SMRF the span of Pingel's per-sample ISPRS optimum
+#: (isprs_smrf_settings.txt: slope .05-.45, window 3-49 m, threshold .1-1.1 m, scalar 0-3.8); PMF
+#: Zhang et al.'s and PDAL's (slope, windows to 50 m, distances); PTD Axelsson's angles and
+#: distances and building sizes; CSF the cloth resolutions and class thresholds of Zhang et al.
+#: 2016 and the three scene rigidnesses; EchoGrid around Matrone et al. 2024's one setting (5 m
+#: kernel, 2 m: they give no grid); EVC around Fan et al. 2023's study (small 0.1-3.2 m, large to
+#: 6.4 m, radius 1-6, threshold 1.0-2.0; here small 0.1-1 m, large 1-10 m, radius 1-3, threshold
+#: 0.3-3.0). Parameters not listed keep the preset's / filter's value (e.g. the cell of 1 m).
 SEARCH: Dict[str, Dict[str, tuple]] = {
     "smrf": {"SLOPE": (0.05, 0.45), "WINDOW": (3.0, 49.0), "THRESHOLD": (0.1, 1.1), "SCALAR": (0.0, 3.8)},
     "pmf": {"MAX_WINDOW": (5.0, 50.0), "SLOPE": (0.05, 1.5), "INITIAL_DISTANCE": (0.05, 1.0),

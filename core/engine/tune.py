@@ -1,6 +1,6 @@
 """Tune a ground filter on a labelled patch (``groundsieve:tune``, ``python -m groundsieve tune``).
 
-The search, over the ranges of ``parameters.SEARCH`` (what the papers explored):
+The search, over the ranges of ``parameters.SEARCH`` (spanning the values the papers used or studied):
 
 1. the filter's defaults (or the starting preset's values), then a space-filling design over
    the ranges: a Halton sequence (deterministic; on 3-4 parameters it covers each range far more
@@ -325,7 +325,7 @@ class TuneResult:
             return ""
         items = [f"{d.name} ({_number(self.best_values[d.field])}) at the {end} end of its searched range "
                  f"({_number(d.low)} to {_number(d.high)})" for d, end in ends]
-        return ("; ".join(items) + ": the best value may lie beyond. The ranges are those the papers explored; to "
+        return ("; ".join(items) + ": the best value may lie beyond. The ranges span the values the papers used or studied; to "
                 "try beyond, run the filter with this preset and the value set by hand, and compare on the patch.")
 
 

@@ -223,8 +223,8 @@ f"; the starting set (filter defaults or starting preset): {_pct(start.total)}"}
         phase = t.phase if t.track < 0 else f"{t.phase} (block {t.track + 1} held out)"
         parts.append(f"<tr{' class=best' if i == result.best else ''}><td>{i + 1}</td>"
                      f"<td style='text-align:left'>{phase}</td>{cells}{res}<td>{t.seconds:.2f}</td></tr>")
-    parts.append("</table><p class='small'>GroundSieve groundsieve:tune. Design: Halton points over the ranges "
-                 "the papers explored (core/engine/parameters.py SEARCH); refinement: pattern search.</p>"
+    parts.append("</table><p class='small'>GroundSieve groundsieve:tune. Design: Halton points over ranges spanning "
+                 "the values the papers used or studied (core/engine/parameters.py SEARCH); refinement: pattern search.</p>"
                  "</body></html>\n")
     return "\n".join(parts)
 
