@@ -186,6 +186,19 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
                              f"(now {options.block_m:g} m) or give it as a file")
     log(", ".join(f"{label}: {len(v[0]):,} points" for label, v in sets.items()))
     notes = []
+    # The paper split its data "to have the presence of all the classes in each dataset"; random
+    # blocks may miss a rare class (a power line in a few blocks): say so.
+    present = {label: set(np.unique(ys).tolist()) for label, (_Xs, ys) in sets.items()}
+    every = set().union(*present.values())
+    for label, have in present.items():
+        missing = sorted(every - have)
+        if missing:
+            effect = ("the model cannot learn " + ("it" if len(missing) == 1 else "them")) if label == "train" else \
+                f"the {label} scores say nothing of " + ("it" if len(missing) == 1 else "them")
+            notes.append(f"{WARNING_PREFIX}the {label} set holds no point of class {', '.join(map(str, missing))}: "
+                         f"{effect}. Use smaller blocks (now {options.block_m:g} m), another seed, or give the "
+                         "sets as files.")
+            log(notes[-1])
     for name, accuracy in leaking_features(*sets["train"], names, seed=options.params.seed):
         notes.append(f"{WARNING_PREFIX}the feature '{name}' alone predicts {accuracy:.1%} of the training labels. "
                      "Check that it does not carry the label itself (e.g. a converted reference cloud whose "
