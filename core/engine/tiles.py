@@ -191,6 +191,9 @@ def needs_tiling(input_path: str, tiling: TileOptions, algorithm=None, dtm=None,
     if is_survey_input(input_path):
         return True
     if _ext(input_path) not in LAS_EXTENSIONS or not os.path.isfile(input_path):
+        if tiling.tile_size_m > 0 and log and os.path.isfile(input_path):
+            log(f"{WARNING_PREFIX}{input_path}: a tile size is set, but only LAS/LAZ files, folders and .vpc run in "
+                "tiles: this text file runs whole.")
         return False
     if tiling.tile_size_m > 0:
         return True
@@ -403,7 +406,12 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     dtm_grid = survey_dtm_grid(infos, dtm.cell_size_m) if dtm_path else None
     # The reach rounded up to whole metres: the buffer's edges then sit on whole metres, where the
     # filters' grids (edges on multiples of their cell) put theirs without floating-point doubt.
-    buffer_m = math.ceil(filter_reach_m(algorithm)) if tiling.buffer_m is None else float(tiling.buffer_m)
+    reach = filter_reach_m(algorithm)
+    buffer_m = math.ceil(reach) if tiling.buffer_m is None else float(tiling.buffer_m)
+    if buffer_m < reach:
+        log(f"{WARNING_PREFIX}the tile buffer ({buffer_m:g} m) is less than the filter's reach ({reach:g} m): points "
+            "near the tile edges may be classified otherwise than in a run of the whole cloud, and the DTM may show "
+            "the tile lines; leave the buffer at -1 (the filter's reach) unless you mean it.")
     density = sample_density(next(i.path for i in infos if i.count))
     cluster = None
     from .cluster import parse_scheduler

@@ -320,6 +320,10 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions, why_none: str = "
                                  closed=True)
     if log is not None:
         _say_stray_points(x, y, grid, log)
+        if min(grid.ncols, grid.nrows) < 3:
+            log(f"{WARNING_PREFIX}DTM: a cell of {options.cell_size_m:g} makes {grid.ncols:,} x {grid.nrows:,} cells over "
+                f"points spanning {float(np.ptp(x)):,.1f} x {float(np.ptp(y)):,.1f}: a DTM of a few cells. The cell "
+                "size is in the CRS's unit (metres for most); choose one near the ground points' spacing.")
     if not ground.any():
         raise InvalidParameterError((f"{path}: " if path else "")
                                     + "the filter found no ground point: no DTM can be made"
@@ -430,6 +434,9 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     if _ext(input_path) in LAS_EXTENSIONS:
         from ..io.lasfiles import scan_header
         warn_about_units(input_path, [scan_header(input_path)], log)
+    elif output_path or dtm_path or rasters:
+        log(f"{WARNING_PREFIX}{input_path}: a text file carries no CRS; the outputs have none either (assign one in "
+            "QGIS: the layer's Properties > Source, or Assign projection for a raster).")
     steps.check()
     w_read, w_filter, w_dtm, _w_write = stage_weights(input_path, output_path, algorithm, bool(dtm_path),
                                                       len(rasters))

@@ -324,3 +324,18 @@ def test_a_cell_too_small_for_dense_points_is_blamed_on_the_cell_not_on_stray_po
     with memory_budget(1 << 30):
         with pytest.raises(MemoryBudgetError):
             GridSpec.covering(x, y, fits * 0.9, what="DTM", bytes_per_cell=40)
+
+
+def test_a_dtm_cell_larger_than_the_cloud_is_warned():
+    """A cell of 1000 (a typo, or feet for metres) on a 450 x 300 m sample wrote a 1 x 1 DTM without a
+    word (a geomorphologist); a DTM of fewer than 3 cells across is now a warning."""
+    from groundsieve.core.engine.workflow import DTMOptions, make_dtm
+    from groundsieve.core.progress import WARNING_PREFIX
+    x, y, z = random_points()
+    ground = np.ones(x.size, dtype=bool)
+    for cell, warned in ((1000.0, True), (1.0, False)):
+        lines = []
+        grid, _dtm = make_dtm(x, y, z, ground, DTMOptions(cell_size_m=cell), log=lines.append)
+        said = [line for line in lines if line.startswith(WARNING_PREFIX + "DTM: a cell of")]
+        assert bool(said) == warned, lines
+    assert said == [] and grid.ncols == 50

@@ -113,12 +113,31 @@ def test_buffer_is_what_removes_the_seams(scene_laz, tmp_path):
     """Without a buffer (what a file-by-file run does), SMRF differs along the tile edges; with its
     reach as the buffer it does not."""
     whole = whole_classes(scene_laz, SMRF())
-    found = {}
+    found, said = {}, {}
     for buffer in (0.0, None):
         out = tmp_path / f"buffer{buffer}.laz"
-        run_ground_filter(scene_laz, str(out), SMRF(), options=tiled(buffer_m=buffer))
+        lines = []
+        run_ground_filter(scene_laz, str(out), SMRF(), options=tiled(buffer_m=buffer), log=lines.append)
         found[buffer] = agreement(laspy.read(out).classification, whole)
+        said[buffer] = [line for line in lines if "is less than the filter's reach" in line]
     assert found[0.0] < found[None] == 1.0
+    # a buffer below the reach is a warning (a reviewer's 10 m buffer drew the tile lines into his DTM)
+    assert said[None] == [] and len(said[0.0]) == 1 and said[0.0][0].startswith(
+        "Warning: the tile buffer (0 m) is less than the filter's reach (38 m)")
+
+
+def test_a_tile_size_on_a_text_file_is_said_to_be_ignored(tmp_path):
+    """TILE_SIZE on an ISPRS text file was ignored without a word (only LAS/LAZ run in tiles)."""
+    src = tmp_path / "patch.txt"
+    rng = np.random.default_rng(1)
+    xy = rng.uniform(0, 60, (3000, 2))
+    np.savetxt(src, np.column_stack([xy + [500000, 5400000], 100 + 0.01 * rng.standard_normal(3000)]), fmt="%.3f")
+    lines = []
+    run = run_ground_filter(str(src), str(tmp_path / "o.laz"), SMRF(), options=tiled(), log=lines.append)
+    assert not isinstance(run, TiledRun)
+    assert any(line.startswith(f"Warning: {src}: a tile size is set, but only LAS/LAZ") for line in lines), lines
+    # and its outputs have no CRS, which is said too (a reviewer's DTM of an ISPRS sample had none, silently)
+    assert any(line.startswith(f"Warning: {src}: a text file carries no CRS") for line in lines), lines
 
 
 def test_output_keeps_every_point_dimension_and_crs(scene_laz, tmp_path):
