@@ -3,7 +3,8 @@ one shipped with the plugin in presets/) whose parameters replace the filter's d
 
 The rule (the same as the command line's ``--preset``): the preset replaces the filter's
 defaults; a dialog value set to something other than the filter's default wins over the preset
-(so "the preset, with a threshold of 0.3 m" is one change in the dialog). A preset for another
+(so "the preset, with a threshold of 0.3 m" is one change in the dialog); under qgis_process, whose
+parameters hold only what was typed, every given value wins, even at the default. A preset for another
 filter, another preset format version, an unknown or out-of-range parameter is refused with the
 file's name and the problem (core/engine/presets.py).
 
@@ -63,19 +64,37 @@ def build_filter(algorithm, parameters, context, log=None):
     kwargs = algorithm.filterArguments(parameters, context)
     path = preset_path(algorithm, parameters, context)
     preset = load_preset(path, algorithm.FILTER) if path else None
+    typed = typed_fields(algorithm.FILTER, parameters) if preset is not None else set()
     if preset is not None:
-        kwargs = merge(algorithm.FILTER, preset.values, kwargs)
+        kwargs = merge(algorithm.FILTER, preset.values, kwargs, typed)
     kwargs = algorithm.completeFilterArguments(kwargs)
     built = table.filter_class(algorithm.FILTER)(**kwargs)
     if log is not None:
-        for line in describe(algorithm.FILTER, built, preset):
+        for line in describe(algorithm.FILTER, built, preset, typed_wins=running_in_qgis_process()):
             log(line)
     return built
+
+
+def running_in_qgis_process() -> bool:
+    """Whether this is qgis_process, whose parameters hold only what the command line gave (the
+    dialog, the modeler and the batch give every parameter, typed or not)."""
+    from qgis.core import QgsApplication
+    return QgsApplication.platform() == "qgis_process"
+
+
+def typed_fields(name: str, parameters) -> set:
+    """The filter's fields given on qgis_process's command line: there a value equal to the
+    default was typed on purpose and wins over the preset, as on GroundSieve's own command line.
+    Empty elsewhere: a dialog cannot tell a typed default from an untouched one."""
+    if not running_in_qgis_process():
+        return set()
+    from ..core.engine import parameters as table
+    return {p.field for p in table.params(name) if p.name in parameters}
 
 
 PRESET_HELP = """<p><b>Preset</b> (optional; every filter but the learned hybrid): a parameters file written by <i>Tune a ground filter on a
 labelled patch</i> (groundsieve:tune), or one shipped with the plugin, by its file or its name
 (<code>forest-smrf.json</code>; the plugin's <code>presets</code> folder).
 Its parameters replace the filter's defaults; a parameter you set in this dialog to a value other than
-its default wins over the preset. A preset for another filter, of another format version, or with an
+its default wins over the preset (in qgis_process, every parameter given wins). A preset for another filter, of another format version, or with an
 unknown or out-of-range parameter is refused with the file's name and the problem.</p>"""

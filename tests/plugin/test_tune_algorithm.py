@@ -186,3 +186,21 @@ def test_the_dialog_and_the_core_agree_on_which_names_are_shipped_presets(ground
         if value.lower().endswith(".json") and "/" not in value:
             assert dialog_ok == (shipped_path(value) is not None) == core_ok, value
     assert sum(shipped_preset_problem("Preset", v) is None for v in candidates) == len(names)
+
+
+def test_in_qgis_process_a_typed_value_equal_to_the_default_wins_over_the_preset(patch, tmp_path):
+    """qgis_process passes only the parameters typed on its command line: a forester's --THRESHOLD=0.5
+    (SMRF's default) against the forest preset's 0.1 was shown in the inputs and silently dropped.
+    There a given value now wins, as on GroundSieve's own command line (the dialog cannot tell a
+    typed default from an untouched one, so its rule is unchanged: the test above)."""
+    import subprocess
+    from pathlib import Path
+    wrapper = str(Path(__file__).resolve().parents[2] / "scripts" / "qgis-process")
+    runs = {}
+    for name, extra in (("typed", ["--THRESHOLD=0.5"]), ("untyped", [])):
+        proc = subprocess.run([wrapper, "run", "groundsieve:smrf", f"--INPUT={patch}", "--PRESET=forest-smrf.json",
+                               f"--OUTPUT={tmp_path / (name + '.laz')}", *extra], capture_output=True, text=True,
+                              timeout=600)
+        assert proc.returncode == 0, proc.stdout + proc.stderr
+        runs[name] = next(line for line in proc.stdout.splitlines() if line.startswith("SMRF parameters:"))
+    assert "THRESHOLD 0.5 m" in runs["typed"] and "THRESHOLD 0.1 m" in runs["untyped"], runs
