@@ -225,12 +225,27 @@ def classify_cloud(cloud: PointCloud, algorithm, options: FilterOptions = Filter
     touched = may.copy()
     if options.keep_existing_classes:
         touched &= np.isin(cls, REWRITTEN_CLASSES)
+    else:
+        _say_replaced_classes(cls[touched & ~np.isin(cls, REWRITTEN_CLASSES)], log)
     ground = np.zeros(len(cloud), dtype=bool)
     ground[idx[sub_ground]] = True
     ground &= touched
     cls[touched] = CLASS_UNCLASSIFIED
     cls[ground] = CLASS_GROUND
     return Classified(cls.astype(np.uint8), ground, filtered, detail, may)
+
+
+def _say_replaced_classes(replaced: np.ndarray, log) -> None:
+    """Say which classes of the input (other than 0, 1, 2) the run gives a new class, by how many
+    points: a vendor's water (9) silently became ground and entered a forester's DTM."""
+    if not replaced.size:
+        return
+    from ..learn.report import ASPRS_NAMES
+    codes, counts = np.unique(replaced, return_counts=True)
+    parts = ", ".join(f"{int(c)} ({ASPRS_NAMES.get(int(c), 'class ' + str(int(c)))}): {int(n):,}"
+                      for c, n in zip(codes, counts))
+    log(f"Classes of the input replaced by ground (2) or non-ground (1): {parts}. To keep them, tick Keep existing "
+        "classes other than 0, 1, 2 (--keep-classes); to add one to the DTM, name it in the DTM classes.")
 
 
 def _codes(codes) -> str:

@@ -134,3 +134,16 @@ def test_a_data_gap_is_left_empty_beyond_the_maximum_distance(tmp_path):
 def test_a_negative_maximum_distance_is_refused():
     with pytest.raises(InvalidParameterError, match="DTM maximum distance must be >= 0 m"):
         DTMOptions(max_distance_m=-1)
+
+
+def test_the_input_classes_a_run_replaces_are_said(river, tmp_path):
+    """Without KEEP_CLASSES a vendor's classes are replaced by 1 and 2 (the documented rule), and a
+    forester's 3,897 water points became ground and entered his DTM without a line in the log."""
+    lines = []
+    run_ground_filter(str(river), str(tmp_path / "o.laz"), SMRF(), log=lines.append)
+    said = [line for line in lines if line.startswith("Classes of the input replaced")]
+    assert len(said) == 1 and "5 (high vegetation): " in said[0] and "9 (water): " in said[0], lines
+    lines = []
+    run_ground_filter(str(river), str(tmp_path / "k.laz"), SMRF(), log=lines.append,
+                      options=FilterOptions(keep_existing_classes=True))
+    assert not any(line.startswith("Classes of the input replaced") for line in lines)
