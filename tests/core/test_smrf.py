@@ -59,6 +59,43 @@ def test_low_outliers_without_refill_still_flagged():
     assert not ground[[100, 200]].any()
 
 
+def closed_canopy(seed=0, size=60, gap_share=0.15):
+    """A flat floor at 100 m under a closed canopy (crowns 14-18 m up in every 1 m cell) that
+    pulses go through in ``gap_share`` of the cells only: the ground returns, few and scattered."""
+    rng = np.random.default_rng(seed)
+    cx, cy = np.meshgrid(np.arange(size) + 0.5, np.arange(size) + 0.5)
+    cx, cy = cx.ravel(), cy.ravel()
+    crowns = np.column_stack([cx + rng.uniform(-0.4, 0.4, cx.size), cy + rng.uniform(-0.4, 0.4, cy.size),
+                              100.0 + rng.uniform(14.0, 18.0, cx.size)])
+    gaps = rng.random(cx.size) < gap_share
+    floor = np.column_stack([cx[gaps] + rng.uniform(-0.4, 0.4, gaps.sum()), cy[gaps] + rng.uniform(-0.4, 0.4, gaps.sum()),
+                             100.0 + rng.normal(0.0, 0.03, gaps.sum())])
+    xyz = np.vstack([floor, crowns]) + [500000.0, 5400000.0, 0.0]
+    return xyz, np.arange(len(xyz)) < len(floor)
+
+
+def test_the_ground_under_a_closed_canopy_is_not_refilled_as_low_outliers():
+    """Under a dense canopy the cells whose lowest point is the ground are single cells among cells
+    of crowns: Pingel's low-outlier test flags them, and the refill replaced them by the crowns
+    around, so the ground followed the canopy (a forester: 20 % Type I, a DTM 2.9 m too high on
+    lidR's Megaplot). Where low-outlier cells are more than low_outlier_max_share of the occupied
+    cells within 10 m they are the ground seen through gaps, and stay; isolated ones are still refilled."""
+    from groundsieve.core.filters.smrf import low_outlier_share
+    xyz, floor = closed_canopy()
+    minimum = SMRF().minimum_surface(xyz)
+    assert minimum.low[~minimum.empty].mean() > 0.05  # the gaps are flagged...
+    ground = SMRF()(xyz)
+    assert ground[floor].mean() > 0.99 and not ground[~floor].any()  # ...and kept
+    old = SMRF(low_outlier_max_share=1.0)(xyz)  # every flagged cell refilled, as before
+    assert old[floor].mean() < 0.5
+    # isolated low outliers in open terrain are still refilled (test_low_outliers_are_not_ground)
+    open_xyz, _ = plane_scene(seed=5)
+    open_xyz[[10, 500, 2000], 2] -= 30.0
+    open_min = SMRF().minimum_surface(open_xyz)
+    assert open_min.low.sum() >= 3
+    assert low_outlier_share(open_min.low, ~open_min.empty, 1.0)[open_min.low].max() <= 0.05
+
+
 def test_result_fields():
     xyz, truth = plane_scene(box=BOX)
     res = SMRF().run(xyz)
@@ -119,6 +156,9 @@ def test_validate_xyz_accepts_lists_and_float32():
     ({"elevation_scalar": math.nan}, "elevation_scalar"),
     ({"low_outlier_slope": 0.0}, "low_outlier_slope"),
     ({"low_outlier_slope": math.nan}, "low_outlier_slope"),
+    ({"low_outlier_max_share": -0.1}, "low_outlier_max_share"),
+    ({"low_outlier_max_share": 1.5}, "low_outlier_max_share"),
+    ({"low_outlier_max_share": math.nan}, "low_outlier_max_share"),
 ])
 def test_invalid_parameters_name_the_parameter(kwargs, name):
     with pytest.raises(InvalidParameterError) as info:
