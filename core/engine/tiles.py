@@ -57,8 +57,9 @@ BYTES_PER_POINT = 330
 #: What one LAS/LAZ file run whole costs, to decide whether it fits the memory budget
 #: (:func:`whole_run_bytes`; fitted on every filter with a 1 m DTM at 10 M dense and 20 M airborne
 #: points, docs/BENCHMARKS.md): each point (its record, kept for the output, plus this much), each
-#: ground point the DTM triangulates, and each cell of the finest grid. The process itself (Python
-#: and its imports, about 0.25 GB) is not counted, as for tiles.
+#: ground point the DTM triangulates, each cell of the finest grid, and for a filter that fills its
+#: grid's empty cells what its guard counts for them (grids.spec.FILL_BYTES_PER_EMPTY_CELL). The
+#: process itself (Python and its imports, about 0.25 GB) is not counted, as for tiles.
 WHOLE_BYTES_PER_POINT = 128
 WHOLE_BYTES_PER_TIN_POINT = 150
 WHOLE_BYTES_PER_CELL = 60
@@ -172,15 +173,20 @@ def whole_run_bytes(info: LasInfo, algorithm=None, dtm=None) -> int:
     extra = getattr(algorithm, "extra_bytes_per_point", 0) if algorithm is not None else None
     if extra is None:
         return int(info.count * BYTES_PER_POINT)
+    from ..grids.spec import FILL_BYTES_PER_EMPTY_CELL
     record = (info.record_size or 34) + extra
     cells = info.area_m2 / finest_grid_m(algorithm) ** 2
+    # a filter that fills the empty cells of its grid (SMRF, PMF, the hybrid's surfaces): what its own
+    # guard counts for them (grids/spec.py), so that a cloud whose grid it would refuse is tiled instead
+    cell = getattr(algorithm, "cell_size_m", None)
+    empty = max(0.0, info.area_m2 / cell ** 2 - info.count) if isinstance(cell, (int, float)) and cell > 0 else 0.0
     tin = 0.0
     if dtm is not None:
         dtm_cells = info.area_m2 / dtm.cell_size_m ** 2
         cells = max(cells, dtm_cells)
         tin = min(float(info.count), dtm.points_per_cell * dtm_cells) if dtm.points_per_cell else float(info.count)
     return int(info.count * (WHOLE_BYTES_PER_POINT + record)
-               + tin * WHOLE_BYTES_PER_TIN_POINT + cells * WHOLE_BYTES_PER_CELL)
+               + tin * WHOLE_BYTES_PER_TIN_POINT + cells * WHOLE_BYTES_PER_CELL + empty * FILL_BYTES_PER_EMPTY_CELL)
 
 
 def needs_tiling(input_path: str, tiling: TileOptions, algorithm=None, dtm=None,
@@ -728,6 +734,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     log(f"Binned into {len(keys)} tile(s) in {time.perf_counter() - t_start:.1f} s." if not n_copc else
         f"Planned {len(keys)} tile(s) in {time.perf_counter() - t_start:.1f} s ({n_copc} COPC file(s) read by "
         "bounds by each tile, not binned).")
+    if dtm_grid is not None and not n_copc:
+        _say_stray_tiles(tiles, grid, dtm_grid, log)
     assigned = [0] * len(infos)
     crs_wkt = infos[0].crs_wkt
     # 2. the DTM's block writer, on the grid run_tiled made from the headers
@@ -1254,6 +1262,27 @@ def _tile_job(job) -> Optional[dict]:
         raise type(err)(f"{where}: {err}") from err
     except Exception as err:  # an unexpected failure still names the tile
         raise GroundSieveError(f"{where} failed: {type(err).__name__}: {err}") from err
+
+
+def _say_stray_tiles(tiles, grid, dtm_grid, log) -> None:
+    """Say when a survey's DTM, which spans the headers' bounds, is mostly empty because a few points
+    lie far from the others (tiles of fewer than MIN_TILE_POINTS points, which are not filtered): the
+    tiled counterpart of workflow._say_stray_points (a stray point 1,000 km away made a 1,000,040 x 40
+    cell DTM without a word)."""
+    counts = {k: sum(p.own_count for p in parts) for k, parts in tiles.items()}
+    kept = [grid.bounds(k) for k, n in counts.items() if n >= MIN_TILE_POINTS]
+    few = sorted((k for k, n in counts.items() if 0 < n < MIN_TILE_POINTS), key=lambda k: counts[k])
+    if not kept or not few:
+        return
+    x0, y0 = min(b[0] for b in kept), min(b[1] for b in kept)
+    x1, y1 = max(b[2] for b in kept), max(b[3] for b in kept)
+    spanned = dtm_grid.ncols * dtm_grid.nrows * dtm_grid.cell ** 2
+    if spanned < 2 * (x1 - x0) * (y1 - y0):
+        return
+    bx0, by0, _bx1, _by1 = grid.bounds(few[0])
+    log(f"{WARNING_PREFIX}DTM: {sum(counts[k] for k in few):,} point(s) in {len(few):,} tile(s) lie far from the others "
+        f"(e.g. {counts[few[0]]:,} in the tile at x {bx0:,.0f}, y {by0:,.0f}): the DTM spans them, {dtm_grid.ncols:,} x "
+        f"{dtm_grid.nrows:,} cells, mostly empty. Class them as noise (7) to leave them out, or crop the cloud.")
 
 
 def _block_cells(full, bounds):

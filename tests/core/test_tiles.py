@@ -946,6 +946,12 @@ def test_one_file_runs_whole_when_its_estimated_memory_fits_the_budget(scene_laz
                                 log=lines.append, options=FilterOptions(tiling=TileOptions(memory_budget_mb=budget, workers=1)))
         assert isinstance(run, TiledRun) == tiled_run
         assert any("run whole it would take about" in line for line in lines) == tiled_run, lines
+    # a grid the filter must fill (one point 1,000 km away) costs what its own guard counts for the empty
+    # cells, so such a file is tiled (tiles exist only where points are) rather than refused by the guard
+    import dataclasses
+    from groundsieve.core.grids.spec import FILL_BYTES_PER_EMPTY_CELL
+    stray = dataclasses.replace(info, maxs=(info.mins[0] + 1_000_000.0, info.maxs[1], info.maxs[2]))
+    assert whole_run_bytes(stray, SMRF(), None) > (stray.area_m2 - stray.count) * FILL_BYTES_PER_EMPTY_CELL > 2 << 30
     # an algorithm whose extra memory is not known keeps the planner's figure (e.g. a model with point features)
     class Unmeasured(SMRF):
         extra_bytes_per_point = None

@@ -108,9 +108,11 @@ def test_two_outputs_on_one_file_are_refused_before_any_work(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.las"]
 
 
-def test_a_stray_point_far_away_is_refused_with_its_place_not_a_crash(tmp_path):
-    # 6,400 points on 40 x 40 m and one point 1000 km east: an SMRF grid of 40 x 1,000,041 cells, mostly
-    # holes to fill (about 90 GB). Refused before allocating, with the stray point's place.
+def test_a_stray_point_far_away_runs_in_tiles_and_is_said_with_its_place(tmp_path):
+    # 6,400 points on 40 x 40 m and one point 1000 km east: a whole run's SMRF grid would be 40 x 1,000,041
+    # cells (about 90 GB with its fill), which was refused with the stray point's place. The estimate of a
+    # whole run (its grid cells counted) now sends such a file to the tiles, which exist only where points
+    # are: the run works in bounded memory, and says where the stray point is and why the DTM is mostly empty.
     src = tmp_path / "in.las"
     write_scene(src, fmt=6, marked=False)
     las = laspy.read(str(src))
@@ -120,9 +122,10 @@ def test_a_stray_point_far_away_is_refused_with_its_place_not_a_crash(tmp_path):
     las.write(str(src))
     out = tmp_path / "out.laz"
     rc, text = _run("groundsieve:smrf", f"--INPUT={src}", f"--OUTPUT={out}", f"--DTM={tmp_path / 'dtm.tif'}")
-    assert rc == 1, text
-    assert "SMRF grid: 1,000,041 x 40 cells of 1 m" in text, text
-    assert "Likely cause: 1 point lies 1000.0 km from the others, at x 1512040.00" in text, text
-    assert "survey-scale tiler" in text and "Traceback" not in text
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.las"]
+    assert rc == 0, text
+    assert "run whole it would take about" in text and "run in buffered tiles" in text, text
+    assert ("DTM: 1 point(s) in 1 tile(s) lie far from the others (e.g. 1 in the tile at x 1,511,840, y "
+            "5,402,320): the DTM spans them, 1,000,040 x 40 cells, mostly empty") in text, text
+    cls, _withheld, _synthetic = _read(out)
+    assert cls[-1] != 2 and (cls[:-1] == 2).mean() > 0.5 and "Traceback" not in text
 
