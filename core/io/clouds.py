@@ -288,7 +288,13 @@ def _text_problem(path: str) -> str:
                     try:
                         float(word)
                     except ValueError:
-                        return f"line {number}, column {column}: {word[:40]!r} is not a number"
+                        hint = ""
+                        if any(sep in word for sep in ",;"):
+                            hint = ("; the values must be separated by spaces or tabs, not commas or semicolons "
+                                    "(or convert the file to LAS/LAZ)")
+                        elif number == 1:
+                            hint = "; a header line is not read: remove it, or start it with '#'"
+                        return f"line {number}, column {column}: {word[:40]!r} is not a number{hint}"
                 if columns is None:
                     columns = len(words)
                 elif len(words) != columns:

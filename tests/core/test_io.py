@@ -323,7 +323,11 @@ def test_las_with_huge_coordinates(tmp_path):
     ("1 2 3 0 # first\n4 5 6\n", "line 2 has 3 columns, the lines before it 4"),
     (b"\xef\xbb\xbf1 2 3 0\n4 5 x 1\n", r"line 2, column 3: 'x' is not a number"),
     (b"# caf\xe9\n1 2 3 0\n1 2 z 0\n", r"line 3, column 3: 'z' is not a number"),
-    (b"\xff\xfe\x00\x01 binary\n", "not text")])
+    (b"\xff\xfe\x00\x01 binary\n", "not text"),
+    # a geomorphologist's header row and commas: the message says what to do
+    ("x y z label\n1 2 3 0\n", r"'x' is not a number; a header line is not read: remove it, or start it with '#'"),
+    ("1,2,3,0\n4,5,6,1\n", r"'1,2,3,0' is not a number; the values must be separated by spaces or tabs, not commas"),
+    ("1 2 3 0\n4;5;6;1\n", r"line 2, column 1: '4;5;6;1' is not a number; the values must be separated by spaces")])
 def test_text_not_numbers(tmp_path, content, match):
     path = tmp_path / "bad.txt"
     path.write_bytes(content if isinstance(content, bytes) else content.encode())
