@@ -70,7 +70,7 @@ def build_filter(algorithm, parameters, context, log=None):
     kwargs = algorithm.completeFilterArguments(kwargs)
     built = table.filter_class(algorithm.FILTER)(**kwargs)
     if log is not None:
-        for line in describe(algorithm.FILTER, built, preset, typed_wins=running_in_qgis_process()):
+        for line in describe(algorithm.FILTER, built, preset, typed_wins=bool(typed)):
             log(line)
     return built
 
@@ -85,11 +85,14 @@ def running_in_qgis_process() -> bool:
 def typed_fields(name: str, parameters) -> set:
     """The filter's fields given on qgis_process's command line: there a value equal to the
     default was typed on purpose and wins over the preset, as on GroundSieve's own command line.
-    Empty elsewhere: a dialog cannot tell a typed default from an untouched one."""
+    Empty elsewhere, and when every parameter of the filter is there: a dialog, a model's step (also
+    run by qgis_process) or a batch fills them all, and cannot tell a typed default from an untouched one."""
     if not running_in_qgis_process():
         return set()
     from ..core.engine import parameters as table
-    return {p.field for p in table.params(name) if p.name in parameters}
+    params = table.params(name)
+    given = {p.field for p in params if p.name in parameters}
+    return set() if len(given) == len(params) else given
 
 
 PRESET_HELP = """<p><b>Preset</b> (optional; every filter but the learned hybrid): a parameters file written by <i>Tune a ground filter on a

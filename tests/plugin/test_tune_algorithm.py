@@ -204,3 +204,27 @@ def test_in_qgis_process_a_typed_value_equal_to_the_default_wins_over_the_preset
         assert proc.returncode == 0, proc.stdout + proc.stderr
         runs[name] = next(line for line in proc.stdout.splitlines() if line.startswith("SMRF parameters:"))
     assert "THRESHOLD 0.5 m" in runs["typed"] and "THRESHOLD 0.1 m" in runs["untyped"], runs
+
+
+def test_in_qgis_process_a_models_step_keeps_the_preset(groundsieve_provider, patch, tmp_path):
+    """A model's step holds every parameter (the modeler fills them all, as a dialog does): run by
+    qgis_process it must keep the dialog's rule, not take each default for a typed value and drop
+    the preset (a reviewer: forest-smrf's THRESHOLD 0.1 replaced by 0.5 in a model run by qgis_process)."""
+    import subprocess
+    from pathlib import Path
+
+    from qgis.core import (QgsProcessingModelAlgorithm, QgsProcessingModelChildParameterSource as Source,
+                           QgsProcessingModelParameter, QgsProcessingParameterFile)
+    from groundsieve.tests.plugin.conftest import add_child
+    model = QgsProcessingModelAlgorithm("preset model", "tests")
+    model.addModelParameter(QgsProcessingParameterFile("cloud", "Point cloud"), QgsProcessingModelParameter("cloud"))
+    add_child(model, "groundsieve:smrf", "smrf", {"INPUT": Source.fromModelParameter("cloud")},
+              {"classified": "OUTPUT"}, static={"PRESET": "forest-smrf.json"})
+    path = str(tmp_path / "preset.model3")
+    assert model.toFile(path)
+    wrapper = str(Path(__file__).resolve().parents[2] / "scripts" / "qgis-process")
+    proc = subprocess.run([wrapper, "run", path, f"--cloud={patch}", f"--smrf:classified={tmp_path / 'm.laz'}"],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    line = next(x for x in (proc.stdout + proc.stderr).splitlines() if "SMRF parameters:" in x)
+    assert "SLOPE 0.3" in line and "THRESHOLD 0.1 m" in line, line
