@@ -197,7 +197,8 @@ def needs_tiling(input_path: str, tiling: TileOptions, algorithm=None, dtm=None,
     if is_survey_input(input_path):
         return True
     if _ext(input_path) not in LAS_EXTENSIONS or not os.path.isfile(input_path):
-        if tiling.tile_size_m > 0 and log and os.path.isfile(input_path):
+        from ..io.clouds import TEXT_EXTENSIONS
+        if tiling.tile_size_m > 0 and log and os.path.isfile(input_path) and _ext(input_path) in TEXT_EXTENSIONS:
             log(f"{WARNING_PREFIX}{input_path}: a tile size is set, but only LAS/LAZ files, folders and .vpc run in "
                 "tiles: this text file runs whole.")
         return False
@@ -406,7 +407,7 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     # once from the headers, so that no tile decides it from what it alone holds
     for_survey = getattr(algorithm, "for_survey", None)
     if for_survey is not None:
-        algorithm = for_survey(infos)
+        algorithm = for_survey(infos, log)
     outs = check_tiled_outputs(inputs, output_path, dtm_path)
     # the DTM's grid from the headers: a DTM cell far too small for the survey is refused now
     dtm_grid = survey_dtm_grid(infos, dtm.cell_size_m) if dtm_path else None
@@ -753,6 +754,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     tile_log = []
     ground_total = 0
     kept_out: Dict[int, int] = {}  # points kept in classes of their own, left out of the DTM
+    replaced: Dict[int, int] = {}  # points of the input's other classes given 1 or 2
     filter_steps = steps.sub(0.3, 0.85)
     t_tiles = time.perf_counter()
     class_paths = [os.path.join(work, f"f{k:05d}.cls.npy") for k in range(len(infos))]
@@ -793,6 +795,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             dtm_writer.write_block(*result["block"])
         for code, count in result.get("kept_out", ()):
             kept_out[int(code)] = kept_out.get(int(code), 0) + int(count)
+        for code, count in result.get("replaced", ()):
+            replaced[int(code)] = replaced.get(int(code), 0) + int(count)
         ground_total += result["ground"]
         tile_log.append(dict(key=tuple(result["key"]), points=result["own"], read=result["read"],
                              ground=result["ground"], copc_read=result.get("copc_read", 0)))
@@ -871,6 +875,9 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         if output_path and _ext(output_path) == VPC_EXTENSION:
             from ..raster.crs import lonlat_box
             write_vpc(staging.stage(output_path), [scan_header(o) for o in staged], outs, lonlat=lonlat_box)
+        from .workflow import replaced_note
+        if replaced_note(replaced):
+            log(replaced_note(replaced))
         if dtm_writer is not None:
             from .workflow import kept_out_note
             note = kept_out_note(kept_out)
@@ -1218,6 +1225,7 @@ def _tile_job(job) -> Optional[dict]:
             return None
         cloud = tile_cloud(clouds, path=where)
         del clouds
+        replaced = {}
         if len(cloud) < MIN_TILE_POINTS:
             # Isolated points (a stray point far from the survey): too few for any filter's grid;
             # they keep their classes and are not ground.
@@ -1225,6 +1233,8 @@ def _tile_job(job) -> Optional[dict]:
         elif workflow.select_points(cloud, options).any():
             done = workflow.classify_cloud(cloud, job["algorithm"], options, Steps(is_cancelled=job["is_cancelled"]))
             cls, ground = done.classification, done.ground
+            if not options.keep_existing_classes:  # said once for the run (the tile's log goes nowhere)
+                replaced = workflow.replaced_classes(cloud.classification, own & done.processable)
         else:  # nothing to filter here (all noise): the points keep their classes
             cls, ground = cloud.classification, np.zeros(len(cloud), dtype=bool)
         assigned, class_parts = {}, None
@@ -1253,7 +1263,7 @@ def _tile_job(job) -> Optional[dict]:
                 kept_out = workflow.kept_out_of_dtm(cloud, cls, area & own, job["dtm"])
         result = dict(key=list(job["key"]), own=int(own.sum()), read=len(cloud), ground=int(ground[own].sum()),
                       assigned=assigned, block=block, class_parts=class_parts, copc_read=copc_read,
-                      kept_out=sorted(kept_out.items()))
+                      kept_out=sorted(kept_out.items()), replaced=sorted(replaced.items()))
         _save_done(job["done_dir"], result)
         return result
     except Cancelled:

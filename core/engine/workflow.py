@@ -33,7 +33,7 @@ from ..errors import InputError, InvalidParameterError
 from ..grids.spec import MAX_CELL_M, GridSpec, memory_budget
 from ..io import (CLASS_GROUND, CLASS_UNCLASSIFIED, NOISE_CLASSES, PointCloud, atomic_path, check_output_path,
                  read_cloud, write_classified)
-from ..io.clouds import parse_classes
+from ..io.clouds import TEXT_EXTENSIONS, parse_classes
 from ..io.outputs import LAS_EXTENSIONS, _ext, check_distinct_outputs
 from ..progress import WARNING_PREFIX, Steps
 from .tiles import TileOptions
@@ -226,7 +226,9 @@ def classify_cloud(cloud: PointCloud, algorithm, options: FilterOptions = Filter
     if options.keep_existing_classes:
         touched &= np.isin(cls, REWRITTEN_CLASSES)
     else:
-        _say_replaced_classes(cls[touched & ~np.isin(cls, REWRITTEN_CLASSES)], log)
+        note = replaced_note(replaced_classes(cls, touched))
+        if note:
+            log(note)
     ground = np.zeros(len(cloud), dtype=bool)
     ground[idx[sub_ground]] = True
     ground &= touched
@@ -235,17 +237,23 @@ def classify_cloud(cloud: PointCloud, algorithm, options: FilterOptions = Filter
     return Classified(cls.astype(np.uint8), ground, filtered, detail, may)
 
 
-def _say_replaced_classes(replaced: np.ndarray, log) -> None:
-    """Say which classes of the input (other than 0, 1, 2) the run gives a new class, by how many
-    points: a vendor's water (9) silently became ground and entered a forester's DTM."""
-    if not replaced.size:
-        return
-    from ..learn.report import ASPRS_NAMES
+def replaced_classes(classification: np.ndarray, touched: np.ndarray) -> dict:
+    """{class: points} of the input classes other than 0, 1, 2 among the points ``touched`` (given a
+    new class by the run)."""
+    replaced = classification[touched & ~np.isin(classification, REWRITTEN_CLASSES)]
     codes, counts = np.unique(replaced, return_counts=True)
-    parts = ", ".join(f"{int(c)} ({ASPRS_NAMES.get(int(c), 'class ' + str(int(c)))}): {int(n):,}"
-                      for c, n in zip(codes, counts))
-    log(f"Classes of the input replaced by ground (2) or non-ground (1): {parts}. To keep them, tick Keep existing "
-        "classes other than 0, 1, 2 (--keep-classes); to add one to the DTM, name it in the DTM classes.")
+    return {int(c): int(n) for c, n in zip(codes, counts)}
+
+
+def replaced_note(counts: dict) -> str:
+    """The log's line on the input's classes the run replaced ("" if none): a vendor's water (9)
+    silently became ground and entered a forester's DTM."""
+    if not counts:
+        return ""
+    from ..learn.report import ASPRS_NAMES
+    parts = ", ".join(f"{c} ({ASPRS_NAMES.get(c, 'class ' + str(c))}): {n:,}" for c, n in sorted(counts.items()))
+    return (f"Classes of the input replaced by ground (2) or non-ground (1): {parts}. To keep them, tick Keep existing "
+            "classes other than 0, 1, 2 (--keep-classes); to add one to the DTM, name it in the DTM classes.")
 
 
 def _codes(codes) -> str:
@@ -335,7 +343,7 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions, why_none: str = "
                                  closed=True)
     if log is not None:
         _say_stray_points(x, y, grid, log)
-        if min(grid.ncols, grid.nrows) < 3:
+        if grid.ncols * grid.nrows < 16:  # (a corridor, 400 x 2 cells, is a DTM of its own)
             log(f"{WARNING_PREFIX}DTM: a cell of {options.cell_size_m:g} makes {grid.ncols:,} x {grid.nrows:,} cells over "
                 f"points spanning {float(np.ptp(x)):,.1f} x {float(np.ptp(y)):,.1f}: a DTM of a few cells. The cell "
                 "size is in the CRS's unit (metres for most); choose one near the ground points' spacing.")
@@ -449,7 +457,7 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     if _ext(input_path) in LAS_EXTENSIONS:
         from ..io.lasfiles import scan_header
         warn_about_units(input_path, [scan_header(input_path)], log)
-    elif output_path or dtm_path or rasters:
+    elif _ext(input_path) in TEXT_EXTENSIONS and (output_path or dtm_path or rasters):
         log(f"{WARNING_PREFIX}{input_path}: a text file carries no CRS; the outputs have none either (assign one in "
             "QGIS: the layer's Properties > Source, or Assign projection for a raster).")
     steps.check()

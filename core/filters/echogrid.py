@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -91,11 +92,27 @@ class EchoGrid:
         check_choice(self, "kernel_origin", ("grid", "cloud"))
         check_choice(self, "echoes", ("auto", "yes", "no"))
 
-    def for_survey(self, infos) -> "EchoGrid":
-        """The filter a tiled run gives every tile (``infos``: the inputs' ``LasInfo``): with
-        ``echoes="auto"``, "yes" when a header counts points beyond return 1, so that the bypass
-        does not depend on what one tile holds. Headers that count none leave "auto"."""
-        if self.echoes == "auto" and any(getattr(i, "later_returns", None) for i in infos):
+    def for_survey(self, infos, log=None) -> "EchoGrid":
+        """The filter a tiled run gives every tile (``infos``: the inputs' ``LasInfo``; ``log`` told
+        what was decided): with ``echoes="auto"``, "yes" when the headers count points beyond return
+        1, so that the bypass does not depend on what one tile holds. Headers that count none leave
+        "auto"; so does a survey that mixes files with later returns and files without (first returns
+        only, photogrammetry): "yes" would take every kernel of the latter as ground, so each tile
+        decides from its own points, and the log says which files differ."""
+        if self.echoes != "auto":
+            return self
+        log = log or (lambda _msg: None)
+        counted = [i for i in infos if getattr(i, "count", 0) and getattr(i, "later_returns", None) is not None]
+        with_echoes = [i for i in counted if i.later_returns]
+        without = [i for i in counted if not i.later_returns]
+        if with_echoes and without:
+            log(f"{WARNING_PREFIX}Echo grid: {len(without)} file(s) have no later returns by their headers "
+                f"({', '.join(os.path.basename(i.path) for i in without[:3])}{', ...' if len(without) > 3 else ''}) "
+                f"where {len(with_echoes)} have: each tile decides from its own points whether the cloud has "
+                "echoes, so tiles may differ from one another; run such files apart.")
+            return self
+        if with_echoes:
+            log("Echo grid: the headers count later returns: every tile uses the single-return bypass.")
             return dataclasses.replace(self, echoes="yes")
         return self
 

@@ -62,14 +62,29 @@ def vertical_unit(crs_wkt: Optional[str]) -> Optional[str]:
     """The unit of the heights under a compound CRS (its vertical part): "metres" or GDAL's name
     (e.g. "US survey foot"); None without a vertical part (heights then in the horizontal unit)."""
     ref = _spatial_reference(crs_wkt)
-    if ref is None or not ref.IsCompound():
-        return None
-    factor = ref.GetTargetLinearUnits("VERT_CS")
-    if not factor:
+    factor = _vertical_factor(ref)
+    if factor is None:
         return None
     if abs(factor - 1.0) <= 1e-12:
         return "metres"
     return ref.GetAttrValue("VERT_CS|UNIT") or f"{factor:g} m"
+
+
+def _vertical_factor(ref) -> Optional[float]:
+    """Metres per unit of a compound CRS's vertical part; None without one."""
+    if ref is None or not ref.IsCompound():
+        return None
+    return ref.GetTargetLinearUnits("VERT_CS") or None
+
+
+def heights_differ(crs_wkt: Optional[str]) -> bool:
+    """Whether the heights of a compound CRS are in another unit than x and y (by size: US survey
+    and international feet, 2 ppm apart, are the same unit for a filter's thresholds)."""
+    ref = _spatial_reference(crs_wkt)
+    vertical = _vertical_factor(ref)
+    if vertical is None or ref.IsGeographic():
+        return False
+    return abs(vertical / ref.GetLinearUnits() - 1.0) > 1e-5
 
 
 def elevation_unit(crs_wkt: Optional[str]) -> str:
@@ -98,7 +113,7 @@ def unit_warning(path: str, crs_wkt: Optional[str], lengths: str = "every length
         return f"{path}: no CRS in the file; outputs have none either."
     unit = horizontal_unit(crs_wkt)
     heights = vertical_unit(crs_wkt)
-    if heights is not None and heights != unit and unit != "degrees":
+    if heights_differ(crs_wkt):
         return (f"{path}: the heights are in {heights} (the CRS's vertical part), x and y in {unit}: the "
                 "filters' height thresholds and the DTM are read in the heights' unit, their cells and windows "
                 "in x and y's. Convert the heights to the horizontal unit first (e.g. PDAL's "

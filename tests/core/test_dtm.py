@@ -339,3 +339,7 @@ def test_a_dtm_cell_larger_than_the_cloud_is_warned():
         said = [line for line in lines if line.startswith(WARNING_PREFIX + "DTM: a cell of")]
         assert bool(said) == warned, lines
     assert said == [] and grid.ncols == 50
+    # a corridor (400 x 2 cells) is a DTM of its own, not a typo
+    lines = []
+    make_dtm(x * 8 - 7 * X0, (y - Y0) / 20 + Y0, z, ground, DTMOptions(cell_size_m=1.0), log=lines.append)
+    assert not any(line.startswith(WARNING_PREFIX + "DTM: a cell of") for line in lines), lines

@@ -147,3 +147,9 @@ def test_the_input_classes_a_run_replaces_are_said(river, tmp_path):
     run_ground_filter(str(river), str(tmp_path / "k.laz"), SMRF(), log=lines.append,
                       options=FilterOptions(keep_existing_classes=True))
     assert not any(line.startswith("Classes of the input replaced") for line in lines)
+    # a tiled run says it once, with the counts of the whole (the tiles' own points)
+    tiled_lines = []
+    run_ground_filter(str(river), str(tmp_path / "t.laz"), SMRF(), log=tiled_lines.append,
+                      options=FilterOptions(tiling=TileOptions(tile_size_m=50.0, workers=1, parallel="threads")))
+    tiled_said = [line for line in tiled_lines if line.startswith("Classes of the input replaced")]
+    assert tiled_said == said, (tiled_said, said)

@@ -643,3 +643,30 @@ def test_first_returns_only_are_not_all_ground_and_are_warned():
     assert len(messages) == 1 and messages[0].startswith(WARNING_PREFIX + "Echo grid: every point has return number 1")
     # a given answer wins over the cloud's (what a tiled run passes down)
     assert EchoGrid(echoes="yes").run(xyz, return_number=rn, number_of_returns=nr).used_returns
+
+
+def test_a_survey_mixing_files_with_and_without_later_returns_decides_per_tile_and_says_so(tmp_path):
+    """A folder with a first-returns-only file beside a normal one: 'yes' from the second file's header
+    took every kernel of the first as ground (a reviewer: 100 % ground, no warning). The run keeps each
+    tile's own decision and names the files without later returns."""
+    import laspy
+
+    from groundsieve.core.engine.tiles import TileOptions
+    from groundsieve.core.engine.workflow import run_ground_filter
+    folder = tmp_path / "survey"
+    folder.mkdir()
+    _slope_with_one_echo_patch(folder / "a.las")
+    first = laspy.read(str(folder / "a.las"))
+    first.x = np.asarray(first.x) + 200.0  # beside the first file
+    first.return_number = np.ones(len(first.points), np.uint8)  # first returns only
+    first.number_of_returns = np.where(np.arange(len(first.points)) % 3 == 0, 3, 1).astype(np.uint8)
+    first.update_header()
+    first.write(str(folder / "b.las"))
+    lines = []
+    run_ground_filter(str(folder), str(tmp_path / "out.vpc"), EchoGrid(), log=lines.append,
+                      options=FilterOptions(tiling=TileOptions(tile_size_m=40.0, workers=1, parallel="threads")))
+    assert any("Echo grid: 1 file(s) have no later returns by their headers (b.las)" in line for line in lines), lines
+    b = np.asarray(laspy.read(str(tmp_path / "out" / "b.las")).classification)
+    whole = EchoGrid().run(np.column_stack([first.x, first.y, first.z]), return_number=np.asarray(first.return_number),
+                           number_of_returns=np.asarray(first.number_of_returns)).ground
+    assert (b == 2).mean() < 1.0 and np.array_equal(b == 2, whole)

@@ -312,3 +312,8 @@ def test_a_search_no_better_than_its_start_says_so(result, tmp_path):
     path = tmp_path / "nogain.html"
     write_report(str(path), beaten)
     assert "No better than the start:" in path.read_text(encoding="utf-8")
+    # kappa and F1 are maximised: a start with kappa 1 is not beaten either; the real start is
+    for metric, name in (("kappa", "kappa"), ("f1", "F1")):
+        text = dict(dataclasses.replace(beaten, metric=metric).warnings)["No better than the start"]
+        assert text.startswith(f"The tuned sets' cross-validated {name} (") and "(100.00 %)" in text
+        assert "No better than the start" not in dict(dataclasses.replace(result, metric=metric).warnings)
