@@ -403,6 +403,7 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     if not any(i.count for i in infos):
         raise InputError(f"{input_path}: the input holds no points")
     workflow.warn_about_units(input_path, infos, log)
+    workflow.check_model_units(algorithm, input_path, infos[0].crs_wkt, log)
     # what a filter decides from the whole cloud (e.g. the echo grid: whether it has echoes), decided
     # once from the headers, so that no tile decides it from what it alone holds
     for_survey = getattr(algorithm, "for_survey", None)

@@ -295,6 +295,18 @@ def kept_out_note(counts: dict) -> str:
             "surface, for a flood model), name it in the DTM classes.")
 
 
+def check_model_units(algorithm, input_path: str, crs_wkt, log) -> None:
+    """For a filter that runs a model (the hybrid filter, rfclassify's on surveys): refuse a cloud
+    whose CRS unit is not the one its model was trained in (learning.check_model_unit; a model
+    trained in feet ran on metres without a word). The shipped models say no unit (trained on the
+    ISPRS text samples, in metres): the CRS warning said before the work covers them."""
+    model = getattr(algorithm, "model", None)
+    if model is None or not getattr(model, "meta", {}).get("crs_unit"):
+        return
+    from .learning import check_model_unit
+    check_model_unit(model, getattr(algorithm, "model_path", "") or "the model", input_path, crs_wkt, log)
+
+
 def warn_about_units(path: str, infos, log) -> None:
     """Before any work: refuse a cloud in longitudes and latitudes, and say when the CRS is missing
     or not in metres (every length is read in its unit), from the files' headers ``infos``."""
@@ -456,7 +468,9 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     check_outputs(input_path, output_path, [dtm_path, *rasters])
     if _ext(input_path) in LAS_EXTENSIONS:
         from ..io.lasfiles import scan_header
-        warn_about_units(input_path, [scan_header(input_path)], log)
+        header = scan_header(input_path)
+        warn_about_units(input_path, [header], log)
+        check_model_units(algorithm, input_path, header.crs_wkt, log)
     elif _ext(input_path) in TEXT_EXTENSIONS and (output_path or dtm_path or rasters):
         log(f"{WARNING_PREFIX}{input_path}: a text file carries no CRS; the outputs have none either (assign one in "
             "QGIS: the layer's Properties > Source, or Assign projection for a raster).")

@@ -101,6 +101,16 @@ def test_a_cloud_in_another_unit_than_the_models_is_refused_before_the_work(scen
                                 options=TrainOptions(params=ForestParams(n_trees=2), block_m=0.0002))
             assert any("the CRS's unit is degrees, not metres: the features' radii and the blocks' size" in line
                        for line in lines), lines
+        # the learned hybrid filter with the same model refuses it too (a surveyor: it ran a model of feet
+        # on metres without a word, 10 times the error), whole and tiled
+        from groundsieve.core.engine.tiles import TileOptions
+        from groundsieve.core.engine.workflow import FilterOptions, run_ground_filter
+        from groundsieve.core.learn.hybrid import Hybrid
+        for options in (FilterOptions(), FilterOptions(tiling=TileOptions(tile_size_m=50.0, workers=1,
+                                                                           parallel="threads"))):
+            with pytest.raises(InputError, match=rf"in_{epsg}\.laz: the CRS's unit is {unit}, but the model "):
+                run_ground_filter(other, str(tmp_path / "h.laz"), Hybrid(model_path=model), options=options)
+        assert not os.path.exists(tmp_path / "h.laz")
         with pytest.raises(InputError, match="was trained on a cloud in metres"):  # a folder survey too
             folder = tmp_path / f"survey_{epsg}"
             folder.mkdir()
