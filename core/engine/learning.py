@@ -299,6 +299,9 @@ class ModelGround(Hybrid):
     the hybrid filter's threshold (ground at a probability of 0.5 or more), so that tiled and whole
     runs of rfclassify agree on ties too."""
     name = "rfclassify"
+    #: rfclassify gives every point a class of its model's: the log's advice on the input's other
+    #: classes (workflow.replaced_note) names the hybrid filter, which can keep them
+    keeps_classes = False
 
     def run(self, xyz, steps=None):
         from ..progress import Steps

@@ -226,7 +226,7 @@ def classify_cloud(cloud: PointCloud, algorithm, options: FilterOptions = Filter
     if options.keep_existing_classes:
         touched &= np.isin(cls, REWRITTEN_CLASSES)
     else:
-        note = replaced_note(replaced_classes(cls, touched))
+        note = replaced_note(replaced_classes(cls, touched), algorithm)
         if note:
             log(note)
     ground = np.zeros(len(cloud), dtype=bool)
@@ -245,15 +245,19 @@ def replaced_classes(classification: np.ndarray, touched: np.ndarray) -> dict:
     return {int(c): int(n) for c, n in zip(codes, counts)}
 
 
-def replaced_note(counts: dict) -> str:
+def replaced_note(counts: dict, algorithm=None) -> str:
     """The log's line on the input's classes the run replaced ("" if none): a vendor's water (9)
-    silently became ground and entered a forester's DTM."""
+    silently became ground and entered a forester's DTM. For an ``algorithm`` whose run has no way to
+    keep them (``keeps_classes`` False: rfclassify), the advice names the filter that has."""
     if not counts:
         return ""
     from ..learn.report import ASPRS_NAMES
     parts = ", ".join(f"{c} ({ASPRS_NAMES.get(c, 'class ' + str(c))}): {n:,}" for c, n in sorted(counts.items()))
-    return (f"Classes of the input replaced by ground (2) or non-ground (1): {parts}. To keep them, tick Keep existing "
-            "classes other than 0, 1, 2 (--keep-classes); to add one to the DTM, name it in the DTM classes.")
+    how = ("tick Keep existing classes other than 0, 1, 2 (--keep-classes)" if getattr(algorithm, "keeps_classes", True)
+           else "run the model in the learned hybrid filter (groundsieve:hybrid, MODEL) with Keep existing classes "
+                "other than 0, 1, 2")
+    return (f"Classes of the input replaced by ground (2) or non-ground (1): {parts}. To keep them, {how}; to add "
+            "one to the DTM, name it in the DTM classes.")
 
 
 def _codes(codes) -> str:

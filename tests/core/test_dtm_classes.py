@@ -153,3 +153,12 @@ def test_the_input_classes_a_run_replaces_are_said(river, tmp_path):
                       options=FilterOptions(tiling=TileOptions(tile_size_m=50.0, workers=1, parallel="threads")))
     tiled_said = [line for line in tiled_lines if line.startswith("Classes of the input replaced")]
     assert tiled_said == said, (tiled_said, said)
+    # rfclassify on a survey has no keep option: its advice names the filter that has (a surveyor was
+    # told to tick an option rfclassify does not offer)
+    from groundsieve.core.engine import learning
+    from groundsieve.core.learn.hybrid import DEFAULT_MODEL
+    rf_lines = []
+    learning.classify_file(str(river), str(tmp_path / "r.laz"), DEFAULT_MODEL, log=rf_lines.append,
+                           tiling=TileOptions(tile_size_m=50.0, workers=1, parallel="threads"))
+    rf_said = [line for line in rf_lines if line.startswith("Classes of the input replaced")]
+    assert len(rf_said) == 1 and "run the model in the learned hybrid filter (groundsieve:hybrid" in rf_said[0]
