@@ -199,6 +199,12 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
                          f"{effect}. Use smaller blocks (now {options.block_m:g} m), another seed, or give the "
                          "sets as files.")
             log(notes[-1])
+    Xt = sets["train"][0]
+    for j in np.flatnonzero((Xt.shape[0] > 1) & (np.nanmax(Xt, axis=0) == np.nanmin(Xt, axis=0))):
+        notes.append(f"{WARNING_PREFIX}the feature '{names[j]}' is {float(Xt[0, j]):g} on every training point: it "
+                     "carries no information (e.g. return_number on a cloud of single returns); leave it out, or "
+                     "train on a cloud where it varies.")
+        log(notes[-1])
     for name, accuracy in leaking_features(*sets["train"], names, seed=options.params.seed):
         notes.append(f"{WARNING_PREFIX}the feature '{name}' alone predicts {accuracy:.1%} of the training labels. "
                      "Check that it does not carry the label itself (e.g. a converted reference cloud whose "
@@ -428,6 +434,11 @@ def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_pat
         log(f"{WARNING_PREFIX}{input_path}: the feature '{name}' lies outside the range the model learnt it in on "
             f"{part_out:.0%} of the points (learnt: {low:,.4g} to {high:,.4g}; here the median is {median:,.4g}; "
             f"e.g. {example}): its predictions may mean little.")
+    from ..learn.rf import constant_features
+    for name, value, (low, high) in constant_features(model, X):
+        log(f"{WARNING_PREFIX}{input_path}: the feature '{name}' is {value:g} on every point (the model learnt it from "
+            f"{low:g} to {high:g}): it carries no information here, and the predictions lean on the other "
+            "features alone (e.g. a single-return cloud given a model trained on multi-return LiDAR).")
     predicted_part = model.predict(X, steps=steps.sub(0.5, 0.7)).astype(np.uint8)
     predicted = cloud.classification.astype(np.uint8)  # a copy: withheld and ignored points as read
     predicted[may] = predicted_part

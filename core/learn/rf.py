@@ -267,6 +267,21 @@ def out_of_range_features(model, X: np.ndarray, share: float = 0.9) -> list:
     return found
 
 
+def constant_features(model, X: np.ndarray) -> list:
+    """[(feature, value, (low, high))] of the features that take one value on every point of ``X``
+    although the model learnt them over a range (e.g. return_number on a cloud of single returns,
+    for a model trained on multi-return LiDAR): they carry no information here."""
+    ranges = model.meta.get("feature_ranges") or [None] * len(model.features)
+    found = []
+    for j, (name, span) in enumerate(zip(model.features, ranges)):
+        column = X[:, j][np.isfinite(X[:, j])]
+        if span is None or column.size < 2 or span[0] >= span[1]:
+            continue
+        if column.min() == column.max():
+            found.append((name, float(column[0]), tuple(span)))
+    return found
+
+
 # -- features of a cloud -----------------------------------------------------------------------
 
 #: f4-f7 of the paper: verticality 0.6 m, planarity 0.6 m, eigenentropy 0.4 m, surface variation 0.6 m.

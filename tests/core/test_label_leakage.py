@@ -88,3 +88,33 @@ def test_a_class_missing_from_a_set_of_the_split_is_warned(tmp_path):
     warned = [m for m in run.warnings if "holds no point of class 14" in m]
     assert 1 <= len(warned) <= 2 and all(m.startswith("Warning: the ") for m in warned), run.warnings
     assert "holds no point of class 14" in (tmp_path / "r.html").read_text()
+
+
+def test_a_feature_constant_in_training_or_in_the_cloud_is_warned(tmp_path):
+    """return_number was constant (a cloud of single returns) in training or in the classified cloud,
+    and nothing said so (a surveyor: 11 % error on a single-return cloud with a model of multi-return
+    LiDAR, no warning)."""
+    src = tmp_path / "multi.laz"
+    labelled(src, leak=False)
+    las = laspy.read(str(src))
+    assert len(np.unique(np.asarray(las.return_number))) > 1
+    single = tmp_path / "single.laz"
+    las.return_number = np.ones(len(las.points), np.uint8)
+    las.number_of_returns = np.ones(len(las.points), np.uint8)
+    las.write(str(single))
+    features = ("intensity", "return_number")
+    messages = []
+    run = learning.train_file(str(single), str(tmp_path / "s.npz"), None,
+                              learning.TrainOptions(features=features, params=rf.ForestParams(n_trees=3)),
+                              log=messages.append)
+    assert any(m.startswith("Warning: the feature 'return_number' is 1 on every training point") for m in run.warnings)
+    assert not any("'intensity' is" in m for m in run.warnings)
+    learning.train_file(str(src), str(tmp_path / "m.npz"), None,
+                        learning.TrainOptions(features=features, params=rf.ForestParams(n_trees=3)))
+    messages = []
+    learning.classify_file(str(single), str(tmp_path / "c.laz"), str(tmp_path / "m.npz"), log=messages.append)
+    said = [m for m in messages if "the feature 'return_number' is 1 on every point (the model learnt it from 1 to" in m]
+    assert len(said) == 1 and said[0].startswith(f"Warning: {single}: "), messages
+    messages = []
+    learning.classify_file(str(src), str(tmp_path / "d.laz"), str(tmp_path / "m.npz"), log=messages.append)
+    assert not any("on every point" in m for m in messages)
