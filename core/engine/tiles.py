@@ -453,7 +453,15 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
     if dtm_path:
         size = fit_dtm_blocks(size, buffer_m, dtm.cell_size_m, tiling, log)
     if not tiling.tile_size_m:  # the planned tiles cannot be smaller than 50 m: say when the budget asked for less
-        need = (size + 2 * buffer_m) ** 2 * density * BYTES_PER_POINT * tiling.worker_count
+        per_tile = (size + 2 * buffer_m) ** 2 * density * BYTES_PER_POINT
+        fit = max(1, int(tiling.budget_bytes // max(per_tile, 1.0)))
+        if cluster is None and fit < tiling.worker_count:
+            # the budget wins over the workers: fewer tiles at a time rather than more memory than allowed
+            log(f"{tiling.worker_count} tiles at the same time would take about "
+                f"{per_tile * tiling.worker_count / 2**20:,.0f} MB, more than the memory budget "
+                f"({tiling.budget_bytes / 2**20:,.0f} MB): {fit} at a time instead.")
+            tiling = dataclasses.replace(tiling, workers=fit)
+        need = per_tile * tiling.worker_count
         if need > 1.05 * tiling.budget_bytes:
             log(f"The memory budget ({tiling.budget_bytes / 2**20:,.0f} MB) is below what the smallest tiles "
                 f"need: tiles of {size:g} m and their buffer take about {need / 2**20:,.0f} MB on "
