@@ -320,6 +320,11 @@ class ModelGround(Hybrid):
         return HybridResult(predicted == GROUND_CLASS, ground.astype(np.float32))
 
 
+def _value(v: float) -> str:
+    """A feature's value for a message: whole digits where large (GPS seconds: 19,200.3, not 1.92e+04)."""
+    return f"{v:,.1f}" if abs(v) >= 1000 else f"{v:.4g}"
+
+
 def check_model_unit(model, model_path: str, input_path: str, crs_wkt: Optional[str], log) -> None:
     """Refuse a cloud whose CRS unit is not the one the model was trained in (its features' radii
     and heights would be read in another unit: 'metres' against 'US survey foot' misclassifies most
@@ -429,11 +434,16 @@ def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_pat
                        gps_time_of_week=model.meta.get("gps_time") == GPS_TIME_OF_WEEK)
     from ..learn.rf import out_of_range_features
     for name, part_out, (low, high), median in out_of_range_features(model, X):
-        example = ("16-bit colour given to a model trained on 8-bit colour" if median > high else
-                   "8-bit colour given to a model trained on 16-bit colour")
+        if name in ("red", "green", "blue", "intensity"):
+            example = ("; e.g. 16-bit colour given to a model trained on 8-bit colour" if median > high else
+                       "; e.g. 8-bit colour given to a model trained on 16-bit colour")
+        elif name == "gps_time":
+            example = "; e.g. a flight of another day, or GPS time of another encoding"
+        else:
+            example = ""
         log(f"{WARNING_PREFIX}{input_path}: the feature '{name}' lies outside the range the model learnt it in on "
-            f"{part_out:.0%} of the points (learnt: {low:,.4g} to {high:,.4g}; here the median is {median:,.4g}; "
-            f"e.g. {example}): its predictions may mean little.")
+            f"{part_out:.0%} of the points (learnt: {_value(low)} to {_value(high)}; here the median is "
+            f"{_value(median)}{example}): its predictions may mean little.")
     from ..learn.rf import constant_features
     for name, value, (low, high) in constant_features(model, X):
         log(f"{WARNING_PREFIX}{input_path}: the feature '{name}' is {value:g} on every point (the model learnt it from "

@@ -371,3 +371,5 @@ def test_a_feature_far_outside_the_range_it_was_learnt_in_is_warned_about(tmp_pa
         said = [line for line in lines if "lies outside the range the model learnt it in" in line]
         assert bool(said) == warned, (name, lines)
     assert "the feature 'red'" in said[0] and "100% of the points" in said[0]
+    # large values whole, not 2.04e+04 (a surveyor read "learnt: 1.92e+04 to 1.92e+04" for GPS seconds)
+    assert "(learnt: 20," in said[0] and "e+0" not in said[0] and "8-bit colour given to a model" in said[0]
