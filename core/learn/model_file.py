@@ -68,6 +68,11 @@ def load_model(path: str) -> Model:
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise InputError(f"{path}: no such model file")
+    with open(path, "rb") as f:
+        magic = f.read(6)
+    if magic[:4] != b"PK\x03\x04":  # an .npz is a zip archive; numpy would call anything else pickled data
+        raise InputError(f"{path}: not a GroundSieve model file (not an .npz archive: "
+                         + ("an empty file" if not magic else "it does not start as a zip file does") + ")")
     try:
         with np.load(path, allow_pickle=False) as data:
             if not hasattr(data, "files"):
