@@ -1290,13 +1290,16 @@ def _say_stray_tiles(tiles, grid, dtm_grid, log) -> None:
     cell DTM without a word)."""
     counts = {k: sum(p.own_count for p in parts) for k, parts in tiles.items()}
     kept = [grid.bounds(k) for k, n in counts.items() if n >= MIN_TILE_POINTS]
-    few = sorted((k for k, n in counts.items() if 0 < n < MIN_TILE_POINTS), key=lambda k: counts[k])
-    if not kept or not few:
+    if not kept:
         return
     x0, y0 = min(b[0] for b in kept), min(b[1] for b in kept)
     x1, y1 = max(b[2] for b in kept), max(b[3] for b in kept)
-    spanned = dtm_grid.ncols * dtm_grid.nrows * dtm_grid.cell ** 2
-    if spanned < 2 * (x1 - x0) * (y1 - y0):
+
+    def outside(k):  # a tile beyond the box of the filtered tiles: the DTM is stretched to reach it
+        bx0, by0, bx1, by1 = grid.bounds(k)
+        return bx1 <= x0 or bx0 >= x1 or by1 <= y0 or by0 >= y1
+    few = sorted((k for k, n in counts.items() if 0 < n < MIN_TILE_POINTS and outside(k)), key=lambda k: counts[k])
+    if not few:
         return
     bx0, by0, _bx1, _by1 = grid.bounds(few[0])
     log(f"{WARNING_PREFIX}DTM: {sum(counts[k] for k in few):,} point(s) in {len(few):,} tile(s) lie far from the others "
