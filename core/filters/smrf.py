@@ -5,12 +5,8 @@ Faithful to the paper and to the author's own code:
 1. minimum surface ``Zmin`` on a grid of ``cell_size_m``; empty cells filled by
    harmonic ("springs") inpainting;
 2. low outliers: the progressive filter run once (radius 1 cell) on ``-Zmin`` with a
-   slope of ``low_outlier_slope`` (5 = 500 %); such cells are objects (Pingel's rule, kept
-   without ``low_outlier_fill``). With ``low_outlier_fill`` (ours, the default) they are removed
-   from ``Zmin`` and refilled before step 3 where they are few (``low_outlier_max_share`` of
-   the occupied cells within 10 m); where they are many they are the ground seen through gaps
-   in a canopy: they stay in ``Zmin``, and are objects only if still low outliers against the
-   terrain around them (themselves and the cells the openings leave as ground);
+   slope of ``low_outlier_slope`` (5 = 500 %); such cells are objects; with
+   ``low_outlier_fill`` they are also removed from ``Zmin`` and refilled before step 3;
 3. progressive morphological opening with disks whose radius grows by one cell from
    1 to ``window_m / cell_size_m``, each step opening the previous result; a cell
    whose height drops by more than ``slope * radius * cell_size_m`` is an object;
@@ -68,8 +64,6 @@ class SMRFMinimum:
     key: tuple
     #: kept drops of the progressive opening (see :meth:`drops`); None = not kept
     openings: Optional[list] = field(default=None, compare=False, repr=False)
-    #: the low-outlier cells removed and refilled (with ``low_outlier_fill``, where few: low_outlier_share)
-    refilled: Optional[np.ndarray] = None
 
     def drops(self, radius: int, steps: Steps | None = None) -> Optional[List[np.ndarray]]:
         """The progressive opening's drops ``last - opening(last, r)`` for r = 1..``radius`` (cells),
@@ -180,17 +174,15 @@ class SMRF:
         steps.report(0.6)
         low = progressive_filter(-zmin, [1], self.cell_size_m, self.low_outlier_slope)
         steps.report(0.7)
-        refilled = np.zeros_like(low)
         if self.low_outlier_fill and low.any():
-            refilled = low & (low_outlier_share(low, ~empty, self.cell_size_m) <= self.low_outlier_max_share)
-            if refilled.any():
-                zmin[refilled] = np.nan
+            refill = low & (low_outlier_share(low, ~empty, self.cell_size_m) <= self.low_outlier_max_share)
+            if refill.any():
+                zmin[refill] = np.nan
                 zmin = inpaint_harmonic(zmin)
         steps.report(1.0)
-        for a in (raw, zmin, empty, low, refilled):
+        for a in (raw, zmin, empty, low):
             a.flags.writeable = False  # shared between runs: nobody may change it
-        return SMRFMinimum(grid, raw, zmin, empty, low, self.minimum_key, [] if keep_openings else None,
-                           refilled)
+        return SMRFMinimum(grid, raw, zmin, empty, low, self.minimum_key, [] if keep_openings else None)
 
     def surface(self, xyz: np.ndarray, steps: Steps | None = None,
                 minimum: SMRFMinimum | None = None) -> Tuple[GridSpec, np.ndarray, np.ndarray]:
@@ -215,7 +207,7 @@ class SMRF:
             objects = np.zeros(minimum.zmin.shape, dtype=bool)
             for radius, drop in zip(self.radii, drops):
                 objects |= drop > self.slope * radius * self.cell_size_m
-        objects |= minimum.empty | self._low_objects(minimum, objects)
+        objects |= minimum.empty | minimum.low
         if objects.all():
             # Nothing survived as ground: fall back to the minimum surface itself.
             zpro = minimum.raw.copy()
@@ -225,25 +217,6 @@ class SMRF:
         zpro = inpaint_harmonic(zpro)
         steps.report(1.0)
         return minimum.grid, zpro, objects
-
-    def _low_objects(self, minimum: SMRFMinimum, opened: np.ndarray) -> np.ndarray:
-        """The low-outlier cells that are objects. Without the refill, every one (Pingel's rule). With
-        it, those refilled, and of those kept (too many around to be outliers: the ground seen through
-        gaps in a canopy, see low_outlier_share) the ones still low outliers against the terrain
-        around them, the kept cells and the cells the openings (``opened``: their object cells) left
-        as ground: a true low outlier among them stays an object, and the ground under a closed canopy
-        is not (were it an object, the surface there would be a fill from the canopy's edge, which a
-        tile cannot see whole)."""
-        low = minimum.low
-        if not (self.low_outlier_fill and low.any()):
-            return low
-        refilled = minimum.refilled
-        kept = low & ~refilled
-        if not kept.any():
-            return refilled
-        terrain = np.where((kept | ~opened) & ~minimum.empty & ~refilled, minimum.raw, np.nan)
-        still = progressive_filter(-inpaint_harmonic(terrain), [1], self.cell_size_m, self.low_outlier_slope)
-        return refilled | (still & kept)
 
     def run(self, xyz: np.ndarray, steps: Steps | None = None,
             minimum: SMRFMinimum | None = None) -> SMRFResult:
