@@ -5,8 +5,15 @@ Faithful to the paper and to the author's own code:
 1. minimum surface ``Zmin`` on a grid of ``cell_size_m``; empty cells filled by
    harmonic ("springs") inpainting;
 2. low outliers: the progressive filter run once (radius 1 cell) on ``-Zmin`` with a
-   slope of ``low_outlier_slope`` (5 = 500 %); such cells are objects; with
-   ``low_outlier_fill`` they are also removed from ``Zmin`` and refilled before step 3;
+   slope of ``low_outlier_slope`` (5 = 500 %); such cells are objects (Pingel's rule, kept
+   without ``low_outlier_fill``). With ``low_outlier_fill`` (ours, the default) they are removed
+   from ``Zmin`` and refilled before step 3 where they are few (``low_outlier_max_share`` of
+   the occupied cells within 10 m); where they are many they are the ground seen through gaps
+   in a canopy: they stay in ``Zmin``, and are objects only if still more than
+   ``low_outlier_slope`` cells below the terrain around them (themselves and the cells the
+   openings leave as ground) opened with a disk of 3 cells. Not told apart: a dense, flat sheet
+   of low noise in open ground (a mirror image under water or glass) looks like a forest floor;
+   classify it as noise (7, ignored by default) first;
 3. progressive morphological opening with disks whose radius grows by one cell from
    1 to ``window_m / cell_size_m``, each step opening the previous result; a cell
    whose height drops by more than ``slope * radius * cell_size_m`` is an object;
@@ -30,7 +37,7 @@ import numpy as np
 
 from ..errors import InvalidParameterError
 from ..grids.inpaint import inpaint_harmonic
-from ..grids.morphology import progressive_filter
+from ..grids.morphology import opening, progressive_filter
 from ..grids.rasterize import cell_min
 from ..grids.spec import FILL_BYTES_PER_EMPTY_CELL, GridSpec
 from ..progress import Steps
@@ -64,6 +71,8 @@ class SMRFMinimum:
     key: tuple
     #: kept drops of the progressive opening (see :meth:`drops`); None = not kept
     openings: Optional[list] = field(default=None, compare=False, repr=False)
+    #: the low-outlier cells removed and refilled (with ``low_outlier_fill``, where few: low_outlier_share)
+    refilled: Optional[np.ndarray] = None
 
     def drops(self, radius: int, steps: Steps | None = None) -> Optional[List[np.ndarray]]:
         """The progressive opening's drops ``last - opening(last, r)`` for r = 1..``radius`` (cells),
@@ -71,7 +80,6 @@ class SMRFMinimum:
         compare them with ``slope * r * cell`` and choose where to stop. Made once and kept (a
         search over slope and window then opens the surface once per radius, not once per run).
         None when they are not kept or would take more than :data:`KEEP_OPENINGS_BYTES`."""
-        from ..grids.morphology import opening
         state = self.openings
         if state is None or radius * self.zmin.nbytes > KEEP_OPENINGS_BYTES:
             return None
@@ -174,15 +182,17 @@ class SMRF:
         steps.report(0.6)
         low = progressive_filter(-zmin, [1], self.cell_size_m, self.low_outlier_slope)
         steps.report(0.7)
+        refilled = np.zeros_like(low)
         if self.low_outlier_fill and low.any():
-            refill = low & (low_outlier_share(low, ~empty, self.cell_size_m) <= self.low_outlier_max_share)
-            if refill.any():
-                zmin[refill] = np.nan
+            refilled = low & (low_outlier_share(low, ~empty, self.cell_size_m) <= self.low_outlier_max_share)
+            if refilled.any():
+                zmin[refilled] = np.nan
                 zmin = inpaint_harmonic(zmin)
         steps.report(1.0)
-        for a in (raw, zmin, empty, low):
+        for a in (raw, zmin, empty, low, refilled):
             a.flags.writeable = False  # shared between runs: nobody may change it
-        return SMRFMinimum(grid, raw, zmin, empty, low, self.minimum_key, [] if keep_openings else None)
+        return SMRFMinimum(grid, raw, zmin, empty, low, self.minimum_key, [] if keep_openings else None,
+                           refilled)
 
     def surface(self, xyz: np.ndarray, steps: Steps | None = None,
                 minimum: SMRFMinimum | None = None) -> Tuple[GridSpec, np.ndarray, np.ndarray]:
@@ -207,7 +217,7 @@ class SMRF:
             objects = np.zeros(minimum.zmin.shape, dtype=bool)
             for radius, drop in zip(self.radii, drops):
                 objects |= drop > self.slope * radius * self.cell_size_m
-        objects |= minimum.empty | minimum.low
+        objects |= minimum.empty | self._low_objects(minimum, objects)
         if objects.all():
             # Nothing survived as ground: fall back to the minimum surface itself.
             zpro = minimum.raw.copy()
@@ -217,6 +227,27 @@ class SMRF:
         zpro = inpaint_harmonic(zpro)
         steps.report(1.0)
         return minimum.grid, zpro, objects
+
+    def _low_objects(self, minimum: SMRFMinimum, opened: np.ndarray) -> np.ndarray:
+        """The low-outlier cells that are objects. Without the refill, every one (Pingel's rule). With
+        it, those refilled, and of those kept (too many around to be outliers: the ground seen through
+        gaps in a canopy, see low_outlier_share) the ones still low outliers against the terrain
+        around them, the kept cells and the cells the openings (``opened``: their object cells) left
+        as ground: a true low outlier among them stays an object, and the ground under a closed canopy
+        is not (were it an object, the surface there would be a fill from the canopy's edge, which a
+        tile cannot see whole)."""
+        low = minimum.low
+        if not (self.low_outlier_fill and low.any()):
+            return low
+        refilled = minimum.refilled
+        kept = low & ~refilled
+        if not kept.any():
+            return refilled
+        terrain = -inpaint_harmonic(np.where((kept | ~opened) & ~minimum.empty & ~refilled, minimum.raw, np.nan))
+        # against a disk of LOW_OUTLIER_TERRAIN_CELLS: a cluster of low points smaller than it (multipath
+        # under a canopy) is still caught, where the 3 x 3 test sees the cluster's own cells around
+        still = terrain - opening(terrain, LOW_OUTLIER_TERRAIN_CELLS) > self.low_outlier_slope * self.cell_size_m
+        return refilled | (still & kept)
 
     def run(self, xyz: np.ndarray, steps: Steps | None = None,
             minimum: SMRFMinimum | None = None) -> SMRFResult:
@@ -238,6 +269,8 @@ class SMRF:
 
 #: the neighbourhood (m) over which low_outlier_share counts the low-outlier cells: a few crowns
 LOW_OUTLIER_SHARE_RADIUS_M = 10.0
+#: the disk (cells) a kept low-outlier cell is judged against the terrain around it with (SMRF._low_objects)
+LOW_OUTLIER_TERRAIN_CELLS = 3
 
 
 def low_outlier_share(low: np.ndarray, occupied: np.ndarray, cell_m: float) -> np.ndarray:

@@ -398,12 +398,13 @@ class Hybrid:
     @property
     def extra_bytes_per_point(self) -> Optional[int]:
         """Memory a point costs a whole run beyond a ground filter's (core/engine/tiles.whole_run_bytes):
-        48 B with PTD's features (the accurate model: 2.04 GB at peak on 10 M points where the fast one
-        takes 1.65 GB, docs/BENCHMARKS.md); None (not measured) for a model with point features."""
+        120 B with PTD's features (the accurate model; measured 40 B more than the fast model at 250
+        points/m², 117 B at 1.2 points/m², docs/BENCHMARKS.md); None (not measured) for a model with
+        point features."""
         if any(name not in GRID_FEATURES and name not in PTD_FEATURES and opening_radius(name) is None
                for name in self.features):
             return None
-        return 48 if any(name in PTD_FEATURES for name in self.features) else 0
+        return 120 if any(name in PTD_FEATURES for name in self.features) else 0
 
     @property
     def reach_m(self) -> float:
