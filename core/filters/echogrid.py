@@ -112,8 +112,13 @@ class EchoGrid:
                 "echoes, so tiles may differ from one another; run such files apart.")
             return self
         if with_echoes:
-            log("Echo grid: the headers count later returns: every tile uses the single-return bypass.")
+            log("Echo grid: the headers count later returns, so the cloud has echoes: every tile applies the "
+                "paper's single-return bypass where its kernels hold single returns only.")
             return dataclasses.replace(self, echoes="yes")
+        if without:  # said once here: a tile's own warning does not reach the run's log
+            log(f"{WARNING_PREFIX}Echo grid: the headers count no return beyond the first (photogrammetry, first "
+                "returns only, or a file without returns): the single-return bypass is off and every kernel gets "
+                "the height test.")
         return self
 
     @property

@@ -666,6 +666,11 @@ def test_a_survey_mixing_files_with_and_without_later_returns_decides_per_tile_a
     run_ground_filter(str(folder), str(tmp_path / "out.vpc"), EchoGrid(), log=lines.append,
                       options=FilterOptions(tiling=TileOptions(tile_size_m=40.0, workers=1, parallel="threads")))
     assert any("Echo grid: 1 file(s) have no later returns by their headers (b.las)" in line for line in lines), lines
+    # the first-returns-only file alone, in tiles: its warning is said once by the run (a tile's is lost)
+    lines = []
+    run_ground_filter(str(folder / "b.las"), str(tmp_path / "b_tiled.las"), EchoGrid(), log=lines.append,
+                      options=FilterOptions(tiling=TileOptions(tile_size_m=40.0, workers=1, parallel="threads")))
+    assert sum(line.startswith("Warning: Echo grid: the headers count no return beyond the first") for line in lines) == 1
     b = np.asarray(laspy.read(str(tmp_path / "out" / "b.las")).classification)
     whole = EchoGrid().run(np.column_stack([first.x, first.y, first.z]), return_number=np.asarray(first.return_number),
                            number_of_returns=np.asarray(first.number_of_returns)).ground
