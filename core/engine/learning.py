@@ -309,6 +309,10 @@ class ModelGround(Hybrid):
     #: classes (workflow.replaced_note) names the hybrid filter, which can keep them
     keeps_classes = False
 
+    def describe(self) -> str:
+        return (f"rfclassify in tiles: {self.model_path} ({len(self.features)} features: {', '.join(self.features)}); "
+                "each point gets the model's most probable class")
+
     def run(self, xyz, steps=None):
         from ..progress import Steps
         steps = steps or Steps()

@@ -453,6 +453,9 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     steps = Steps(progress, is_cancelled)
     log = log or (lambda _msg: None)
     rasters = {path: fn for path, fn in (rasters or {}).items() if path}
+    describe = getattr(algorithm, "describe", None)
+    if callable(describe):  # a filter whose parameters are not a table's (the hybrid: its model)
+        log(describe())
     from .tiles import needs_tiling, run_tiled
     if needs_tiling(input_path, options.tiling, algorithm, dtm if dtm_path else None, log):
         # A folder, a .vpc, a set tile size or a cloud beyond the memory budget: buffered tiles.

@@ -395,6 +395,12 @@ class Hybrid:
     def cell_size_m(self) -> float:
         return float(self._model.meta.get(CELL_KEY, 1.0))
 
+    def describe(self) -> str:
+        """The run's log line on what classifies (the engine logs it before the work)."""
+        model = self.model_path or f"the shipped {self.shipped_model} model"
+        return (f"{type(self).__name__}: {model} ({len(self.features)} features: {', '.join(self.features)}); "
+                f"ground at a probability of {self.ground_probability:g} or more")
+
     @property
     def extra_bytes_per_point(self) -> Optional[int]:
         """Memory a point costs a whole run beyond a ground filter's (core/engine/tiles.whole_run_bytes):

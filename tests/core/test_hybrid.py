@@ -432,3 +432,16 @@ def test_a_feature_named_twice_gets_the_same_values_in_both_columns():
     twice = hybrid_features(xyz, ["above_cell_min", "cell_range", "above_cell_min", "above_smrf", "above_smrf"])
     assert np.array_equal(twice[:, [0, 1, 3]], once) and np.array_equal(twice[:, 2], once[:, 0])
     assert np.array_equal(twice[:, 4], once[:, 2])
+
+
+def test_a_hybrid_run_says_which_model_classifies(tmp_path):
+    """A forester could not tell from the log which model or threshold a hybrid run used."""
+    from groundsieve.core.engine.workflow import run_ground_filter
+    from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+    src = tmp_path / "s.laz"
+    write_scene(make_scene(SceneSpec(size_m=40.0, density_per_m2=2.0, seed=2)), src)
+    lines = []
+    run_ground_filter(str(src), str(tmp_path / "o.laz"), Hybrid(shipped_model="accurate", ground_probability=0.6),
+                      log=lines.append)
+    assert lines[0].startswith("Hybrid: the shipped accurate model (8 features: above_smrf,")
+    assert lines[0].endswith("ground at a probability of 0.6 or more")
