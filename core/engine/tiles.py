@@ -805,7 +805,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     if not tiling.scheduler:  # (a cluster run says where its tiles go)
         log(f"{len(keys)} tile(s) on {workers} worker(s) ({'processes' if use_processes else 'threads'}).")
 
-    def record(result):
+    def record(result, resumed=False):
         nonlocal ground_total
         if result is None:
             return
@@ -823,19 +823,22 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         ground_total += result["ground"]
         tile_log.append(dict(key=tuple(result["key"]), points=result["own"], read=result["read"],
                              ground=result["ground"], copc_read=result.get("copc_read", 0)))
-        elapsed = time.perf_counter() - t_tiles
         done_frac = len(tile_log) / len(keys)
+        filter_steps.report(done_frac)
+        if resumed:  # a tile of the interrupted run: counted, not told again (the log said how many)
+            return
+        pace["done"] += 1
+        pace["last"] = time.perf_counter()
+        # the time left at the pace of this run's tiles (a resumed run's earlier tiles took none of it)
+        left = (pace["last"] - pace["start"]) / pace["done"] * (len(keys) - len(tile_log))
         x0, y0 = grid.bounds(tuple(result["key"]))[:2]
         log(f"Tile {len(tile_log)}/{len(keys)} at {x0:.0f}, {y0:.0f}: {result['own']:,} points "
             f"(+{result['read'] - result['own']:,} buffer), {result['ground']:,} ground; "
-            f"about {elapsed / done_frac - elapsed:.0f} s left.")
-        filter_steps.report(done_frac)
-        pace["done"] += 1
-        pace["last"] = time.perf_counter()
+            f"about {left:.0f} s left.")
 
     # Between two finished tiles the bar moves on at the pace of those finished so far in this run
     # (never past the next one): with few large tiles on worker processes it stood still for minutes.
-    pace = {"done": 0, "last": None}
+    pace = {"done": 0, "last": None, "start": time.perf_counter()}
 
     def tick():
         steps.check()
@@ -846,7 +849,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
 
     for before in done_before:
         if before is not None:
-            record(before)
+            record(before, resumed=True)
     pace.update(done=0, start=time.perf_counter())  # (the pace of this run's tiles only)
     if tiling.scheduler:
         from .cluster import run_jobs

@@ -822,6 +822,13 @@ def test_working_folders_left_by_killed_runs_are_named_with_their_size(scene_laz
     run_ground_filter(scene_laz, str(tmp_path / "a.laz"), SMRF(), options=opts, log=lines.append)
     assert any(line.startswith("Resuming the interrupted run") for line in lines)
     assert not any("earlier runs that were killed" in line for line in lines), lines
+    # the tiles done before are counted once, not told again one by one (a surveyor saw 16 "Tile i/16 ...
+    # about 0 s left" lines, the skipped ones included)
+    skipped = next(line for line in lines if "tile(s) were done before; skipping them" in line)
+    done_before, total = (int(v) for v in skipped.split(" tile(s)")[0].split(" of "))
+    told = [line for line in lines if line.startswith("Tile ")]
+    assert done_before >= 2 and len(told) == total - done_before, lines
+    assert told[0].startswith(f"Tile {done_before + 1}/{total} ")
 
 
 def test_a_filters_grids_asked_of_a_tiled_run_are_refused_with_the_reason(scene_laz, tmp_path):
