@@ -35,7 +35,7 @@ from ..io import (CLASS_GROUND, CLASS_UNCLASSIFIED, NOISE_CLASSES, PointCloud, a
                  read_cloud, write_classified)
 from ..io.clouds import TEXT_EXTENSIONS, parse_classes
 from ..io.outputs import LAS_EXTENSIONS, _ext, check_distinct_outputs
-from ..progress import WARNING_PREFIX, Steps
+from ..progress import WARNING_PREFIX, Steps, warning_of
 from .tiles import TileOptions
 
 #: Classes a ground filter may rewrite when existing classes are kept: never classified,
@@ -186,7 +186,10 @@ def call_filter(algorithm, cloud: PointCloud, idx: np.ndarray, steps: Steps, log
     extra = {name: np.ascontiguousarray(getattr(cloud, name)[idx])
              for name in getattr(algorithm, "point_fields", ())}
     if getattr(algorithm, "wants_log", False):
-        extra["log"] = log
+        def named(message: str) -> None:  # a filter's warning names the file it is about (it sees arrays)
+            text = warning_of(message)
+            log(message if text is None or cloud.path in text else f"{WARNING_PREFIX}{cloud.path}: {text}")
+        extra["log"] = named
     if hasattr(algorithm, "run"):
         detail = algorithm.run(xyz, steps=steps, **extra)
         return np.asarray(detail.ground, dtype=bool), detail
