@@ -217,7 +217,9 @@ class SMRF:
             objects = np.zeros(minimum.zmin.shape, dtype=bool)
             for radius, drop in zip(self.radii, drops):
                 objects |= drop > self.slope * radius * self.cell_size_m
-        objects |= minimum.empty | self._low_objects(minimum, objects)
+        steps.report(0.8)
+        objects |= minimum.empty | self._low_objects(minimum, objects, steps)
+        steps.report(0.9)  # (a cancel is honoured between the judging of kept cells and the last fill)
         if objects.all():
             # Nothing survived as ground: fall back to the minimum surface itself.
             zpro = minimum.raw.copy()
@@ -228,7 +230,7 @@ class SMRF:
         steps.report(1.0)
         return minimum.grid, zpro, objects
 
-    def _low_objects(self, minimum: SMRFMinimum, opened: np.ndarray) -> np.ndarray:
+    def _low_objects(self, minimum: SMRFMinimum, opened: np.ndarray, steps: Steps | None = None) -> np.ndarray:
         """The low-outlier cells that are objects. Without the refill, every one (Pingel's rule). With
         it, those refilled, and of those kept (too many around to be outliers: the ground seen through
         gaps in a canopy, see low_outlier_share) the ones still low outliers against the terrain
@@ -244,6 +246,8 @@ class SMRF:
         if not kept.any():
             return refilled
         terrain = -inpaint_harmonic(np.where((kept | ~opened) & ~minimum.empty & ~refilled, minimum.raw, np.nan))
+        if steps is not None:
+            steps.report(0.85)
         # against a disk of LOW_OUTLIER_TERRAIN_CELLS: a cluster of low points smaller than it (multipath
         # under a canopy) is still caught, where the 3 x 3 test sees the cluster's own cells around
         still = terrain - opening(terrain, LOW_OUTLIER_TERRAIN_CELLS) > self.low_outlier_slope * self.cell_size_m
