@@ -902,8 +902,9 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             from ..raster.crs import lonlat_box
             write_vpc(staging.stage(output_path), [scan_header(o) for o in staged], outs, lonlat=lonlat_box)
         from .workflow import replaced_note
-        if replaced_note(replaced, algorithm):
-            log(replaced_note(replaced, algorithm))
+        note = replaced_note(replaced, algorithm)
+        if note:
+            log(note)
         if dtm_writer is not None:
             from .workflow import kept_out_note
             note = kept_out_note(kept_out)

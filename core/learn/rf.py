@@ -271,11 +271,15 @@ def constant_features(model, X: np.ndarray) -> list:
     """[(feature, value, (low, high))] of the features that take one value on every point of ``X``
     although the model learnt them over a range (e.g. return_number on a cloud of single returns,
     for a model trained on multi-return LiDAR): they carry no information here."""
-    ranges = model.meta.get("feature_ranges") or [None] * len(model.features)
+    ranges = model.meta.get("feature_ranges")
     found = []
+    if not ranges:
+        return found
     for j, (name, span) in enumerate(zip(model.features, ranges)):
+        if span is None or span[0] >= span[1]:
+            continue
         column = X[:, j][np.isfinite(X[:, j])]
-        if span is None or column.size < 2 or span[0] >= span[1]:
+        if column.size < 2:
             continue
         if column.min() == column.max():
             found.append((name, float(column[0]), tuple(span)))

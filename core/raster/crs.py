@@ -94,9 +94,7 @@ def elevation_unit(crs_wkt: Optional[str]) -> str:
     ref = _spatial_reference(crs_wkt)
     if ref is None or not ref.IsProjected():
         return ""
-    factor = ref.GetLinearUnits()
-    if ref.IsCompound() and ref.GetTargetLinearUnits("VERT_CS"):
-        factor = ref.GetTargetLinearUnits("VERT_CS")
+    factor = _vertical_factor(ref) or ref.GetLinearUnits()
     for unit, metres in (("m", 1.0), ("ft", 0.3048), ("US survey foot", 1200.0 / 3937.0)):
         if abs(factor - metres) < 1e-9:
             return unit
@@ -112,9 +110,8 @@ def unit_warning(path: str, crs_wkt: Optional[str], lengths: str = "every length
     if not crs_wkt:
         return f"{path}: no CRS in the file; outputs have none either."
     unit = horizontal_unit(crs_wkt)
-    heights = vertical_unit(crs_wkt)
     if heights_differ(crs_wkt):
-        return (f"{path}: the heights are in {heights} (the CRS's vertical part), x and y in {unit}: the "
+        return (f"{path}: the heights are in {vertical_unit(crs_wkt)} (the CRS's vertical part), x and y in {unit}: the "
                 "filters' height thresholds and the DTM are read in the heights' unit, their cells and windows "
                 "in x and y's. Convert the heights to the horizontal unit first (e.g. PDAL's "
                 "filters.reprojection to a compound CRS in metres, or LAStools' las2las).")
