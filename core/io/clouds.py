@@ -6,6 +6,7 @@ nothing half-written. Input files are only ever opened for reading.
 """
 from __future__ import annotations
 
+import functools
 import os
 import re
 import warnings
@@ -144,14 +145,85 @@ CHUNK_POINTS = 500_000
 
 def header_crs_wkt(header) -> Optional[str]:
     """The CRS of a laspy header as WKT (from its WKT or GeoTIFF records), or None when it has none
-    or none that can be parsed (a file without a usable CRS is still read)."""
+    or none that can be parsed (a file without a usable CRS is still read). A CRS given by GeoTIFF
+    keys keeps its vertical part (:func:`_with_geokey_heights`), which laspy's parser drops."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
             crs = header.parse_crs()
-            return crs.to_wkt() if crs is not None else None
+            if crs is None:
+                return None
+            return _with_geokey_heights(crs, header).to_wkt()
         except Exception:
             return None
+
+
+#: GeoTIFF's VerticalCSTypeGeoKey and VerticalUnitsGeoKey, and the EPSG length units the second may
+#: name, with pyproj's axis of a height in that unit.
+_VERTICAL_CS_KEY, _VERTICAL_UNITS_KEY = 4096, 4099
+_HEIGHT_AXES = {9001: ("GRAVITY_HEIGHT", "metre"), 9002: ("GRAVITY_HEIGHT_FT", "foot"),
+                9003: ("GRAVITY_HEIGHT_US_FT", "US survey foot")}
+
+
+@functools.lru_cache(maxsize=16)
+def _epsg_height(datum: str, unit: str):
+    """The EPSG vertical CRS of heights (up) on the vertical datum named ``datum`` in ``unit``, e.g.
+    NAVD88 height (ftUS), EPSG:6360; None when EPSG has none. A GeoTIFF DTM keeps a vertical CRS by
+    its code: GDAL wrote a custom one in US survey feet as metres. (About 0.2 s, once.)"""
+    import pyproj
+    from pyproj.database import query_crs_info
+    for info in query_crs_info(auth_name="EPSG", pj_types=["VERTICAL_CRS"]):
+        candidate = pyproj.CRS.from_epsg(info.code)
+        axes = candidate.axis_info
+        if candidate.datum is not None and candidate.datum.name == datum and len(axes) == 1 \
+                and axes[0].direction == "up" and axes[0].unit_name == unit and not info.deprecated:
+            return candidate
+    return None
+
+
+def _with_geokey_heights(crs, header):
+    """``crs`` with the vertical part that the header's GeoTIFF keys give, when its CRS comes from
+    those keys: laspy reads only their horizontal CRS, so a LAS 1.2 delivery "NAD83 / UTM 17N +
+    NAVD88 height in US survey feet" (keys 3072, 4096 and 4099, as LAStools writes them) lost its
+    heights' datum and unit, its heights in feet were taken for metres without a word, and its DTM
+    said metres (a flood modeller). The units key wins over the vertical CRS's own unit (LAStools
+    writes NAVD88's code 5703, in metres, beside US survey feet); without a known vertical CRS the
+    heights get a vertical CRS of unknown datum in that unit. A WKT CRS is kept as it is."""
+    from laspy.vlrs.known import GeoKeyDirectoryVlr, WktCoordinateSystemVlr
+    records = list(header.vlrs) + list(header.evlrs or [])
+    if any(isinstance(r, WktCoordinateSystemVlr) and r.string for r in records) or crs.is_compound \
+            or crs.is_vertical:
+        return crs
+    keys = {}
+    for record in records:
+        if isinstance(record, GeoKeyDirectoryVlr):
+            keys.update({int(k.id): int(k.value_offset) for k in record.geo_keys if int(k.tiff_tag_location) == 0})
+    code, unit = keys.get(_VERTICAL_CS_KEY), keys.get(_VERTICAL_UNITS_KEY)
+    if code is None and unit is None:
+        return crs
+    import pyproj
+    from pyproj.crs import CompoundCRS, VerticalCRS
+    from pyproj.crs.coordinate_system import VerticalCS
+    vertical = None
+    if code is not None and 0 < code < 32767:
+        try:
+            vertical = pyproj.CRS.from_epsg(code)
+        except pyproj.exceptions.CRSError:
+            vertical = None
+        if vertical is not None and not vertical.is_vertical:
+            vertical = None
+    if unit in _HEIGHT_AXES:
+        axis, name = _HEIGHT_AXES[unit]
+        has = vertical.axis_info[0].unit_name if vertical is not None and vertical.axis_info else None
+        if vertical is None:
+            vertical = VerticalCRS(name=f"unknown height ({name})", vertical_cs=VerticalCS(axis),
+                                   datum={"type": "VerticalReferenceFrame", "name": "unknown"})
+        elif has != name:
+            vertical = _epsg_height(vertical.datum.name, name) or VerticalCRS(
+                name=f"{vertical.name} ({name})", datum=vertical.datum, vertical_cs=VerticalCS(axis))
+    if vertical is None:
+        return crs
+    return CompoundCRS(name=f"{crs.name} + {vertical.name}", components=[crs, vertical])
 
 
 def read_cloud(path: str, steps: Optional[Steps] = None) -> PointCloud:

@@ -77,3 +77,73 @@ def test_heights_in_feet_under_a_compound_crs_in_metres_are_warned_and_the_dtm_s
                       log=lines.append)
     assert any(line.startswith(WARNING_PREFIX) and "the heights are in US survey foot" in line for line in lines), lines
     assert gdal.Open(str(tmp_path / "o.tif")).GetRasterBand(1).GetUnitType() == "US survey foot"
+
+
+def _geokey_las(path, keys, z_factor=1.0):
+    """A LAS 1.2 file whose CRS is given by GeoTIFF keys only (the usual pre-1.4 delivery)."""
+    import struct
+
+    import laspy
+    import numpy as np
+
+    from groundsieve.core.synthetic import SceneSpec, make_scene
+    scene = make_scene(SceneSpec(size_m=60.0, density_per_m2=2.0, seed=3))
+    data = [1, 1, 0, len(keys)]
+    for key, value in keys:
+        data += [key, 0, 1, value]
+    header = laspy.LasHeader(point_format=1, version="1.2")
+    header.scales, header.offsets = np.array([0.01, 0.01, 0.01]), np.array([500000.0, 5600000.0, 0.0])
+    header.vlrs.append(laspy.VLR(user_id="LASF_Projection", record_id=34735, description="GeoKeyDirectoryTag",
+                                 record_data=struct.pack(f"<{len(data)}H", *data)))
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = scene.x + 500000.0, scene.y + 5600000.0, scene.z / z_factor
+    las.classification = scene.classification
+    las.write(str(path))
+    return path
+
+
+def test_the_vertical_part_of_a_crs_given_by_geotiff_keys_is_kept(tmp_path):
+    """laspy reads only the horizontal CRS of GeoTIFF keys: a LAS 1.2 file of NAD83 / UTM 17N with
+    NAVD88 heights in US survey feet (keys 3072, 4096 and 4099, as LAStools writes them: NAVD88's code
+    5703 in metres beside the units key) ran without a word with its thresholds read in feet, and
+    its DTM said metres with no vertical datum (a flood modeller)."""
+    import laspy
+    import pyproj
+
+    from groundsieve.core.io.clouds import header_crs_wkt
+
+    def crs(name, keys):
+        wkt = header_crs_wkt(laspy.open(str(_geokey_las(tmp_path / name, keys))).header)
+        return pyproj.CRS(wkt)
+
+    utm = [(1024, 1), (1025, 1), (3072, 26917)]
+    lastools = crs("lastools.las", utm + [(4096, 5703), (4099, 9003)])
+    assert lastools.is_compound and lastools.sub_crs_list[0].to_epsg() == 26917
+    assert lastools.sub_crs_list[1].datum.name == "North American Vertical Datum 1988"
+    assert [a.unit_name for a in lastools.axis_info] == ["metre", "metre", "US survey foot"]
+    epsg = crs("epsg.las", utm + [(4096, 6360), (4099, 9003)])  # NAVD88 height (ftUS) itself
+    assert epsg.sub_crs_list[1].to_epsg() == 6360
+    metres = crs("m.las", utm + [(4096, 5703)])
+    assert metres.sub_crs_list[1].to_epsg() == 5703 and metres.axis_info[2].unit_name == "metre"
+    unit_only = crs("ft.las", utm + [(4096, 32767), (4099, 9002)])  # user-defined datum, international feet
+    assert unit_only.is_compound and unit_only.axis_info[2].unit_name == "foot"
+    assert crs("plain.las", utm).to_epsg() == 26917  # no vertical keys: as laspy reads it
+    assert crs("odd.las", utm + [(4096, 26917)]).to_epsg() == 26917  # not a vertical CRS: ignored
+
+
+def test_a_geotiff_keys_file_in_us_survey_feet_is_warned_and_its_dtm_says_so(tmp_path):
+    from osgeo import gdal
+
+    from groundsieve.core.engine.workflow import DTMOptions, run_ground_filter
+    from groundsieve.core.filters.smrf import SMRF
+    from groundsieve.core.progress import WARNING_PREFIX
+    src = _geokey_las(tmp_path / "navd88ft.las", [(1024, 1), (1025, 1), (3072, 26917), (4096, 5703), (4099, 9003)],
+                      z_factor=1200 / 3937)
+    lines = []
+    run_ground_filter(str(src), str(tmp_path / "o.las"), SMRF(), dtm_path=str(tmp_path / "o.tif"),
+                      dtm=DTMOptions(), log=lines.append)
+    assert any(line.startswith(WARNING_PREFIX) and "navd88ft.las: the heights are in US survey foot" in line
+               for line in lines), lines
+    dtm = gdal.Open(str(tmp_path / "o.tif"))
+    assert dtm.GetRasterBand(1).GetUnitType() == "US survey foot"
+    assert "North American Vertical Datum 1988" in dtm.GetProjection()
