@@ -778,6 +778,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     ground_total = 0
     kept_out: Dict[int, int] = {}  # points kept in classes of their own, left out of the DTM
     replaced: Dict[int, int] = {}  # points of the input's other classes given 1 or 2
+    structures: Dict[int, int] = {}  # those of its structure classes made ground
     filter_steps = steps.sub(0.3, 0.85)
     t_tiles = time.perf_counter()
     class_paths = [os.path.join(work, f"f{k:05d}.cls.npy") for k in range(len(infos))]
@@ -820,6 +821,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             kept_out[int(code)] = kept_out.get(int(code), 0) + int(count)
         for code, count in result.get("replaced", ()):
             replaced[int(code)] = replaced.get(int(code), 0) + int(count)
+        for code, count in result.get("structures", ()):
+            structures[int(code)] = structures.get(int(code), 0) + int(count)
         ground_total += result["ground"]
         tile_log.append(dict(key=tuple(result["key"]), points=result["own"], read=result["read"],
                              ground=result["ground"], copc_read=result.get("copc_read", 0)))
@@ -901,10 +904,14 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         if output_path and _ext(output_path) == VPC_EXTENSION:
             from ..raster.crs import lonlat_box
             write_vpc(staging.stage(output_path), [scan_header(o) for o in staged], outs, lonlat=lonlat_box)
-        from .workflow import replaced_note
+        from .workflow import replaced_note, structures_warning
         note = replaced_note(replaced, algorithm)
         if note:
             log(note)
+        warning = structures_warning(structures, replaced, inputs[0] if len(inputs) == 1 else
+                                     f"{len(inputs)} input files", algorithm)
+        if warning:
+            log(warning)
         if dtm_writer is not None:
             from .workflow import kept_out_note
             note = kept_out_note(kept_out)
@@ -1252,7 +1259,7 @@ def _tile_job(job) -> Optional[dict]:
             return None
         cloud = tile_cloud(clouds, path=where)
         del clouds
-        replaced = {}
+        replaced, structures = {}, {}
         if len(cloud) < MIN_TILE_POINTS:
             # Isolated points (a stray point far from the survey): too few for any filter's grid;
             # they keep their classes and are not ground.
@@ -1262,6 +1269,7 @@ def _tile_job(job) -> Optional[dict]:
             cls, ground = done.classification, done.ground
             if not options.keep_existing_classes:  # said once for the run (the tile's log goes nowhere)
                 replaced = workflow.replaced_classes(cloud.classification, own & done.processable)
+                structures = workflow.structures_made_ground(cloud.classification, own & ground)
         else:  # nothing to filter here (all noise): the points keep their classes
             cls, ground = cloud.classification, np.zeros(len(cloud), dtype=bool)
         assigned, class_parts = {}, None
@@ -1290,7 +1298,8 @@ def _tile_job(job) -> Optional[dict]:
                 kept_out = workflow.kept_out_of_dtm(cloud, cls, area & own, job["dtm"])
         result = dict(key=list(job["key"]), own=int(own.sum()), read=len(cloud), ground=int(ground[own].sum()),
                       assigned=assigned, block=block, class_parts=class_parts, copc_read=copc_read,
-                      kept_out=sorted(kept_out.items()), replaced=sorted(replaced.items()))
+                      kept_out=sorted(kept_out.items()), replaced=sorted(replaced.items()),
+                      structures=sorted(structures.items()))
         _save_done(job["done_dir"], result)
         return result
     except Cancelled:

@@ -229,12 +229,17 @@ def classify_cloud(cloud: PointCloud, algorithm, options: FilterOptions = Filter
     if options.keep_existing_classes:
         touched &= np.isin(cls, REWRITTEN_CLASSES)
     else:
-        note = replaced_note(replaced_classes(cls, touched), algorithm)
+        replaced = replaced_classes(cls, touched)
+        note = replaced_note(replaced, algorithm)
         if note:
             log(note)
     ground = np.zeros(len(cloud), dtype=bool)
     ground[idx[sub_ground]] = True
     ground &= touched
+    if not options.keep_existing_classes:
+        warning = structures_warning(structures_made_ground(cls, ground), replaced, cloud.path, algorithm)
+        if warning:
+            log(warning)
     cls[touched] = CLASS_UNCLASSIFIED
     cls[ground] = CLASS_GROUND
     return Classified(cls.astype(np.uint8), ground, filtered, detail, may)
@@ -248,19 +253,50 @@ def replaced_classes(classification: np.ndarray, touched: np.ndarray) -> dict:
     return {int(c): int(n) for c, n in zip(codes, counts)}
 
 
+def _keep_advice(algorithm) -> str:
+    """How to keep the input's classes: for an ``algorithm`` whose run has no way to (``keeps_classes``
+    False: rfclassify), the filter that has."""
+    if getattr(algorithm, "keeps_classes", True):
+        return "tick Keep existing classes other than 0, 1, 2 (--keep-classes)"
+    return ("run the model in the learned hybrid filter (groundsieve:hybrid, MODEL) with Keep existing classes "
+            "other than 0, 1, 2")
+
+
 def replaced_note(counts: dict, algorithm=None) -> str:
     """The log's line on the input's classes the run replaced ("" if none): a vendor's water (9)
-    silently became ground and entered a forester's DTM. For an ``algorithm`` whose run has no way to
-    keep them (``keeps_classes`` False: rfclassify), the advice names the filter that has."""
+    silently became ground and entered a forester's DTM."""
     if not counts:
         return ""
     from ..learn.report import ASPRS_NAMES
     parts = ", ".join(f"{c} ({ASPRS_NAMES.get(c, 'class ' + str(c))}): {n:,}" for c, n in sorted(counts.items()))
-    how = ("tick Keep existing classes other than 0, 1, 2 (--keep-classes)" if getattr(algorithm, "keeps_classes", True)
-           else "run the model in the learned hybrid filter (groundsieve:hybrid, MODEL) with Keep existing classes "
-                "other than 0, 1, 2")
-    return (f"Classes of the input replaced by ground (2) or non-ground (1): {parts}. To keep them, {how}; to add "
-            "one to the DTM, name it in the DTM classes.")
+    return (f"Classes of the input replaced by ground (2) or non-ground (1): {parts}. To keep them, "
+            f"{_keep_advice(algorithm)}; to add one to the DTM, name it in the DTM classes.")
+
+
+#: Classes of the input that are never terrain (building, wires and towers, bridge deck, overhead
+#: structure): their points made ground by a filter are a warning, not a note.
+STRUCTURE_CLASSES = (6, 13, 14, 15, 16, 17, 19)
+
+
+def structures_made_ground(classification: np.ndarray, ground: np.ndarray) -> dict:
+    """{class: points} of the input's :data:`STRUCTURE_CLASSES` among the points made ``ground``."""
+    made = classification[ground & np.isin(classification, STRUCTURE_CLASSES)]
+    codes, counts = np.unique(made, return_counts=True)
+    return {int(c): int(n) for c, n in zip(codes, counts)}
+
+
+def structures_warning(made_ground: dict, replaced: dict, where: str, algorithm=None) -> str:
+    """The warning ("" if none) on the points of an input's structure classes that the run made
+    ground: a vendor's bridge deck (17) whose points became ground put a 4 m dam across the river
+    under it in a flood modeller's DTM, told only by the note on replaced classes."""
+    if not made_ground:
+        return ""
+    from ..learn.report import ASPRS_NAMES
+    parts = ", ".join(f"{n:,} of {replaced.get(c, n):,} {ASPRS_NAMES.get(c, 'class ' + str(c))} ({c})"
+                      for c, n in sorted(made_ground.items()))
+    return (f"{WARNING_PREFIX}{where}: {parts} point(s) of the input became ground, and a DTM takes them for "
+            f"terrain (a bridge deck made ground dams the river under it). To keep them as they are and out of "
+            f"the DTM, {_keep_advice(algorithm)}.")
 
 
 def _codes(codes) -> str:

@@ -162,3 +162,36 @@ def test_the_input_classes_a_run_replaces_are_said(river, tmp_path):
                            tiling=TileOptions(tile_size_m=50.0, workers=1, parallel="threads"))
     rf_said = [line for line in rf_lines if line.startswith("Classes of the input replaced")]
     assert len(rf_said) == 1 and "run the model in the learned hybrid filter (groundsieve:hybrid" in rf_said[0]
+
+
+def test_a_bridge_deck_made_ground_is_warned_whole_and_tiled(tmp_path):
+    """A vendor's bridge deck (17) over the river: without KEEP_CLASSES its points are refiltered,
+    those made ground enter the DTM as a dam across the channel, and a flood modeller was told only by
+    the note on replaced classes (not a warning, not in --json's warnings). The run now warns with
+    the count; kept classes keep the deck out and say nothing."""
+    from groundsieve.core.progress import WARNING_PREFIX
+    rng = np.random.default_rng(5)
+    n = 30_000
+    x, y = rng.uniform(0, 120, n), rng.uniform(0, 120, n)
+    wet = (x > RIVER[0]) & (x < RIVER[1])
+    z = np.where(wet, WATER_Z, BANK_Z) + rng.normal(0, 0.02, n)
+    cls = np.where(wet, 9, 2).astype(np.uint8)
+    deck = (x > RIVER[0] - 10) & (x < RIVER[1] + 10) & (y > 55) & (y < 65)
+    z[deck], cls[deck] = BANK_Z + 0.8, 17  # a deck 8 m wide on low abutments: terrain to a filter
+    path = tmp_path / "bridge.laz"
+    write_las(new_las(x, y, z, classification=cls), str(path))
+    for tiling in (TileOptions(), TileOptions(tile_size_m=50.0, workers=1, parallel="threads")):
+        lines = []
+        out = tmp_path / "o.laz"
+        run_ground_filter(str(path), str(out), SMRF(), options=FilterOptions(tiling=tiling), log=lines.append)
+        from groundsieve.core.io import read_cloud
+        made = int(np.sum(read_cloud(str(out)).classification[deck] == 2))
+        assert made > 0  # the case this guards: a filter takes a low deck for terrain
+        warned = [line for line in lines if line.startswith(WARNING_PREFIX) and "bridge deck (17)" in line]
+        assert len(warned) == 1, lines
+        assert f"{made:,} of {int(deck.sum()):,} bridge deck (17) point(s) of the input became ground" in warned[0]
+        assert "--keep-classes" in warned[0] and str(path) in warned[0]
+    lines = []
+    run_ground_filter(str(path), str(tmp_path / "k.laz"), SMRF(), options=FilterOptions(keep_existing_classes=True),
+                      log=lines.append)
+    assert not any("bridge deck" in line for line in lines if line.startswith(WARNING_PREFIX)), lines
