@@ -91,6 +91,11 @@ class BlockGeoTIFF:
         gdal.UseExceptions()
         self.grid, self.nodata, self.work_path = grid, nodata, work_path
         self._lock = threading.Lock()
+        # each row's first and last cell with a value and its count of such cells (blocks never
+        # overlap): the cells between a row's first and last value that have none (enclosed_nodata)
+        self._first = np.full(grid.nrows, np.iinfo(np.int64).max, dtype=np.int64)
+        self._last = np.full(grid.nrows, -1, dtype=np.int64)
+        self._valued = np.zeros(grid.nrows, dtype=np.int64)
         try:
             self._ds = gdal.GetDriverByName("GTiff").Create(
                 work_path, grid.ncols, grid.nrows, 1, gdal.GDT_Float32,
@@ -107,9 +112,26 @@ class BlockGeoTIFF:
 
     def write_block(self, row0: int, col0: int, values: np.ndarray) -> None:
         """Write ``values`` (row 0 north, NaN = no data) with its north-west cell at (row0, col0)."""
-        data = np.where(np.isnan(values), self.nodata, values).astype(np.float32)
+        valued = ~np.isnan(values)
+        data = np.where(valued, values, self.nodata).astype(np.float32)
+        rows = np.flatnonzero(valued.any(axis=1))
         with self._lock:
             self._band.WriteArray(data, xoff=int(col0), yoff=int(row0))
+            if rows.size:
+                r = int(row0) + rows
+                self._first[r] = np.minimum(self._first[r], int(col0) + valued[rows].argmax(axis=1))
+                last = valued.shape[1] - 1 - valued[rows, ::-1].argmax(axis=1)
+                self._last[r] = np.maximum(self._last[r], int(col0) + last)
+                self._valued[r] += valued[rows].sum(axis=1)
+
+    def enclosed_nodata(self) -> int:
+        """Cells without a value between two cells with one in the same row, over the blocks written
+        so far. A linear TIN of one cloud fills its ground's convex hull, which holds the segment
+        between any two of its cells: such a cell has a value in a run of the whole cloud (without a
+        maximum distance), and stays empty in blocks only where a tile saw no ground across it."""
+        with self._lock:
+            has = self._last >= 0
+            return int(np.sum(self._last[has] - self._first[has] + 1 - self._valued[has]))
 
     def close(self) -> None:
         """Close the work raster, band before dataset (left to the garbage collector, e.g. kept

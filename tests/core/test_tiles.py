@@ -212,6 +212,41 @@ def test_a_gap_wider_than_a_tile_keeps_its_dtm_in_a_tiled_run(scene_laz, tmp_pat
     assert any(t["points"] == 0 and t["read"] > 0 for t in run.tile_log)  # such a tile ran, on its buffer
 
 
+def test_dtm_cells_a_tile_cannot_see_across_a_gap_to_are_warned(scene_laz, tmp_path):
+    """A gap wider than the tiles' buffer (a lake) leaves cells empty in a tiled DTM that a run of the
+    whole cloud fills (a flood modeller's 120 m lake: 32 such cells, a step at a tile edge, and not a
+    word). The run now warns with their count: every cell between two cells with a value in its row
+    that has none, which is exactly what the tiled DTM lacks against the whole run's here."""
+    from groundsieve.core.progress import WARNING_PREFIX
+    las = laspy.read(scene_laz)
+    x, y = np.asarray(las.x), np.asarray(las.y)
+    x0, y0 = las.header.mins[:2]
+    gap = (x > x0 + 70) & (x < x0 + 170) & (y > y0 + 70) & (y < y0 + 170)
+    las.points = las.points[~gap]
+    holed = tmp_path / "holed.laz"
+    las.write(holed)
+    cell = DTMOptions(cell_size_m=1.0)
+    lines = []
+    run_ground_filter(str(holed), None, SMRF(), dtm_path=str(tmp_path / "whole.tif"), dtm=cell, log=lines.append)
+    assert not any("stayed nodata" in line for line in lines)
+    narrow = tiled(buffer_m=5.0)  # the tile at 80-160 m and its buffer lie inside the gap
+    lines = []
+    run_ground_filter(str(holed), None, SMRF(), options=narrow, dtm_path=str(tmp_path / "tiled.tif"), dtm=cell,
+                      log=lines.append)
+    whole, _ = _dtm_values(tmp_path / "whole.tif")
+    mosaic, _ = _dtm_values(tmp_path / "tiled.tif")
+    missing = int(np.isnan(mosaic).sum() - np.isnan(whole).sum())
+    assert missing >= 80 * 80 and np.isnan(mosaic[~np.isnan(whole)]).sum() == missing
+    warned = [line for line in lines if line.startswith(WARNING_PREFIX) and "stayed nodata" in line]
+    assert len(warned) == 1 and f"DTM: {missing:,} cell(s) between cells with a value stayed nodata" in warned[0]
+    assert "tiles' buffer (5 m)" in warned[0]
+    # with a maximum distance the empty cells are the rule's: no warning
+    lines = []
+    run_ground_filter(str(holed), None, SMRF(), options=narrow, dtm_path=str(tmp_path / "limited.tif"),
+                      dtm=DTMOptions(cell_size_m=1.0, max_distance_m=5.0), log=lines.append)
+    assert not any("stayed nodata" in line for line in lines)
+
+
 def test_points_on_the_eastern_and_southern_edges_add_no_column_or_row(tmp_path):
     """Points in [x0, x0 + 100] x [y0, y0 + 100] with some on the edges (a vendor's tile) make a
     DTM of 100 x 100 cells of 1 m, whole and tiled, the same values: the edge points gave an
