@@ -307,7 +307,8 @@ def dtm_max_distance_parameter(name):
         type=QgsProcessingParameterNumber.Type.Double, defaultValue=0.0, minValue=0.0)
     param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
     param.setHelp("A data gap (a missing tile, water without returns) is otherwise bridged by the "
-                  "triangulation: cells farther than this from every ground point stay nodata. In a survey, "
+                  "triangulation: cells whose centre is farther than this from the centre of every cell holding a "
+                  "ground point stay nodata. In a survey, "
                   "keep it at most the tile buffer.")
     return param
 
