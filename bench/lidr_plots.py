@@ -5,7 +5,7 @@ files' own classes 1 and 2 (total, Type I, Type II error) and the DTM against a 
 reference ground points, at the cell centres within 3 m of one (bias, RMSE, cells more than 2 m
 too high).
 
-    .venv/bin/python bench/lidr_plots.py [--data ../shared/data/lidR] [--files Megaplot ...]
+    .venv/bin/python bench/lidr_plots.py [--data ../shared/data/lidR] [--files Megaplot ...] [--methods 'ptd' ...]
 
 Markdown rows on stdout (docs/BENCHMARKS.md, "Real forest plots").
 """
@@ -59,13 +59,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--data", default=os.path.join(REPO, "..", "shared", "data", "lidR"))
     parser.add_argument("--files", nargs="+", default=FILES)
+    parser.add_argument("--methods", nargs="+", default=METHODS, help="e.g. 'ptd' 'ptd --low-outlier-support 0.2'")
     args = parser.parse_args()
     print("| file | method | total % | Type I % | Type II % | DTM bias m | DTM RMSE m | cells > 2 m high |")
     print("|---|---|---:|---:|---:|---:|---:|---:|")
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.files:
             src = os.path.abspath(os.path.join(args.data, name + ".laz"))
-            for method in METHODS:
+            for method in args.methods:
                 out, dtm = os.path.join(tmp, "o.laz"), os.path.join(tmp, "o.tif")
                 done = subprocess.run([sys.executable, "-m", "groundsieve", *method.split(), "--input", src,
                                        "--output", out, "--dtm", dtm, "--dtm-cell", str(DTM_CELL)],

@@ -68,6 +68,9 @@ FILTERS: Dict[str, Tuple[str, str, Sequence[Param]]] = {
               advanced=True),
         Param("mirror", "MIRROR", "Mirror points (Axelsson)", advanced=True),
         Param("low_outlier_check", "LOW_OUTLIERS", "Reject low outliers as seeds", advanced=True),
+        Param("low_outlier_support", "LOW_OUTLIER_SUPPORT",
+              "Low-outlier test: share of the cells around that must support a seed", advanced=True,
+              minimum=0.01, maximum=1.0),
     )),
     "csf": ("csf", "CSF", (
         Param("cloth_resolution_m", "RESOLUTION", "Cloth resolution", "m", minimum=0.01),

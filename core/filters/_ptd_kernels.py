@@ -104,18 +104,21 @@ def _has_support(i, vx, vy, vz, zmin, cell, ncols, nrows, block, radius, dz, tan
 
 @njit(cache=True, nogil=True)
 def seeds_kernel(vx, vy, vz, n, seed_cell, scols, srows, zmin_fine, cell, ncols, nrows, block,
-                 radius, dz, tan_angle, share, max_tries, status, seed_of_cell):
-    """The seed of each seed cell: its lowest point that has support (see _has_support; the
-    lowest point of each fine cell is in ``zmin_fine``; radius < 0: no test). A lowest point
+                 radius, dz, tan_angle, share, max_tries, status, seed_of_cell, active):
+    """The seed of each ``active`` seed cell: its lowest point that has support (see _has_support;
+    the lowest point of each fine cell is in ``zmin_fine``; radius < 0: no test). A lowest point
     without support is a low outlier: it is EXCLUDED and the next lowest is tried, at most
     ``max_tries`` times a cell (then the cell has no seed). ``seed_of_cell`` gets the sorted
-    index of each cell's seed or -1."""
+    index of each active cell's seed or -1 (the other cells' entries are left as they are)."""
     ncell = scols * srows
     zmin = np.empty(ncell)
     found = np.empty(ncell, dtype=np.int64)
     tries = np.zeros(ncell, dtype=np.int64)
-    done = np.zeros(ncell, dtype=np.bool_)
-    seed_of_cell[:] = -1
+    done = np.empty(ncell, dtype=np.bool_)
+    for k in range(ncell):
+        done[k] = not active[k]
+        if active[k]:
+            seed_of_cell[k] = -1
     pending = ncell
     while pending > 0:
         zmin[:] = np.inf

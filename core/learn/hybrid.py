@@ -79,7 +79,11 @@ GRID_FEATURES = ("above_smrf", "smrf_slope", "smrf_curvature", "above_cell_min",
 #: leave-one-sample-out figures. These values are fixed from outside the ISPRS data (lasR's ``ptd``:
 #: 50 m seed cell ("res"), 30 degrees, 1 m, offset 0.05 m; mirror off as Axelsson's default).
 #: Changing them changes the features: a model trained with them would have to be retrained.
-PTD_SETTINGS = dict(seed_cell_m=50.0, max_angle_deg=30.0, max_distance_m=1.0, offset_m=0.05, mirror=False)
+PTD_SETTINGS = dict(seed_cell_m=50.0, max_angle_deg=30.0, max_distance_m=1.0, offset_m=0.05, mirror=False,
+                    low_outlier_support=0.4, low_outlier_retry=False)
+#: PTD settings added after models were trained: the value their features were computed with
+#: (a model's stored settings lack the key), so that those models still load.
+_PTD_SETTINGS_BEFORE = dict(low_outlier_support=0.4, low_outlier_retry=False)
 _OPENING_RE = re.compile(r"^above_opening_r(?P<int>[0-9]+)(?:p(?P<frac>[0-9]+))?$")
 
 #: The default feature set: heights above ground surfaces and their shape only, nothing that
@@ -342,6 +346,8 @@ def load_hybrid_model(path: Optional[str] = None):
         raise InputError(f"{path}: this model has no ground class (2) (its classes: "
                          f"{', '.join(str(int(c)) for c in model.classes)}); the hybrid filter needs one")
     settings = model.meta.get("hybrid_ptd_settings")
+    if isinstance(settings, dict):
+        settings = {**_PTD_SETTINGS_BEFORE, **settings}
     if settings is not None and any(f in PTD_FEATURES for f in model.features) and settings != PTD_SETTINGS:
         raise InputError(f"{path}: this model's PTD features were computed with PTD settings {settings}, "
                          f"this version computes them with {PTD_SETTINGS}; retrain the model")

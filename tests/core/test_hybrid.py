@@ -312,7 +312,11 @@ def test_the_accurate_shipped_model_loads_and_runs_on_xyz():
     assert SHIPPED_MODELS == {"fast": DEFAULT_MODEL, "accurate": PTD_MODEL}
     model = load_hybrid_model(PTD_MODEL)
     assert model.features == list(DEFAULT_FEATURES) + list(PTD_FEATURES)
-    assert model.meta[CELL_KEY] == 1.0 and model.meta["hybrid_ptd_settings"] == PTD_SETTINGS
+    # trained before PTD's low-outlier support share and retry were settings: its features used 0.4
+    # and no retry, which PTD_SETTINGS keeps (PTD's own defaults became 0.2 with retries)
+    assert model.meta[CELL_KEY] == 1.0 and dict(model.meta["hybrid_ptd_settings"], low_outlier_support=0.4,
+                                                low_outlier_retry=False) == PTD_SETTINGS
+    assert PTD_SETTINGS["low_outlier_support"] == 0.4 and PTD_SETTINGS["low_outlier_retry"] is False
     h = Hybrid(shipped_model="accurate")
     assert h.features == model.features
     assert Hybrid(model_path=PTD_MODEL).features == model.features
@@ -332,6 +336,19 @@ def test_a_model_with_other_ptd_settings_is_refused(tmp_path):
     save_model(model, str(path))
     with pytest.raises(InputError, match=r"old_ptd\.npz.*PTD settings.*retrain"):
         Hybrid(model_path=str(path))
+    # a model whose features used another low-outlier support share is refused too; one that
+    # predates the setting (no key) used 0.4 and loads
+    for support, refused in ((0.2, True), (None, False)):
+        settings = dict(PTD_SETTINGS, low_outlier_support=support)
+        if support is None:
+            del settings["low_outlier_support"], settings["low_outlier_retry"]
+        model.meta["hybrid_ptd_settings"] = settings
+        save_model(model, str(path))
+        if refused:
+            with pytest.raises(InputError, match="PTD settings"):
+                Hybrid(model_path=str(path))
+        else:
+            assert Hybrid(model_path=str(path)).features == [PTD_FEATURES[0]]
 
 
 def test_the_reach_covers_ptds_seed_cells():
