@@ -250,6 +250,55 @@ def read_cloud(path: str, steps: Optional[Steps] = None) -> PointCloud:
     return cloud
 
 
+#: Bytes of a LAS VLR header and of an EVLR header (their smallest possible size on disk).
+_VLR_BYTES, _EVLR_BYTES = 54, 60
+
+
+def check_las_layout(path: str) -> None:
+    """Refuse a LAS/LAZ file whose header announces more records than the file can hold, before
+    laspy or lazrs reads it: a VLR count of 2e9 made laspy build VLRs until the memory ran out
+    (deaf to Cancel), and a LAZ chunk table announcing 2^31 chunks made lazrs allocate 34 GB and
+    abort the process, QGIS with it (a QA reviewer's 4-byte edits). Each VLR takes at least 54
+    bytes, each EVLR 60, and each LAZ chunk at least one point record stored raw (LASzip writes a
+    chunk's first point uncompressed). A file this cannot parse is left to laspy's own errors."""
+    import struct
+    try:
+        size = os.path.getsize(path)
+        with open(path, "rb") as f:
+            head = f.read(375)
+            if len(head) < 227 or head[:4] != b"LASF":
+                return
+            minor, = struct.unpack_from("<B", head, 25)
+            header_size, offset, vlrs = struct.unpack_from("<HII", head, 94)
+            point_format, record = struct.unpack_from("<BH", head, 104)
+            count, = struct.unpack_from("<I", head, 107)
+            if vlrs * _VLR_BYTES > max(offset - header_size, 0) or offset > size:
+                raise InputError(f"{path}: the header announces {vlrs:,} VLRs before the points, which start at "
+                                 f"byte {offset:,} of {size:,}: the header is damaged")
+            if minor >= 4 and len(head) >= 255:
+                evlr_at, evlrs, count64 = struct.unpack_from("<QIQ", head, 235)
+                count = count64 or count
+                if evlrs and evlr_at + evlrs * _EVLR_BYTES > size:
+                    raise InputError(f"{path}: the header announces {evlrs:,} extended VLRs from byte {evlr_at:,}, "
+                                     f"more than the file's {size:,} bytes hold: the header is damaged")
+            if not point_format & 0x80 or record <= 0 or offset + 8 > size:
+                return
+            f.seek(offset)
+            table_at, = struct.unpack("<q", f.read(8))
+            if table_at == -1 and size >= 8:  # written at the end by a streaming writer
+                f.seek(size - 8)
+                table_at, = struct.unpack("<q", f.read(8))
+            if not 0 < table_at <= size - 8:
+                return  # (lazrs says what is wrong with the table's place)
+            f.seek(table_at)
+            _version, chunks = struct.unpack("<II", f.read(8))
+    except (OSError, struct.error):
+        return
+    if chunks * record > size or (count and chunks > count):
+        raise InputError(f"{path}: the LAZ chunk table announces {chunks:,} chunks for {count:,} points in "
+                         f"{size:,} bytes: the file is damaged (its chunk table or its end was overwritten)")
+
+
 def _records_before_evlrs(header) -> Optional[int]:
     """How many point records fit between the point data's start and the first EVLR of an
     uncompressed LAS 1.4 file (None when there is no such bound)."""
@@ -290,6 +339,7 @@ def _read_points(reader, count: int, steps: Steps):
 def _read_las(path: str, steps: Steps) -> PointCloud:
     import laspy
     notes = []
+    check_las_layout(path)
     try:
         las = None
         with laspy.open(path) as reader:

@@ -17,7 +17,7 @@ from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 import numpy as np
 
 from ..errors import GroundSieveError, InputError, OutputError, UnsupportedFormatError
-from .clouds import PointCloud, header_crs_wkt
+from .clouds import PointCloud, check_las_layout, header_crs_wkt
 from .outputs import LAS_EXTENSIONS, _ext, atomic_path, check_classes_fit
 
 VPC_EXTENSION = ".vpc"
@@ -54,6 +54,7 @@ def scan_header(path: str) -> LasInfo:
         raise InputError(f"{path}: no such file")
     if _ext(path) not in LAS_EXTENSIONS:
         raise UnsupportedFormatError(f"{path}: expected a .las or .laz file (got '{_ext(path) or '(none)'}')")
+    check_las_layout(path)
     try:
         with laspy.open(path) as reader:
             h = reader.header

@@ -474,3 +474,58 @@ def test_written_file_follows_the_umask(tmp_path):
     finally:
         os.umask(old)
     assert stat.S_IMODE(os.stat(path).st_mode) == 0o644
+
+
+def _las_bytes(tmp_path, name, **kw):
+    rng = np.random.default_rng(4)
+    n = 3000
+    path = tmp_path / name
+    write_las(new_las(rng.uniform(0, 50, n), rng.uniform(0, 50, n), rng.uniform(0, 2, n), **kw), str(path))
+    return path, bytearray(path.read_bytes())
+
+
+def _refusals_in_a_child(path, timeout=60):
+    """What scan_header and read_cloud say of ``path``, read in a child process: without the checks
+    these files hang (eating memory) or abort the process, which would take the test run down."""
+    import subprocess
+    import sys
+    code = ("import sys\nfrom groundsieve.core.io import read_cloud\nfrom groundsieve.core.io.lasfiles import scan_header\n"
+            "from groundsieve.core.errors import InputError\n"
+            "for read in (scan_header, read_cloud):\n"
+            "    try:\n        read(sys.argv[1])\n    except InputError as err:\n        print(err)\n")
+    done = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, timeout=timeout,
+                          env=dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path)))
+    assert done.returncode == 0, done.stderr[-2000:]
+    return done.stdout.splitlines()
+
+
+def test_a_header_announcing_more_vlrs_or_evlrs_than_the_file_holds_is_refused_at_once(tmp_path):
+    """A VLR count of 2e9 made laspy build VLRs until the memory ran out, deaf to Cancel; a LAS 1.4
+    EVLR count of 1e9 the same (a QA reviewer's 4-byte edits). Refused before laspy reads them."""
+    import struct
+    path, data = _las_bytes(tmp_path, "v.las")
+    struct.pack_into("<I", data, 100, 2_000_000_000)
+    path.write_bytes(data)
+    said = _refusals_in_a_child(path)
+    assert len(said) == 2 and all("v.las: the header announces 2,000,000,000 VLRs before the points" in s
+                                  for s in said), said
+    path, data = _las_bytes(tmp_path, "e.las", point_format=6, version="1.4")
+    struct.pack_into("<QI", data, 235, len(data), 1_000_000_000)  # EVLRs at the file's end, 1e9 of them
+    path.write_bytes(data)
+    said = _refusals_in_a_child(path)
+    assert len(said) == 2 and all("e.las: the header announces 1,000,000,000 extended VLRs" in s for s in said), said
+
+
+def test_a_laz_whose_chunk_table_announces_2_31_chunks_is_refused_not_a_crash(tmp_path):
+    """lazrs allocated 34 GB for a chunk table announcing 2^31 - 1 chunks and aborted the process
+    (exit 134), QGIS with it."""
+    import struct
+    path, data = _las_bytes(tmp_path, "c.laz")
+    offset = laspy.open(str(path)).header.offset_to_point_data
+    table = struct.unpack_from("<q", data, offset)[0]
+    struct.pack_into("<I", data, table + 4, 0x7FFFFFFF)
+    path.write_bytes(data)
+    said = _refusals_in_a_child(path)
+    assert len(said) == 2 and all("c.laz: the LAZ chunk table announces 2,147,483,647 chunks for 3,000 points" in s
+                                  for s in said), said
+    assert len(read_cloud(str(_las_bytes(tmp_path, "ok.laz")[0]))) == 3000  # an intact LAZ reads
