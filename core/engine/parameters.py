@@ -57,7 +57,8 @@ FILTERS: Dict[str, Tuple[str, str, Sequence[Param]]] = {
         Param("exponential", "EXPONENTIAL", "Exponential window growth (off: linear)"),
     )),
     "ptd": ("ptd", "PTD", (
-        Param("seed_cell_m", "SEED_CELL", "Seed cell size: largest building size", "m", minimum=0.01),
+        Param("seed_cell_m", "SEED_CELL", "Seed cell size: largest building size", "m", minimum=0.01,
+              maximum=1000.0),
         Param("max_angle_deg", "MAX_ANGLE", "Iteration angle", "degrees", maximum=89.9, minimum=0.1),
         Param("max_distance_m", "MAX_DISTANCE", "Iteration distance", "m", minimum=0.001),
         Param("max_edge_m", "MAX_EDGE", "Maximum edge length of an accepting triangle", "m, 0 = off"),

@@ -131,7 +131,10 @@ def square_opening(grid: np.ndarray, radius: int, *, border: str = "ignore") -> 
     grid = _square_check(grid, radius)
     if border not in ("ignore", "replicate"):
         raise InvalidParameterError(f"border must be 'ignore' or 'replicate' (got {border!r})")
-    r = int(radius)
+    # A square wider than the grid, in either way of treating the border, opens it as a square just
+    # as wide does (every window then reaches the grid's edges): PDAL's max window of 1e9 m padded
+    # the grid by 1e9 cells and ran out of memory.
+    r = min(int(radius), max(grid.shape))
     if border == "ignore" or r == 0:
         return _square_extreme(_square_extreme(grid, r, False), r, True)
     opened = _square_extreme(_square_extreme(np.pad(grid, r, mode="edge"), r, False), r, True)

@@ -97,6 +97,10 @@ from ..errors import InvalidParameterError
 from ..progress import Steps, run_cancellable
 from ..validate import check_choice, check_number, validate_xyz
 
+#: Largest seed cell accepted (m): far larger than any building; the seed cells sit on multiples of
+#: the cell, so a cell of 1e9 m put the grid's corner at the origin and its thinning grid ran out of
+#: memory (a QA reviewer).
+MAX_SEED_CELL_M = 1000.0
 #: Largest seed grid accepted (cells): a guard against a seed cell far too small.
 MAX_SEED_CELLS = 50_000_000
 #: Points per cell (on average) of the fine grid that orders the points in memory and holds
@@ -164,6 +168,9 @@ class PTD:
             check_number(self, name)
         _require(math.isfinite(self.seed_cell_m) and self.seed_cell_m > 0,
                  f"seed_cell_m must be > 0 (got {self.seed_cell_m})")
+        _require(self.seed_cell_m <= MAX_SEED_CELL_M,
+                 f"seed_cell_m must be at most {MAX_SEED_CELL_M:g} m, the size of the largest buildings "
+                 f"(got {self.seed_cell_m:g})")
         _require(math.isfinite(self.max_angle_deg) and 0 < self.max_angle_deg < 90,
                  f"max_angle_deg must be in (0, 90) degrees (got {self.max_angle_deg})")
         _require(math.isfinite(self.max_distance_m) and self.max_distance_m > 0,

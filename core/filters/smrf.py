@@ -209,13 +209,17 @@ class SMRF:
             raise InvalidParameterError(f"this minimum surface was made for cell, low-outlier slope and refill "
                                         f"{minimum.key}, not {self.minimum_key}")
         steps.report(0.2)
-        drops = minimum.drops(len(self.radii), steps.sub(0.2, 0.8))
+        # Once a disk spans the grid's diagonal the opened surface is the grid's minimum everywhere,
+        # and the openings after it drop nothing: the radii stop there, with the same objects (a
+        # window of 1e9 m built a list of 1e9 radii and exhausted the memory; 1e4 m took 146 s).
+        radii = self.radii[:max(1, math.ceil(math.hypot(*minimum.zmin.shape)))]
+        drops = minimum.drops(len(radii), steps.sub(0.2, 0.8))
         if drops is None:
-            objects = progressive_filter(minimum.zmin, self.radii, self.cell_size_m, self.slope,
+            objects = progressive_filter(minimum.zmin, radii, self.cell_size_m, self.slope,
                                          steps=steps.sub(0.2, 0.8))
         else:  # progressive_filter's test on the kept drops, the same comparisons
             objects = np.zeros(minimum.zmin.shape, dtype=bool)
-            for radius, drop in zip(self.radii, drops):
+            for radius, drop in zip(radii, drops):
                 objects |= drop > self.slope * radius * self.cell_size_m
         steps.report(0.8)
         objects |= minimum.empty | self._low_objects(minimum, objects, steps)

@@ -463,3 +463,15 @@ def test_isprs_default_parameters_mean_total_error():
     assert mean <= PMF_DEFAULTS_MEAN_TOTAL + 0.05, \
         f"mean total error {mean:.2f} % > {PMF_DEFAULTS_MEAN_TOTAL} %; per sample: " + \
         ", ".join(f"{k} {v:.2f}" for k, v in totals.items())
+
+
+@pytest.mark.parametrize("border", ["ignore", "replicate"])
+def test_a_square_wider_than_the_grid_opens_as_the_grid_wide_one(border):
+    """PMF with a max window of 1e9 m padded its grid by 1e9 cells and ran out of memory (a QA
+    reviewer): a square at least as wide as the grid opens it the same whatever its size, so the
+    radius stops at the grid's size."""
+    grid = np.random.default_rng(3).normal(size=(23, 31)).cumsum(axis=0)
+    reference = square_opening(grid, 31, border=border)
+    for radius in (40, 10_000, 10 ** 9):
+        np.testing.assert_array_equal(square_opening(grid, radius, border=border), reference)
+    assert not np.array_equal(square_opening(grid, 5, border=border), reference)

@@ -436,6 +436,7 @@ def test_axelsson_test_against_direct_geometry():
     ({"offset_m": math.nan}, "offset_m"),
     ({"mirror": 1}, "mirror"),
     ({"low_outlier_check": "yes"}, "low_outlier_check"),
+    ({"seed_cell_m": 1e9}, "seed_cell_m must be at most 1000 m"),
     ({"low_outlier_support": 0.0}, "low_outlier_support"),
     ({"low_outlier_support": 1.5}, "low_outlier_support"),
     ({"low_outlier_support": math.nan}, "low_outlier_support"),

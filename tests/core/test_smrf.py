@@ -282,3 +282,23 @@ def test_the_last_step_reads_both_grids_as_the_cubic_interpolation_does():
     got = ground_against_surface(x, y, z, surface, slope, grid, 0.5, 1.25)
     assert np.array_equal(got, want)
     assert 0.3 < want.mean() < 0.7
+
+
+def test_a_window_far_wider_than_the_cloud_costs_what_its_diagonal_does(monkeypatch):
+    """A window of 1e9 m built a list of 1e9 radii and exhausted the memory (1e4 m took 146 s on a
+    60 m scene, a QA reviewer). Openings past the grid's diagonal drop nothing, so the radii stop
+    there: the same objects as any window at least that wide."""
+    from groundsieve.core.filters import smrf as smrf_module
+    xyz, _ = plane_scene(seed=3, size=40.0, box=BOX, tilt=(0.05, 0.0))
+    wide = SMRF(window_m=60.0).run(xyz)  # the grid's diagonal is about 57 cells of 1 m
+    opened = []
+    original = smrf_module.progressive_filter
+
+    def counting(surface, radii, *args, **kw):
+        opened.append(len(radii))
+        assert len(radii) <= 60  # (before the openings: 1e9 of them would never end)
+        return original(surface, radii, *args, **kw)
+    monkeypatch.setattr(smrf_module, "progressive_filter", counting)
+    huge = SMRF(window_m=1e9).run(xyz)
+    assert opened and opened[0] <= 60
+    assert np.array_equal(wide.ground, huge.ground) and np.array_equal(wide.object_cells, huge.object_cells)
