@@ -675,11 +675,22 @@ def _remove_tree(path: str, patience_s: float = 3.0) -> None:
 
 
 def _fingerprint(infos, grid, algorithm, options, dtm) -> str:
+    """What a working folder's results depend on: the inputs, the tiles and their buffer, the filter,
+    the options but how the tiles are run (workers, threads or processes, the memory budget and the
+    scheduler change where and when a tile runs, not its result: a reviewer's run killed on 2
+    workers did not resume on 1), the DTM, and the code: a run resumed with another core/ (same
+    version) mixed tiles of both versions, its classes and DTM those of neither."""
+    import dataclasses
     import hashlib
     import json as _json
+    from .cluster import _core_digest
     files = [(os.path.realpath(i.path), os.path.getsize(i.path), os.stat(i.path).st_mtime_ns) for i in infos]
-    text = _json.dumps([files, grid.size, grid.buffer, repr(algorithm), repr(options), repr(dtm), WORK_FORMAT],
-                       default=str)
+    results = dataclasses.replace(options, memory_budget_bytes=None, tiling=None) \
+        if dataclasses.is_dataclass(options) and hasattr(options, "tiling") else options
+    dtm_results = dataclasses.replace(dtm, memory_budget_bytes=None) \
+        if dataclasses.is_dataclass(dtm) and hasattr(dtm, "memory_budget_bytes") else dtm
+    text = _json.dumps([files, grid.size, grid.buffer, repr(algorithm), repr(results), repr(dtm_results), WORK_FORMAT,
+                        _core_digest()], default=str)
     return hashlib.sha1(text.encode()).hexdigest()[:16]
 
 

@@ -551,6 +551,40 @@ def test_an_interrupted_run_resumes_and_skips_the_tiles_done(scene_laz, tmp_path
     assert np.array_equal(gdal.Open(str(dtm)).ReadAsArray(), gdal.Open(str(clean)).ReadAsArray())
 
 
+def test_a_killed_run_resumes_with_other_workers_but_not_with_other_code(scene_laz, tmp_path, monkeypatch):
+    """A run killed on 2 workers did not resume on 1 (the workers, the threads or processes and the
+    memory budget were part of the working folder's name, though they change no tile's result); a
+    run resumed with another core/ of the same version mixed tiles of both codes (an HPC reviewer:
+    its ground count was neither code's). The folder's name now holds the code's digest instead."""
+    from groundsieve.core.engine import cluster
+    Flaky = flaky_smrf(budget=3)
+    work = tmp_path / "work"
+    work.mkdir()
+
+    def options(**kw):
+        return FilterOptions(tiling=TileOptions(tile_size_m=TILE, work_dir=str(work), **kw))
+    with pytest.raises(GroundSieveError, match="killed"):
+        run_ground_filter(scene_laz, str(tmp_path / "a.laz"), Flaky(), options=options(workers=2, parallel="threads"))
+    kept = os.listdir(work)
+    assert len(kept) == 1
+    done = len([n for n in os.listdir(work / kept[0] / "done") if n.endswith(".json")])
+    assert done >= 1  # (2 threads: the tiles finished when the other one failed)
+    Flaky.failing, Flaky.calls = False, 0
+    messages = []
+    run = run_ground_filter(scene_laz, str(tmp_path / "a.laz"), Flaky(), log=messages.append,
+                            options=options(workers=1, memory_budget_mb=900.0))
+    assert Flaky.calls == run.tiles - done and any(f"{done} of" in m and "skipping" in m for m in messages), messages
+    # killed again, then started with other code: every tile runs again
+    Flaky.failing, Flaky.calls = True, 0
+    with pytest.raises(GroundSieveError, match="killed"):
+        run_ground_filter(scene_laz, str(tmp_path / "b.laz"), Flaky(), options=options(workers=1))
+    monkeypatch.setattr(cluster, "_core_digest", lambda: "other code")
+    Flaky.failing, Flaky.calls = False, 0
+    messages = []
+    run = run_ground_filter(scene_laz, str(tmp_path / "b.laz"), Flaky(), log=messages.append, options=options(workers=1))
+    assert Flaky.calls == run.tiles and not any("skipping" in m for m in messages)
+
+
 @pytest.mark.parametrize("point_format,version,scattered", [(0, "1.2", False), (1, "1.2", True), (3, "1.2", False),
                                                             (6, "1.4", True), (7, "1.4", False), (8, "1.4", False)])
 def test_tile_parts_read_as_laspy_reads_the_points(tmp_path, monkeypatch, point_format, version, scattered):
