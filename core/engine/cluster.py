@@ -225,7 +225,10 @@ def check_workers(client, paths: Sequence[str], writable: Sequence[str] = ()) ->
     """Refuse, naming the worker, one that lacks the core's packages, runs another GroundSieve, or
     cannot see a path (input or working folder). Returns the number of workers."""
     import sys
-    reports = client.run(_probe_function(), list(paths), list(writable))
+    try:
+        reports = client.run(_probe_function(), list(paths), list(writable))
+    except (OSError, TimeoutError) as err:  # the scheduler gone between two stages (an HPC reviewer: kind "other")
+        raise _scheduler_lost(client, err) from err
     if not reports:
         raise ClusterError(f"The Dask scheduler {client.scheduler.address} has no worker; start some "
                            "(dask worker <scheduler address>) and run again")

@@ -192,3 +192,20 @@ def test_addresses_with_a_scheme_dask_cannot_use_are_refused_before_connecting(t
     for bad in ("https://host:8787", "inproc://10.0.0.5:1", "ftp://host:21"):
         with pytest.raises(InvalidParameterError, match="Dask accepts tcp://, tls://"):
             parse_scheduler(bad)
+
+
+def test_a_scheduler_lost_before_the_workers_check_is_a_cluster_error():
+    """The scheduler gone between two stages of a run: the next stage's check of the workers raised
+    distributed's own OSError (kind "other", with a traceback) where the other stages say the
+    connection was lost (kind "cluster", which scripts retry). An HPC reviewer's run, killed
+    scheduler; here a client whose calls fail as distributed's do then."""
+    from groundsieve.core.engine.cluster import ClusterError, check_workers
+
+    class Gone:
+        class scheduler:
+            address = "tcp://10.0.0.5:8786"
+
+        def run(self, *args, **kw):
+            raise OSError("Timed out trying to connect to tcp://10.0.0.5:8786 after 10 s")
+    with pytest.raises(ClusterError, match=r"the connection to the Dask scheduler tcp://10\.0\.0\.5:8786 was lost"):
+        check_workers(Gone(), ["/data"])
