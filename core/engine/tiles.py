@@ -218,6 +218,13 @@ def needs_tiling(input_path: str, tiling: TileOptions, algorithm=None, dtm=None,
         return False
     if tiling.tile_size_m > 0:
         return True
+    if tiling.scheduler:
+        # On a cluster the workers do the work: a file run whole would be read, filtered and written
+        # in this process, beside the scheduler it was told to use (an HPC reviewer's 10 M points
+        # took 1.8 GB on the login node, the workers idle, without a word).
+        if log:
+            log(f"{input_path}: runs in buffered tiles on the Dask cluster ({tiling.scheduler}).")
+        return True
     info = scan_header(input_path)
     # A bounding box no 1 m grid could cover (two areas far apart, a stray point): tiles exist only
     # where points are.

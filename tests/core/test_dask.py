@@ -338,3 +338,14 @@ def test_tiles_are_planned_for_the_clusters_workers_not_this_machine(tmp_path):
     assert run.point_count == len(alone.cloud)
     agree = (laspy.read(tmp_path / "dask.laz").classification == laspy.read(tmp_path / "alone.laz").classification)
     assert agree.mean() > 0.999
+
+
+def test_a_single_small_file_given_a_scheduler_runs_on_the_cluster(survey):
+    """A LAS/LAZ that fits the client's memory ran whole in the client, beside the scheduler it was
+    given (an HPC reviewer: 10 M points, 1.8 GB on the login node, the workers idle, no word). With
+    a scheduler every file runs in tiles on the workers; without one it still runs whole."""
+    from groundsieve.core.engine.tiles import needs_tiling
+    lines = []
+    assert needs_tiling(survey, TileOptions(scheduler="tcp://10.0.0.5:8786"), SMRF(), log=lines.append)
+    assert lines == [f"{survey}: runs in buffered tiles on the Dask cluster (tcp://10.0.0.5:8786)."]
+    assert not needs_tiling(survey, TileOptions(), SMRF())
