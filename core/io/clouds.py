@@ -268,7 +268,10 @@ def check_las_layout(path: str) -> None:
             head = f.read(375)
             if len(head) < 227 or head[:4] != b"LASF":
                 return
-            minor, = struct.unpack_from("<B", head, 25)
+            major, minor = struct.unpack_from("<BB", head, 24)
+            if major != 1 or not 1 <= minor <= 4:  # (1.0 failed at the write, after the whole run)
+                raise UnsupportedFormatError(f"{path}: LAS version {major}.{minor} is not supported (1.1 to 1.4 are); "
+                                             "convert it first, e.g. las2las -set_version 1.2 or PDAL's translate")
             header_size, offset, vlrs = struct.unpack_from("<HII", head, 94)
             point_format, record = struct.unpack_from("<BH", head, 104)
             count, = struct.unpack_from("<I", head, 107)
@@ -444,12 +447,25 @@ def _read_isprs_text(path: str) -> PointCloud:
             f"{path}: {what}: expected 3 or 4 columns 'x y z [label]', found {data.shape[1]}"
             + ("" if data.shape[1] < 3 else "; for other text layouts convert the file to LAS/LAZ first"))
     n = data.shape[0]
-    label = data[:, 3].astype(np.uint8) if data.shape[1] >= 4 else None
+    # before the scale (an infinite z gave decimals_scale's OverflowError with a traceback)
+    check_coordinates(data[:, 0], data[:, 1], data[:, 2], what=path)
+    label, notes = None, []
+    if data.shape[1] >= 4:
+        labels = data[:, 3]
+        odd = ~(np.isfinite(labels) & (labels == np.round(labels)) & (labels >= 0) & (labels <= 255))
+        if odd.any():  # (256, nan and 0.7 became label 0, ground truth for tune; -1 became 255)
+            k = int(np.argmax(odd))
+            notes.append(f"{WARNING_PREFIX}{path}: the 4th column is not a label (whole numbers 0-255, 0 = ground "
+                         f"in the ISPRS samples: point {k + 1:,} has {labels[k]:g}); it is ignored, and the "
+                         "cloud has no reference labels.")
+        else:
+            label = labels.astype(np.uint8)
     ones = np.ones(n, dtype=np.uint8)
     return PointCloud(path=path, x=data[:, 0].copy(), y=data[:, 1].copy(), z=data[:, 2].copy(),
                       classification=np.zeros(n, dtype=np.uint8), return_number=ones,
                       number_of_returns=ones.copy(), crs_wkt=None, has_return_info=False,
-                      reference_label=label, scale=decimals_scale(data[:, 0], data[:, 1], data[:, 2]))
+                      reference_label=label, scale=decimals_scale(data[:, 0], data[:, 1], data[:, 2]),
+                      notes=notes)
 
 
 def new_las(x, y, z, *, point_format: int = 1, version: str = "1.2", scale: float = 0.01,

@@ -58,6 +58,10 @@ def scan_header(path: str) -> LasInfo:
     try:
         with laspy.open(path) as reader:
             h = reader.header
+            if not all(math.isfinite(float(v)) for v in (*h.mins, *h.maxs)):
+                raise InputError(f"{path}: the header's bounds are not numbers ({list(h.mins)} to {list(h.maxs)}): "
+                                 "the header is damaged; rewrite it with a tool that recomputes it (e.g. "
+                                 "las2las, PDAL's translate)")
             return LasInfo(path, int(h.point_count), tuple(float(v) for v in h.mins),
                            tuple(float(v) for v in h.maxs), int(h.point_format.id), str(h.version),
                            header_crs_wkt(h),
@@ -94,9 +98,12 @@ def read_vpc(path: str) -> List[str]:
     folder = os.path.dirname(os.path.abspath(path))
     files = []
     for item in features:
-        href = ((item or {}).get("assets") or {}).get("data", {}).get("href")
-        if not href:
-            raise InputError(f"{path}: item '{(item or {}).get('id', '?')}' has no assets.data.href")
+        item = item if isinstance(item, dict) else {}
+        assets = item.get("assets")
+        data = assets.get("data") if isinstance(assets, dict) else None
+        href = data.get("href") if isinstance(data, dict) else None
+        if not href or not isinstance(href, str):  # (assets 5 or href 7 gave a traceback: a QA reviewer)
+            raise InputError(f"{path}: item '{item.get('id', '?')}' has no assets.data.href naming a file")
         if href.startswith(("http://", "https://", "s3://", "/vsi")):
             raise InputError(f"{path}: remote data ({href}) is not supported; download the files first")
         full = href if os.path.isabs(href) else os.path.normpath(os.path.join(folder, href))

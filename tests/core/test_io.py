@@ -529,3 +529,43 @@ def test_a_laz_whose_chunk_table_announces_2_31_chunks_is_refused_not_a_crash(tm
     assert len(said) == 2 and all("c.laz: the LAZ chunk table announces 2,147,483,647 chunks for 3,000 points" in s
                                   for s in said), said
     assert len(read_cloud(str(_las_bytes(tmp_path, "ok.laz")[0]))) == 3000  # an intact LAZ reads
+
+
+def test_hostile_inputs_a_qa_reviewer_found_get_messages_naming_the_file(tmp_path):
+    """Each gave a traceback (kind "other") or a silent wrong answer: an infinite z in a text file
+    (OverflowError in the scale), a 4th column that is no label (300, nan, 0.7 became label 0, -1
+    255), a LAS 1.0 file (refused by laspy only at the write, after the whole run), header bounds
+    of NaN (in the survey engine's memory estimate), a .vpc whose assets or href are not objects."""
+    import json
+    import struct
+
+    from groundsieve.core.io.lasfiles import read_vpc, scan_header
+    from groundsieve.core.progress import WARNING_PREFIX
+    rows = "\n".join(f"{x} {y} {z} 0" for x, y, z in np.random.default_rng(2).uniform(0, 50, (30, 3)))
+    (tmp_path / "inf.txt").write_text(rows + "\n1 2 inf 1\n")
+    with pytest.raises(InputError, match=r"inf\.txt: 1 point\(s\) have NaN or infinite coordinates"):
+        read_cloud(str(tmp_path / "inf.txt"))
+    (tmp_path / "odd.txt").write_text(rows + "\n1 2 3 300\n")
+    cloud = read_cloud(str(tmp_path / "odd.txt"))
+    assert cloud.reference_label is None
+    assert cloud.notes == [f"{WARNING_PREFIX}{tmp_path / 'odd.txt'}: the 4th column is not a label (whole numbers 0-255, "
+                           "0 = ground in the ISPRS samples: point 31 has 300); it is ignored, and the cloud has no "
+                           "reference labels."]
+    (tmp_path / "ok.txt").write_text(rows + "\n1 2 3 1\n")
+    assert read_cloud(str(tmp_path / "ok.txt")).reference_label.tolist() == [0] * 30 + [1]
+    path, data = _las_bytes(tmp_path, "v10.las")
+    data[25] = 0  # LAS 1.0
+    path.write_bytes(data)
+    for read in (read_cloud, scan_header):
+        with pytest.raises(UnsupportedFormatError, match=r"v10\.las: LAS version 1\.0 is not supported"):
+            read(str(path))
+    path, data = _las_bytes(tmp_path, "nan.las")
+    struct.pack_into("<d", data, 179, float("nan"))  # max x
+    path.write_bytes(data)
+    with pytest.raises(InputError, match=r"nan\.las: the header's bounds are not numbers"):
+        scan_header(str(path))
+    for name, item in (("assets", {"assets": 5}), ("href", {"assets": {"data": {"href": 7}}})):
+        vpc = tmp_path / f"{name}.vpc"
+        vpc.write_text(json.dumps({"type": "FeatureCollection", "features": [item]}))
+        with pytest.raises(InputError, match=rf"{name}\.vpc: item '\?' has no assets\.data\.href naming a file"):
+            read_vpc(str(vpc))
