@@ -247,6 +247,27 @@ def test_dtm_cells_a_tile_cannot_see_across_a_gap_to_are_warned(scene_laz, tmp_p
     assert not any("stayed nodata" in line for line in lines)
 
 
+def test_points_on_a_tile_boundary_at_the_survey_edge_are_not_called_far(tmp_path):
+    """A survey whose eastern edge lies on a multiple of the tile size: its points exactly on that edge
+    make a tile of their own beside the others, which was called "far from the others" (an HPC
+    reviewer's 9 points, in every run's warnings); a point a tile or more away still is."""
+    rng = np.random.default_rng(8)
+    n = 30_000
+    x, y = rng.uniform(0, 160, n), rng.uniform(0, 160, n)
+    x[:9] = 160.0  # on the edge, a multiple of the 80 m tiles
+    z = 100 + 0.02 * x + rng.normal(0, 0.05, n)
+    for name, extra in (("edge", ()), ("far", ((400.0, 50.0),))):
+        xs = np.r_[x, [e[0] for e in extra]] + 500_000.0
+        ys = np.r_[y, [e[1] for e in extra]] + 5_400_000.0
+        src = tmp_path / f"{name}.laz"
+        write_las(new_las(xs, ys, np.r_[z, [100.0] * len(extra)]), str(src))
+        lines = []
+        run_ground_filter(str(src), None, SMRF(), options=tiled(), dtm_path=str(tmp_path / f"{name}.tif"),
+                          log=lines.append)
+        far = [line for line in lines if "lie far from the others" in line]
+        assert far == [] if name == "edge" else len(far) == 1, lines
+
+
 def test_points_on_the_eastern_and_southern_edges_add_no_column_or_row(tmp_path):
     """Points in [x0, x0 + 100] x [y0, y0 + 100] with some on the edges (a vendor's tile) make a
     DTM of 100 x 100 cells of 1 m, whole and tiled, the same values: the edge points gave an
