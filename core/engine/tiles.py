@@ -644,7 +644,10 @@ def _run_locked(work, inputs, infos, outs, output_path, grid, algorithm, options
             pool.shutdown(wait=True, cancel_futures=True)
             pool = None
         for writer in rasters:  # closed at once, not by the garbage collector (GDAL may crash then)
-            writer.close()
+            try:
+                writer.close()
+            except Exception:  # noqa: BLE001 - e.g. a full disk: the run's own error is the one to tell
+                pass  # (GDAL's "TIFFAppendToStrip: Write error" replaced "No space left on device": a reviewer)
         if cluster is not None:  # first: a LocalCluster's workers still running a tile stop writing
             cluster.close()
             cluster = None
@@ -679,6 +682,24 @@ def _remove_tree(path: str, patience_s: float = 3.0) -> None:
         if not os.path.exists(path) or time.monotonic() > deadline:
             return
         time.sleep(0.1)
+
+
+def _reserve(paths, work: str) -> None:
+    """Give the (sparse) class files their disk blocks now: the tiles write them through memory maps,
+    and a disk that filled up mid-run then killed the process with SIGBUS, no message (an HPC
+    reviewer's full working folder). Where the system cannot reserve, nothing is done."""
+    import errno
+    if not hasattr(os, "posix_fallocate"):
+        return
+    for path in paths:
+        try:
+            with open(path, "r+b") as f:
+                os.posix_fallocate(f.fileno(), 0, os.fstat(f.fileno()).st_size)
+        except OSError as err:
+            if err.errno in (errno.ENOSPC, errno.EDQUOT):
+                raise OutputError(f"the disk of the working folder {work} is full ({err.strerror}); free space "
+                                  "or set another working folder") from err
+            return  # (a file system without fallocate: EOPNOTSUPP, EINVAL)
 
 
 def _fingerprint(infos, grid, algorithm, options, dtm) -> str:
@@ -761,6 +782,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         for c in classes:
             c.flush()
         del classes
+        _reserve([os.path.join(work, f"f{k:05d}.cls.npy") for k in range(len(infos))], work)
         os.makedirs(done_dir)
         _save_json(binned, [dict(key=list(k), parts=[dataclasses.asdict(p) for p in v]) for k, v in tiles.items()])
     # a tile with buffer points only (its own area empty: a lake, a gap in the data) is no tile,
@@ -1342,6 +1364,13 @@ def _tile_job(job) -> Optional[dict]:
         raise
     except GroundSieveError as err:
         raise type(err)(f"{where}: {err}") from err
+    except OSError as err:
+        import errno
+        if err.errno in (errno.ENOSPC, errno.EDQUOT):  # a full disk is the working folder's, not a bug
+            raise OutputError(f"{where}: the disk of the working folder {os.path.dirname(job['done_dir'])} is full "
+                              f"({err.strerror}); "
+                              "free space or set another working folder, then run again") from err
+        raise GroundSieveError(f"{where} failed: {type(err).__name__}: {err}") from err
     except Exception as err:  # an unexpected failure still names the tile
         raise GroundSieveError(f"{where} failed: {type(err).__name__}: {err}") from err
 

@@ -247,6 +247,29 @@ def test_dtm_cells_a_tile_cannot_see_across_a_gap_to_are_warned(scene_laz, tmp_p
     assert not any("stayed nodata" in line for line in lines)
 
 
+def test_a_full_disk_in_a_tile_is_an_output_error_naming_the_working_folder(scene_laz, tmp_path, monkeypatch):
+    """A working folder's disk filling up mid-run gave "tile ... failed: OSError: [Errno 28]", which
+    the DTM writer's failing close then replaced with GDAL's "TIFFAppendToStrip: Write error" (kind
+    "other", an HPC reviewer). Now an output error naming the folder, and nothing half-written."""
+    import errno
+
+    from groundsieve.core.engine import tiles as tiles_module
+    calls = {"n": 0}
+    original = tiles_module._save_done
+
+    def full(*args, **kw):
+        calls["n"] += 1
+        if calls["n"] > 2:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return original(*args, **kw)
+    monkeypatch.setattr(tiles_module, "_save_done", full)
+    out, dtm = tmp_path / "o.laz", tmp_path / "d.tif"
+    with pytest.raises(OutputError, match=r"the disk of the working folder .* is full \(No space left on device\)"):
+        run_ground_filter(scene_laz, str(out), SMRF(), options=tiled(parallel="threads"), dtm_path=str(dtm))
+    assert not out.exists() and not dtm.exists()
+    assert not [n for n in os.listdir(tmp_path) if n.startswith(".")]
+
+
 def test_points_on_a_tile_boundary_at_the_survey_edge_are_not_called_far(tmp_path):
     """A survey whose eastern edge lies on a multiple of the tile size: its points exactly on that edge
     make a tile of their own beside the others, which was called "far from the others" (an HPC
@@ -1133,3 +1156,22 @@ def test_smrf_under_a_closed_canopy_is_the_same_tiled_and_whole(tmp_path):
     xyz = _closed_canopy_on_relief(src, width=240, height=180, radius=70)
     whole = whole_classes(str(src), SMRF())
     assert (whole[floor_of(xyz, 240, 180, 70)] == 2).mean() > 0.99 and not (whole[xyz[:, 2] < 95] == 2).any()
+
+
+def test_the_class_files_get_their_disk_blocks_before_the_tiles_write_them(tmp_path, monkeypatch):
+    """The tiles write the class files through memory maps; a disk that filled up mid-run then killed
+    the process with SIGBUS and no message (an HPC reviewer). Their blocks are reserved after the
+    binning, where a full disk is an output error naming the working folder."""
+    import errno
+
+    from groundsieve.core.engine import tiles as tiles_module
+    path = tmp_path / "f00000.cls.npy"
+    np.lib.format.open_memmap(str(path), mode="w+", dtype=np.uint8, shape=(1_000_000,)).flush()
+    if hasattr(os, "posix_fallocate"):
+        tiles_module._reserve([str(path)], str(tmp_path))
+        assert os.stat(path).st_blocks * 512 >= 1_000_000  # no longer sparse
+    def full(fd, offset, length):
+        raise OSError(errno.ENOSPC, "No space left on device")
+    monkeypatch.setattr(os, "posix_fallocate", full, raising=False)
+    with pytest.raises(OutputError, match=rf"the disk of the working folder {tmp_path} is full \(No space left"):
+        tiles_module._reserve([str(path)], str(tmp_path))
