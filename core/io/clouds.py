@@ -302,6 +302,15 @@ def check_las_layout(path: str) -> None:
                          f"{size:,} bytes: the file is damaged (its chunk table or its end was overwritten)")
 
 
+def extra_records_warning(path: str, announced: int, held: int) -> str:
+    """The warning on a LAS file holding more point records than its header announces (only the
+    announced are read), whole or tiled."""
+    return (f"{WARNING_PREFIX}{path}: the header announces {announced:,} points but the file holds {held:,} point "
+            f"records; read the {announced:,} announced, {held - announced:,} ignored (the header's count is wrong, "
+            "or something else follows the points; rewrite the file with a tool that fixes its header to use them "
+            "all).")
+
+
 def _records_before_evlrs(header) -> Optional[int]:
     """How many point records fit between the point data's start and the first EVLR of an
     uncompressed LAS 1.4 file (None when there is no such bound)."""
@@ -361,11 +370,7 @@ def _read_las(path: str, steps: Steps) -> PointCloud:
                              f"{announced - room:,} missing (the header's count is wrong).")
             held = _records_held(path, header)
             if las is None and held is not None and held > int(header.point_count):
-                notes.append(f"{WARNING_PREFIX}{path}: the header announces {int(header.point_count):,} points but the "
-                             f"file holds {held:,} point records; read the {int(header.point_count):,} announced, "
-                             f"{held - int(header.point_count):,} ignored (the header's count is wrong, or "
-                             "something else follows the points; rewrite the file with a tool that fixes its "
-                             "header to use them all).")
+                notes.append(extra_records_warning(path, int(header.point_count), held))
             if las is None:
                 las = laspy.LasData(header=header, points=_read_points(reader, int(header.point_count), steps.sub(0.0, READ_SHARE)))
     except GroundSieveError:

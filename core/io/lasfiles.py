@@ -17,7 +17,7 @@ from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 import numpy as np
 
 from ..errors import GroundSieveError, InputError, OutputError, UnsupportedFormatError
-from .clouds import PointCloud, check_las_layout, header_crs_wkt
+from .clouds import PointCloud, _records_held, check_las_layout, header_crs_wkt
 from .outputs import LAS_EXTENSIONS, _ext, atomic_path, check_classes_fit
 
 VPC_EXTENSION = ".vpc"
@@ -39,6 +39,8 @@ class LasInfo:
     record_size: int = 0  #: bytes per point record, extra bytes included (0 = not known)
     #: points the header counts beyond return 1 (None: its counts by return are all 0, not filled in)
     later_returns: Optional[int] = None
+    #: whole point records an uncompressed file holds (None: LAZ, not known without decoding)
+    held: Optional[int] = None
 
     @property
     def area_m2(self) -> float:
@@ -66,7 +68,7 @@ def scan_header(path: str) -> LasInfo:
                            tuple(float(v) for v in h.maxs), int(h.point_format.id), str(h.version),
                            header_crs_wkt(h),
                            copc=is_copc_header(h), record_size=int(h.point_format.size),
-                           later_returns=_later_returns(h))
+                           later_returns=_later_returns(h), held=_records_held(path, h))
     except (InputError, UnsupportedFormatError):
         raise
     except Exception as err:  # laspy raises many types for damaged files
