@@ -962,7 +962,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             if note:
                 log(note)
             _say_enclosed_nodata(dtm_writer, dtm, grid.buffer, log)
-            dtm_writer.finish(staging.stage(dtm_path))
+            dtm_writer.finish(staging.stage(dtm_path), atomic=False)
         steps.check()
         staging.commit()
     if dtm_writer is not None:

@@ -104,8 +104,10 @@ def remove_stale_temporaries(path: str, *, max_age_s: float = 86400.0) -> list:
     pattern = os.path.join(glob.escape(folder), glob.escape(f".{base}.") + "*" + glob.escape(f".part{ext}"))
     own = re.compile(re.escape(f".{base}.gs") + r"(\d+)-[^/]*" + re.escape(f".part{ext}") + "$")
     removed = []
-    for tmp in glob.glob(pattern):
-        m = own.match(os.path.basename(tmp))
+    # (GDAL's COG writer keeps the overviews in "<its output>.ovr.tmp" until it ends: a DTM killed
+    # while being written left one beside its temporary)
+    for tmp in glob.glob(pattern) + glob.glob(pattern + ".ovr.tmp"):
+        m = own.match(os.path.basename(tmp[:-len(".ovr.tmp")] if tmp.endswith(".ovr.tmp") else tmp))
         try:
             if m:
                 stale = int(m.group(1)) != os.getpid() and not _process_alive(int(m.group(1)))

@@ -142,13 +142,15 @@ class BlockGeoTIFF:
             self._band = None
             self._ds = None
 
-    def finish(self, path: str) -> None:
-        """Close the work raster and write the COG to ``path`` (atomically)."""
+    def finish(self, path: str, *, atomic: bool = True) -> None:
+        """Close the work raster and write the COG to ``path`` (atomically; ``atomic=False`` when
+        ``path`` is already a staged temporary: a second one inside it, ``..dtm.tif.gs<pid>-<random>.part.tif
+        .gs<pid>-<random>.part.tif``, was not found by the next run's clean-up when a run was killed)."""
         from osgeo import gdal
         path = check_raster_path(path)
         self.close()
         try:
-            with atomic_path(path) as tmp:
+            with (atomic_path(path) if atomic else contextlib.nullcontext(path)) as tmp:
                 gdal.Translate(tmp, self.work_path, format="COG",
                                creationOptions=["COMPRESS=DEFLATE", "PREDICTOR=YES", "BIGTIFF=IF_SAFER",
                                                 "OVERVIEWS=AUTO"])

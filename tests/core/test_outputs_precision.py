@@ -109,3 +109,36 @@ def test_a_later_run_removes_the_temporaries_of_a_killed_run(tmp_path):
     assert subprocess.run([sys.executable, "-c", code]).returncode == 9
     run_ground_filter(str(src), str(out), SMRF())
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([".other.las.gs1-x.part.las", "in.las", "out.las"])
+
+
+def test_a_dtm_killed_while_gdal_wrote_it_leaves_nothing_the_next_run_keeps(tmp_path):
+    """GDAL's COG writer keeps the overviews in "<its output>.ovr.tmp" until it ends, and a tiled
+    run's DTM was written to a temporary inside its staged temporary: killed while writing, a run
+    left "..dtm.tif.gs<pid>-x.part.tif.gs<pid>-y.part.tif" and its ".ovr.tmp", which the next run's
+    clean-up did not match (an HPC reviewer). The DTM goes straight to the staged temporary now, and
+    a dead process's ".ovr.tmp" goes with its temporary."""
+    dtm = tmp_path / "dtm.tif"
+    dead = 2 ** 22 + 12345  # no such process (above the default pid_max)
+    left = tmp_path / f".dtm.tif.gs{dead}-abc.part.tif"
+    for name in (left.name, left.name + ".ovr.tmp"):
+        (tmp_path / name).write_bytes(b"half")
+    assert sorted(remove_stale_temporaries(str(dtm))) == sorted([str(left), str(left) + ".ovr.tmp"])
+    from groundsieve.core.engine.tiles import TileOptions
+    from groundsieve.core.engine.workflow import DTMOptions, FilterOptions
+    src = tmp_path / "in.las"
+    plane_las(src)
+    seen = []
+    import groundsieve.core.raster.geotiff as geotiff
+    original = geotiff.BlockGeoTIFF.finish
+
+    def spy(self, path, **kw):
+        seen.append((os.path.basename(path), kw))
+        return original(self, path, **kw)
+    geotiff.BlockGeoTIFF.finish = spy
+    try:
+        run_ground_filter(str(src), None, SMRF(), dtm_path=str(dtm), dtm=DTMOptions(),
+                          options=FilterOptions(tiling=TileOptions(tile_size_m=20.0, workers=1)))
+    finally:
+        geotiff.BlockGeoTIFF.finish = original
+    assert len(seen) == 1 and seen[0][0].startswith(".dtm.tif.gs") and seen[0][1] == {"atomic": False}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dtm.tif", "in.las"]
