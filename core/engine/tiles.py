@@ -756,9 +756,16 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         bin_steps = steps.sub(0.0, 0.3)
         binned_parts = {}
 
+        file_bounds: Dict[int, list] = {}
+
         def record_bin(result):
             nonlocal done_points
             binned_parts[(result["file_index"], result["first"])] = result["parts"]
+            b, k = result.get("bounds"), result["file_index"]
+            if b:
+                had = file_bounds.get(k)
+                file_bounds[k] = b if had is None else [min(had[0], b[0]), min(had[1], b[1]),
+                                                        max(had[2], b[2]), max(had[3], b[3])]
             done_points += result["points"]
             bin_steps.report(done_points / total)
         # one job per input file, on the workers (each file's parts have their own names); a big file
@@ -778,6 +785,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                               stop=cuts[p + 1], piece=p, records=records) for p in range(pieces)]
         _map_files(_bin_job, bin_jobs, record_bin, tiling, steps, log, stage="binning", points=total,
                    paths=[info.path for info in infos] + [work], writable=[work], cluster=cluster, pool=pool)
+        _say_beyond_header(infos, file_bounds, log)
         for k in sorted(binned_parts):  # in file (and piece) order, whatever order the jobs finished in
             for key, part in binned_parts[k].items():
                 tiles.setdefault(key, []).append(part)
@@ -1041,10 +1049,32 @@ def _write_classified(infos, outs, staged, work, class_paths, class_parts, tilin
 def _bin_job(job) -> dict:
     """Bin one input file into its tile parts (a pure function of its job: same parts, same names)."""
     first, stop = job.get("first", 0), job.get("stop")
+    bounds: list = []
     parts = bin_file(job["path"], job["file_index"], job["grid"], job["work"], check=job.get("check"),
-                     first=first, stop=stop, piece=job.get("piece"), records=job.get("records"))
+                     first=first, stop=stop, piece=job.get("piece"), records=job.get("records"), bounds=bounds)
     points = (stop if stop is not None else scan_header(job["path"]).count) - first
-    return dict(file_index=job["file_index"], first=first, parts=parts, points=points)
+    return dict(file_index=job["file_index"], first=first, parts=parts, points=points, bounds=bounds)
+
+
+def _say_beyond_header(infos, bounds: dict, log) -> None:
+    """Warn about files whose points lie beyond their header's bounds, which the survey's DTM grid is
+    made from: a file whose header said x ended 20 m short of its points lost that strip of the DTM
+    without a word (a QA reviewer). ``bounds``: {file index: the points' stored [xmin, ymin, xmax,
+    ymax]}."""
+    import laspy
+    for k, (x0, y0, x1, y1) in sorted(bounds.items()):
+        info = infos[k]
+        with laspy.open(info.path) as reader:
+            scales, offsets = reader.header.scales, reader.header.offsets
+        lo = (x0 * scales[0] + offsets[0], y0 * scales[1] + offsets[1])
+        hi = (x1 * scales[0] + offsets[0], y1 * scales[1] + offsets[1])
+        slack = (scales[0], scales[1])
+        if any(lo[i] < info.mins[i] - slack[i] or hi[i] > info.maxs[i] + slack[i] for i in (0, 1)):
+            log(f"{WARNING_PREFIX}{info.path}: its points reach x {lo[0]:,.2f} to {hi[0]:,.2f}, y {lo[1]:,.2f} to "
+                f"{hi[1]:,.2f}, beyond its header's bounds (x {info.mins[0]:,.2f} to {info.maxs[0]:,.2f}, y "
+                f"{info.mins[1]:,.2f} to {info.maxs[1]:,.2f}): the points are classified, but the DTM, made for the "
+                "headers' bounds, leaves out those beyond them. Rewrite the file with a tool that recomputes its "
+                "header (e.g. PDAL's translate, LAStools' lasinfo -repair_bb).")
 
 
 def _records_path(work: str, file_index: int) -> str:

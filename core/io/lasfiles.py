@@ -312,7 +312,7 @@ def _read_records(fd: int, buffer: np.ndarray, first: int, stop: int, size: int,
 
 def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk_points: int = CHUNK_POINTS,
              check=None, first: int = 0, stop: Optional[int] = None, piece: Optional[int] = None,
-             records: Optional[str] = None) -> Dict[tuple, TilePart]:
+             records: Optional[str] = None, bounds: Optional[list] = None) -> Dict[tuple, TilePart]:
     """Stream ``path`` once (laspy chunks) and write, for every tile its points or buffer touch,
     the part of the file that tile needs into ``work_dir``. Tiles exist only where points are.
     ``first``/``stop`` bin only those points of the file (one ``piece`` of it, named in the parts'
@@ -324,7 +324,8 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
 
     A point goes to its own tile (``TileGrid.key_of``) and to every tile whose buffer holds it
     (:func:`_in_buffer`), in one numba pass a chunk (``_binning_kernels``); each part lists its
-    points in file order."""
+    points in file order. ``bounds``: a list given the points' [xmin, ymin, xmax, ymax] (as stored,
+    scaled integers), to compare with the header's."""
     import laspy
 
     from ._binning_kernels import bin_chunk_kernel
@@ -351,6 +352,10 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
                 done = 0
                 while done < len(flat):  # (pwrite may write less than asked)
                     done += os.pwrite(fd, flat[done:], start * recs.dtype.itemsize + done)
+                if bounds is not None and n:
+                    lo = [int(recs["X"].min()), int(recs["Y"].min()), int(recs["X"].max()), int(recs["Y"].max())]
+                    bounds[:] = lo if not bounds else [min(bounds[0], lo[0]), min(bounds[1], lo[1]),
+                                                       max(bounds[2], lo[2]), max(bounds[3], lo[3])]
                 kx0, ky0, nky, cuts, out_idx, own_count = bin_chunk_kernel(
                     recs["X"], recs["Y"], scales[0], offsets[0], scales[1], offsets[1], float(grid.size),
                     float(grid.buffer), m, start)

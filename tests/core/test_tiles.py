@@ -827,7 +827,7 @@ def test_a_survey_puts_its_outputs_in_place_together_or_not_at_all(tmp_path, mon
     def run(**kw):
         run_ground_filter(str(folder), str(out / "c.vpc"), SMRF(**kw), dtm_path=str(out / "d.tif"), options=opts)
 
-    def failing_finish(self, path):
+    def failing_finish(self, path, **_kw):
         self.close()
         raise OutputError(f"{path}: cannot write the DTM (No space left on device)")
 
@@ -1197,3 +1197,31 @@ def test_a_header_announcing_fewer_points_than_the_file_holds_is_warned_tiled_as
     lines = []
     run = run_ground_filter(str(src), str(tmp_path / "o.las"), SMRF(), options=tiled(tile=50.0), log=lines.append)
     assert run.point_count == 1_000 and sum(line.startswith(said) for line in lines) == 1, lines
+
+
+def test_points_beyond_their_header_bounds_are_warned_in_a_tiled_run(tmp_path):
+    """The survey's DTM grid is made from the headers: a file whose header said x ended 20 m short
+    of its points lost that strip of the DTM, "done" and no warning (a QA reviewer). The binning,
+    which reads every point, now says so."""
+    import struct
+
+    from groundsieve.core.progress import WARNING_PREFIX
+    rng = np.random.default_rng(9)
+    n = 20_000
+    src = tmp_path / "stale.las"
+    write_las(new_las(rng.uniform(0, 100, n) + 500_000.0, rng.uniform(0, 100, n) + 5_400_000.0,
+                      rng.uniform(100, 101, n)), str(src))
+    data = bytearray(src.read_bytes())
+    struct.pack_into("<d", data, 179, 500_080.0)  # max x 20 m short
+    src.write_bytes(data)
+    lines = []
+    run_ground_filter(str(src), str(tmp_path / "o.las"), SMRF(), options=tiled(tile=50.0),
+                      dtm_path=str(tmp_path / "d.tif"), log=lines.append)
+    said = [line for line in lines if line.startswith(f"{WARNING_PREFIX}{src}: its points reach x 500,000")]
+    assert len(said) == 1 and "beyond its header's bounds (x 500,000" in said[0] and "to 500,080.00" in said[0], lines
+    good = tmp_path / "good.las"
+    write_las(new_las(rng.uniform(0, 100, n) + 500_000.0, rng.uniform(0, 100, n) + 5_400_000.0,
+                      rng.uniform(100, 101, n)), str(good))
+    lines = []
+    run_ground_filter(str(good), str(tmp_path / "g.las"), SMRF(), options=tiled(tile=50.0), log=lines.append)
+    assert not any("beyond its header's bounds" in line for line in lines)
