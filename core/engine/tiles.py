@@ -323,7 +323,10 @@ def output_files(inputs: Sequence[str], output_path: Optional[str]) -> List[Opti
     folder = os.path.splitext(os.path.abspath(output_path))[0]
     names = [os.path.basename(p) for p in inputs]
     if len(set(names)) != len(names):
-        raise InputError("two input files have the same name; the classified files would overwrite each other")
+        twice = next(n for n in names if names.count(n) > 1)
+        same = [p for p in inputs if os.path.basename(p) == twice]
+        raise InputError(f"two input files have the same name ({' and '.join(same[:2])}); the classified files "
+                         "would overwrite each other")
     return [os.path.join(folder, n) for n in names]
 
 

@@ -7,6 +7,7 @@ nothing half-written. Input files are only ever opened for reading.
 from __future__ import annotations
 
 import functools
+import math
 import os
 import re
 import warnings
@@ -275,6 +276,10 @@ def check_las_layout(path: str) -> None:
             header_size, offset, vlrs = struct.unpack_from("<HII", head, 94)
             point_format, record = struct.unpack_from("<BH", head, 104)
             count, = struct.unpack_from("<I", head, 107)
+            scales = struct.unpack_from("<3d", head, 131)
+            if not all(math.isfinite(v) and v > 0 for v in scales):  # (0 put every point on one spot, all ground)
+                raise InputError(f"{path}: the header's scale factors {list(scales)} are not numbers > 0: the header is "
+                                 "damaged")
             if vlrs * _VLR_BYTES > max(offset - header_size, 0) or offset > size:
                 raise InputError(f"{path}: the header announces {vlrs:,} VLRs before the points, which start at "
                                  f"byte {offset:,} of {size:,}: the header is damaged")
@@ -284,6 +289,12 @@ def check_las_layout(path: str) -> None:
                 if evlrs and evlr_at + evlrs * _EVLR_BYTES > size:
                     raise InputError(f"{path}: the header announces {evlrs:,} extended VLRs from byte {evlr_at:,}, "
                                      f"more than the file's {size:,} bytes hold: the header is damaged")
+                if evlrs:  # the first one's length (laspy allocates it: a bogus one was a MemoryError)
+                    f.seek(evlr_at + 20)
+                    length, = struct.unpack("<Q", f.read(8))
+                    if evlr_at + _EVLR_BYTES + length > size:
+                        raise InputError(f"{path}: its first extended VLR (at byte {evlr_at:,}) announces {length:,} "
+                                         f"bytes, more than the file's {size:,} hold: the file is damaged")
             if not point_format & 0x80 or record <= 0 or offset + 8 > size:
                 return
             f.seek(offset)

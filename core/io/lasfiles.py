@@ -72,7 +72,7 @@ def scan_header(path: str) -> LasInfo:
     except (InputError, UnsupportedFormatError):
         raise
     except Exception as err:  # laspy raises many types for damaged files
-        raise InputError(f"{path}: cannot read its LAS header ({err})") from err
+        raise InputError(f"{path}: cannot read its LAS header ({str(err) or type(err).__name__})") from err
 
 
 def _later_returns(header) -> Optional[int]:

@@ -569,3 +569,25 @@ def test_hostile_inputs_a_qa_reviewer_found_get_messages_naming_the_file(tmp_pat
         vpc.write_text(json.dumps({"type": "FeatureCollection", "features": [item]}))
         with pytest.raises(InputError, match=rf"{name}\.vpc: item '\?' has no assets\.data\.href naming a file"):
             read_vpc(str(vpc))
+
+
+def test_a_zero_scale_or_an_evlr_longer_than_the_file_is_refused(tmp_path):
+    """A scale of 0 put every point on one spot and called all of them ground, without a word; an
+    EVLR whose length runs past the file's end made laspy allocate it: "cannot read its LAS header
+    ()" with an empty reason (a QA reviewer)."""
+    import struct
+
+    from groundsieve.core.io.lasfiles import scan_header
+    path, data = _las_bytes(tmp_path, "s0.las")
+    struct.pack_into("<3d", data, 131, 0.0, 0.0, 0.0)
+    path.write_bytes(data)
+    with pytest.raises(InputError, match=r"s0\.las: the header's scale factors \[0\.0, 0\.0, 0\.0\] are not numbers > 0"):
+        read_cloud(str(path))
+    path, data = _las_bytes(tmp_path, "ev.las", point_format=6, version="1.4")
+    evlr = struct.pack("<H16sHQ32s", 0, b"someone", 1, 10 ** 15, b"long")
+    struct.pack_into("<QI", data, 235, len(data), 1)
+    path.write_bytes(bytes(data) + evlr)
+    for read in (read_cloud, scan_header):
+        with pytest.raises(InputError, match=r"ev\.las: its first extended VLR \(at byte [\d,]+\) announces "
+                                             r"1,000,000,000,000,000 bytes"):
+            read(str(path))

@@ -1225,3 +1225,10 @@ def test_points_beyond_their_header_bounds_are_warned_in_a_tiled_run(tmp_path):
     lines = []
     run_ground_filter(str(good), str(tmp_path / "g.las"), SMRF(), options=tiled(tile=50.0), log=lines.append)
     assert not any("beyond its header's bounds" in line for line in lines)
+
+
+def test_two_inputs_of_the_same_name_are_named(tmp_path):
+    from groundsieve.core.engine.tiles import output_files
+    a, b = str(tmp_path / "x" / "t.laz"), str(tmp_path / "y" / "t.laz")
+    with pytest.raises(InputError, match=rf"two input files have the same name \({a} and {b}\)"):
+        output_files([a, b], str(tmp_path / "out.vpc"))
