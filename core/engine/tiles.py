@@ -948,10 +948,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     write_steps = steps.sub(0.85, 0.95 if dtm_writer is not None else 0.99)
     t_write = time.perf_counter()
     written = []
-    for out in outs:
-        if out:
-            os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
-    with StagedOutputs() as staging:
+    with _output_folders(outs), StagedOutputs() as staging:
         staged = [staging.stage(out) if out else None for out in outs]
         _write_classified(infos, outs, staged, work, class_paths, class_parts, tiling, steps, log, write_steps,
                           written, cluster, pool)
@@ -984,6 +981,26 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     return TiledRun(inputs, [o for o in outs if o], sum(i.count for i in infos), ground_total, crs_wkt,
                     grid.size, grid.buffer, len(tile_log), dtm_path, tile_log=tile_log,
                     copc_inputs=[i.path for i in infos if i.copc])
+
+
+@contextlib.contextmanager
+def _output_folders(outs):
+    """Make the folders of the classified files; those made here are removed again (when empty) if
+    the run fails (a reviewer's failed .vpc run left its empty folder of classified files)."""
+    made = []
+    for folder in sorted({os.path.dirname(os.path.abspath(out)) for out in outs if out}):
+        if not os.path.isdir(folder):
+            os.makedirs(folder)
+            made.append(folder)
+    try:
+        yield
+    except BaseException:
+        for folder in reversed(made):
+            try:
+                os.rmdir(folder)
+            except OSError:
+                pass
+        raise
 
 
 def _say_enclosed_nodata(writer, dtm, buffer_m: float, log) -> None:

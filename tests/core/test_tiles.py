@@ -836,6 +836,7 @@ def test_a_survey_puts_its_outputs_in_place_together_or_not_at_all(tmp_path, mon
         with pytest.raises(OutputError, match="No space left on device"):
             run()
     assert sorted(p.name for p in out.rglob("*") if p.is_file()) == []  # nothing, not even a temporary
+    assert list(out.iterdir()) == []  # nor the folder made for the classified files (an HPC reviewer)
     run()
     before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
     assert sorted(p.name for p in before) == ["c.vpc", "d.tif", "e.laz", "w.laz"]
