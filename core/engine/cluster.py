@@ -347,6 +347,19 @@ class Cluster:
 
 
 def _unreachable(address: str, err: BaseException) -> ClusterError:
+    """The error of a scheduler that cannot be reached: what the cause chain says when it is a
+    refused connection or an unknown host (both were told as "did not answer within 10 s", after
+    waiting those 10 s: an HPC reviewer), else the time limit."""
+    import socket
+    seen, cause = set(), err
+    while cause is not None and id(cause) not in seen:
+        seen.add(id(cause))
+        if isinstance(cause, ConnectionRefusedError):
+            return ClusterError(f"The Dask scheduler {address} refused the connection: nothing listens on that port "
+                                "(is `dask scheduler` running there, on this port?)")
+        if isinstance(cause, socket.gaierror):
+            return ClusterError(f"The Dask scheduler {address}: its host name is unknown ({cause}); check the address")
+        cause = cause.__cause__ or cause.__context__
     return ClusterError(f"The Dask scheduler {address} did not answer within {CONNECT_TIMEOUT_S} s "
                         f"({type(err).__name__}: {err}); check the address and that `dask scheduler` "
                         "runs there and its port is open")
@@ -372,6 +385,7 @@ def _connect(distributed, address: str, is_cancelled: Callable[[], bool]):
 
     def attempt():
         try:
+            _refused_or_unknown(distributed, address)
             loop = asyncio.new_event_loop()
             try:
                 with lock:
@@ -442,7 +456,8 @@ def _connect(distributed, address: str, is_cancelled: Callable[[], bool]):
     if isinstance(err, (asyncio.TimeoutError, TimeoutError)):
         raise _not_dask(address, f"no Dask answer within {CONNECT_TIMEOUT_S} s") from err
     comm_closed = getattr(getattr(distributed, "comm", None), "CommClosedError", ())
-    if type(err) is OSError:  # distributed's connect: no TCP connection within the time limit
+    if type(err) is OSError or isinstance(err, _AT_ONCE):  # distributed's connect: no TCP connection within
+        # the time limit; or what _refused_or_unknown found at once
         raise _unreachable(address, err) from err
     if isinstance(err, comm_closed):
         if "ssl" in str(err).lower() or "tls" in str(err).lower():
@@ -450,6 +465,32 @@ def _connect(distributed, address: str, is_cancelled: Callable[[], bool]):
         raise _not_dask(address, "it closed the connection without a Dask answer") from err
     # MemoryError, ValueError, msgpack's errors...: Dask's decoder fed with another protocol's bytes
     raise _not_dask(address, "what answers there does not speak Dask's protocol") from err
+
+
+_AT_ONCE = (ConnectionRefusedError, __import__("socket").gaierror)
+
+
+def _refused_or_unknown(distributed, address: str) -> None:
+    """Raise at once (ConnectionRefusedError, socket.gaierror) for a TCP address whose host is unknown
+    or whose port refuses the connection: distributed's connect retries both until its 10 s limit,
+    then says it timed out (an HPC reviewer). A connection that is neither made nor refused within a
+    second is left to the probe."""
+    import socket
+    try:
+        scheme, location = distributed.comm.parse_address(address)
+        host, port = distributed.comm.parse_host_port(location)
+    except Exception:  # (an address form this does not know: the probe says what is wrong)
+        return
+    if scheme not in ("tcp", "tls") or not host or not port:
+        return
+    socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+    try:
+        with socket.create_connection((host, port), timeout=1.0):
+            pass
+    except ConnectionRefusedError:
+        raise
+    except OSError:  # a time-out, no route...: the probe's own limit decides
+        return
 
 
 async def _probe(distributed, address: str) -> None:
