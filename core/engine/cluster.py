@@ -74,9 +74,11 @@ class _NoRetry:
     def __call__(self, job):
         if self.code and _core_digest() != self.code:  # (this worker process's own digest, made once)
             return Failed(ClusterError(f"Dask worker {_worker_address()} runs GroundSieve {package_version()} "
-                                       "with other code than this client (it joined after the workers were "
-                                       "checked; its core/ differs); install the same groundsieve folder on "
-                                       "every worker (e.g. one copy on the shared file system)"))
+                                       "with other code than this run started with (its core/ differs: a worker "
+                                       "that joined after the workers were checked, or the groundsieve folder "
+                                       "changed during the run); install the same groundsieve folder on every "
+                                       "worker (e.g. one copy on the shared file system), do not change it during "
+                                       "a run, and run again"))
         try:
             return self.function(job)
         except Cancelled:
