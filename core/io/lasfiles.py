@@ -60,6 +60,10 @@ def scan_header(path: str) -> LasInfo:
     try:
         with laspy.open(path) as reader:
             h = reader.header
+            held = _records_held(path, h)
+            if held is not None and held < int(h.point_count) and not (h.version.minor >= 4 and h.number_of_evlrs):
+                raise InputError(f"{path}: the header announces {int(h.point_count):,} points but the file holds "
+                                 f"{held:,} point records: the file is truncated or its header's count is wrong")
             if not all(math.isfinite(float(v)) for v in (*h.mins, *h.maxs)):
                 raise InputError(f"{path}: the header's bounds are not numbers ({list(h.mins)} to {list(h.maxs)}): "
                                  "the header is damaged; rewrite it with a tool that recomputes it (e.g. "
@@ -68,7 +72,7 @@ def scan_header(path: str) -> LasInfo:
                            tuple(float(v) for v in h.maxs), int(h.point_format.id), str(h.version),
                            header_crs_wkt(h),
                            copc=is_copc_header(h), record_size=int(h.point_format.size),
-                           later_returns=_later_returns(h), held=_records_held(path, h))
+                           later_returns=_later_returns(h), held=held)
     except (InputError, UnsupportedFormatError):
         raise
     except Exception as err:  # laspy raises many types for damaged files
@@ -273,7 +277,7 @@ class TilePart:
     index_dtype: str = "<i8"
 
 
-def _chunks(reader, first: int, stop: Optional[int], chunk_points: int):
+def _chunks(reader, first: int, stop: Optional[int], chunk_points: int, path: str = "the file"):
     """The reader's points ``first`` to ``stop`` (None: the end), ``chunk_points`` at a time."""
     if first == 0 and stop is None:
         yield from reader.chunk_iterator(chunk_points)
@@ -285,7 +289,8 @@ def _chunks(reader, first: int, stop: Optional[int], chunk_points: int):
     while pos < stop:
         chunk = reader.read_points(min(chunk_points, stop - pos))
         if len(chunk) == 0:
-            raise InputError(f"{reader.header.point_count:,} points announced but the file ends at {pos:,}")
+            raise InputError(f"{path}: the header announces {reader.header.point_count:,} points but the file ends "
+                             f"before point {pos + 1:,}: the file is truncated or its header's count is wrong")
         pos += len(chunk)
         yield chunk
 
@@ -342,7 +347,7 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
             idx_dtype = index_dtype(int(h.point_count))
             scales, offsets = tuple(float(v) for v in h.scales), tuple(float(v) for v in h.offsets)
             start = first
-            for chunk in _chunks(reader, first, stop, chunk_points):
+            for chunk in _chunks(reader, first, stop, chunk_points, path):
                 if check is not None:
                     check()
                 n = len(chunk)
@@ -741,7 +746,7 @@ def iter_chunks(path: str, chunk_points: int = CHUNK_POINTS, first: int = 0) -> 
     import laspy
     try:
         with laspy.open(path) as reader:
-            yield from _chunks(reader, first, None, chunk_points)
+            yield from _chunks(reader, first, None, chunk_points, path)
     except GroundSieveError:
         raise
     except Exception as err:

@@ -591,3 +591,19 @@ def test_a_zero_scale_or_an_evlr_longer_than_the_file_is_refused(tmp_path):
         with pytest.raises(InputError, match=r"ev\.las: its first extended VLR \(at byte [\d,]+\) announces "
                                              r"1,000,000,000,000,000 bytes"):
             read(str(path))
+
+
+def test_a_header_announcing_more_points_than_a_las_holds_is_refused_before_the_run(tmp_path):
+    """A LAS 1.2 whose header said 4,294,967,295 points for 3,000 records went to the tiles (its count
+    over the budget) and failed in the binning with "4,294,967,295 points announced but the file ends
+    at 2,147,483,647", no file named and a point index for a position (a QA reviewer). Refused when
+    its header is read, naming the file, as a run of the whole file refuses it."""
+    import struct
+
+    from groundsieve.core.io.lasfiles import scan_header
+    path, data = _las_bytes(tmp_path, "big.las")
+    struct.pack_into("<I", data, 107, 0xFFFFFFFF)
+    path.write_bytes(data)
+    with pytest.raises(InputError, match=r"big\.las: the header announces 4,294,967,295 points but the file holds "
+                                         r"3,000 point records: the file is truncated"):
+        scan_header(str(path))
