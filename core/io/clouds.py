@@ -237,6 +237,8 @@ def read_cloud(path: str, steps: Optional[Steps] = None) -> PointCloud:
         raise InputError(f"{path}: no such file")
     if os.path.isdir(path):
         raise InputError(f"{path}: is a folder, not a point-cloud file")
+    if not os.path.isfile(path):  # a FIFO or a device: reading it could wait for good
+        raise InputError(f"{path}: is not a regular file (a pipe or a device?); give a point-cloud file")
     ext = _ext(path)
     if ext in LAS_EXTENSIONS:
         cloud = _read_las(path, steps)

@@ -53,7 +53,8 @@ def scan_header(path: str) -> LasInfo:
     from .copc import is_copc_header
     path = os.fspath(path)
     if not os.path.isfile(path):
-        raise InputError(f"{path}: no such file")
+        raise InputError(f"{path}: " + ("is not a regular file (a pipe or a device?); give a point-cloud file"
+                                         if os.path.exists(path) and not os.path.isdir(path) else "no such file"))
     if _ext(path) not in LAS_EXTENSIONS:
         raise UnsupportedFormatError(f"{path}: expected a .las or .laz file (got '{_ext(path) or '(none)'}')")
     check_las_layout(path)

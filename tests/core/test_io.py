@@ -607,3 +607,16 @@ def test_a_header_announcing_more_points_than_a_las_holds_is_refused_before_the_
     with pytest.raises(InputError, match=r"big\.las: the header announces 4,294,967,295 points but the file holds "
                                          r"3,000 point records: the file is truncated"):
         scan_header(str(path))
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no named pipes on this system")
+def test_a_named_pipe_is_not_a_point_cloud_file(tmp_path):
+    """A FIFO named like a cloud was "no such file" for a LAS name, and a text one would have waited
+    for a writer for good (a QA reviewer)."""
+    from groundsieve.core.io.lasfiles import scan_header
+    for name in ("p.las", "p.txt"):
+        os.mkfifo(tmp_path / name)
+        with pytest.raises(InputError, match=rf"{name}: is not a regular file"):
+            read_cloud(str(tmp_path / name))
+    with pytest.raises(InputError, match=r"p\.las: is not a regular file"):
+        scan_header(str(tmp_path / "p.las"))
