@@ -152,11 +152,14 @@ def header_crs_wkt(header) -> Optional[str]:
         warnings.simplefilter("ignore")
         try:
             crs = header.parse_crs()
-            if crs is None:
-                return None
-            return _with_geokey_heights(crs, header).to_wkt()
         except Exception:
             return None
+        if crs is None:
+            return None
+        try:
+            return _with_geokey_heights(crs, header).to_wkt()
+        except Exception:  # (the horizontal CRS is kept when no compound can be made of the keys)
+            return crs.to_wkt()
 
 
 #: GeoTIFF's VerticalCSTypeGeoKey and VerticalUnitsGeoKey, and the EPSG length units the second may
@@ -189,11 +192,14 @@ def _with_geokey_heights(crs, header):
     heights' datum and unit, its heights in feet were taken for metres without a word, and its DTM
     said metres (a flood modeller). The units key wins over the vertical CRS's own unit (LAStools
     writes NAVD88's code 5703, in metres, beside US survey feet); without a known vertical CRS the
-    heights get a vertical CRS of unknown datum in that unit. A WKT CRS is kept as it is."""
+    heights get a vertical CRS of unknown datum in that unit. Only heights in another unit than x
+    and y are added: LAStools writes the units key (metres) into nearly every file, and a compound
+    CRS of "unknown height (metre)" told two tiles of one survey apart and took the EPSG code off
+    their DTMs (a code reviewer). A WKT CRS, and a 3D one, are kept as they are."""
     from laspy.vlrs.known import GeoKeyDirectoryVlr, WktCoordinateSystemVlr
     records = list(header.vlrs) + list(header.evlrs or [])
     if any(isinstance(r, WktCoordinateSystemVlr) and r.string for r in records) or crs.is_compound \
-            or crs.is_vertical:
+            or crs.is_vertical or len(crs.axis_info) != 2:
         return crs
     keys = {}
     for record in records:
@@ -222,8 +228,12 @@ def _with_geokey_heights(crs, header):
         elif has != name:
             vertical = _epsg_height(vertical.datum.name, name) or VerticalCRS(
                 name=f"{vertical.name} ({name})", datum=vertical.datum, vertical_cs=VerticalCS(axis))
-    if vertical is None:
+    if vertical is None or not vertical.axis_info or not crs.axis_info:
         return crs
+    metres = {"metre": 1.0, "foot": 0.3048, "US survey foot": 1200 / 3937}
+    up, across = metres.get(vertical.axis_info[0].unit_name), metres.get(crs.axis_info[0].unit_name)
+    if up is not None and across is not None and abs(up / across - 1) <= 1e-5:
+        return crs  # heights in the unit of x and y: nothing a run reads differently
     return CompoundCRS(name=f"{crs.name} + {vertical.name}", components=[crs, vertical])
 
 

@@ -123,12 +123,18 @@ def test_the_vertical_part_of_a_crs_given_by_geotiff_keys_is_kept(tmp_path):
     assert [a.unit_name for a in lastools.axis_info] == ["metre", "metre", "US survey foot"]
     epsg = crs("epsg.las", utm + [(4096, 6360), (4099, 9003)])  # NAVD88 height (ftUS) itself
     assert epsg.sub_crs_list[1].to_epsg() == 6360
-    metres = crs("m.las", utm + [(4096, 5703)])
-    assert metres.sub_crs_list[1].to_epsg() == 5703 and metres.axis_info[2].unit_name == "metre"
     unit_only = crs("ft.las", utm + [(4096, 32767), (4099, 9002)])  # user-defined datum, international feet
     assert unit_only.is_compound and unit_only.axis_info[2].unit_name == "foot"
     assert crs("plain.las", utm).to_epsg() == 26917  # no vertical keys: as laspy reads it
     assert crs("odd.las", utm + [(4096, 26917)]).to_epsg() == 26917  # not a vertical CRS: ignored
+    # heights in the unit of x and y add nothing: LAStools writes the units key (metres) into nearly
+    # every file, and "+ unknown height (metre)" told two tiles of one survey apart and took the EPSG
+    # code off their DTMs (a code reviewer); NAVD88 in metres stays EPSG:26917 for the same reason
+    for name, keys in (("units_m.las", [(4099, 9001)]), ("navd88_m.las", [(4096, 5703)]),
+                       ("both_m.las", [(4096, 5703), (4099, 9001)])):
+        assert crs(name, utm + keys).to_epsg() == 26917, name
+    # a 3D geographic CRS with a vertical key keeps its CRS (the compound failed and the whole CRS went)
+    assert crs("geo3d.las", [(1024, 2), (1025, 1), (2048, 4979), (4099, 9001)]) is not None
 
 
 def test_a_geotiff_keys_file_in_us_survey_feet_is_warned_and_its_dtm_says_so(tmp_path):
