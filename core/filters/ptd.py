@@ -8,12 +8,14 @@ using adaptive TIN models", IAPRS 33(B4/1):110-117).
    point within the iteration distance and angle above it) is not ground, and the cell's next
    lowest point is tried. This also rejects groups of low points (multipath echoes along a
    wall, ISPRS samp41). Under a closed canopy most fine cells' lowest points are crowns, and the
-   ground seen through them has little support: ``low_outlier_retry`` tries a seed cell none of
-   whose 32 lowest points has support again with half the share, down to 1/16 of it (without it,
-   where no cell kept a seed, the lowest point of all, an outlier, became the one seed and the TIN
-   stayed below the ground: a generated UAV forest lost 73 % of its ground, 0.95 % with it; lidR's
-   Megaplot 8.1 -> 3.4 % Type I; the ISPRS samples unchanged). A share of 0.2 takes Megaplot to
-   0.03 % but accepts a group of 25 multipath points 25 m down along 12 m (docs/BENCHMARKS.md).
+   ground seen through them has little support: ``low_outlier_retry`` tries the seed cells none of
+   whose 32 lowest points has support again with half the share, down to 1/16 of it, where at
+   least half of the cells around (3 x 3) failed too (without it, where no cell kept a seed, the
+   lowest point of all, an outlier, became the one seed and the TIN stayed below the ground: a
+   generated UAV forest lost 73 % of its ground, 0.95 % with it; lidR's Megaplot 8.1 -> 6.0 % Type
+   I; the ISPRS samples unchanged; a cell that failed among cells with seeds holds a large group of
+   low points, and is not retried). A share of 0.2 takes Megaplot to 0.03 % but accepts a group of
+   25 multipath points 25 m down along 12 m (docs/BENCHMARKS.md).
 2. The initial TIN: the Delaunay triangulation of the seeds, closed by a ring of virtual
    vertices half a seed cell outside the data. Their heights extrapolate the TIN (a plane
    fitted to the real vertices among their neighbours and neighbours' neighbours) and are
@@ -267,16 +269,19 @@ class PTD:
         if n / area > _THIN_MIN_DENSITY:  # then the thinning grid has fewer than n / 2 squares
             K.thin_kernel(vx, vy, vz, n, _THIN_M, int(xr // _THIN_M) + 1, int(yr // _THIN_M) + 1, status)
         del cell_start
-        # ``low_outlier_retry``: a seed cell none of whose lowest points has support is tried again
-        # with half the share, down to _SUPPORT_SHARE_FLOOR of it. Under a closed canopy with little understory the lowest
-        # points of nearly every fine cell are crowns: every candidate of such a cell was rejected,
-        # and where no cell kept a seed the one seed left (the lowest point of all: a low outlier)
-        # kept the whole TIN below the ground (a forester's generated forest lost all its ground).
-        # The cell's lowest points are tried first at each share, so the lowest share at which the
-        # ground has support is used before an outlier, which has little or none at any share.
+        # ``low_outlier_retry``: where most seed cells around one failed (none of their lowest points
+        # had support), they are tried again with half the share, down to _SUPPORT_SHARE_FLOOR of it.
+        # Under a closed canopy with little understory the lowest points of nearly every fine cell are
+        # crowns: every candidate of such cells was rejected, and where no cell kept a seed the one
+        # seed left (the lowest point of all: a low outlier) kept the whole TIN below the ground (a
+        # forester's generated forest lost all its ground). A cell that failed among cells that found
+        # their seed is not retried: there it is a large group of low points (60 multipath echoes fill
+        # a cell's 32 tries, and a retry made them seeds: a code reviewer). The cell's lowest points
+        # are tried first at each share, so the ground has the lowest share at which it has support.
         share = float(self.low_outlier_support)
         thinned = status.copy()
         active = np.ones(scols * srows, dtype=bool)
+        first = True
         while True:
             K.seeds_kernel(vx, vy, vz, n, seed_cell, scols, srows, zmin_fine, cell, ncols, nrows, block,
                            radius if self.low_outlier_check else -1.0, float(self.max_distance_m), tan_angle,
@@ -287,11 +292,17 @@ class PTD:
             tried = status == K.EXCLUDED  # the points rejected in this pass's active cells
             if not tried.any():
                 break
-            k = (np.minimum(np.maximum((vy[:n] // seed_cell).astype(np.int64), 0), srows - 1) * scols
-                 + np.minimum(np.maximum((vx[:n] // seed_cell).astype(np.int64), 0), scols - 1))
-            active = np.zeros(scols * srows, dtype=bool)
-            active[k[tried]] = True
-            active &= seed_of_cell < 0  # cells whose candidates were all rejected
+            if first:  # each point's seed cell, as the kernel computes it
+                k = (np.minimum((vy[:n] / seed_cell).astype(np.int64), srows - 1) * scols
+                     + np.minimum((vx[:n] / seed_cell).astype(np.int64), scols - 1))
+            failed = np.zeros(scols * srows, dtype=bool)
+            failed[k[tried]] = True
+            failed &= seed_of_cell < 0  # cells whose candidates were all rejected
+            if first:
+                occupied = np.bincount(k, minlength=scols * srows).reshape(srows, scols) > 0
+                failed &= _mostly_failed(failed.reshape(srows, scols), occupied).ravel()
+                first = False
+            active = failed & active
             if not active.any():
                 break
             again = active[k]
@@ -421,6 +432,15 @@ class PTD:
         outlier[perm] = low_outlier
         steps.report(1.0)
         return PTDResult(ground, seed, vertex, outlier, len(added), tuple(added))
+
+
+def _mostly_failed(failed: np.ndarray, occupied: np.ndarray) -> np.ndarray:
+    """Per seed cell: at least half of the cells holding points in its 3 x 3 neighbourhood (itself
+    included) failed to find a supported seed."""
+    from scipy.ndimage import uniform_filter
+    f = uniform_filter(failed.astype(np.float64), size=3, mode="constant")
+    o = uniform_filter(occupied.astype(np.float64), size=3, mode="constant")
+    return f >= 0.5 * o - 1e-9
 
 
 def _ring(xr: float, yr: float, seed_cell: float) -> np.ndarray:
