@@ -66,6 +66,17 @@ def no_retry(function, code: str = ""):
     return _NoRetry(function, code)
 
 
+def other_code(who: str, version: str, likely: str) -> str:
+    """The refusal of a worker whose core/ differs from the one the run started with: ``likely`` is
+    the usual cause where it is said; the groundsieve folder changed during the run is the other
+    (the client's digest is taken once, when the run starts: an HPC reviewer who edited the shared
+    copy mid-run was told the worker was the odd one)."""
+    return (f"{who} runs GroundSieve {version} with other code than this run started with (its core/ differs: "
+            f"{likely}, or the groundsieve folder changed during the run); install the same groundsieve folder "
+            "on every worker (e.g. one copy on the shared file system), do not change it during a run, and run "
+            "again")
+
+
 class _NoRetry:
     def __init__(self, function, code: str = ""):
         self.function = function
@@ -73,12 +84,8 @@ class _NoRetry:
 
     def __call__(self, job):
         if self.code and _core_digest() != self.code:  # (this worker process's own digest, made once)
-            return Failed(ClusterError(f"Dask worker {_worker_address()} runs GroundSieve {package_version()} "
-                                       "with other code than this run started with (its core/ differs: a worker "
-                                       "that joined after the workers were checked, or the groundsieve folder "
-                                       "changed during the run); install the same groundsieve folder on every "
-                                       "worker (e.g. one copy on the shared file system), do not change it during "
-                                       "a run, and run again"))
+            return Failed(ClusterError(other_code(f"Dask worker {_worker_address()}", package_version(),
+                                                  "a worker that joined after the workers were checked")))
         try:
             return self.function(job)
         except Cancelled:
@@ -249,9 +256,7 @@ def check_workers(client, paths: Sequence[str], writable: Sequence[str] = ()) ->
             raise ClusterError(f"{who} runs GroundSieve {r['version']}, this client {mine}; every worker must "
                                "run the same version")
         if r.get("code") and r["code"] != code:
-            raise ClusterError(f"{who} runs GroundSieve {mine} with other code than this client (its core/ differs: "
-                               "a changed or older copy of the same version); install the same groundsieve "
-                               "folder on every worker (e.g. one copy on the shared file system)")
+            raise ClusterError(other_code(who, mine, "a changed or older copy of the same version on that worker"))
         if r["python"] != here:
             raise ClusterError(f"{who} runs Python {r['python']}, this client {here}; use the same Python "
                                "on the client and the workers")

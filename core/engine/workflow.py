@@ -500,13 +500,15 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
         # A folder, a .vpc, a set tile size or a cloud beyond the memory budget: buffered tiles.
         if rasters:
             from .tiles import is_survey_input
+            tiling = options.tiling
             why = ("it is a survey (a folder or a .vpc), run in tiles" if is_survey_input(input_path) else
-                   "a tile size is set" if options.tiling is not None and options.tiling.tile_size_m else
-                   "it is beyond the memory budget, so it would be run in tiles")
+                   "a tile size is set" if tiling is not None and tiling.tile_size_m else
+                   "a Dask scheduler is set, whose workers run it in tiles" if tiling is not None and tiling.scheduler
+                   else "it is beyond the memory budget, so it would be run in tiles")
             raise InvalidParameterError(
                 f"{input_path}: the filter's intermediate grids are made for one cloud in memory, and {why}; "
-                "leave those outputs empty, or (for one file) set a larger memory budget (e.g. 8000 MB) "
-                "and no tile size")
+                "leave those outputs empty, or (for one file) set a larger memory budget (e.g. 8000 MB), "
+                "no tile size and no scheduler")
         return run_tiled(input_path, output_path, algorithm, options=options, dtm_path=dtm_path, dtm=dtm,
                          steps=steps, log=log)
     if not os.path.exists(input_path):  # before the outputs: a mistyped input explains the rest

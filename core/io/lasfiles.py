@@ -17,7 +17,7 @@ from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 import numpy as np
 
 from ..errors import GroundSieveError, InputError, OutputError, UnsupportedFormatError
-from .clouds import PointCloud, _records_held, check_las_layout, header_crs_wkt
+from .clouds import PointCloud, check_las_layout, header_crs_wkt, records_held
 from .outputs import LAS_EXTENSIONS, _ext, atomic_path, check_classes_fit
 
 VPC_EXTENSION = ".vpc"
@@ -61,7 +61,7 @@ def scan_header(path: str) -> LasInfo:
     try:
         with laspy.open(path) as reader:
             h = reader.header
-            held = _records_held(path, h)
+            held = records_held(path, h)
             if held is not None and held < int(h.point_count) and not (h.version.minor >= 4 and h.number_of_evlrs):
                 raise InputError(f"{path}: the header announces {int(h.point_count):,} points but the file holds "
                                  f"{held:,} point records: the file is truncated or its header's count is wrong")

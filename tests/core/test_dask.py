@@ -356,3 +356,13 @@ def test_a_single_small_file_given_a_scheduler_runs_on_the_cluster(survey):
     assert needs_tiling(survey, TileOptions(scheduler="tcp://10.0.0.5:8786"), SMRF(), log=lines.append)
     assert lines == [f"{survey}: runs in buffered tiles on the Dask cluster (tcp://10.0.0.5:8786)."]
     assert not needs_tiling(survey, TileOptions(), SMRF())
+
+
+def test_intermediate_rasters_with_a_scheduler_are_refused_for_the_right_reason(survey, tmp_path):
+    """With a scheduler every file runs in tiles; EVC's grids were refused "beyond the memory budget
+    ... set a larger memory budget", which could not help (a code reviewer)."""
+    from groundsieve.core.errors import InvalidParameterError
+    with pytest.raises(InvalidParameterError, match="a Dask scheduler is set, whose workers run it in tiles"):
+        run_ground_filter(survey, str(tmp_path / "x.laz"), SMRF(), rasters={str(tmp_path / "r.tif"): lambda run: None},
+                          options=FilterOptions(tiling=TileOptions(scheduler="tcp://10.0.0.5:8786")))
+    assert not (tmp_path / "x.laz").exists()

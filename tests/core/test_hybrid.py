@@ -313,7 +313,7 @@ def test_the_accurate_shipped_model_loads_and_runs_on_xyz():
     model = load_hybrid_model(PTD_MODEL)
     assert model.features == list(DEFAULT_FEATURES) + list(PTD_FEATURES)
     # trained before PTD's low-outlier support share and retry were settings: its features used 0.4
-    # and no retry, which PTD_SETTINGS keeps (PTD's own defaults became 0.2 with retries)
+    # and no retry, which PTD_SETTINGS keeps (PTD's own defaults are 0.4 with retries)
     assert model.meta[CELL_KEY] == 1.0 and dict(model.meta["hybrid_ptd_settings"], low_outlier_support=0.4,
                                                 low_outlier_retry=False) == PTD_SETTINGS
     assert PTD_SETTINGS["low_outlier_support"] == 0.4 and PTD_SETTINGS["low_outlier_retry"] is False

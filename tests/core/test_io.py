@@ -620,3 +620,29 @@ def test_a_named_pipe_is_not_a_point_cloud_file(tmp_path):
             read_cloud(str(tmp_path / name))
     with pytest.raises(InputError, match=r"p\.las: is not a regular file"):
         scan_header(str(tmp_path / "p.las"))
+
+
+def test_a_las_1_3_with_waveform_packets_after_its_points_holds_what_it_announces(tmp_path):
+    """LAS 1.3 keeps waveform packets in the file after the points (global encoding bit 1, the start
+    of their record in the header): they were counted as point records, and the file said to hold
+    2,246 records more than announced, whole and now tiled (a code reviewer)."""
+    import struct
+
+    from groundsieve.core.io.lasfiles import scan_header
+    rng = np.random.default_rng(0)
+    n = 2000
+    header = laspy.LasHeader(point_format=4, version="1.3")
+    header.scales, header.offsets = [0.01] * 3, [500000, 5400000, 0]
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = 500000 + rng.uniform(0, 50, n), 5400000 + rng.uniform(0, 50, n), rng.uniform(0, 2, n)
+    path = tmp_path / "wave13.las"
+    las.write(str(path))
+    data = bytearray(path.read_bytes())
+    size = len(data)
+    struct.pack_into("<H", data, 6, struct.unpack_from("<H", data, 6)[0] | 2)  # waveform packets internal
+    struct.pack_into("<Q", data, 227, size)  # their record starts after the points
+    data += struct.pack("<H16sHQ32s", 0, b"LASF_Spec", 65535, n * 64, b"waveform") + bytes(n * 64)
+    path.write_bytes(data)
+    assert read_cloud(str(path)).notes == []
+    info = scan_header(str(path))
+    assert info.count == n and info.held == n
