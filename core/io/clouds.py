@@ -267,6 +267,24 @@ def read_cloud(path: str, steps: Optional[Steps] = None) -> PointCloud:
 _VLR_BYTES, _EVLR_BYTES = 54, 60
 
 
+def _laszip_compressor(f, header_size: int, vlrs: int) -> Optional[int]:
+    """The compressor of the LASzip VLR among the ``vlrs`` after the header (0 none, 1 pointwise, 2
+    pointwise and chunked, 3 layered and chunked: LAS 1.4 formats 6-10); None without one."""
+    import struct
+    at = header_size
+    for _ in range(vlrs):
+        f.seek(at)
+        head = f.read(54)
+        if len(head) < 54:
+            return None
+        user, record, length = struct.unpack_from("<16sHH", head, 2)
+        if user.rstrip(b"\0") == b"laszip encoded" and record == 22204:
+            data = f.read(2)
+            return struct.unpack("<H", data)[0] if len(data) == 2 else None
+        at += 54 + length
+    return None
+
+
 def check_las_layout(path: str) -> None:
     """Refuse a LAS/LAZ file whose header announces more records than the file can hold, before
     laspy or lazrs reads it: a VLR count of 2e9 made laspy build VLRs until the memory ran out
@@ -308,6 +326,8 @@ def check_las_layout(path: str) -> None:
                         raise InputError(f"{path}: its first extended VLR (at byte {evlr_at:,}) announces {length:,} "
                                          f"bytes, more than the file's {size:,} hold: the file is damaged")
             if not point_format & 0x80 or record <= 0 or offset + 8 > size:
+                return
+            if _laszip_compressor(f, header_size, vlrs) not in (2, 3):  # only chunked LASzip has the table
                 return
             f.seek(offset)
             table_at, = struct.unpack("<q", f.read(8))
