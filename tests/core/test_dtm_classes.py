@@ -20,15 +20,21 @@ BANK_Z, WATER_Z = 10.0, 6.0
 RIVER = (50.0, 70.0)
 
 
+def river_points(rng, n):
+    """x, y, z, classes and the channel mask of flat banks at 10 m (ground) and a 20 m channel of
+    water points at 6 m (class 9) over 120 x 120 m."""
+    x, y = rng.uniform(0, 120, n), rng.uniform(0, 120, n)
+    wet = (x > RIVER[0]) & (x < RIVER[1])
+    z = np.where(wet, WATER_Z, BANK_Z) + rng.normal(0, 0.02, n)
+    return x, y, z, np.where(wet, 9, 2).astype(np.uint8), wet
+
+
 @pytest.fixture(scope="module")
 def river(tmp_path_factory):
     """Flat banks at 10 m (ground), a 20 m channel of water points at 6 m (class 9), a few trees."""
     rng = np.random.default_rng(3)
     n = 24_000
-    x, y = rng.uniform(0, 120, n), rng.uniform(0, 120, n)
-    wet = (x > RIVER[0]) & (x < RIVER[1])
-    z = np.where(wet, WATER_Z, BANK_Z) + rng.normal(0, 0.02, n)
-    cls = np.where(wet, 9, 2).astype(np.uint8)
+    x, y, z, cls, wet = river_points(rng, n)
     tree = (~wet) & (rng.random(n) < 0.05)
     z[tree] += rng.uniform(3, 12, tree.sum())
     cls[tree] = 5
@@ -170,12 +176,7 @@ def test_a_bridge_deck_made_ground_is_warned_whole_and_tiled(tmp_path):
     the note on replaced classes (not a warning, not in --json's warnings). The run now warns with
     the count; kept classes keep the deck out and say nothing."""
     from groundsieve.core.progress import WARNING_PREFIX
-    rng = np.random.default_rng(5)
-    n = 30_000
-    x, y = rng.uniform(0, 120, n), rng.uniform(0, 120, n)
-    wet = (x > RIVER[0]) & (x < RIVER[1])
-    z = np.where(wet, WATER_Z, BANK_Z) + rng.normal(0, 0.02, n)
-    cls = np.where(wet, 9, 2).astype(np.uint8)
+    x, y, z, cls, _wet = river_points(np.random.default_rng(5), 30_000)
     deck = (x > RIVER[0] - 10) & (x < RIVER[1] + 10) & (y > 55) & (y < 65)
     z[deck], cls[deck] = BANK_Z + 0.8, 17  # a deck 8 m wide on low abutments: terrain to a filter
     path = tmp_path / "bridge.laz"

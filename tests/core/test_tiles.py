@@ -1178,21 +1178,26 @@ def test_the_class_files_get_their_disk_blocks_before_the_tiles_write_them(tmp_p
         tiles_module._reserve([str(path)], str(tmp_path))
 
 
+def _edited_header_las(path, n, fmt=None, offset=0, value=0):
+    """A LAS 1.2 of ``n`` points over 100 x 100 m, its header's bytes at ``offset`` replaced by
+    ``value`` packed as ``fmt`` (none when ``fmt`` is None)."""
+    import struct
+    rng = np.random.default_rng(n)
+    write_las(new_las(rng.uniform(0, 100, n) + 500_000.0, rng.uniform(0, 100, n) + 5_400_000.0,
+                      rng.uniform(100, 101, n)), str(path))
+    if fmt is not None:
+        data = bytearray(path.read_bytes())
+        struct.pack_into(fmt, data, offset, value)
+        path.write_bytes(data)
+    return path
+
+
 def test_a_header_announcing_fewer_points_than_the_file_holds_is_warned_tiled_as_whole(tmp_path):
     """A run of the whole file says that it reads only the points the header announces; a tiled run
     dropped the others without a word (a QA reviewer: 8,554 of 8,654 points, and big clouds are
     tiled by themselves)."""
-    import struct
-
     from groundsieve.core.progress import WARNING_PREFIX
-    rng = np.random.default_rng(6)
-    n = 9_000
-    src = tmp_path / "short.las"
-    write_las(new_las(rng.uniform(0, 100, n) + 500_000.0, rng.uniform(0, 100, n) + 5_400_000.0,
-                      rng.uniform(100, 101, n)), str(src))
-    data = bytearray(src.read_bytes())
-    struct.pack_into("<I", data, 107, 1_000)
-    src.write_bytes(data)
+    src = _edited_header_las(tmp_path / "short.las", 9_000, "<I", 107, 1_000)
     said = f"{WARNING_PREFIX}{src}: the header announces 1,000 points but the file holds 9,000 point records"
     assert read_cloud(str(src)).notes[0].startswith(said)
     lines = []
@@ -1204,25 +1209,14 @@ def test_points_beyond_their_header_bounds_are_warned_in_a_tiled_run(tmp_path):
     """The survey's DTM grid is made from the headers: a file whose header said x ended 20 m short
     of its points lost that strip of the DTM, "done" and no warning (a QA reviewer). The binning,
     which reads every point, now says so."""
-    import struct
-
     from groundsieve.core.progress import WARNING_PREFIX
-    rng = np.random.default_rng(9)
-    n = 20_000
-    src = tmp_path / "stale.las"
-    write_las(new_las(rng.uniform(0, 100, n) + 500_000.0, rng.uniform(0, 100, n) + 5_400_000.0,
-                      rng.uniform(100, 101, n)), str(src))
-    data = bytearray(src.read_bytes())
-    struct.pack_into("<d", data, 179, 500_080.0)  # max x 20 m short
-    src.write_bytes(data)
+    src = _edited_header_las(tmp_path / "stale.las", 20_000, "<d", 179, 500_080.0)  # max x 20 m short
     lines = []
     run_ground_filter(str(src), str(tmp_path / "o.las"), SMRF(), options=tiled(tile=50.0),
                       dtm_path=str(tmp_path / "d.tif"), log=lines.append)
     said = [line for line in lines if line.startswith(f"{WARNING_PREFIX}{src}: its points reach x 500,000")]
     assert len(said) == 1 and "beyond its header's bounds (x 500,000" in said[0] and "to 500,080.00" in said[0], lines
-    good = tmp_path / "good.las"
-    write_las(new_las(rng.uniform(0, 100, n) + 500_000.0, rng.uniform(0, 100, n) + 5_400_000.0,
-                      rng.uniform(100, 101, n)), str(good))
+    good = _edited_header_las(tmp_path / "good.las", 20_000)
     lines = []
     run_ground_filter(str(good), str(tmp_path / "g.las"), SMRF(), options=tiled(tile=50.0), log=lines.append)
     assert not any("beyond its header's bounds" in line for line in lines)
