@@ -1013,12 +1013,12 @@ def _say_enclosed_nodata(writer, dtm, buffer_m: float, log) -> None:
         return
     empty = writer.enclosed_nodata()
     if empty:
-        log(f"{WARNING_PREFIX}DTM: {empty:,} cell(s) between cells with a value stayed nodata, where a gap or a bay "
-            f"of the data is wider than the tiles' buffer ({buffer_m:g} m): a tile cannot see across it, while a run "
-            "of the whole cloud interpolates across it (near such gaps the tiled DTM may also step at tile edges). "
-            "For a lake or a missing strip, a tile buffer of at least the gap's width gives the whole run's DTM; for "
-            "open water or land outside the survey, nodata is right, and a DTM maximum distance makes it the rule "
-            "(tiled or whole, without this warning).")
+        log(f"{WARNING_PREFIX}DTM: {empty:,} cell(s) with values around them in their row and their column stayed "
+            f"nodata: a gap in the data there (a lake, a missing strip) is wider than the tiles' buffer ({buffer_m:g} "
+            "m), which a tile cannot see across, while a run of the whole cloud interpolates across it (near such "
+            "gaps the tiled DTM may also step at tile edges). A tile buffer of at least the gap's width gives the "
+            "whole run's DTM; to leave such gaps empty on purpose (water without returns), set a DTM maximum "
+            "distance (tiled or whole, without this warning).")
 
 
 def _existing_folder(path: str) -> str:

@@ -238,7 +238,8 @@ def test_dtm_cells_a_tile_cannot_see_across_a_gap_to_are_warned(scene_laz, tmp_p
     missing = int(np.isnan(mosaic).sum() - np.isnan(whole).sum())
     assert missing >= 80 * 80 and np.isnan(mosaic[~np.isnan(whole)]).sum() == missing
     warned = [line for line in lines if line.startswith(WARNING_PREFIX) and "stayed nodata" in line]
-    assert len(warned) == 1 and f"DTM: {missing:,} cell(s) between cells with a value stayed nodata" in warned[0]
+    assert len(warned) == 1
+    assert f"DTM: {missing:,} cell(s) with values around them in their row and their column stayed nodata" in warned[0]
     assert "tiles' buffer (5 m)" in warned[0]
     # with a maximum distance the empty cells are the rule's: no warning
     lines = []
@@ -268,6 +269,30 @@ def test_a_full_disk_in_a_tile_is_an_output_error_naming_the_working_folder(scen
         run_ground_filter(scene_laz, str(out), SMRF(), options=tiled(parallel="threads"), dtm_path=str(dtm))
     assert not out.exists() and not dtm.exists()
     assert not [n for n in os.listdir(tmp_path) if n.startswith(".")]
+
+
+def test_a_bay_of_the_data_is_not_called_a_gap_a_tile_cannot_see_across(tmp_path):
+    """A survey with a bay open on one side (a coastline, an estuary): its tiled DTM leaves the bay
+    empty where a run of the whole cloud draws triangles across it, as a lake; the warning told the
+    user to set a buffer as wide as the bay (a code reviewer's 200 x 400 m bay). Only cells with
+    values around them in their row and in their column count."""
+    from groundsieve.core.progress import WARNING_PREFIX
+    rng = np.random.default_rng(12)
+    n = 60_000
+    x, y = rng.uniform(0, 240, n), rng.uniform(0, 240, n)
+    keep = ~((x > 60) & (x < 200) & (y > 60))  # the bay, open to the north
+    src = tmp_path / "bay.laz"
+    write_las(new_las(x[keep] + 500_000.0, y[keep] + 5_400_000.0, 100 + 0.01 * x[keep] + rng.normal(0, 0.03, keep.sum())),
+              str(src))
+    cell = DTMOptions(cell_size_m=2.0)
+    run_ground_filter(str(src), None, SMRF(), dtm_path=str(tmp_path / "whole.tif"), dtm=cell)
+    lines = []
+    run_ground_filter(str(src), None, SMRF(), options=tiled(buffer_m=10.0), dtm_path=str(tmp_path / "tiled.tif"),
+                      dtm=cell, log=lines.append)
+    whole, _ = _dtm_values(tmp_path / "whole.tif")
+    mosaic, _ = _dtm_values(tmp_path / "tiled.tif")
+    assert np.isnan(mosaic).sum() > np.isnan(whole).sum() + 500  # the bay, empty in tiles only
+    assert not any(line.startswith(WARNING_PREFIX) and "stayed nodata" in line for line in lines), lines
 
 
 def test_points_on_a_tile_boundary_at_the_survey_edge_are_not_called_far(tmp_path):
