@@ -300,8 +300,8 @@ def check_las_layout(path: str) -> None:
             if len(head) < 227 or head[:4] != b"LASF":
                 return
             major, minor = struct.unpack_from("<BB", head, 24)
-            if major != 1 or not 1 <= minor <= 4:  # (1.0 failed at the write, after the whole run)
-                raise UnsupportedFormatError(f"{path}: LAS version {major}.{minor} is not supported (1.1 to 1.4 are); "
+            if major != 1 or minor > 4:
+                raise UnsupportedFormatError(f"{path}: LAS version {major}.{minor} is not supported (1.0 to 1.4 are); "
                                              "convert it first, e.g. las2las -set_version 1.2 or PDAL's translate")
             header_size, offset, vlrs = struct.unpack_from("<HII", head, 94)
             point_format, record = struct.unpack_from("<BH", head, 104)
@@ -594,7 +594,8 @@ def write_classified(cloud: PointCloud, classification: np.ndarray, path: str, *
     if cloud.las is not None:
         las = cloud.las
         from .copc import is_copc_header, plain_header
-        if is_copc_header(las.header):  # laspy writes no COPC; nor would the copy be one (its chunks)
+        if is_copc_header(las.header) or las.header.version.minor == 0:  # laspy writes neither COPC (nor
+            # would the copy be one: its chunks) nor LAS 1.0
             import laspy
             las = laspy.LasData(header=plain_header(las.header), points=las.points)
         check_classes_fit(path, las.point_format.id, classification)

@@ -56,9 +56,13 @@ def is_copc_header(header) -> bool:
 def plain_header(header):
     """A copy of ``header`` for a file that is not COPC (e.g. our classified copy, whose LAZ
     chunks are no longer the octree's nodes): the COPC records (info, extents, hierarchy) dropped,
-    the other VLRs and EVLRs kept."""
+    the other VLRs and EVLRs kept. A LAS 1.0 header becomes 1.2 (the same header and point formats
+    0 and 1; laspy writes no 1.0, and a 1.0 input failed at the write, after the whole run)."""
     from laspy.vlrs.vlrlist import VLRList
     h = copy.deepcopy(header)
+    if h.version.minor == 0:
+        from laspy.header import Version
+        h.version = Version(1, 2)
     h.vlrs = VLRList([v for v in h.vlrs if not _is_copc_record(v)])
     if getattr(h, "evlrs", None) is not None:
         h.evlrs = plain_evlrs(h)

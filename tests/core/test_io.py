@@ -534,7 +534,7 @@ def test_a_laz_whose_chunk_table_announces_2_31_chunks_is_refused_not_a_crash(tm
 def test_hostile_inputs_a_qa_reviewer_found_get_messages_naming_the_file(tmp_path):
     """Each gave a traceback (kind "other") or a silent wrong answer: an infinite z in a text file
     (OverflowError in the scale), a 4th column that is no label (300, nan, 0.7 became label 0, -1
-    255), a LAS 1.0 file (refused by laspy only at the write, after the whole run), header bounds
+    255), a LAS 2.2 file (refused by laspy only at the write, after the whole run), header bounds
     of NaN (in the survey engine's memory estimate), a .vpc whose assets or href are not objects."""
     import json
     import struct
@@ -553,11 +553,11 @@ def test_hostile_inputs_a_qa_reviewer_found_get_messages_naming_the_file(tmp_pat
                            "reference labels."]
     (tmp_path / "ok.txt").write_text(rows + "\n1 2 3 1\n")
     assert read_cloud(str(tmp_path / "ok.txt")).reference_label.tolist() == [0] * 30 + [1]
-    path, data = _las_bytes(tmp_path, "v10.las")
-    data[25] = 0  # LAS 1.0
+    path, data = _las_bytes(tmp_path, "v22.las")
+    data[24], data[25] = 2, 2  # LAS 2.2
     path.write_bytes(data)
     for read in (read_cloud, scan_header):
-        with pytest.raises(UnsupportedFormatError, match=r"v10\.las: LAS version 1\.0 is not supported"):
+        with pytest.raises(UnsupportedFormatError, match=r"v22\.las: LAS version 2\.2 is not supported"):
             read(str(path))
     path, data = _las_bytes(tmp_path, "nan.las")
     struct.pack_into("<d", data, 179, float("nan"))  # max x
@@ -646,3 +646,22 @@ def test_a_las_1_3_with_waveform_packets_after_its_points_holds_what_it_announce
     assert read_cloud(str(path)).notes == []
     info = scan_header(str(path))
     assert info.count == n and info.held == n
+
+
+@pytest.mark.parametrize("tiles", [0.0, 20.0], ids=["whole", "tiled"])
+def test_a_las_1_0_input_is_classified_into_a_las_1_2_copy(tmp_path, tiles):
+    """laspy reads LAS 1.0 but writes no 1.0: such an input failed at the write, after the whole run
+    (a QA reviewer; refused up front for a while, which also refused DTM-only runs, a code reviewer).
+    Its classified copy is LAS 1.2 now (the same header and point formats), points to the bit."""
+    from groundsieve.core.engine.tiles import TileOptions
+    from groundsieve.core.engine.workflow import FilterOptions, run_ground_filter
+    from groundsieve.core.filters.smrf import SMRF
+    path, data = _las_bytes(tmp_path, "v10.las")
+    data[25] = 0
+    path.write_bytes(data)
+    assert laspy.read(str(path)).header.version.minor == 0
+    out = tmp_path / "o.laz"
+    run_ground_filter(str(path), str(out), SMRF(), options=FilterOptions(tiling=TileOptions(tile_size_m=tiles)))
+    got, want = laspy.read(str(out)), laspy.read(str(path))
+    assert str(got.header.version) == "1.2" and len(got.points) == len(want.points)
+    assert np.array_equal(got.X, want.X) and np.array_equal(got.Z, want.Z) and (got.classification == 2).any()
