@@ -32,6 +32,7 @@ import asyncio
 import functools
 import os
 import re
+import socket
 import threading
 import time
 from typing import Callable, List, Optional, Sequence, Tuple
@@ -357,7 +358,6 @@ def _unreachable(address: str, err: BaseException) -> ClusterError:
     """The error of a scheduler that cannot be reached: what the cause chain says when it is a
     refused connection or an unknown host (both were told as "did not answer within 10 s", after
     waiting those 10 s: an HPC reviewer), else the time limit."""
-    import socket
     seen, cause = set(), err
     while cause is not None and id(cause) not in seen:
         seen.add(id(cause))
@@ -474,7 +474,7 @@ def _connect(distributed, address: str, is_cancelled: Callable[[], bool]):
     raise _not_dask(address, "what answers there does not speak Dask's protocol") from err
 
 
-_AT_ONCE = (ConnectionRefusedError, __import__("socket").gaierror)
+_AT_ONCE = (ConnectionRefusedError, socket.gaierror)
 
 
 def _refused_or_unknown(distributed, address: str) -> None:
@@ -482,7 +482,6 @@ def _refused_or_unknown(distributed, address: str) -> None:
     or whose port refuses the connection: distributed's connect retries both until its 10 s limit,
     then says it timed out (an HPC reviewer). A connection that is neither made nor refused within a
     second is left to the probe."""
-    import socket
     try:
         scheme, location = distributed.comm.parse_address(address)
         host, port = distributed.comm.parse_host_port(location)

@@ -45,9 +45,10 @@ from typing import Callable, Dict, List, Optional, Sequence
 import numpy as np
 
 from ..errors import Cancelled, GroundSieveError, InputError, InvalidParameterError, OutputError
+from ..io.clouds import extra_records_warning
 from ..io.lasfiles import (CHUNK_POINTS, VPC_EXTENSION, LasInfo, TileGrid, assemble_classified, bin_file,
-                           check_survey, expand_inputs, iter_chunks, piece_cuts, read_part, scan_header, tile_cloud,
-                           write_classified_piece, write_classified_stream, write_vpc)
+                           check_survey, expand_inputs, iter_chunks, merge_bounds, piece_cuts, read_part, scan_header,
+                           tile_cloud, write_classified_piece, write_classified_stream, write_vpc)
 from ..io.outputs import LAS_EXTENSIONS, StagedOutputs, _ext, _reason, check_output_path
 from ..progress import WARNING_PREFIX, Steps
 
@@ -428,7 +429,6 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
         raise InputError(f"{input_path}: the input holds no points")
     for info in infos:  # as a run of the whole file says (a tiled one dropped 8,554 points without a word)
         if info.held is not None and info.held > info.count:
-            from ..io.clouds import extra_records_warning
             log(extra_records_warning(info.path, info.count, info.held))
     workflow.warn_about_units(input_path, infos, log)
     workflow.check_model_units(algorithm, input_path, infos[0].crs_wkt, log)
@@ -691,11 +691,20 @@ def _remove_tree(path: str, patience_s: float = 3.0) -> None:
         time.sleep(0.1)
 
 
+def _full_disk(err: OSError, work: str, where: str = "", then: str = "") -> Optional[OutputError]:
+    """The output error for a full disk (or quota) in the working folder ``work``, or None for another
+    OSError: a full disk is the working folder's, not a bug."""
+    import errno
+    if err.errno not in (errno.ENOSPC, errno.EDQUOT):
+        return None
+    return OutputError(f"{where}the disk of the working folder {work} is full ({err.strerror}); free space or set "
+                       f"another working folder{then}")
+
+
 def _reserve(paths, work: str) -> None:
     """Give the (sparse) class files their disk blocks now: the tiles write them through memory maps,
     and a disk that filled up mid-run then killed the process with SIGBUS, no message (an HPC
     reviewer's full working folder). Where the system cannot reserve, nothing is done."""
-    import errno
     if not hasattr(os, "posix_fallocate"):
         return
     for path in paths:
@@ -703,9 +712,9 @@ def _reserve(paths, work: str) -> None:
             with open(path, "r+b") as f:
                 os.posix_fallocate(f.fileno(), 0, os.fstat(f.fileno()).st_size)
         except OSError as err:
-            if err.errno in (errno.ENOSPC, errno.EDQUOT):
-                raise OutputError(f"the disk of the working folder {work} is full ({err.strerror}); free space "
-                                  "or set another working folder") from err
+            full = _full_disk(err, work)
+            if full is not None:
+                raise full from err
             return  # (a file system without fallocate: EOPNOTSUPP, EINVAL)
 
 
@@ -764,11 +773,9 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         def record_bin(result):
             nonlocal done_points
             binned_parts[(result["file_index"], result["first"])] = result["parts"]
-            b, k = result.get("bounds"), result["file_index"]
-            if b:
-                had = file_bounds.get(k)
-                file_bounds[k] = b if had is None else [min(had[0], b[0]), min(had[1], b[1]),
-                                                        max(had[2], b[2]), max(had[3], b[3])]
+            if result.get("bounds"):
+                k = result["file_index"]
+                file_bounds[k] = merge_bounds(file_bounds.get(k), result["bounds"])
             done_points += result["points"]
             bin_steps.report(done_points / total)
         # one job per input file, on the workers (each file's parts have their own names); a big file
@@ -1420,11 +1427,9 @@ def _tile_job(job) -> Optional[dict]:
     except GroundSieveError as err:
         raise type(err)(f"{where}: {err}") from err
     except OSError as err:
-        import errno
-        if err.errno in (errno.ENOSPC, errno.EDQUOT):  # a full disk is the working folder's, not a bug
-            raise OutputError(f"{where}: the disk of the working folder {os.path.dirname(job['done_dir'])} is full "
-                              f"({err.strerror}); "
-                              "free space or set another working folder, then run again") from err
+        full = _full_disk(err, os.path.dirname(job["done_dir"]), f"{where}: ", ", then run again")
+        if full is not None:
+            raise full from err
         raise GroundSieveError(f"{where} failed: {type(err).__name__}: {err}") from err
     except Exception as err:  # an unexpected failure still names the tile
         raise GroundSieveError(f"{where} failed: {type(err).__name__}: {err}") from err

@@ -114,7 +114,7 @@ _POINTS_PER_FINE_CELL = 4.0
 _SUPPORT_SPACINGS = 10.0
 _SUPPORT_MIN_RADIUS_M = 5.0
 _MAX_SEED_TRIES = 32
-#: When no seed cell finds a supported point, the share is halved down to this fraction of it.
+#: The low-outlier retry halves the share down to this fraction of it (PTD.low_outlier_retry).
 _SUPPORT_SHARE_FLOOR = 1 / 16
 #: Thinning: in clouds denser than _THIN_MIN_DENSITY points/m², only the lowest point of each
 #: _THIN_M square takes part in the densification (see the module's docstring).

@@ -230,9 +230,10 @@ def _with_geokey_heights(crs, header):
                 name=f"{vertical.name} ({name})", datum=vertical.datum, vertical_cs=VerticalCS(axis))
     if vertical is None or not vertical.axis_info or not crs.axis_info:
         return crs
-    metres = {"metre": 1.0, "foot": 0.3048, "US survey foot": 1200 / 3937}
-    up, across = metres.get(vertical.axis_info[0].unit_name), metres.get(crs.axis_info[0].unit_name)
-    if up is not None and across is not None and abs(up / across - 1) <= 1e-5:
+    # metres per unit, as PROJ knows them (US survey and international feet, 2 ppm apart, are one unit
+    # for the thresholds, as raster/crs.py's heights_differ has it)
+    up, across = vertical.axis_info[0].unit_conversion_factor, crs.axis_info[0].unit_conversion_factor
+    if up and across and abs(up / across - 1) <= 1e-5:
         return crs  # heights in the unit of x and y: nothing a run reads differently
     return CompoundCRS(name=f"{crs.name} + {vertical.name}", components=[crs, vertical])
 
@@ -274,14 +275,14 @@ def _laszip_compressor(f, header_size: int, vlrs: int) -> Optional[int]:
     at = header_size
     for _ in range(vlrs):
         f.seek(at)
-        head = f.read(54)
-        if len(head) < 54:
+        head = f.read(_VLR_BYTES)
+        if len(head) < _VLR_BYTES:
             return None
         user, record, length = struct.unpack_from("<16sHH", head, 2)
         if user.rstrip(b"\0") == b"laszip encoded" and record == 22204:
             data = f.read(2)
             return struct.unpack("<H", data)[0] if len(data) == 2 else None
-        at += 54 + length
+        at += _VLR_BYTES + length
     return None
 
 

@@ -316,6 +316,13 @@ def _read_records(fd: int, buffer: np.ndarray, first: int, stop: int, size: int,
     return rows.reshape(-1, size)
 
 
+def merge_bounds(a: Optional[list], b: list) -> list:
+    """The [xmin, ymin, xmax, ymax] holding both ``a`` (None or empty: nothing yet) and ``b``."""
+    if not a:
+        return list(b)
+    return [min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), max(a[3], b[3])]
+
+
 def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk_points: int = CHUNK_POINTS,
              check=None, first: int = 0, stop: Optional[int] = None, piece: Optional[int] = None,
              records: Optional[str] = None, bounds: Optional[list] = None) -> Dict[tuple, TilePart]:
@@ -359,9 +366,8 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
                 while done < len(flat):  # (pwrite may write less than asked)
                     done += os.pwrite(fd, flat[done:], start * recs.dtype.itemsize + done)
                 if bounds is not None and n:
-                    lo = [int(recs["X"].min()), int(recs["Y"].min()), int(recs["X"].max()), int(recs["Y"].max())]
-                    bounds[:] = lo if not bounds else [min(bounds[0], lo[0]), min(bounds[1], lo[1]),
-                                                       max(bounds[2], lo[2]), max(bounds[3], lo[3])]
+                    bounds[:] = merge_bounds(bounds, [int(recs["X"].min()), int(recs["Y"].min()),
+                                                      int(recs["X"].max()), int(recs["Y"].max())])
                 kx0, ky0, nky, cuts, out_idx, own_count = bin_chunk_kernel(
                     recs["X"], recs["Y"], scales[0], offsets[0], scales[1], offsets[1], float(grid.size),
                     float(grid.buffer), m, start)

@@ -78,6 +78,16 @@ def _set_categories(band, categories) -> None:
     band.SetMetadata({f"CLASS_{value}": name for value, name, _colour in categories})
 
 
+def _ends(valued: np.ndarray, axis: int):
+    """The rows (``axis`` 1) or columns (``axis`` 0) of ``valued`` holding a True, and the index of
+    their first and last True along ``axis``."""
+    lines = np.flatnonzero(valued.any(axis=axis))
+    along = valued[lines] if axis == 1 else valued[:, lines]
+    first = along.argmax(axis=axis)
+    last = along.shape[axis] - 1 - np.flip(along, axis=axis).argmax(axis=axis)
+    return lines, first, last
+
+
 class BlockGeoTIFF:
     """One raster written block by block (each tile its cells), never whole in memory: a tiled,
     compressed GeoTIFF at ``work_path``, then :meth:`finish` makes the cloud-optimised GeoTIFF
@@ -115,22 +125,19 @@ class BlockGeoTIFF:
 
     def write_block(self, row0: int, col0: int, values: np.ndarray) -> None:
         """Write ``values`` (row 0 north, NaN = no data) with its north-west cell at (row0, col0)."""
+        row0, col0 = int(row0), int(col0)
         valued = ~np.isnan(values)
         data = np.where(valued, values, self.nodata).astype(np.float32)
-        rows = np.flatnonzero(valued.any(axis=1))
+        r, first, last = _ends(valued, 1)
+        c, top, bottom = _ends(valued, 0)
         with self._lock:
-            self._band.WriteArray(data, xoff=int(col0), yoff=int(row0))
-            if rows.size:
-                r = int(row0) + rows
-                self._first[r] = np.minimum(self._first[r], int(col0) + valued[rows].argmax(axis=1))
-                last = valued.shape[1] - 1 - valued[rows, ::-1].argmax(axis=1)
-                self._last[r] = np.maximum(self._last[r], int(col0) + last)
-                self._valued[r] += valued[rows].sum(axis=1)
-                cols = np.flatnonzero(valued.any(axis=0))
-                c = int(col0) + cols
-                self._top[c] = np.minimum(self._top[c], int(row0) + valued[:, cols].argmax(axis=0))
-                bottom = valued.shape[0] - 1 - valued[::-1, cols].argmax(axis=0)
-                self._bottom[c] = np.maximum(self._bottom[c], int(row0) + bottom)
+            self._band.WriteArray(data, xoff=col0, yoff=row0)
+            if r.size:
+                self._first[row0 + r] = np.minimum(self._first[row0 + r], col0 + first)
+                self._last[row0 + r] = np.maximum(self._last[row0 + r], col0 + last)
+                self._valued[row0 + r] += valued[r].sum(axis=1)
+                self._top[col0 + c] = np.minimum(self._top[col0 + c], row0 + top)
+                self._bottom[col0 + c] = np.maximum(self._bottom[col0 + c], row0 + bottom)
 
     def enclosed_nodata(self, strip_rows: int = 512) -> int:
         """Cells without a value between cells with one both in their row and in their column, over
