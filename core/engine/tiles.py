@@ -430,6 +430,9 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     for info in infos:  # as a run of the whole file says (a tiled one dropped 8,554 points without a word)
         if info.held is not None and info.held > info.count:
             log(extra_records_warning(info.path, info.count, info.held))
+        if info.copc_damaged:  # read as the whole run reads it (it was refused here)
+            log(f"{WARNING_PREFIX}{info.path}: {info.copc_damaged}: its points are read as a plain LAZ file's, "
+                "binned instead of read by bounds")
     workflow.warn_about_units(input_path, infos, log)
     workflow.check_model_units(algorithm, input_path, infos[0].crs_wkt, log)
     # what a filter decides from the whole cloud (e.g. the echo grid: whether it has echoes), decided

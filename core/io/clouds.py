@@ -313,13 +313,15 @@ def check_las_layout(path: str) -> None:
                                  "damaged")
             if vlrs * _VLR_BYTES > max(offset - header_size, 0) or offset > size:
                 raise InputError(f"{path}: the header announces {vlrs:,} VLRs before the points, which start at "
-                                 f"byte {offset:,} of {size:,}: the header is damaged")
+                                 f"byte {offset:,} of {size:,}: the "
+                                 + ("file is truncated or its header is damaged" if offset > size else "header is damaged"))
             if minor >= 4 and len(head) >= 255:
                 evlr_at, evlrs, count64 = struct.unpack_from("<QIQ", head, 235)
                 count = count64 or count
                 if evlrs and evlr_at + evlrs * _EVLR_BYTES > size:
                     raise InputError(f"{path}: the header announces {evlrs:,} extended VLRs from byte {evlr_at:,}, "
-                                     f"more than the file's {size:,} bytes hold: the header is damaged")
+                                     f"more than the file's {size:,} bytes hold: the file is truncated or its "
+                                     "header is damaged")
                 if evlrs:  # the first one's length (laspy allocates it: a bogus one was a MemoryError)
                     f.seek(evlr_at + 20)
                     length, = struct.unpack("<Q", f.read(8))

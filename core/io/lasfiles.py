@@ -41,6 +41,9 @@ class LasInfo:
     later_returns: Optional[int] = None
     #: whole point records an uncompressed file holds (None: LAZ, not known without decoding)
     held: Optional[int] = None
+    #: why a file with the COPC records is not read as COPC (its index is damaged): it is read as a
+    #: plain LAZ, as a run of the whole file reads it ("" when it is no COPC file or a sound one)
+    copc_damaged: str = ""
 
     @property
     def area_m2(self) -> float:
@@ -65,6 +68,7 @@ def scan_header(path: str) -> LasInfo:
             if held is not None and held < int(h.point_count) and not (h.version.minor >= 4 and h.number_of_evlrs):
                 raise InputError(f"{path}: the header announces {int(h.point_count):,} points but the file holds "
                                  f"{held:,} point records: the file is truncated or its header's count is wrong")
+            damaged = _copc_damage(path) if is_copc_header(h) else ""
             if not all(math.isfinite(float(v)) for v in (*h.mins, *h.maxs)):
                 raise InputError(f"{path}: the header's bounds are not numbers ({list(h.mins)} to {list(h.maxs)}): "
                                  "the header is damaged; rewrite it with a tool that recomputes it (e.g. "
@@ -72,12 +76,23 @@ def scan_header(path: str) -> LasInfo:
             return LasInfo(path, int(h.point_count), tuple(float(v) for v in h.mins),
                            tuple(float(v) for v in h.maxs), int(h.point_format.id), str(h.version),
                            header_crs_wkt(h),
-                           copc=is_copc_header(h), record_size=int(h.point_format.size),
-                           later_returns=_later_returns(h), held=held)
+                           copc=is_copc_header(h) and not damaged, record_size=int(h.point_format.size),
+                           later_returns=_later_returns(h), held=held, copc_damaged=damaged)
     except (InputError, UnsupportedFormatError):
         raise
     except Exception as err:  # laspy raises many types for damaged files
         raise InputError(f"{path}: cannot read its LAS header ({str(err) or type(err).__name__})") from err
+
+
+def _copc_damage(path: str) -> str:
+    """Why the COPC index of ``path`` cannot be used, in words after the file's name (its hierarchy
+    read and checked; cached per file), "" when it can."""
+    from .copc import open_index
+    try:
+        open_index(path)
+    except InputError as err:  # "<path>: a damaged COPC file (why); rewrite it ..."
+        return str(err).removeprefix(f"{path}: ").split("; rewrite it")[0]
+    return ""
 
 
 def _later_returns(header) -> Optional[int]:

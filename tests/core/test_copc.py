@@ -297,12 +297,29 @@ def _damage(src, dst, how):
     return str(dst)
 
 
-@pytest.mark.parametrize("how", ["truncated", "counts"])
-def test_a_damaged_copc_is_refused_naming_the_file(files, tmp_path, how):
-    bad = _damage(files[0], tmp_path / "bad.copc.laz", how)
-    with pytest.raises(InputError, match="bad.copc.laz"):
+def test_a_truncated_copc_is_refused_naming_the_file(files, tmp_path):
+    bad = _damage(files[0], tmp_path / "bad.copc.laz", "truncated")
+    with pytest.raises(InputError, match=r"bad\.copc\.laz: .*the file is truncated or its header is damaged"):
         run_ground_filter(bad, str(tmp_path / "out.laz"), SMRF(), options=tiled())
     assert not (tmp_path / "out.laz").exists()
+
+
+def test_a_copc_with_a_damaged_index_is_read_as_a_plain_laz_with_a_warning(files, runs, tmp_path):
+    """A wrong count in its hierarchy: a run of the whole file reads the LAZ chunks and never looks at
+    the index; a tiled run refused the file. It now bins it as the plain LAZ it also is, saying so, and
+    gives the plain file's classes."""
+    bad = _damage(files[0], tmp_path / "bad.copc.laz", "counts")
+    info = scan_header(bad)
+    assert not info.copc and "hierarchy holds" in info.copc_damaged
+    assert scan_header(files[0]).copc and not scan_header(files[0]).copc_damaged
+    said = []
+    run_ground_filter(bad, str(tmp_path / "out.laz"), SMRF(), options=tiled(), log=said.append)
+    warned = [m for m in said if "bad.copc.laz: a damaged COPC file (its hierarchy holds" in m]
+    assert len(warned) == 1 and "read as a plain LAZ file's" in warned[0], said
+    _, _, folder = runs
+    got, plain = laspy.read(tmp_path / "out.laz"), laspy.read(folder / "plain.laz")
+    assert np.array_equal(got.gps_time, plain.gps_time)
+    assert np.array_equal(got.classification, plain.classification)
 
 
 def test_copc_and_plain_laz_in_one_folder_and_vpc(tmp_path):
