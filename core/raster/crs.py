@@ -122,7 +122,8 @@ def unit_warning(path: str, crs_wkt: Optional[str], lengths: str = "every length
                 f"{bounds[2]:,.0f}, y {bounds[1]:,.0f} to {bounds[3]:,.0f}) cannot be one survey's longitudes and "
                 "latitudes: the CRS is likely wrong, and the lengths were read in the coordinates' own unit. "
                 "Assign the right CRS to the file (outputs keep the wrong one).")
-    return f"{path}: the CRS's unit is {unit}, not metres: {lengths} was read in that unit."
+    return (f"{path}: the CRS's unit is {unit}, not metres: {lengths} was read in that unit (where the parameters "
+            f"say m, read one {unit}).")
 
 
 #: the widest span (degrees) a cloud in longitudes and latitudes is taken to have: a local survey in

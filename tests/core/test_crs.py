@@ -63,7 +63,9 @@ def test_heights_in_feet_under_a_compound_crs_in_metres_are_warned_and_the_dtm_s
     assert vertical_unit(pyproj.CRS.from_epsg(32632).to_wkt()) is None
     assert unit_warning("a.laz", metres) is None
     # US survey feet across and international feet up (2 ppm apart): the same unit for the thresholds
-    assert unit_warning("ft.laz", pyproj.CRS("EPSG:2249+8228").to_wkt()).startswith("ft.laz: the CRS's unit is US survey foot")
+    said = unit_warning("ft.laz", pyproj.CRS("EPSG:2249+8228").to_wkt())
+    assert said.startswith("ft.laz: the CRS's unit is US survey foot")
+    assert said.endswith("(where the parameters say m, read one US survey foot).")  # the log's "CELL 1 m" is 1 ft
     said = unit_warning("a.laz", feet)
     assert said.startswith("a.laz: the heights are in US survey foot (the CRS's vertical part), x and y in metres")
     assert elevation_unit(feet) == "US survey foot" and elevation_unit(metres) == "m"
