@@ -454,9 +454,9 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     density = sample_density(next(i.path for i in infos if i.count))
     cluster = None
     from .cluster import parse_scheduler
-    if parse_scheduler(tiling.scheduler)[0] == "address" and not tiling.tile_size_m and not tiling.memory_budget_mb:
-        # tiles sized for the cluster's workers, not for this machine: connected now (the run keeps
-        # the connection, one LocalCluster, for the binning, the tiles and the writing)
+    if parse_scheduler(tiling.scheduler)[0] == "address":
+        # tiles sized for the cluster's workers, not for this machine, or a size set checked against
+        # them: connected now (the run keeps the connection for the binning, the tiles and the writing)
         from .cluster import Cluster
         cluster = Cluster(tiling.scheduler, log, steps.is_cancelled)
     try:
@@ -468,12 +468,30 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
         raise
 
 
+def _say_tiles_beyond_workers(size: float, buffer_m: float, density: float, per_task: int, tiling: TileOptions,
+                              log) -> None:
+    """Warn when the tiles set by the user (their size, or a memory budget) take more memory than a
+    Dask task has on the cluster: Dask pauses a worker at 80 % of its limit and restarts it at 95 %,
+    and the run then fails after its retries ("KilledWorker") instead of saying so before the work."""
+    per_tile = (size + 2 * buffer_m) ** 2 * density * BYTES_PER_POINT
+    if per_tile <= CLUSTER_TASK_SHARE * per_task:
+        return
+    fit = math.sqrt(CLUSTER_TASK_SHARE * per_task / BYTES_PER_POINT / max(density, 1e-6)) - 2 * buffer_m
+    what = f"tiles of {size:g} m" + (" (from the memory budget set)" if not tiling.tile_size_m else "")
+    log(f"{WARNING_PREFIX}{what} and their buffer take about {per_tile / 2**20:,.0f} MB each, more than half the "
+        f"memory a task has on the Dask cluster ({per_task / 2**20:,.0f} MB: the smallest worker's memory limit over its "
+        "threads); Dask pauses a worker at 80 % of its limit and restarts it at 95 %. "
+        + (f"Use tiles of at most {max(math.floor(fit / 10) * 10, 10):g} m, or " if fit >= 10 else "Use ")
+        + "a tile size of 0 and no memory budget, to have the tiles planned for the cluster.")
+
+
 def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path, dtm, dtm_grid, buffer_m, density,
                   tiling, steps, log, workflow, cluster):
     """run_tiled's run once its inputs are checked: the tiles planned, the working folder held."""
     total = sum(i.count for i in infos)
     per_task, threads = cluster.memory_per_task() if cluster is not None else (None, 0)
-    if per_task:
+    chosen = bool(tiling.tile_size_m or tiling.memory_budget_mb)  # the user's tiles, not the cluster's plan
+    if per_task and not chosen:
         # a tile within its share of the smallest task's memory, and at least TILES_PER_THREAD tiles
         # for each of the cluster's threads where the survey is big enough
         tile_bytes = min(CLUSTER_TASK_SHARE * per_task, total * BYTES_PER_POINT / (TILES_PER_THREAD * max(threads, 1)))
@@ -483,6 +501,8 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
     size = plan_tile_size(infos, tiling, buffer_m, density, multiple_of=dtm.cell_size_m if dtm_path else 1.0)
     if dtm_path:
         size = fit_dtm_blocks(size, buffer_m, dtm.cell_size_m, tiling, log)
+    if per_task and chosen:
+        _say_tiles_beyond_workers(size, buffer_m, density, per_task, tiling, log)
     if not tiling.tile_size_m:  # the planned tiles cannot be smaller than 50 m: say when the budget asked for less
         per_tile = (size + 2 * buffer_m) ** 2 * density * BYTES_PER_POINT
         fit = max(1, int(tiling.budget_bytes // max(per_tile, 1.0)))

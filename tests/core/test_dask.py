@@ -4,6 +4,7 @@ byte for byte; bad schedulers and unfit workers are refused with a clear message
 from __future__ import annotations
 
 import os
+import re
 import time
 
 import laspy
@@ -345,6 +346,37 @@ def test_tiles_are_planned_for_the_clusters_workers_not_this_machine(tmp_path):
     assert run.point_count == len(alone.cloud)
     agree = (laspy.read(tmp_path / "dask.laz").classification == laspy.read(tmp_path / "alone.laz").classification)
     assert agree.mean() > 0.999
+
+
+@needs_dask
+def test_tiles_set_larger_than_the_workers_memory_are_warned_about(tmp_path, monkeypatch):
+    """A tile size set by hand was never compared with the workers' memory: tiles too big for them got
+    workers paused and restarted by Dask until the run failed (KilledWorker), with nothing said before
+    the work. The set size is kept, and the run warns with a size that fits; a size that fits is not
+    warned about."""
+    from groundsieve.core.engine.cluster import Cluster
+    (tmp_path / "survey").mkdir()
+    write_scene(make_scene(SceneSpec(size_m=400.0, density_per_m2=2.0, seed=4)), tmp_path / "survey" / "scene.laz")
+    # a worker with 40 MB a task, as the scheduler would tell of a small cluster (the real one has 2 GB)
+    monkeypatch.setattr(Cluster, "memory_per_task", lambda self: (40 << 20, 2))
+    import dask
+    with dask.config.set({"distributed.nanny.environ": {"NUMBA_NUM_THREADS": "1"}}), \
+            distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, memory_limit="2GiB",
+                                     dashboard_address=None, silence_logs=50) as cluster:
+        said = []
+
+        def run(tile):
+            said.clear()
+            done = run_ground_filter(str(tmp_path / "survey"), str(tmp_path / f"t{tile:g}.laz"), SMRF(), log=said.append,
+                                     options=FilterOptions(tiling=TileOptions(tile_size_m=tile,
+                                                                              scheduler=cluster.scheduler_address)))
+            assert done.tile_size_m == tile
+            return [line for line in said if "more than half the memory a task has on the Dask cluster (40 MB" in line]
+        warned = run(400.0)
+        assert len(warned) == 1 and warned[0].startswith("Warning: tiles of 400 m and their buffer take about"), said
+        fit = float(re.search(r"Use tiles of at most (\d+) m", warned[0]).group(1))
+        assert 10 <= fit < 400
+        assert not run(fit), said  # the size it gives is not warned about
 
 
 def test_a_single_small_file_given_a_scheduler_runs_on_the_cluster(survey):
