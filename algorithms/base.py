@@ -8,6 +8,7 @@ import re
 
 from qgis.core import (Qgis, QgsCoordinateReferenceSystem, QgsFeature, QgsFeatureSink, QgsField, QgsFields,
                        QgsGeometry, QgsPoint, QgsProcessing, QgsProcessingAlgorithm, QgsProcessingException,
+                       QgsProcessingOutputNumber,
                        QgsProcessingParameterBoolean, QgsProcessingParameterDefinition,
                        QgsProcessingParameterEnum, QgsProcessingParameterFeatureSink,
                        QgsProcessingParameterFile, QgsProcessingParameterFileDestination,
@@ -477,6 +478,10 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
             type=QgsProcessing.SourceType.TypeVectorPoint, optional=True, createByDefault=False)
         ground_points.setFlags(ground_points.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
         self.addParameter(ground_points)
+        # the counts every run returns, declared as native algorithms declare theirs: a model's next
+        # step can take them, and the dialog and qgis_process help list them
+        self.addOutput(QgsProcessingOutputNumber(self.GROUND_COUNT, "Ground points"))
+        self.addOutput(QgsProcessingOutputNumber(self.POINT_COUNT, "Points classified"))
 
     def addExtraOutputParameters(self):  # noqa: N802
         """The filter's intermediate rasters (evcrasters): optional, not created by default."""

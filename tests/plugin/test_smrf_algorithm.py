@@ -41,6 +41,15 @@ def test_smrf_classifies_scene_and_writes_dtm(groundsieve_provider, scene_laz, t
     cls = classes_of(out)
     assert set(np.unique(cls)) <= {1, 2}
     assert result["GROUND_COUNT"] == int((cls == 2).sum())
+    # every result is a declared output, as native algorithms have them (the counts were returned but not
+    # declared: a model's next step could not take them, and the dialog and qgis_process help hid them)
+    from qgis.core import QgsApplication
+    for alg_id in ("smrf", "csf", "ptd", "pmf", "evc", "evcrasters", "echogrid", "hybrid"):
+        alg = QgsApplication.processingRegistry().algorithmById(f"groundsieve:{alg_id}")
+        declared = {o.name() for o in alg.outputDefinitions()}
+        assert {"GROUND_COUNT", "POINT_COUNT"} <= declared, (alg_id, declared)
+    assert set(result) <= {o.name() for o in QgsApplication.processingRegistry().algorithmById(
+        "groundsieve:smrf").outputDefinitions()}, result
     acc = ground_accuracy(scene.classification == 2, cls == 2)
     assert acc.total < 0.05, acc.summary()
     ds = gdal.Open(str(dtm))
