@@ -46,6 +46,9 @@ FILTERS: Dict[str, Tuple[str, str, Sequence[Param]]] = {
         Param("elevation_threshold_m", "THRESHOLD", "Elevation threshold", "m"),
         Param("elevation_scalar", "SCALAR", "Elevation scalar", "m per unit slope"),
         Param("low_outlier_fill", "LOW_OUTLIER_FILL", "Remove low outliers before the opening"),
+        Param("low_outlier_slope", "LOW_OUTLIER_SLOPE",
+              "Low-outlier slope: a cell this many cell sizes below the cells around it is a low outlier",
+              "rise/run", advanced=True, minimum=0.01),
     )),
     "pmf": ("pmf", "PMF", (
         Param("cell_size_m", "CELL", "Cell size", "m", minimum=0.01),

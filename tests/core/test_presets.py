@@ -125,18 +125,18 @@ def test_search_ranges_name_parameters_of_the_table_within_their_limits():
 
 
 def test_the_run_log_names_every_value_used_and_what_came_from_the_preset(tmp_path):
-    """describe(): the dialog's parameters always, a finer setting (LOW_OUTLIER_SLOPE) when the preset
-    gives it or it is not the default; what the run changed from the preset is said apart."""
+    """describe(): the dialog's parameters always, a finer setting (LOW_OUTLIER_MAX_SHARE) when the
+    preset gives it or it is not the default; what the run changed from the preset is said apart."""
     from groundsieve.core.engine.presets import describe
     path = str(tmp_path / "fine.json")
-    write_preset(path, "smrf", {"low_outlier_slope": 3.0, "slope": 0.2})
+    write_preset(path, "smrf", {"low_outlier_max_share": 0.1, "low_outlier_slope": 3.0, "slope": 0.2})
     preset = load_preset(path, "smrf")
     built = preset.build({"slope": 0.3})
     first, second = describe("smrf", built, preset)
     assert first == ("SMRF parameters: CELL 1 m, SLOPE 0.3, WINDOW 18 m, THRESHOLD 0.5 m, SCALAR 1.25, "
-                     "LOW_OUTLIER_FILL True, LOW_OUTLIER_SLOPE 3")
-    assert second == ("From the preset fine.json: LOW_OUTLIER_SLOPE 3; changed from the preset: SLOPE 0.3 "
-                      "(a value equal to the filter's default never replaces the preset's)")
+                     "LOW_OUTLIER_FILL True, LOW_OUTLIER_SLOPE 3, LOW_OUTLIER_MAX_SHARE 0.1")
+    assert second == ("From the preset fine.json: LOW_OUTLIER_SLOPE 3, LOW_OUTLIER_MAX_SHARE 0.1; changed from the "
+                      "preset: SLOPE 0.3 (a value equal to the filter's default never replaces the preset's)")
     plain = describe("smrf", SMRF())
     assert plain == ["SMRF parameters: CELL 1 m, SLOPE 0.15, WINDOW 18 m, THRESHOLD 0.5 m, SCALAR 1.25, "
-                     "LOW_OUTLIER_FILL True"]
+                     "LOW_OUTLIER_FILL True, LOW_OUTLIER_SLOPE 5"]
