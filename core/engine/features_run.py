@@ -85,7 +85,7 @@ def write_features(cloud: PointCloud, features: Mapping, path: str, *, atomic: b
                         for name in arrays])
     for name, values in arrays.items():
         las[name] = values
-    write_las(las, path, atomic=atomic)
+    write_las(las, path, atomic=atomic, source=cloud.path if cloud.las is not None else None)
 
 
 @dataclass

@@ -33,6 +33,7 @@ import contextlib
 import dataclasses
 import math
 import os
+import re
 import shutil
 import sys
 import threading
@@ -322,10 +323,11 @@ def output_files(inputs: Sequence[str], output_path: Optional[str]) -> List[Opti
         raise OutputError(f"{output_path}: several input files give several classified files; the output must "
                           "name a .vpc (e.g. out/classified.vpc), beside which a folder of the same name holds them")
     folder = os.path.splitext(os.path.abspath(output_path))[0]
-    names = [os.path.basename(p) for p in inputs]
+    # a COPC input's copy is a plain LAZ: not named .copc.laz, which readers open as COPC
+    names = [re.sub(r"\.copc\.laz$", ".laz", os.path.basename(p), flags=re.I) for p in inputs]
     if len(set(names)) != len(names):
         twice = next(n for n in names if names.count(n) > 1)
-        same = [p for p in inputs if os.path.basename(p) == twice]
+        same = [p for p, n in zip(inputs, names) if n == twice]
         raise InputError(f"two input files have the same name ({' and '.join(same[:2])}); the classified files "
                          "would overwrite each other")
     return [os.path.join(folder, n) for n in names]

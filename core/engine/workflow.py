@@ -444,7 +444,7 @@ def write_outputs(cloud: PointCloud, classification: np.ndarray, output_path: Op
         if output_path:
             log(f"Writing {len(cloud):,} classified points to {output_path} ...")
             write_classified(cloud, classification, stack.enter_context(atomic_path(output_path)), atomic=False,
-                             steps=steps.sub(0.0, share * 0.99))
+                             steps=steps.sub(0.0, share * 0.99), name=output_path)
         for i, (path, values, grid, *how) in enumerate(rasters):  # how: write_geotiff's options, if any
             log(f"Writing {path} ...")
             write_geotiff(stack.enter_context(atomic_path(path)), values, grid, crs_wkt=cloud.crs_wkt,

@@ -266,6 +266,8 @@ def read_cloud(path: str, steps: Optional[Steps] = None) -> PointCloud:
 
 #: Bytes of a LAS VLR header and of an EVLR header (their smallest possible size on disk).
 _VLR_BYTES, _EVLR_BYTES = 54, 60
+#: Bytes of a LAS 1.4 header, the largest.
+_HEADER_BYTES_14 = 375
 
 
 def _laszip_compressor(f, header_size: int, vlrs: int) -> Optional[int]:
@@ -284,6 +286,161 @@ def _laszip_compressor(f, header_size: int, vlrs: int) -> Optional[int]:
             return struct.unpack("<H", data)[0] if len(data) == 2 else None
         at += _VLR_BYTES + length
     return None
+
+
+#: The waveform data packets' record (LAS 1.3 and 1.4): an EVLR of LASF_Spec, record 65535.
+_WAVEFORM_USER, _WAVEFORM_RECORD = b"LASF_Spec", 65535
+
+
+def _is_waveform_record(evlr_header: bytes) -> bool:
+    import struct
+    return (len(evlr_header) >= _EVLR_BYTES and evlr_header[2:18].rstrip(b"\0") == _WAVEFORM_USER
+            and struct.unpack_from("<H", evlr_header, 18)[0] == _WAVEFORM_RECORD)
+
+
+def match_source(src: str, dst: str, name: Optional[str] = None) -> None:
+    """Put back in ``dst``, a classified copy of the LAS/LAZ ``src`` just written by laspy (before it
+    is put in place), what laspy's writer changes or drops (a format reviewer compared every field):
+
+    - the waveform data packets ``src`` holds inside the file (:func:`carry_waveform_packets`);
+    - the header's creation day and year, as they are (laspy read day 0 as the last day of the year
+      before and wrote an unset date as today's);
+    - a LAS 1.4 file of point formats 0-5: the legacy point counts, which LAS 1.4 R15 wants filled in
+      when they fit (laspy wrote 0: older readers saw no point);
+    - the extra-bytes descriptions' minimum, maximum and the rest of each, as ``src`` has them for
+      the dimensions the copy keeps (laspy wrote its own empty minimum and maximum beside an options
+      byte saying they were set).
+
+    Then, for a LAZ copy of point format 9 or 10, its first chunk's wave packet fields are read back and
+    compared with ``src``'s: lazrs 0.8.2 writes them wrong where points of several scanner channels
+    carry wave packets, and such a copy is refused (:class:`OutputError`, naming ``name``: the copy's
+    final path) rather than delivered."""
+    import struct
+    with open(src, "rb") as f, open(dst, "r+b") as g:
+        a, b = bytearray(f.read(_HEADER_BYTES_14)), bytearray(g.read(_HEADER_BYTES_14))
+        if len(a) < 227 or len(b) < 227 or a[:4] != b"LASF" or b[:4] != b"LASF":
+            return
+        g.seek(90)
+        g.write(a[90:94])  # creation day of year, year
+        if b[25] >= 4 and len(b) >= 375 and b[104] & 0x3F < 6:
+            count, = struct.unpack_from("<Q", b, 247)
+            by_return = struct.unpack_from("<15Q", b, 255)
+            if count < 2 ** 32 and all(v < 2 ** 32 for v in by_return[:5]):
+                g.seek(107)
+                g.write(struct.pack("<I5I", count, *by_return[:5]))
+        _match_extra_bytes(f, g, a, b)
+    carry_waveform_packets(src, dst)
+    if (name or dst).lower().endswith(".laz") and b[104] & 0x3F in (9, 10):
+        _check_wave_packets(src, dst, name or dst)
+
+
+def _vlrs(f, header: bytes):
+    """(offset of the record's data, user id, record id, length) of each VLR after ``header``."""
+    import struct
+    at, = struct.unpack_from("<H", header, 94)
+    count, = struct.unpack_from("<I", header, 100)
+    out = []
+    for _ in range(min(count, 10_000)):
+        f.seek(at)
+        h = f.read(_VLR_BYTES)
+        if len(h) < _VLR_BYTES:
+            break
+        length, = struct.unpack_from("<H", h, 20)
+        out.append((at + _VLR_BYTES, h[2:18].rstrip(b"\0"), struct.unpack_from("<H", h, 18)[0], length))
+        at += _VLR_BYTES + length
+    return out
+
+
+def _match_extra_bytes(f, g, a: bytes, b: bytes) -> None:
+    """The copy's extra-bytes descriptions (192 bytes each) as the source's, for each the copy keeps
+    (the same name and type in the same place: a copy may add dimensions after them)."""
+    ours = [v for v in _vlrs(f, a) if v[1] == b"LASF_Spec" and v[2] == 4]
+    theirs = [v for v in _vlrs(g, b) if v[1] == b"LASF_Spec" and v[2] == 4]
+    if len(ours) != 1 or len(theirs) != 1:
+        return
+    f.seek(ours[0][0])
+    source = f.read(ours[0][3])
+    g.seek(theirs[0][0])
+    copy = bytearray(g.read(theirs[0][3]))
+    for k in range(min(len(source), len(copy)) // 192):
+        s, c = source[192 * k:192 * (k + 1)], copy[192 * k:192 * (k + 1)]
+        if s[2] != c[2] or s[4:36] != c[4:36]:  # data type, name
+            break
+        copy[192 * k:192 * (k + 1)] = s
+    g.seek(theirs[0][0])
+    g.write(copy)
+
+
+def _check_wave_packets(src: str, dst: str, name: str) -> None:
+    import laspy
+    with laspy.open(src) as r, laspy.open(dst) as w:
+        a, b = r.read_points(50_000), w.read_points(50_000)
+    names = ("wavepacket_index", "wavepacket_offset", "wavepacket_size", "return_point_wave_location",
+             "x_t", "y_t", "z_t")
+    if any(not np.array_equal(np.asarray(a[n]), np.asarray(b[n])) for n in names):
+        raise OutputError(f"{name}: the LAZ writer (lazrs 0.8) wrote the wave packet fields of {src}'s points wrong "
+                          "(point format 9 or 10 with several scanner channels): write a .las output instead")
+
+
+def carry_waveform_packets(src: str, dst: str) -> None:
+    """Give ``dst``, a copy of ``src`` just written by laspy (before it is put in place), the waveform
+    data packets ``src`` holds inside the file (LAS 1.3/1.4, global encoding bit 1: one record after
+    the points, from whose start every point's wave packet offset counts). laspy writes none for LAS
+    1.3, the header still saying they are there (a reviewer's 1.28 MB of samples went without a
+    word); in LAS 1.4 it keeps the record among the EVLRs but not the header's pointer to it, which a
+    LAZ copy moves. The record is appended as it is, or found among the copy's EVLRs, and the
+    header points at it. Nothing is done for a file without them, or whose pointer leads nowhere."""
+    import shutil
+    import struct
+    with open(src, "rb") as f:
+        head = f.read(_HEADER_BYTES_14)
+        if len(head) < 235 or head[:4] != b"LASF" or head[25] < 3 or not struct.unpack_from("<H", head, 6)[0] & 2:
+            return
+        at, = struct.unpack_from("<Q", head, 227)
+        size = os.fstat(f.fileno()).st_size
+        if not 0 < at <= size - _EVLR_BYTES:
+            return
+        f.seek(at)
+        record = f.read(_EVLR_BYTES)
+        length, = struct.unpack_from("<Q", record, 20)
+        if not _is_waveform_record(record) or at + _EVLR_BYTES + length > size:
+            return
+        with open(dst, "r+b") as g:
+            out = g.read(_HEADER_BYTES_14)
+            minor = out[25]
+            first, count = struct.unpack_from("<QI", out, 235) if minor >= 4 else (0, 0)
+            place = first
+            for _ in range(count):  # LAS 1.4: laspy kept it among the EVLRs
+                g.seek(place)
+                evlr = g.read(_EVLR_BYTES)
+                if len(evlr) < _EVLR_BYTES:
+                    break
+                if _is_waveform_record(evlr):
+                    g.seek(227)
+                    g.write(struct.pack("<Q", place))
+                    return
+                place += _EVLR_BYTES + struct.unpack_from("<Q", evlr, 20)[0]
+            end = g.seek(0, os.SEEK_END)
+            f.seek(at)
+            shutil.copyfileobj(_Limited(f, _EVLR_BYTES + length), g, 1 << 20)
+            g.seek(227)
+            g.write(struct.pack("<Q", end))
+            if minor >= 4:
+                g.seek(235)
+                g.write(struct.pack("<QI", first if count else end, count + 1))
+
+
+class _Limited:
+    """The next ``n`` bytes of a file, for shutil.copyfileobj."""
+
+    def __init__(self, f, n: int):
+        self.f, self.left = f, n
+
+    def read(self, size: int = -1) -> bytes:
+        size = self.left if size is None or size < 0 else min(size, self.left)
+        data = self.f.read(size) if size else b""
+        self.left -= len(data)
+        return data
 
 
 def check_las_layout(path: str) -> None:
@@ -586,19 +743,26 @@ def new_las(x, y, z, *, point_format: int = 1, version: str = "1.2", scale: floa
     return las
 
 
-def write_las(las, path: str, *, atomic: bool = True, steps: Optional[Steps] = None) -> None:
+def write_las(las, path: str, *, atomic: bool = True, steps: Optional[Steps] = None,
+              source: Optional[str] = None, name: Optional[str] = None) -> None:
     """Write a laspy ``LasData`` (LAZ when the name ends in .laz), atomically unless the caller
     already writes to a temporary path of its own (``atomic=False``). The points go out in chunks
     of :data:`CHUNK_POINTS` when ``steps`` is given, reporting progress to it and checking
     cancellation between them (a cancelled write leaves no file when atomic); in one call of
-    ``LasData.write`` otherwise (the same bytes)."""
+    ``LasData.write`` otherwise (the same bytes). ``source``: the file ``las`` was read from, whose
+    header fields, extra-bytes descriptions and waveform packets the copy then keeps (:func:`match_source`);
+    ``name``: the path the messages give, when ``path`` is the caller's temporary."""
     path = check_output_path(path)
     try:
         if atomic:
             with atomic_path(path) as tmp:
                 _write_chunks(las, tmp, _ext(path) == ".laz", steps)
+                if source:
+                    match_source(source, tmp, path)
         else:
             _write_chunks(las, path, _ext(path) == ".laz", steps)
+            if source:
+                match_source(source, path, name)
     except OSError as err:
         raise OutputError(f"{path}: cannot be written ({err})") from err
 
@@ -619,7 +783,7 @@ def _write_chunks(las, path: str, compress: bool, steps: Optional[Steps]) -> Non
 
 
 def write_classified(cloud: PointCloud, classification: np.ndarray, path: str, *, atomic: bool = True,
-                     steps: Optional[Steps] = None) -> None:
+                     steps: Optional[Steps] = None, name: Optional[str] = None) -> None:
     """Write ``cloud`` with a new classification, keeping every other dimension, the
     extra bytes, the VLRs and the CRS of a LAS/LAZ input. An ISPRS text input becomes
     LAS 1.2 point format 0 with its label column kept as the extra dimension
@@ -638,7 +802,7 @@ def write_classified(cloud: PointCloud, classification: np.ndarray, path: str, *
         original = np.array(las.classification)
         las.classification = classification
         try:
-            write_las(las, path, atomic=atomic, steps=steps)
+            write_las(las, path, atomic=atomic, steps=steps, source=cloud.path, name=name)
         finally:
             las.classification = original  # the in-memory input stays as read
     else:

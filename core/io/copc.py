@@ -63,7 +63,8 @@ def plain_header(header):
     if h.version.minor == 0:
         from laspy.header import Version
         h.version = Version(1, 2)
-    h.vlrs = VLRList([v for v in h.vlrs if not _is_copc_record(v)])
+    if any(_is_copc_record(v) for v in h.vlrs):  # (setting the list moves the extra-bytes VLR last)
+        h.vlrs = VLRList([v for v in h.vlrs if not _is_copc_record(v)])
     if getattr(h, "evlrs", None) is not None:
         h.evlrs = plain_evlrs(h)
     return h

@@ -17,7 +17,7 @@ from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 import numpy as np
 
 from ..errors import GroundSieveError, InputError, OutputError, UnsupportedFormatError
-from .clouds import PointCloud, check_las_layout, header_crs_wkt, records_held
+from .clouds import PointCloud, check_las_layout, header_crs_wkt, match_source, records_held
 from .outputs import LAS_EXTENSIONS, _ext, atomic_path, check_classes_fit
 
 VPC_EXTENSION = ".vpc"
@@ -580,6 +580,7 @@ def write_classified_stream(src: str, dst: str, classification: np.ndarray, *,
                         start += n
                     if reader.header.version.minor >= 4 and plain_evlrs(reader.header):
                         writer.write_evlrs(plain_evlrs(reader.header))
+                match_source(src, tmp, dst)
     except OSError as err:
         raise OutputError(f"{dst}: cannot be written ({err})") from err
     except GroundSieveError:
@@ -747,17 +748,19 @@ def assemble_classified(src: str, dst: str, pieces: Sequence[dict]) -> None:
         with laspy.open(src) as reader:
             header = plain_header(reader.header)  # as write_classified_stream: no COPC records
             evlrs = plain_evlrs(reader.header) if reader.header.version.minor >= 4 else []
-        with atomic_path(dst) as tmp, open(tmp, "wb") as f:
-            writer = laspy.LasWriter(f, header=header, do_compress=compress, closefd=False,
-                                     laz_backend=_pieces_backend(pieces) if compress else None)
-            _merge_stats(writer.header, [p["stats"] for p in pieces])
-            if not compress:
-                for piece in pieces:
-                    with open(piece["path"], "rb") as g:
-                        _copy_bytes(g, f, os.path.getsize(piece["path"]))
-            if evlrs:  # after the points (the LAZ backend's done() writes the chunks first)
-                writer.write_evlrs(evlrs)
-            writer.close()
+        with atomic_path(dst) as tmp:
+            with open(tmp, "wb") as f:
+                writer = laspy.LasWriter(f, header=header, do_compress=compress, closefd=False,
+                                         laz_backend=_pieces_backend(pieces) if compress else None)
+                _merge_stats(writer.header, [p["stats"] for p in pieces])
+                if not compress:
+                    for piece in pieces:
+                        with open(piece["path"], "rb") as g:
+                            _copy_bytes(g, f, os.path.getsize(piece["path"]))
+                if evlrs:  # after the points (the LAZ backend's done() writes the chunks first)
+                    writer.write_evlrs(evlrs)
+                writer.close()
+            match_source(src, tmp, dst)
     except OSError as err:
         raise OutputError(f"{dst}: cannot be written ({err})") from err
 

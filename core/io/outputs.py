@@ -30,6 +30,9 @@ def check_output_path(path: str, *, inputs=(), extensions=LAS_EXTENSIONS, what: 
     ext = _ext(path)
     if ext not in extensions:
         raise OutputError(f"{path}: the {what} must end in {' or '.join(extensions)} (got '{ext or '(none)'}')")
+    if ext == ".laz" and path.lower().endswith(".copc.laz"):
+        raise OutputError(f"{path}: the {what} is a plain LAZ, not COPC (its chunks are not an octree's nodes), and "
+                          "QGIS and other readers open a name ending in .copc.laz as COPC, which fails: name it .laz")
     real = os.path.realpath(path)
     for other in inputs:
         if other and os.path.realpath(os.fspath(other)) == real:

@@ -339,17 +339,28 @@ def test_copc_and_plain_laz_in_one_folder_and_vpc(tmp_path):
     write_vpc(str(vpc), [scan_header(p) for p in mixed], mixed)
     ref = run_ground_filter(str(tmp_path / "plain"), str(tmp_path / "ref.vpc"), SMRF(), options=tiled())
     assert ref.copc_inputs == []
-    want = {n: laspy.read(tmp_path / "ref" / n).classification for n in ("a_west.laz", "b_east.copc.laz")}
+    # the COPC input's copy is a plain LAZ, named .laz (readers open a .copc.laz as COPC)
+    want = {n: laspy.read(tmp_path / "ref" / n).classification for n in ("a_west.laz", "b_east.laz")}
     for source, out in ((str(tmp_path / "mixed"), tmp_path / "m1.vpc"), (str(vpc), tmp_path / "m2.vpc")):
         run = run_ground_filter(source, str(out), SMRF(), options=tiled())
         assert run.copc_inputs == [mixed[1]]
         for name, classes in want.items():
             got = laspy.read(os.path.join(os.path.splitext(str(out))[0], name))
             assert np.array_equal(got.classification, classes), name
-        assert [f["properties"]["pc:count"] for f in json.load(open(out))["features"]] == \
-            [int(west.sum()), int(east.sum())]
+        features = json.load(open(out))["features"]
+        assert [f["properties"]["pc:count"] for f in features] == [int(west.sum()), int(east.sum())]
+        assert [os.path.basename(f["assets"]["data"]["href"]) for f in features] == ["a_west.laz", "b_east.laz"]
     whole = classify_cloud(tile_cloud([read_cloud(p) for p in mixed]), SMRF()).classification
     assert np.mean(np.concatenate(list(want.values())) == whole) >= 0.999
+
+
+def test_an_output_named_copc_laz_is_refused(files, tmp_path):
+    """The copy of a COPC input is a plain LAZ; named .copc.laz, QGIS's COPC provider (and other readers)
+    would open it as COPC and fail (a format reviewer)."""
+    from groundsieve.core.errors import OutputError
+    with pytest.raises(OutputError, match=r"out\.copc\.laz: the output is a plain LAZ, not COPC .*name it \.laz"):
+        run_ground_filter(files[0], str(tmp_path / "out.copc.laz"), SMRF())
+    assert os.listdir(tmp_path) == []
 
 
 def test_an_interrupted_copc_run_resumes(tmp_path):

@@ -1,0 +1,167 @@
+"""The classified copy keeps what the input has, but the classes, where laspy's writer changed it (a
+format reviewer compared every field of formats 0-10 in LAS 1.2-1.4, whole and tiled).
+
+Waveform data packets stored inside a LAS 1.3/1.4 file (global encoding bit 1: one record after the
+points, LASF_Spec 65535, from whose start every point's wave packet offset counts) are carried into
+the classified copy. laspy wrote none for LAS 1.3, the header still saying they were there (a
+format reviewer's 1.28 MB of samples went without a word), and in LAS 1.4 a LAZ copy kept the record
+but the header pointed into the compressed points."""
+from __future__ import annotations
+
+import struct
+
+import laspy
+import numpy as np
+import pytest
+from laspy.vlrs.vlrlist import VLRList
+
+from groundsieve.core.engine.tiles import TileOptions
+from groundsieve.core.engine.workflow import FilterOptions, run_ground_filter
+from groundsieve.core.errors import OutputError
+from groundsieve.core.filters.smrf import SMRF
+
+
+def write_with_packets(path, point_format, version, n=3000, other_evlr=False):
+    """A cloud whose points each point at 256 bytes of samples in the record appended after them."""
+    header = laspy.LasHeader(point_format=point_format, version=version)
+    header.scales, header.offsets = [0.01] * 3, [500000.0, 4000000.0, 0.0]
+    las = laspy.LasData(header)
+    rng = np.random.default_rng(1)
+    las.x, las.y = 500000 + rng.uniform(0, 120, n), 4000000 + rng.uniform(0, 120, n)
+    las.z = rng.uniform(0, 0.3, n) + (rng.random(n) < 0.3) * rng.uniform(2, 15, n)
+    las.wavepacket_index = np.ones(n, np.uint8)
+    las.wavepacket_offset = 60 + 256 * np.arange(n, dtype=np.uint64)
+    las.wavepacket_size = np.full(n, 256, np.uint32)
+    if other_evlr:
+        las.evlrs = VLRList([laspy.VLR(user_id="test", record_id=7, description="not waveform", record_data=b"x" * 100)])
+    las.write(str(path))
+    data = bytearray(path.read_bytes())
+    samples = rng.integers(0, 256, n * 256, dtype=np.uint8).tobytes()
+    start = len(data)
+    data += struct.pack("<H16sHQ32s", 0, b"LASF_Spec", 65535, len(samples), b"waveform packets") + samples
+    struct.pack_into("<H", data, 6, struct.unpack_from("<H", data, 6)[0] | 0x2)  # internal packets
+    struct.pack_into("<Q", data, 227, start)
+    if version == "1.4":
+        first, count = struct.unpack_from("<QI", data, 235)
+        struct.pack_into("<QI", data, 235, first if count else start, count + 1)
+    path.write_bytes(bytes(data))
+    return path
+
+
+def packets(path):
+    """The waveform record the header points at (None when it points at none)."""
+    data = path.read_bytes()
+    at, = struct.unpack_from("<Q", data, 227)
+    if not (struct.unpack_from("<H", data, 6)[0] & 2) or at + 60 > len(data):
+        return None
+    if data[at + 2:at + 18].rstrip(b"\0") != b"LASF_Spec" or struct.unpack_from("<H", data, at + 18)[0] != 65535:
+        return None
+    length, = struct.unpack_from("<Q", data, at + 20)
+    return data[at:at + 60 + length]
+
+
+@pytest.mark.parametrize("point_format, version, other_evlr", [(4, "1.3", False), (9, "1.4", False), (9, "1.4", True)])
+@pytest.mark.parametrize("ext", ["las", "laz"])
+@pytest.mark.parametrize("tiled", [False, True])
+def test_internal_waveform_packets_are_carried_into_the_classified_copy(tmp_path, point_format, version, other_evlr,
+                                                                        ext, tiled):
+    src = write_with_packets(tmp_path / "wave.las", point_format, version, other_evlr=other_evlr)
+    before = src.read_bytes()
+    out = tmp_path / f"out.{ext}"
+    options = FilterOptions(tiling=TileOptions(tile_size_m=40.0, workers=2, parallel="threads")) if tiled else FilterOptions()
+    run = run_ground_filter(str(src), str(out), SMRF(), options=options)
+    assert (run.cloud is None) == tiled
+    assert src.read_bytes() == before
+    assert packets(out) == packets(src) is not None
+    a, b = laspy.read(str(src)), laspy.read(str(out))
+    for dim in a.point_format.dimension_names:
+        if dim != "classification":
+            assert np.array_equal(a[dim], b[dim]), dim
+    assert 0 < np.mean(b.classification == 2) < 1
+    if other_evlr:
+        assert [v.record_id for v in b.evlrs] == [7, 65535]
+    # the copy is a sound input in its turn
+    again = tmp_path / f"again.{ext}"
+    run_ground_filter(str(out), str(again), SMRF())
+    assert packets(again) == packets(src)
+
+
+def test_a_file_without_internal_packets_is_copied_as_before(tmp_path):
+    """External packets (bit 2) or none: the header is left as laspy writes it."""
+    src = write_with_packets(tmp_path / "wave.las", 4, "1.3")
+    data = bytearray(src.read_bytes())
+    struct.pack_into("<H", data, 6, (struct.unpack_from("<H", data, 6)[0] & ~0x2) | 0x4)  # external (a .wdp file)
+    src.write_bytes(bytes(data))
+    run_ground_filter(str(src), str(tmp_path / "out.las"), SMRF())
+    out = (tmp_path / "out.las").read_bytes()
+    assert packets(tmp_path / "out.las") is None
+    assert len(out) < len(data) - 256 * 3000  # the bytes after the points are not copied
+
+
+def tiled_or_whole(tiled):
+    return FilterOptions(tiling=TileOptions(tile_size_m=40.0, workers=2, parallel="threads")) if tiled else FilterOptions()
+
+
+@pytest.mark.parametrize("tiled", [False, True])
+@pytest.mark.parametrize("ext", ["las", "laz"])
+def test_header_dates_legacy_counts_and_extra_bytes_descriptions_are_kept(tmp_path, tiled, ext):
+    """laspy wrote 0 for LAS 1.4's legacy counts in formats 0-5 (R15 wants them when they fit: older
+    readers saw no point), read a creation day 0 as the year before's last day, and wrote its own empty
+    minimum and maximum into the extra-bytes descriptions beside an options byte saying they were set;
+    a tiled copy moved the extra-bytes VLR last."""
+    n = 3000
+    header = laspy.LasHeader(point_format=3, version="1.4")
+    header.scales, header.offsets = [0.01] * 3, [500000.0, 4000000.0, 0.0]
+    header.add_extra_dim(laspy.ExtraBytesParams(name="treeID", type=np.int32, description="tree"))
+    header.vlrs.append(laspy.VLR(user_id="MYCORP", record_id=42, description="custom", record_data=b"abc" * 8))
+    las = laspy.LasData(header)
+    rng = np.random.default_rng(2)
+    las.x, las.y = 500000 + rng.uniform(0, 120, n), 4000000 + rng.uniform(0, 120, n)
+    las.z = rng.uniform(0, 0.3, n) + (rng.random(n) < 0.3) * rng.uniform(2, 15, n)
+    las.return_number = np.where(rng.random(n) < 0.7, 1, 2)
+    las.number_of_returns = np.full(n, 2)
+    las.treeID = rng.integers(1, 206, n)
+    src = tmp_path / "in.las"
+    las.write(str(src))
+    data = bytearray(src.read_bytes())
+    struct.pack_into("<HH", data, 90, 0, 2018)  # creation day 0 of 2018
+    by_return = struct.unpack_from("<15Q", data, 255)
+    struct.pack_into("<I5I", data, 107, n, *by_return[:5])  # legacy counts, as LAStools and PDAL write them
+    at = struct.unpack_from("<H", data, 94)[0] + 54  # the first VLR's data: the extra-bytes description
+    assert data[at - 54 + 2:at - 54 + 11] == b"LASF_Spec"
+    data[at + 3] |= 0x06  # min and max set
+    struct.pack_into("<q", data, at + 64, 1)
+    struct.pack_into("<q", data, at + 88, 205)
+    src.write_bytes(bytes(data))
+    out = tmp_path / f"out.{ext}"
+    run_ground_filter(str(src), str(out), SMRF(), options=tiled_or_whole(tiled))
+    got = out.read_bytes()
+    assert got[90:94] == data[90:94]
+    assert got[107:131] == data[107:131] and struct.unpack_from("<I", got, 107)[0] == n
+    description = data[at:at + 192]
+    assert description in got  # the same 192 bytes: name, type, options, min, max
+    with laspy.open(str(out)) as reader:
+        assert [type(v).__name__ for v in reader.header.vlrs][:2] == ["ExtraBytesVlr", "VLR"]
+    assert np.array_equal(laspy.read(str(out)).treeID, las.treeID)
+
+
+def test_a_laz_copy_whose_wave_packets_lazrs_writes_wrong_is_refused(tmp_path):
+    """lazrs 0.8.2 writes the wave packet fields of point formats 9 and 10 wrong where points of several
+    scanner channels carry them (the format reviewer: offsets 60 316 572 828 1084 came back as 60 316 572
+    828 316). The LAZ copy is read back and refused rather than delivered; a .las copy is right."""
+    src = write_with_packets(tmp_path / "wave.las", 9, "1.4")
+    las = laspy.read(str(src))
+    las.scanner_channel = np.arange(len(las.points)) % 2
+    las.x_t = np.linspace(0, 1, len(las.points))
+    las.write(str(src))
+    plain = laspy.read(str(src))
+    plain.write(str(tmp_path / "probe.laz"))
+    if np.array_equal(laspy.read(str(tmp_path / "probe.laz")).wavepacket_offset, plain.wavepacket_offset):
+        pytest.skip("this lazrs writes the wave packets of several channels right: nothing to refuse")
+    with pytest.raises(OutputError, match=r"out\.laz: the LAZ writer \(lazrs 0\.8\) wrote the wave packet fields of .*"
+                                          r"write a \.las output instead"):
+        run_ground_filter(str(src), str(tmp_path / "out.laz"), SMRF())
+    assert not (tmp_path / "out.laz").exists()
+    run_ground_filter(str(src), str(tmp_path / "out.las"), SMRF())
+    got = laspy.read(str(tmp_path / "out.las"))
+    assert np.array_equal(got.wavepacket_offset, plain.wavepacket_offset) and np.array_equal(got.x_t, plain.x_t)
