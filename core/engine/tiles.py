@@ -862,7 +862,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                 "DTM may differ from tile to tile. Keep the distance at most the buffer, or set a larger tile "
                 "buffer.")
     tile_log = []
-    ground_total = 0
+    ground_total = dtm_points = 0  # the tiles' own ground points; those that entered the DTM
     kept_out: Dict[int, int] = {}  # points kept in classes of their own, left out of the DTM
     replaced: Dict[int, int] = {}  # points of the input's other classes given 1 or 2
     structures: Dict[int, int] = {}  # those of its structure classes made ground
@@ -894,7 +894,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         log(f"{len(keys)} tile(s) on {workers} worker(s) ({'processes' if use_processes else 'threads'}).")
 
     def record(result, resumed=False):
-        nonlocal ground_total
+        nonlocal ground_total, dtm_points
         if result is None:
             return
         steps.check()
@@ -911,6 +911,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         for code, count in result.get("structures", ()):
             structures[int(code)] = structures.get(int(code), 0) + int(count)
         ground_total += result["ground"]
+        dtm_points += result["dtm_points"]
         tile_log.append(dict(key=tuple(result["key"]), points=result["own"], read=result["read"],
                              ground=result["ground"], copc_read=result.get("copc_read", 0)))
         done_frac = len(tile_log) / len(keys)
@@ -1002,6 +1003,11 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             if note:
                 log(note)
             _say_enclosed_nodata(dtm_writer, dtm, grid.buffer, log)
+            if not dtm.fill_outside_hull:
+                from .workflow import dtm_spacing_note
+                note = dtm_spacing_note(dtm_points, dtm_writer.valued_cells, dtm_writer.grid.cell)
+                if note:
+                    log(note)
             dtm_writer.finish(staging.stage(dtm_path), atomic=False)
         steps.check()
         staging.commit()
@@ -1434,15 +1440,16 @@ def _tile_job(job) -> Optional[dict]:
             # (the write phase reads them there; a killed worker's writes stay too).
             del classes
             assigned[int(k)] = int(sel.sum())
-        block, kept_out = None, {}
+        block, kept_out, dtm_own = None, {}, 0
         if job["dtm"] is not None:
             area = workflow.processable(cloud, options)
-            block = _dtm_block(cloud, workflow.dtm_points(cloud, ground, area, job["dtm"]), job["dtm"],
-                               job["dtm_grid"], job["bounds"], job["buffer"])
+            in_dtm = workflow.dtm_points(cloud, ground, area, job["dtm"])
+            dtm_own = int(np.count_nonzero(in_dtm & own))
+            block = _dtm_block(cloud, in_dtm, job["dtm"], job["dtm_grid"], job["bounds"], job["buffer"])
             if options.keep_existing_classes:
                 kept_out = workflow.kept_out_of_dtm(cloud, cls, area & own, job["dtm"])
         result = dict(key=list(job["key"]), own=int(own.sum()), read=len(cloud), ground=int(ground[own].sum()),
-                      assigned=assigned, block=block, class_parts=class_parts, copc_read=copc_read,
+                      dtm_points=dtm_own, assigned=assigned, block=block, class_parts=class_parts, copc_read=copc_read,
                       kept_out=sorted(kept_out.items()), replaced=sorted(replaced.items()),
                       structures=sorted(structures.items()))
         _save_done(job["done_dir"], result)

@@ -22,8 +22,8 @@ same for a whole file and for each tile of a survey:
 from __future__ import annotations
 
 import contextlib
-import os
 import math
+import os
 from dataclasses import dataclass
 from typing import Callable, Optional
 
@@ -411,7 +411,25 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions, why_none: str = "
     dtm = tin_dtm(x[ground], y[ground], z[ground], grid, fill_outside=options.fill_outside_hull,
                   points_per_cell=options.points_per_cell, threads=None, steps=steps, log=log,
                   max_distance=options.max_distance_m)
+    if log is not None and not options.fill_outside_hull:
+        note = dtm_spacing_note(int(ground.sum()), int(np.count_nonzero(np.isfinite(dtm))), grid.cell)
+        if note:
+            log(note)
     return grid, dtm
+
+
+def dtm_spacing_note(points: int, valued_cells: int, cell: float) -> str:
+    """What to say when the DTM's cells are much finer than its ground points are apart (on average
+    over the cells with a value: more than 2 cells apart), "" otherwise. An archaeologist's 0.5 m DTMs
+    of 1 point/m² data were mosaics of the TIN's triangles in the hillshade, without a word."""
+    if points <= 0 or valued_cells <= 0:
+        return ""
+    spacing = cell * math.sqrt(valued_cells / points)
+    if spacing < 2 * cell:
+        return ""
+    return (f"DTM: {points:,} ground points for {valued_cells:,} cells of {cell:g} m with a value: about one point every "
+            f"{spacing:.1f} m, so most cells are interpolated between points, and a hillshade shows the triangles "
+            f"between them rather than finer terrain. A cell of about {spacing:.1f} m shows what the data hold.")
 
 
 def check_outputs(input_path: str, output_path: Optional[str], raster_paths=()) -> None:

@@ -139,6 +139,11 @@ class BlockGeoTIFF:
                 self._top[col0 + c] = np.minimum(self._top[col0 + c], row0 + top)
                 self._bottom[col0 + c] = np.maximum(self._bottom[col0 + c], row0 + bottom)
 
+    @property
+    def valued_cells(self) -> int:
+        """Cells written with a value so far."""
+        return int(self._valued.sum())
+
     def enclosed_nodata(self, strip_rows: int = 512) -> int:
         """Cells without a value between cells with one both in their row and in their column, over
         the blocks written so far. A linear TIN of one cloud fills its ground's convex hull, which

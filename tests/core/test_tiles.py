@@ -1252,3 +1252,27 @@ def test_two_inputs_of_the_same_name_are_named(tmp_path):
     a, b = str(tmp_path / "x" / "t.laz"), str(tmp_path / "y" / "t.laz")
     with pytest.raises(InputError, match=rf"two input files have the same name \({a} and {b}\)"):
         output_files([a, b], str(tmp_path / "out.vpc"))
+
+
+@pytest.mark.parametrize("cell, said", [(0.25, True), (2.0, False)])
+def test_a_dtm_much_finer_than_the_ground_points_spacing_is_said_whole_and_tiled(tmp_path, cell, said):
+    """An archaeologist's 0.5 m DTMs of 1 point/m² data were mosaics of the TIN's triangles in the
+    hillshade, with nothing in the log: the run now says how far apart the ground points are, whole
+    and tiled alike, when that is over 2 cells; a cell near the spacing draws nothing."""
+    src = tmp_path / "sparse.laz"
+    write_scene(make_scene(SceneSpec(size_m=120.0, density_per_m2=1.0, seed=8)), src)
+    notes = {}
+    for name, options in (("whole", FilterOptions()), ("tiled", tiled(60.0))):
+        logs = []
+        run_ground_filter(str(src), str(tmp_path / f"{name}.laz"), SMRF(), dtm_path=str(tmp_path / f"{name}.tif"),
+                          dtm=DTMOptions(cell_size_m=cell), options=options, log=logs.append)
+        notes[name] = [line for line in logs if "ground points for" in line and "a hillshade shows" in line]
+    if not said:
+        assert notes == {"whole": [], "tiled": []}
+        return
+    spacing = {}
+    for name, lines in notes.items():
+        assert len(lines) == 1, (name, lines)
+        spacing[name] = float(lines[0].split("about one point every ")[1].split(" m,")[0])
+    assert 1.0 < spacing["whole"] < 3.0  # about 1.4 m: half the points are ground
+    assert abs(spacing["tiled"] - spacing["whole"]) <= 0.1
