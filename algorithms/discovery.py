@@ -5,6 +5,7 @@ One table for every algorithm, so that the words stay consistent."""
 HOMEPAGE = "https://github.com/groundsieve/groundsieve"
 HELP_URL = f"{HOMEPAGE}/blob/main/README.md"
 BENCHMARKS_URL = f"{HOMEPAGE}/blob/main/docs/BENCHMARKS.md"
+GUIDE_URL = f"{HOMEPAGE}/blob/main/docs/USER_GUIDE.md"
 
 #: Words a user types in the toolbox search to find any of GroundSieve's algorithms.
 COMMON_TAGS = ("lidar", "point cloud", "pointcloud", "las", "laz", "als", "uav", "drone")
@@ -55,6 +56,29 @@ SHORT = {
 }
 
 
+#: The user guide's section on each algorithm (its heading), where the dialog's Help button leads.
+GUIDE_SECTIONS = {
+    "smrf": "Ground filter (SMRF)",
+    "csf": "Ground filter (CSF)",
+    "pmf": "Ground filter (PMF)",
+    "ptd": "Ground filter (progressive TIN densification)",
+    "echogrid": "Ground filter (return-number grid)",
+    "evc": "Ground filter (multiscale EVC) and the EVC raster workflow",
+    "evcrasters": "Ground filter (multiscale EVC) and the EVC raster workflow",
+    "hybrid": "Ground filter (learned hybrid)",
+    "features": "Classification: features, training, classifying",
+    "rftrain": "Classification: features, training, classifying",
+    "rfclassify": "Classification: features, training, classifying",
+    "tune": "Tune a ground filter on a labelled patch",
+}
+
+
+def heading_anchor(heading: str) -> str:
+    """The anchor a Markdown heading gets on GitHub: lower case, punctuation dropped, spaces as '-'."""
+    import re
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
 class Discoverable:
     """Mixin of every GroundSieve algorithm: tags, short description and help URL by its name."""
 
@@ -65,4 +89,6 @@ class Discoverable:
         return SHORT.get(self.name(), "")
 
     def helpUrl(self):  # noqa: N802
-        return f"{HELP_URL}#algorithms"
+        """The algorithm's section in the user guide (the README's list of algorithms for any without one)."""
+        heading = GUIDE_SECTIONS.get(self.name())
+        return f"{GUIDE_URL}#{heading_anchor(heading)}" if heading else f"{HELP_URL}#algorithms"

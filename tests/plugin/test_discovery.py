@@ -2,6 +2,7 @@
 users type, and what every algorithm offers besides (short description, help URL, help that
 stands on its own inside the plugin zip)."""
 import re
+from pathlib import Path
 
 import pytest
 
@@ -60,6 +61,21 @@ def test_every_algorithm_has_tags_description_and_help_url(groundsieve_provider)
         assert len(algorithm.tags()) >= 5, algorithm.id()
         assert 20 < len(algorithm.shortDescription()) < 200, algorithm.id()
         assert algorithm.helpUrl().startswith("https://"), algorithm.id()
+
+
+def test_each_algorithms_help_button_leads_to_its_section_of_the_guide(groundsieve_provider):
+    """The Help button led every algorithm to the README's list (a QGIS reviewer); it now opens the
+    algorithm's own section of the user guide, whose heading must exist."""
+    from groundsieve.algorithms.discovery import GUIDE_URL, heading_anchor
+    guide = (Path(__file__).resolve().parents[2] / "docs" / "USER_GUIDE.md").read_text(encoding="utf-8")
+    anchors = {heading_anchor(line[3:]) for line in guide.splitlines() if line.startswith("## ")}
+    assert heading_anchor("Ground filter (SMRF)") == "ground-filter-smrf"
+    assert heading_anchor("Classification: features, training, classifying") == \
+        "classification-features-training-classifying"
+    for algorithm in groundsieve_provider.algorithms():
+        url = algorithm.helpUrl()
+        assert url.startswith(GUIDE_URL + "#"), (algorithm.id(), url)
+        assert url.split("#", 1)[1] in anchors, (algorithm.id(), url)
 
 
 def test_help_points_at_nothing_the_zip_leaves_out(groundsieve_provider):
