@@ -328,6 +328,9 @@ def output_files(inputs: Sequence[str], output_path: Optional[str]) -> List[Opti
     if len(set(names)) != len(names):
         twice = next(n for n in names if names.count(n) > 1)
         same = [p for p, n in zip(inputs, names) if n == twice]
+        if len({os.path.basename(p) for p in same}) > 1:  # x.copc.laz beside x.laz
+            raise InputError(f"{same[0]} and {same[1]} would both have the classified copy {twice} (a COPC "
+                             "input's copy is a plain LAZ, named .laz); rename one of them")
         raise InputError(f"two input files have the same name ({' and '.join(same[:2])}); the classified files "
                          "would overwrite each other")
     return [os.path.join(folder, n) for n in names]
@@ -343,11 +346,16 @@ def check_tiled_outputs(inputs: Sequence[str], output_path: Optional[str], dtm_p
         if folder in in_folders:
             raise OutputError(f"{output_path}: the classified files would go into {folder}, which holds input "
                               "files; choose another output name or folder")
-    for out in outs:
+    from ..io.clouds import check_laz_wave_packets
+    from ..io.outputs import check_not_copc_name
+    for path, out in zip(inputs, outs):
         if out and os.path.realpath(out) in real_inputs:
             raise OutputError(f"{out}: the output must not be an input file; choose another name")
         if out and _ext(out) not in LAS_EXTENSIONS:
             raise OutputError(f"{out}: the output must end in .las or .laz")
+        if out:
+            check_not_copc_name(out)
+            check_laz_wave_packets(path, out)
     if dtm_path:
         from ..raster.geotiff import check_raster_path
         check_raster_path(dtm_path, inputs=list(inputs) + [output_path])
@@ -1095,7 +1103,7 @@ def _write_classified(infos, outs, staged, work, class_paths, class_parts, tilin
     def record_write(result):
         written.append(result)
         write_steps.report((len(write_jobs) + len(written)) / total_jobs)
-    assemble_jobs = [dict(key=("assemble", k), path=info.path, out=staged[k], pieces=pieces.get(k, []),
+    assemble_jobs = [dict(key=("assemble", k), path=info.path, out=staged[k], name=outs[k], pieces=pieces.get(k, []),
                           class_path=class_paths[k], class_parts=sorted(class_parts[k]), count=info.count)
                      for k, info in enumerate(infos) if outs[k]]
     _map_files(_assemble_job, assemble_jobs, record_write, tiling, steps, log, stage="writing",
@@ -1198,9 +1206,9 @@ def _assemble_job(job) -> dict:
     input, or one without points) is streamed with the classes its tiles wrote."""
     if not job["pieces"]:
         write_classified_stream(job["path"], job["out"], _file_classes(job, 0, job["count"]),
-                                check=job.get("check"))
+                                check=job.get("check"), name=job.get("name"))
     else:
-        assemble_classified(job["path"], job["out"], job["pieces"])
+        assemble_classified(job["path"], job["out"], job["pieces"], name=job.get("name"))
         for piece in job["pieces"]:
             os.remove(piece["path"])
     return dict(out=job["out"])

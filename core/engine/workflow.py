@@ -441,6 +441,8 @@ def check_outputs(input_path: str, output_path: Optional[str], raster_paths=()) 
     check_distinct_outputs([("classified point cloud", output_path), *labelled])
     if output_path:
         check_output_path(output_path, inputs=[input_path])
+        from ..io.clouds import check_laz_wave_packets
+        check_laz_wave_packets(input_path, output_path)
     for _label, path in labelled:
         if path:
             check_raster_path(path, inputs=[input_path, output_path])

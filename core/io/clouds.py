@@ -6,6 +6,8 @@ nothing half-written. Input files are only ever opened for reading.
 """
 from __future__ import annotations
 
+import contextlib
+import copy
 import functools
 import math
 import os
@@ -298,30 +300,37 @@ def _is_waveform_record(evlr_header: bytes) -> bool:
             and struct.unpack_from("<H", evlr_header, 18)[0] == _WAVEFORM_RECORD)
 
 
-def match_source(src: str, dst: str, name: Optional[str] = None) -> None:
-    """Put back in ``dst``, a classified copy of the LAS/LAZ ``src`` just written by laspy (before it
-    is put in place), what laspy's writer changes or drops (a format reviewer compared every field):
+def finish_copy(dst: str, src: Optional[str] = None, name: Optional[str] = None) -> None:
+    """Mend ``dst``, a LAS/LAZ file just written by laspy (before it is put in place), where laspy's
+    writer changes or drops what a copy of ``src`` (the LAS/LAZ it was read from, if any) should keep
+    (a format reviewer compared every field):
 
     - the waveform data packets ``src`` holds inside the file (:func:`carry_waveform_packets`);
-    - the header's creation day and year, as they are (laspy read day 0 as the last day of the year
-      before and wrote an unset date as today's);
+    - the header's creation day and year, as ``src`` has them (laspy read day 0 as the last day of the
+      year before and wrote an unset date as today's);
     - a LAS 1.4 file of point formats 0-5: the legacy point counts, which LAS 1.4 R15 wants filled in
       when they fit (laspy wrote 0: older readers saw no point);
-    - the extra-bytes descriptions' minimum, maximum and the rest of each, as ``src`` has them for
-      the dimensions the copy keeps (laspy wrote its own empty minimum and maximum beside an options
-      byte saying they were set).
+    - the extra-bytes descriptions as ``src`` has them for the dimensions the copy keeps; for the
+      others (added by the run) the options byte no longer claims a minimum and maximum (laspy wrote
+      sentinels or NaN beside an options byte saying they were set).
 
-    Then, for a LAZ copy of point format 9 or 10, its first chunk's wave packet fields are read back and
-    compared with ``src``'s: lazrs 0.8.2 writes them wrong where points of several scanner channels
+    Then a LAZ copy of point format 9 or 10 is read back and its wave packet fields compared with
+    ``src``'s, chunk by chunk: lazrs 0.8.2 writes them wrong where points of several scanner channels
     carry wave packets, and such a copy is refused (:class:`OutputError`, naming ``name``: the copy's
-    final path) rather than delivered."""
+    final path) rather than delivered (:func:`check_laz_wave_packets` tries the first chunk before
+    the work)."""
     import struct
-    with open(src, "rb") as f, open(dst, "r+b") as g:
-        a, b = bytearray(f.read(_HEADER_BYTES_14)), bytearray(g.read(_HEADER_BYTES_14))
-        if len(a) < 227 or len(b) < 227 or a[:4] != b"LASF" or b[:4] != b"LASF":
+    name = name or dst
+    with open(dst, "r+b") as g, (open(src, "rb") if src else contextlib.nullcontext()) as f:
+        b = bytearray(g.read(_HEADER_BYTES_14))
+        if len(b) < 227 or b[:4] != b"LASF":
             return
-        g.seek(90)
-        g.write(a[90:94])  # creation day of year, year
+        a = bytearray(f.read(_HEADER_BYTES_14)) if f is not None else b""
+        if len(a) < 227 or a[:4] != b"LASF":
+            f = None
+        if f is not None:
+            g.seek(90)
+            g.write(a[90:94])  # creation day of year, year
         if b[25] >= 4 and len(b) >= 375 and b[104] & 0x3F < 6:
             count, = struct.unpack_from("<Q", b, 247)
             by_return = struct.unpack_from("<15Q", b, 255)
@@ -329,9 +338,11 @@ def match_source(src: str, dst: str, name: Optional[str] = None) -> None:
                 g.seek(107)
                 g.write(struct.pack("<I5I", count, *by_return[:5]))
         _match_extra_bytes(f, g, a, b)
+    if f is None:
+        return
     carry_waveform_packets(src, dst)
-    if (name or dst).lower().endswith(".laz") and b[104] & 0x3F in (9, 10):
-        _check_wave_packets(src, dst, name or dst)
+    if name.lower().endswith(".laz") and b[104] & 0x3F in (9, 10):
+        _check_wave_packets(src, dst, name)
 
 
 def _vlrs(f, header: bytes):
@@ -351,35 +362,85 @@ def _vlrs(f, header: bytes):
     return out
 
 
+#: Bytes of one extra-bytes description; its options byte's bits for "minimum set" and "maximum set".
+_EXTRA_BYTES_STRUCT, _MIN_MAX_BITS = 192, 0x06
+
+
 def _match_extra_bytes(f, g, a: bytes, b: bytes) -> None:
-    """The copy's extra-bytes descriptions (192 bytes each) as the source's, for each the copy keeps
-    (the same name and type in the same place: a copy may add dimensions after them)."""
-    ours = [v for v in _vlrs(f, a) if v[1] == b"LASF_Spec" and v[2] == 4]
+    """The copy's extra-bytes descriptions as the source's (``f``, None without one), for each the copy
+    keeps (the same name and type in the same place: a copy may add dimensions after them); the others
+    claim no minimum and maximum."""
     theirs = [v for v in _vlrs(g, b) if v[1] == b"LASF_Spec" and v[2] == 4]
-    if len(ours) != 1 or len(theirs) != 1:
+    if len(theirs) != 1:
         return
-    f.seek(ours[0][0])
-    source = f.read(ours[0][3])
+    ours = [v for v in _vlrs(f, a) if v[1] == b"LASF_Spec" and v[2] == 4] if f is not None else []
+    source = b""
+    if len(ours) == 1:
+        f.seek(ours[0][0])
+        source = f.read(ours[0][3])
     g.seek(theirs[0][0])
     copy = bytearray(g.read(theirs[0][3]))
-    for k in range(min(len(source), len(copy)) // 192):
-        s, c = source[192 * k:192 * (k + 1)], copy[192 * k:192 * (k + 1)]
+    n = _EXTRA_BYTES_STRUCT
+    kept = 0
+    for k in range(min(len(source), len(copy)) // n):
+        s, c = source[n * k:n * (k + 1)], copy[n * k:n * (k + 1)]
         if s[2] != c[2] or s[4:36] != c[4:36]:  # data type, name
             break
-        copy[192 * k:192 * (k + 1)] = s
+        copy[n * k:n * (k + 1)] = s
+        kept += 1
+    for k in range(kept, len(copy) // n):
+        copy[n * k + 3] &= ~_MIN_MAX_BITS & 0xFF
     g.seek(theirs[0][0])
     g.write(copy)
+
+
+#: The wave packet fields of point formats 4, 5, 9 and 10 (in the floats, NaN equals NaN).
+_WAVE_FIELDS = ("wavepacket_index", "wavepacket_offset", "wavepacket_size", "return_point_wave_location",
+                "x_t", "y_t", "z_t")
+
+
+def _same_wave_packets(a, b) -> bool:
+    return all(np.array_equal(np.asarray(a[n]), np.asarray(b[n]), equal_nan=np.asarray(a[n]).dtype.kind == "f")
+               for n in _WAVE_FIELDS)
+
+
+def _lazrs_wave_packets_error(name: str, src: str) -> OutputError:
+    return OutputError(f"{name}: the LAZ writer (lazrs 0.8) writes the wave packet fields of {src}'s points wrong "
+                       "(point format 9 or 10 with several scanner channels): write a .las output instead")
 
 
 def _check_wave_packets(src: str, dst: str, name: str) -> None:
     import laspy
     with laspy.open(src) as r, laspy.open(dst) as w:
-        a, b = r.read_points(50_000), w.read_points(50_000)
-    names = ("wavepacket_index", "wavepacket_offset", "wavepacket_size", "return_point_wave_location",
-             "x_t", "y_t", "z_t")
-    if any(not np.array_equal(np.asarray(a[n]), np.asarray(b[n])) for n in names):
-        raise OutputError(f"{name}: the LAZ writer (lazrs 0.8) wrote the wave packet fields of {src}'s points wrong "
-                          "(point format 9 or 10 with several scanner channels): write a .las output instead")
+        for a, b in zip(r.chunk_iterator(CHUNK_POINTS), w.chunk_iterator(CHUNK_POINTS)):
+            if not _same_wave_packets(a, b):
+                raise _lazrs_wave_packets_error(name, src)
+
+
+def check_laz_wave_packets(src: str, out: Optional[str]) -> None:
+    """Before any work: refuse a LAZ copy of a point format 9 or 10 file whose first chunk's wave
+    packet fields lazrs writes wrong (tried in memory), so that a run does not end with the refusal
+    of :func:`finish_copy` after all its work; the copy written is still checked in full."""
+    if not out or _ext(out) != ".laz" or _ext(src) not in LAS_EXTENSIONS:
+        return
+    import io
+    import laspy
+    try:
+        with laspy.open(src) as reader:
+            if reader.header.point_format.id not in (9, 10):
+                return
+            points = reader.read_points(50_000)
+            header = copy.deepcopy(reader.header)
+        buffer = io.BytesIO()
+        with laspy.LasWriter(buffer, header=header, do_compress=True, closefd=False) as writer:
+            writer.write_points(points)
+        buffer.seek(0)
+        with laspy.open(buffer) as back:
+            same = _same_wave_packets(points, back.read_points(len(points)))
+    except Exception:  # noqa: BLE001 - a file laspy cannot read is refused by the run in its own words
+        return
+    if not same:
+        raise _lazrs_wave_packets_error(out, src)
 
 
 def carry_waveform_packets(src: str, dst: str) -> None:
@@ -652,27 +713,52 @@ TEXT_CHUNK_LINES = CHUNK_POINTS
 def _text_rows(path: str, encoding: str, steps: Steps) -> np.ndarray:
     """The numbers of a text cloud as numpy's loadtxt reads them, read :data:`TEXT_CHUNK_LINES` lines at
     a time, reporting the share of the file's characters read to ``steps`` and checking cancellation
-    between chunks (22 M lines read in one loadtxt call took 8 s deaf to Cancel). A ValueError when the
-    rows are not numbers or their columns differ between chunks, as loadtxt raises within one."""
+    between chunks (22 M lines read in one loadtxt call took 8 s deaf to Cancel). The chunks fill one
+    array sized by a count of the file's line ends (so the peak memory stays about one loadtxt's). A
+    ValueError when the rows are not numbers (loadtxt's row numbers counted from the file's start) or
+    their columns differ between chunks, as loadtxt raises within one."""
     import itertools
     size = max(os.path.getsize(path), 1)
-    parts, done = [], 0
+    lines_at_most = _line_ends(path, steps) + 1
+    out, filled, done, before = None, 0, 0, 0
     with open(path, encoding=encoding) as f:
         while True:
             steps.check()
             lines = list(itertools.islice(f, TEXT_CHUNK_LINES))
             if not lines:
                 break
-            rows = np.loadtxt(lines, dtype=np.float64, ndmin=2)
+            try:
+                rows = np.loadtxt(lines, dtype=np.float64, ndmin=2)
+            except ValueError as err:  # "... at row 12, column 3": the row counted in this chunk
+                raise ValueError(re.sub(r"\brow (\d+)", lambda m: f"row {int(m.group(1)) + before}", str(err))) from err
+            before += len(lines)
             if rows.size:
-                if parts and rows.shape[1] != parts[0].shape[1]:
+                if out is None:
+                    out = np.empty((max(lines_at_most, len(rows)), rows.shape[1]))
+                elif rows.shape[1] != out.shape[1]:
                     raise ValueError("the number of columns changed")
-                parts.append(rows)
+                if filled + len(rows) > len(out):  # (a file that grew while read)
+                    out = np.concatenate([out[:filled], np.empty((filled + len(rows) - len(out), out.shape[1]))])
+                out[filled:filled + len(rows)] = rows
+                filled += len(rows)
             done += sum(map(len, lines))
             steps.report(READ_SHARE * min(done / size, 1.0))
-    if not parts:
+    if out is None:
         return np.empty((0, 0))
-    return parts[0] if len(parts) == 1 else np.concatenate(parts)
+    return out[:filled]
+
+
+def _line_ends(path: str, steps: Steps, block: int = 1 << 24) -> int:
+    """How many line ends the file holds at most (newlines or, in old Mac files, carriage returns)."""
+    newlines = returns = 0
+    with open(path, "rb") as f:
+        while True:
+            steps.check()
+            data = f.read(block)
+            if not data:
+                return max(newlines, returns)
+            newlines += data.count(b"\n")
+            returns += data.count(b"\r")
 
 
 def _read_isprs_text(path: str, steps: Optional[Steps] = None) -> PointCloud:
@@ -750,19 +836,17 @@ def write_las(las, path: str, *, atomic: bool = True, steps: Optional[Steps] = N
     of :data:`CHUNK_POINTS` when ``steps`` is given, reporting progress to it and checking
     cancellation between them (a cancelled write leaves no file when atomic); in one call of
     ``LasData.write`` otherwise (the same bytes). ``source``: the file ``las`` was read from, whose
-    header fields, extra-bytes descriptions and waveform packets the copy then keeps (:func:`match_source`);
+    header fields, extra-bytes descriptions and waveform packets the copy then keeps (:func:`finish_copy`);
     ``name``: the path the messages give, when ``path`` is the caller's temporary."""
     path = check_output_path(path)
     try:
         if atomic:
             with atomic_path(path) as tmp:
                 _write_chunks(las, tmp, _ext(path) == ".laz", steps)
-                if source:
-                    match_source(source, tmp, path)
+                finish_copy(tmp, source, path)
         else:
             _write_chunks(las, path, _ext(path) == ".laz", steps)
-            if source:
-                match_source(source, path, name)
+            finish_copy(path, source, name)
     except OSError as err:
         raise OutputError(f"{path}: cannot be written ({err})") from err
 

@@ -58,13 +58,12 @@ def plain_header(header):
     chunks are no longer the octree's nodes): the COPC records (info, extents, hierarchy) dropped,
     the other VLRs and EVLRs kept. A LAS 1.0 header becomes 1.2 (the same header and point formats
     0 and 1; laspy writes no 1.0, and a 1.0 input failed at the write, after the whole run)."""
-    from laspy.vlrs.vlrlist import VLRList
     h = copy.deepcopy(header)
     if h.version.minor == 0:
         from laspy.header import Version
         h.version = Version(1, 2)
-    if any(_is_copc_record(v) for v in h.vlrs):  # (setting the list moves the extra-bytes VLR last)
-        h.vlrs = VLRList([v for v in h.vlrs if not _is_copc_record(v)])
+    for record in [v for v in h.vlrs if _is_copc_record(v)]:  # removed in place: a new list set in its
+        h.vlrs.remove(record)  # stead moved the extra-bytes VLR last
     if getattr(h, "evlrs", None) is not None:
         h.evlrs = plain_evlrs(h)
     return h

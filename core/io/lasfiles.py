@@ -17,7 +17,7 @@ from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 import numpy as np
 
 from ..errors import GroundSieveError, InputError, OutputError, UnsupportedFormatError
-from .clouds import PointCloud, check_las_layout, header_crs_wkt, match_source, records_held
+from .clouds import PointCloud, check_las_layout, finish_copy, header_crs_wkt, records_held
 from .outputs import LAS_EXTENSIONS, _ext, atomic_path, check_classes_fit
 
 VPC_EXTENSION = ".vpc"
@@ -553,10 +553,11 @@ def _part_cloud(part: TilePart, rec: np.ndarray) -> PointCloud:
 # -- the classified copy --------------------------------------------------------------------------
 
 def write_classified_stream(src: str, dst: str, classification: np.ndarray, *,
-                            chunk_points: int = CHUNK_POINTS, check=None) -> None:
+                            chunk_points: int = CHUNK_POINTS, check=None, name: Optional[str] = None) -> None:
     """Copy ``src`` to ``dst`` (LAZ when it ends in .laz) with ``classification`` (one uint8 per
     point, in file order; a memmap is fine) in one streamed pass, every other dimension, the VLRs
-    and the CRS kept. Atomic: ``dst`` appears only when complete."""
+    and the CRS kept. Atomic: ``dst`` appears only when complete. ``name``: the path its messages give
+    (``dst`` may be a staged name)."""
     import laspy
     from .copc import plain_evlrs, plain_header
     classification = np.asarray(classification)
@@ -580,7 +581,7 @@ def write_classified_stream(src: str, dst: str, classification: np.ndarray, *,
                         start += n
                     if reader.header.version.minor >= 4 and plain_evlrs(reader.header):
                         writer.write_evlrs(plain_evlrs(reader.header))
-                match_source(src, tmp, dst)
+                finish_copy(tmp, src, name or dst)
     except OSError as err:
         raise OutputError(f"{dst}: cannot be written ({err})") from err
     except GroundSieveError:
@@ -735,7 +736,7 @@ def _pieces_backend(pieces):
     return Backend()
 
 
-def assemble_classified(src: str, dst: str, pieces: Sequence[dict]) -> None:
+def assemble_classified(src: str, dst: str, pieces: Sequence[dict], name: Optional[str] = None) -> None:
     """Write ``dst`` (LAZ when it ends in .laz; atomic) from the pieces of
     :func:`write_classified_piece` (in file order, together every point of ``src``): ``src``'s
     header and VLRs as laspy's writer writes them for a streamed copy, the pieces' records or LAZ
@@ -760,7 +761,7 @@ def assemble_classified(src: str, dst: str, pieces: Sequence[dict]) -> None:
                 if evlrs:  # after the points (the LAZ backend's done() writes the chunks first)
                     writer.write_evlrs(evlrs)
                 writer.close()
-            match_source(src, tmp, dst)
+            finish_copy(tmp, src, name or dst)
     except OSError as err:
         raise OutputError(f"{dst}: cannot be written ({err})") from err
 

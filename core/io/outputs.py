@@ -30,9 +30,7 @@ def check_output_path(path: str, *, inputs=(), extensions=LAS_EXTENSIONS, what: 
     ext = _ext(path)
     if ext not in extensions:
         raise OutputError(f"{path}: the {what} must end in {' or '.join(extensions)} (got '{ext or '(none)'}')")
-    if ext == ".laz" and path.lower().endswith(".copc.laz"):
-        raise OutputError(f"{path}: the {what} is a plain LAZ, not COPC (its chunks are not an octree's nodes), and "
-                          "QGIS and other readers open a name ending in .copc.laz as COPC, which fails: name it .laz")
+    check_not_copc_name(path, what)
     real = os.path.realpath(path)
     for other in inputs:
         if other and os.path.realpath(os.fspath(other)) == real:
@@ -42,6 +40,14 @@ def check_output_path(path: str, *, inputs=(), extensions=LAS_EXTENSIONS, what: 
         raise OutputError(f"{path}: the folder {folder} does not exist")
     check_folder_writable(path, folder)
     return path
+
+
+def check_not_copc_name(path: str, what: str = "output") -> None:
+    """Refuse a classified copy named .copc.laz: it is a plain LAZ, not COPC (its chunks are not an
+    octree's nodes), and QGIS and other readers open such a name as COPC, which fails."""
+    if path.lower().endswith(".copc.laz"):
+        raise OutputError(f"{path}: the {what} is a plain LAZ, not COPC (its chunks are not an octree's nodes), and "
+                          "QGIS and other readers open a name ending in .copc.laz as COPC, which fails: name it .laz")
 
 
 def check_folder_writable(path: str, folder: str) -> None:

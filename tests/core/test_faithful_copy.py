@@ -8,6 +8,7 @@ format reviewer's 1.28 MB of samples went without a word), and in LAS 1.4 a LAZ 
 but the header pointed into the compressed points."""
 from __future__ import annotations
 
+import os
 import struct
 
 import laspy
@@ -145,23 +146,100 @@ def test_header_dates_legacy_counts_and_extra_bytes_descriptions_are_kept(tmp_pa
     assert np.array_equal(laspy.read(str(out)).treeID, las.treeID)
 
 
-def test_a_laz_copy_whose_wave_packets_lazrs_writes_wrong_is_refused(tmp_path):
+def _channels(path, channel_of, x_t=None):
+    """A point format 9 file with wave packets whose points are on the scanner channels ``channel_of(n)``."""
+    src = write_with_packets(path, 9, "1.4", n=120_000)
+    las = laspy.read(str(src))
+    las.scanner_channel = channel_of(len(las.points))
+    las.x_t = np.linspace(0, 1, len(las.points)) if x_t is None else x_t(len(las.points))
+    las.write(str(src))
+    return src
+
+
+def _lazrs_mixes_channels(tmp_path) -> bool:
+    probe = laspy.read(str(_channels(tmp_path / "probe.las", lambda n: np.arange(n) % 2)))
+    probe.write(str(tmp_path / "probe.laz"))
+    return not np.array_equal(laspy.read(str(tmp_path / "probe.laz")).wavepacket_offset, probe.wavepacket_offset)
+
+
+@pytest.mark.parametrize("tiled", [False, True])
+def test_a_laz_copy_whose_wave_packets_lazrs_writes_wrong_is_refused(tmp_path, tiled):
     """lazrs 0.8.2 writes the wave packet fields of point formats 9 and 10 wrong where points of several
     scanner channels carry them (the format reviewer: offsets 60 316 572 828 1084 came back as 60 316 572
-    828 316). The LAZ copy is read back and refused rather than delivered; a .las copy is right."""
-    src = write_with_packets(tmp_path / "wave.las", 9, "1.4")
-    las = laspy.read(str(src))
-    las.scanner_channel = np.arange(len(las.points)) % 2
-    las.x_t = np.linspace(0, 1, len(las.points))
-    las.write(str(src))
-    plain = laspy.read(str(src))
-    plain.write(str(tmp_path / "probe.laz"))
-    if np.array_equal(laspy.read(str(tmp_path / "probe.laz")).wavepacket_offset, plain.wavepacket_offset):
+    828 316). Channels mixed from the first point: refused before any work (the first chunk is tried in
+    memory); mixed only after 60,000 points (a code reviewer: the first version checked the first
+    50,000 and delivered the copy): refused when the copy, read back in full, differs, naming the
+    output (a tiled run named its staged temporary). A .las copy is right; nothing is left behind."""
+    if not _lazrs_mixes_channels(tmp_path):
         pytest.skip("this lazrs writes the wave packets of several channels right: nothing to refuse")
-    with pytest.raises(OutputError, match=r"out\.laz: the LAZ writer \(lazrs 0\.8\) wrote the wave packet fields of .*"
-                                          r"write a \.las output instead"):
-        run_ground_filter(str(src), str(tmp_path / "out.laz"), SMRF())
-    assert not (tmp_path / "out.laz").exists()
-    run_ground_filter(str(src), str(tmp_path / "out.las"), SMRF())
-    got = laspy.read(str(tmp_path / "out.las"))
+    options = tiled_or_whole(tiled)
+    early = _channels(tmp_path / "early.las", lambda n: np.arange(n) % 2)
+    said = []
+    with pytest.raises(OutputError, match=r"out\.laz: the LAZ writer \(lazrs 0\.8\) writes the wave packet fields of "
+                                          r".*early\.las's points wrong .*write a \.las output instead"):
+        run_ground_filter(str(early), str(tmp_path / "out.laz"), SMRF(), options=options, log=said.append)
+    assert not any(line.startswith(("Filtering", "Tile ")) for line in said), said  # before any work
+    late = _channels(tmp_path / "late.las", lambda n: np.where(np.arange(n) < 60_000, 0, np.arange(n) % 2))
+    with pytest.raises(OutputError, match=r"(?<![.\w])out\.laz: the LAZ writer \(lazrs 0\.8\) writes the wave packet "
+                                          r"fields of .*late\.las's points wrong"):
+        run_ground_filter(str(late), str(tmp_path / "out.laz"), SMRF(), options=options)
+    assert sorted(os.listdir(tmp_path)) == ["early.las", "late.las", "probe.las", "probe.laz"]
+    run_ground_filter(str(late), str(tmp_path / "out.las"), SMRF(), options=options)
+    plain, got = laspy.read(str(late)), laspy.read(str(tmp_path / "out.las"))
     assert np.array_equal(got.wavepacket_offset, plain.wavepacket_offset) and np.array_equal(got.x_t, plain.x_t)
+
+
+def test_a_laz_copy_of_one_channel_with_nan_wave_vectors_is_delivered(tmp_path):
+    """One scanner channel, lazrs writes the fields right; a NaN in x_t made the check refuse it."""
+    src = _channels(tmp_path / "nan.las", lambda n: np.zeros(n, int),
+                    x_t=lambda n: np.where(np.arange(n) == 5, np.nan, np.linspace(0, 1, n)))
+    run_ground_filter(str(src), str(tmp_path / "out.laz"), SMRF())
+    got = laspy.read(str(tmp_path / "out.laz"))
+    assert np.isnan(got.x_t[5]) and np.array_equal(got.wavepacket_offset, laspy.read(str(src)).wavepacket_offset)
+
+
+def test_the_dimensions_a_run_adds_claim_no_minimum_or_maximum(tmp_path):
+    """laspy wrote NaN or sentinels as the minimum and maximum of the extra dimensions it adds, beside an
+    options byte saying they were set (a code reviewer, on groundsieve:features' output); the source's
+    own descriptions are kept as they are."""
+    from groundsieve.core.engine.features_run import write_features
+    from groundsieve.core.io import read_cloud
+    header = laspy.LasHeader(point_format=1, version="1.2")
+    header.add_extra_dim(laspy.ExtraBytesParams(name="treeID", type=np.int32))
+    las = laspy.LasData(header)
+    rng = np.random.default_rng(4)
+    las.x, las.y, las.z = rng.uniform(0, 50, (3, 500))
+    las.treeID = rng.integers(1, 9, 500)
+    src = tmp_path / "in.las"
+    las.write(str(src))
+    data = bytearray(src.read_bytes())
+    at = struct.unpack_from("<H", data, 94)[0] + 54
+    data[at + 3] |= 0x06
+    struct.pack_into("<q", data, at + 64, 1)
+    struct.pack_into("<q", data, at + 88, 8)
+    src.write_bytes(bytes(data))
+    out = tmp_path / "features.las"
+    write_features(read_cloud(str(src)), {"verticality": rng.random(500).astype(np.float32)}, str(out))
+    with laspy.open(str(out)) as reader:
+        eb = next(v for v in reader.header.vlrs if type(v).__name__ == "ExtraBytesVlr").record_data_bytes()
+    assert eb[:192] == bytes(data[at:at + 192])  # the source's, as it was
+    assert eb[192 + 4:192 + 4 + 11].rstrip(b"\0") == b"verticality" and not eb[192 + 3] & 0x06
+
+
+def test_a_copc_headers_copy_keeps_the_other_vlrs_in_their_order():
+    """plain_header set a new VLR list, which laspy writes with the extra-bytes VLR last."""
+    from groundsieve.core.io.copc import plain_header
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    header.vlrs.append(laspy.VLR(user_id="copc", record_id=1, record_data=b"\0" * 160))
+    header.vlrs.append(laspy.VLR(user_id="MYCORP", record_id=1, record_data=b"a"))
+    header.add_extra_dim(laspy.ExtraBytesParams(name="e", type=np.uint8))
+    header.vlrs.append(laspy.VLR(user_id="MYCORP", record_id=2, record_data=b"b"))
+    before = [(str(v.user_id), v.record_id) for v in header.vlrs]
+    assert before[0] == ("copc", 1)
+    import io
+    buffer = io.BytesIO()
+    with laspy.LasWriter(buffer, header=plain_header(header), closefd=False) as writer:
+        writer.write_points(laspy.ScaleAwarePointRecord.zeros(3, header=header))
+    buffer.seek(0)
+    with laspy.open(buffer) as reader:
+        assert [(str(v.user_id), v.record_id) for v in reader.header.vlrs] == before[1:]

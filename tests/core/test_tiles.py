@@ -1252,6 +1252,12 @@ def test_two_inputs_of_the_same_name_are_named(tmp_path):
     a, b = str(tmp_path / "x" / "t.laz"), str(tmp_path / "y" / "t.laz")
     with pytest.raises(InputError, match=rf"two input files have the same name \({a} and {b}\)"):
         output_files([a, b], str(tmp_path / "out.vpc"))
+    # a COPC input's copy is named .laz: beside a plain file of that name, the message says so
+    c, d = str(tmp_path / "s" / "t.copc.laz"), str(tmp_path / "s" / "t.laz")
+    assert output_files([c], str(tmp_path / "one.vpc")) == [str(tmp_path / "one" / "t.laz")]
+    with pytest.raises(InputError, match=rf"{c} and {d} would both have the classified copy t\.laz \(a COPC input's "
+                                         r"copy is a plain LAZ, named \.laz\); rename one of them"):
+        output_files([c, d], str(tmp_path / "out.vpc"))
 
 
 @pytest.mark.parametrize("cell, said", [(0.25, True), (2.0, False)])
