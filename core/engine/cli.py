@@ -258,7 +258,8 @@ def run_tune(args, out) -> dict:
     result = tune(args.input, args.tune_filter,
                   TuneOptions(metric=args.metric, budget=args.budget, blocks=args.blocks, seconds=args.seconds,
                               selection=args.selection),
-                  base=base, progress=_progress_printer(out), log=lambda msg: print(msg, file=out, flush=True))
+                  base=base, progress=_progress_printer(out), is_cancelled=_interrupt_seen,
+                  log=lambda msg: print(msg, file=out, flush=True))
     if args.preset_out:
         write_preset(args.preset_out, args.tune_filter, preset_values(result), source=preset_source(result),
                      description=f"tuned on {result.patch} ({result.metric}, {len(result.trials)} sets)")
@@ -307,7 +308,7 @@ def run_filter(args, out) -> dict:
     algorithm, options, dtm = options_from(args, log)
     start = time.monotonic()
     run = run_ground_filter(args.input, args.output, algorithm, options=options, dtm_path=args.dtm, dtm=dtm,
-                            progress=_progress_printer(out), log=log)
+                            progress=_progress_printer(out), is_cancelled=_interrupt_seen, log=log)
     seconds = time.monotonic() - start
     document = filter_document(args, algorithm, run, seconds, warnings)
     print(f"{document['points']:,} points, {document['ground']:,} ground.", file=out)
@@ -421,6 +422,16 @@ def options_from(args, log=None):
 #: set once the run has ended (its outputs in place or its error said): a SIGTERM then changes nothing
 #: (``python -m groundsieve`` ignores it instead of ending a finished run as killed)
 FINISHED = [False]
+#: set by ``python -m groundsieve``'s handler when Ctrl-C or SIGTERM came during the run: its
+#: KeyboardInterrupt, raised inside lazrs's writer, came back as "LazrsError: IoError: Failed to call
+#: write" (a QA reviewer: a traceback and "failed / other" for 6 of 7 signals while a LAZ was written)
+INTERRUPT_SEEN = [False]
+
+
+def _interrupt_seen() -> bool:
+    """The run's cancel check: an interrupt whose KeyboardInterrupt a library swallowed (GDAL's writer:
+    a Ctrl-C during the DTM's write ended "done") still stops the run before its outputs are put in place."""
+    return INTERRUPT_SEEN[0]
 
 #: the exit status of an interrupted run (128 + SIGINT, as shells report Ctrl-C)
 INTERRUPTED = 130
@@ -439,11 +450,21 @@ def _run(args, out):
         print(f"groundsieve: {err}", file=out)
         return 2, {"status": "failed", "kind": "usage", "error": str(err)}
     except KeyboardInterrupt:
-        print("groundsieve: interrupted", file=out)
-        return INTERRUPTED, {"status": "interrupted", "kind": "interrupted", "error": "interrupted"}
+        return _interrupted(out)
     except GroundSieveError as err:  # Cancelled too
+        if INTERRUPT_SEEN[0]:  # (the interrupt came back as a library's error, wrapped as ours)
+            return _interrupted(out)
         print(f"groundsieve: {err}", file=out)
         return 1, {"status": "failed", "kind": error_kind(err), "error": str(err)}
+    except Exception:
+        if INTERRUPT_SEEN[0]:  # the interrupt, come back as a library's error (lazrs: LazrsError)
+            return _interrupted(out)
+        raise
+
+
+def _interrupted(out):
+    print("groundsieve: interrupted", file=out)
+    return INTERRUPTED, {"status": "interrupted", "kind": "interrupted", "error": "interrupted"}
 
 
 def error_kind(err: BaseException) -> str:
@@ -463,7 +484,7 @@ def main(argv: Optional[List[str]] = None, out=None, stdout=None) -> int:
     130 = interrupted (Ctrl-C; SIGTERM too under ``python -m groundsieve``). The log goes to ``out``
     (stderr); with ``--json`` one JSON document goes to ``stdout`` (sys.stdout) at the end."""
     out = out or sys.stderr
-    FINISHED[0] = False
+    FINISHED[0] = INTERRUPT_SEEN[0] = False
     argv = sys.argv[1:] if argv is None else list(argv)
     try:
         args = build_parser().parse_args(argv)

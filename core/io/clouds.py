@@ -14,7 +14,7 @@ import os
 import re
 import warnings
 from dataclasses import dataclass, field
-from typing import Optional
+from typing import Optional, Tuple
 
 import numpy as np
 
@@ -443,52 +443,109 @@ def check_laz_wave_packets(src: str, out: Optional[str]) -> None:
         raise _lazrs_wave_packets_error(out, src)
 
 
+def _evlr_places(f, head: bytes, size: int) -> list:
+    """(offset, total length) of each EVLR a LAS 1.4 header lists, as far as they lie in the file."""
+    import struct
+    if head[25] < 4 or len(head) < 247:
+        return []
+    at, count = struct.unpack_from("<QI", head, 235)
+    out = []
+    for _ in range(min(count, 100_000)):
+        if not 0 < at <= size - _EVLR_BYTES:
+            break
+        f.seek(at)
+        evlr = f.read(_EVLR_BYTES)
+        total = _EVLR_BYTES + struct.unpack_from("<Q", evlr, 20)[0]
+        out.append((at, total, _is_waveform_record(evlr)))
+        at += total
+    return out
+
+
+def internal_waveform(path: str) -> Tuple[Optional[int], int, str]:
+    """Where the waveform data packets of a LAS 1.3/1.4 file that says it holds them (global encoding
+    bit 1) are: (offset of their record, its length with its header, ""), found where the header points
+    or, when that leads to no such record, right after the point records of an uncompressed file;
+    (None, 0, why) when the file says so but holds none that fits; (None, 0, "") when it does not say so."""
+    import struct
+    with open(path, "rb") as f:
+        head = f.read(_HEADER_BYTES_14)
+        if len(head) < 235 or head[:4] != b"LASF" or head[25] < 3 or not struct.unpack_from("<H", head, 6)[0] & 2:
+            return None, 0, ""
+        size = os.fstat(f.fileno()).st_size
+
+        def record_at(at: int) -> int:
+            if not 0 < at <= size - _EVLR_BYTES:
+                return 0
+            f.seek(at)
+            evlr = f.read(_EVLR_BYTES)
+            total = _EVLR_BYTES + struct.unpack_from("<Q", evlr, 20)[0]
+            return total if _is_waveform_record(evlr) and at + total <= size else 0
+
+        pointer, = struct.unpack_from("<Q", head, 227)
+        total = record_at(pointer)
+        if total:
+            return pointer, total, ""
+        offset, = struct.unpack_from("<I", head, 96)
+        record, = struct.unpack_from("<H", head, 105)
+        count, = struct.unpack_from("<I", head, 107)
+        if head[25] >= 4 and len(head) >= 255:
+            count = struct.unpack_from("<Q", head, 247)[0] or count
+        after = offset + count * record
+        total = 0 if head[104] & 0x80 else record_at(after)  # (a LAZ's points end where only lazrs knows)
+        if total:
+            return after, total, ""
+    return None, 0, (f"its header says the waveform packets are in the file, at byte {pointer:,}, but no waveform "
+                     "record (LASF_Spec 65535) that fits in the file is there")
+
+
+def waveform_note(path: str) -> str:
+    """A warning when a LAS file says it holds its waveform packets but they cannot be found: its
+    classified copy says it holds none (the points' wave packet fields are kept as they are)."""
+    _at, _total, why = internal_waveform(path)
+    return (f"{WARNING_PREFIX}{path}: {why}; the classified copy is written without them and says so in its "
+            "header") if why else ""
+
+
 def carry_waveform_packets(src: str, dst: str) -> None:
     """Give ``dst``, a copy of ``src`` just written by laspy (before it is put in place), the waveform
     data packets ``src`` holds inside the file (LAS 1.3/1.4, global encoding bit 1: one record after
-    the points, from whose start every point's wave packet offset counts). laspy writes none for LAS
-    1.3, the header still saying they are there (a reviewer's 1.28 MB of samples went without a
-    word); in LAS 1.4 it keeps the record among the EVLRs but not the header's pointer to it, which a
-    LAZ copy moves. The record is appended as it is, or found among the copy's EVLRs, and the
-    header points at it. Nothing is done for a file without them, or whose pointer leads nowhere."""
+    the points, from whose start every point's wave packet offset counts; :func:`internal_waveform`).
+    laspy writes none for LAS 1.3, the header still saying they are there (a reviewer's 1.28 MB of
+    samples went without a word); in LAS 1.4 it keeps the records among the EVLRs but not the
+    header's pointer to the one in use, which a LAZ copy moves. The record is found among the copy's
+    EVLRs (the same one: the same place among the waveform records) or appended as it is, and the
+    header points at it; a file that says it holds them but does not gets a copy that says it holds
+    none (bit 1 and the pointer cleared), rather than a pointer to nothing."""
     import shutil
     import struct
-    with open(src, "rb") as f:
-        head = f.read(_HEADER_BYTES_14)
-        if len(head) < 235 or head[:4] != b"LASF" or head[25] < 3 or not struct.unpack_from("<H", head, 6)[0] & 2:
-            return
-        at, = struct.unpack_from("<Q", head, 227)
-        size = os.fstat(f.fileno()).st_size
-        if not 0 < at <= size - _EVLR_BYTES:
-            return
-        f.seek(at)
-        record = f.read(_EVLR_BYTES)
-        length, = struct.unpack_from("<Q", record, 20)
-        if not _is_waveform_record(record) or at + _EVLR_BYTES + length > size:
-            return
-        with open(dst, "r+b") as g:
-            out = g.read(_HEADER_BYTES_14)
-            minor = out[25]
-            first, count = struct.unpack_from("<QI", out, 235) if minor >= 4 else (0, 0)
-            place = first
-            for _ in range(count):  # LAS 1.4: laspy kept it among the EVLRs
-                g.seek(place)
-                evlr = g.read(_EVLR_BYTES)
-                if len(evlr) < _EVLR_BYTES:
-                    break
-                if _is_waveform_record(evlr):
-                    g.seek(227)
-                    g.write(struct.pack("<Q", place))
-                    return
-                place += _EVLR_BYTES + struct.unpack_from("<Q", evlr, 20)[0]
-            end = g.seek(0, os.SEEK_END)
-            f.seek(at)
-            shutil.copyfileobj(_Limited(f, _EVLR_BYTES + length), g, 1 << 20)
+    at, total, why = internal_waveform(src)
+    if at is None and not why:
+        return
+    with open(src, "rb") as f, open(dst, "r+b") as g:
+        out = g.read(_HEADER_BYTES_14)
+        if at is None:
+            encoding, = struct.unpack_from("<H", out, 6)
+            g.seek(6)
+            g.write(struct.pack("<H", encoding & ~2))
             g.seek(227)
-            g.write(struct.pack("<Q", end))
-            if minor >= 4:
-                g.seek(235)
-                g.write(struct.pack("<QI", first if count else end, count + 1))
+            g.write(struct.pack("<Q", 0))
+            return
+        head = f.read(_HEADER_BYTES_14)
+        theirs = [p for p, _t, wave in _evlr_places(f, head, os.fstat(f.fileno()).st_size) if wave]
+        ours = [p for p, _t, wave in _evlr_places(g, out, os.fstat(g.fileno()).st_size) if wave]
+        if at in theirs and len(ours) == len(theirs):  # LAS 1.4: laspy kept them among the EVLRs
+            g.seek(227)
+            g.write(struct.pack("<Q", ours[theirs.index(at)]))
+            return
+        end = g.seek(0, os.SEEK_END)
+        f.seek(at)
+        shutil.copyfileobj(_Limited(f, total), g, 1 << 20)
+        g.seek(227)
+        g.write(struct.pack("<Q", end))
+        if out[25] >= 4:
+            first, count = struct.unpack_from("<QI", out, 235)
+            g.seek(235)
+            g.write(struct.pack("<QI", first if count else end, count + 1))
 
 
 class _Limited:
@@ -594,14 +651,12 @@ def records_held(path: str, header) -> Optional[int]:
     end = os.path.getsize(path)
     if header.version.minor >= 4 and header.number_of_evlrs and int(header.start_of_first_evlr or 0) > 0:
         end = min(end, int(header.start_of_first_evlr))
-    try:  # LAS 1.3+ with the waveform packets in the file: they follow the points (a code reviewer's
-        # file was said to hold 2,246 records more than announced)
-        if header.version.minor >= 3 and header.global_encoding.waveform_data_packets_internal:
-            packets = int(header.start_of_waveform_data_packet_record or 0)
-            if packets > int(header.offset_to_point_data):
-                end = min(end, packets)
-    except AttributeError:
-        pass
+    # LAS 1.3+ with the waveform packets in the file: they follow the points (a code reviewer's file was
+    # said to hold 2,246 records more than announced); where the header points, or right after the points
+    # when it points nowhere (a pointer into the points read as "0 point records": a QA reviewer)
+    packets, _total, _why = internal_waveform(path)
+    if packets is not None and packets > int(header.offset_to_point_data):
+        end = min(end, packets)
     return max(0, end - int(header.offset_to_point_data)) // int(header.point_format.size)
 
 
@@ -622,8 +677,8 @@ def _read_points(reader, count: int, steps: Steps):
 
 def _read_las(path: str, steps: Steps) -> PointCloud:
     import laspy
-    notes = []
     check_las_layout(path)
+    notes = [note for note in (waveform_note(path),) if note]
     try:
         las = None
         with laspy.open(path) as reader:
@@ -718,7 +773,8 @@ def _text_rows(path: str, encoding: str, steps: Steps) -> np.ndarray:
     ValueError when the rows are not numbers (loadtxt's row numbers counted from the file's start) or
     their columns differ between chunks, as loadtxt raises within one."""
     import itertools
-    size = max(os.path.getsize(path), 1)
+    before_read = os.stat(path)
+    size = max(before_read.st_size, 1)
     lines_at_most = _line_ends(path, steps) + 1
     out, filled, done, before = None, 0, 0, 0
     with open(path, encoding=encoding) as f:
@@ -727,6 +783,8 @@ def _text_rows(path: str, encoding: str, steps: Steps) -> np.ndarray:
             lines = list(itertools.islice(f, TEXT_CHUNK_LINES))
             if not lines:
                 break
+            if not before and lines[0].startswith("\xef\xbb\xbf"):  # a UTF-8 BOM read as Latin-1 (a file
+                lines[0] = lines[0][3:]  # with a BOM and a Latin-1 comment: 'ï»¿161.45' was not a number)
             try:
                 rows = np.loadtxt(lines, dtype=np.float64, ndmin=2)
             except ValueError as err:  # "... at row 12, column 3": the row counted in this chunk
@@ -737,28 +795,37 @@ def _text_rows(path: str, encoding: str, steps: Steps) -> np.ndarray:
                     out = np.empty((max(lines_at_most, len(rows)), rows.shape[1]))
                 elif rows.shape[1] != out.shape[1]:
                     raise ValueError("the number of columns changed")
-                if filled + len(rows) > len(out):  # (a file that grew while read)
-                    out = np.concatenate([out[:filled], np.empty((filled + len(rows) - len(out), out.shape[1]))])
+                if filled + len(rows) > len(out):  # (not expected: the line ends were counted as Python reads them)
+                    grown = np.empty((max(filled + len(rows), len(out) + len(out) // 2), out.shape[1]))
+                    grown[:filled] = out[:filled]
+                    out = grown
                 out[filled:filled + len(rows)] = rows
                 filled += len(rows)
             done += sum(map(len, lines))
             steps.report(READ_SHARE * min(done / size, 1.0))
+    after_read = os.stat(path)
+    if (after_read.st_size, after_read.st_mtime_ns) != (before_read.st_size, before_read.st_mtime_ns):
+        raise InputError(f"{path}: the file changed while it was read ({before_read.st_size:,} bytes, then "
+                         f"{after_read.st_size:,}): run again once it is complete")
     if out is None:
         return np.empty((0, 0))
     return out[:filled]
 
 
 def _line_ends(path: str, steps: Steps, block: int = 1 << 24) -> int:
-    """How many line ends the file holds at most (newlines or, in old Mac files, carriage returns)."""
-    newlines = returns = 0
+    """The line ends of the file as Python's text mode counts them: newlines, carriage returns and
+    their pairs (a file may mix them: 500,000 lines ending in a newline, then carriage returns only)."""
+    ends, last = 0, b""
     with open(path, "rb") as f:
         while True:
             steps.check()
             data = f.read(block)
             if not data:
-                return max(newlines, returns)
-            newlines += data.count(b"\n")
-            returns += data.count(b"\r")
+                return ends
+            ends += data.count(b"\n") + data.count(b"\r") - data.count(b"\r\n")
+            if last == b"\r" and data[:1] == b"\n":  # a pair split between two blocks
+                ends -= 1
+            last = data[-1:]
 
 
 def _read_isprs_text(path: str, steps: Optional[Steps] = None) -> PointCloud:

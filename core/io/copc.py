@@ -153,8 +153,17 @@ def _open_index(real: str, size: int, mtime_ns: int, path: str) -> CopcIndex:
                              f"{int(header.point_count):,}")
     crs_wkt = header_crs_wkt(header)
     center = np.asarray(info.center, dtype=np.float64)
-    return CopcIndex(path, header, bytes(laszip.record_data), crs_wkt, center - float(info.halfsize),
-                     float(info.halfsize), nodes, np.cumsum(counts) - counts, (real, size, mtime_ns))
+    halfsize = float(info.halfsize)
+    # the octree's cube must hold the points (a NaN, negative or shifted cube put the nodes nowhere: a
+    # tiled run then read none of their points and blamed the header)
+    slack = 2.0 * np.asarray(header.scales, dtype=np.float64)
+    if not (np.all(np.isfinite(center)) and math.isfinite(halfsize) and halfsize > 0
+            and np.all(center - halfsize <= np.asarray(header.mins) + slack)
+            and np.all(center + halfsize >= np.asarray(header.maxs) - slack)):
+        raise _damaged(path, f"its octree's cube (centre {', '.join(f'{v:,.2f}' for v in center)}, half side "
+                             f"{halfsize:,.2f}) does not hold the points' bounds")
+    return CopcIndex(path, header, bytes(laszip.record_data), crs_wkt, center - halfsize,
+                     halfsize, nodes, np.cumsum(counts) - counts, (real, size, mtime_ns))
 
 
 def _read_hierarchy(f, path: str, size: int, offset: int, nbytes: int) -> np.ndarray:

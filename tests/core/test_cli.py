@@ -353,6 +353,37 @@ def test_json_failures_give_the_message_and_the_exit_status(tmp_path, monkeypatc
     assert json.loads(stdout.getvalue()) == {"status": "failed", "kind": "other", "error": "RuntimeError: a bug"}
 
 
+def test_an_interrupt_a_library_turned_into_its_own_error_or_swallowed_is_still_an_interrupt(monkeypatch):
+    """Ctrl-C or SIGTERM while lazrs wrote a LAZ came back as "LazrsError: IoError: Failed to call write",
+    a traceback and "failed / other" (a QA reviewer, 6 of 7 signals); GDAL's writer swallowed one and the
+    run ended "done". The handler of `python -m groundsieve` notes the interrupt: a library's error after
+    it is the interrupt (130), and the run's cancel check sees it before the outputs are put in place."""
+    from groundsieve.core.engine import cli, workflow
+    from groundsieve.core.errors import Cancelled
+    monkeypatch.setattr(cli, "INTERRUPT_SEEN", [False])  # (the module's own list back after the test)
+    seen = {}
+
+    def lazrs_wrapped(*_a, **_k):
+        cli.INTERRUPT_SEEN[0] = True  # what the handler does, then its KeyboardInterrupt comes back as:
+        raise RuntimeError("LazrsError: IoError: Failed to call write")
+
+    def swallowed(*_a, is_cancelled=None, **_k):
+        cli.INTERRUPT_SEEN[0] = True  # ... and GDAL ate the KeyboardInterrupt: the run goes on to its check
+        seen["cancel"] = is_cancelled()
+        raise Cancelled("cancelled by the user")
+    for fake in (lazrs_wrapped, swallowed):
+        monkeypatch.setattr(workflow, "run_ground_filter", fake)
+        out, stdout = io.StringIO(), io.StringIO()
+        assert main(["smrf", "--input", "x.laz", "--output", "o.laz", "--json"], out=out, stdout=stdout) == 130
+        assert json.loads(stdout.getvalue()) == {"status": "interrupted", "kind": "interrupted", "error": "interrupted"}
+        assert "Traceback" not in out.getvalue()
+    assert seen == {"cancel": True}
+    # without an interrupt, a library's error is still a bug shown as one
+    monkeypatch.setattr(workflow, "run_ground_filter", lambda *_a, **_k: (_ for _ in ()).throw(RuntimeError("bug")))
+    with pytest.raises(RuntimeError):
+        main(["smrf", "--input", "x.laz", "--output", "o.laz"], out=io.StringIO())
+
+
 def test_json_stdout_holds_the_document_alone_even_when_something_writes_to_it(scene, tmp_path):
     """Under `python -m groundsieve`, a print or a library writing to descriptor 1 during the run
     goes to stderr: stdout is the JSON document and nothing else."""

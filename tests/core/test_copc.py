@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import struct
 
 import copclib  # requirements-dev.txt: a missing install fails here, it is not skipped
 import laspy
@@ -320,6 +321,26 @@ def test_a_copc_with_a_damaged_index_is_read_as_a_plain_laz_with_a_warning(files
     got, plain = laspy.read(tmp_path / "out.laz"), laspy.read(folder / "plain.laz")
     assert np.array_equal(got.gps_time, plain.gps_time)
     assert np.array_equal(got.classification, plain.classification)
+
+
+@pytest.mark.parametrize("halfsize", [float("nan"), -300.0, 1e-3])
+def test_a_copc_whose_octree_cube_misses_its_points_is_read_as_a_plain_laz(files, runs, tmp_path, halfsize):
+    """A NaN, negative or tiny half side in the COPC info VLR put every node nowhere: a tiled run read
+    none of their points and said "the file's header and its points disagree" (a QA reviewer), where a
+    run of the whole file reads them all. The cube is checked: such a file is binned as the plain LAZ it
+    is, with a warning naming the cube."""
+    data = bytearray(open(files[0], "rb").read())
+    info_at = struct.unpack_from("<H", data, 94)[0] + 54  # the first VLR's data: the COPC info
+    struct.pack_into("<d", data, info_at + 24, halfsize)
+    bad = tmp_path / "cube.copc.laz"
+    bad.write_bytes(bytes(data))
+    assert "does not hold the points' bounds" in scan_header(str(bad)).copc_damaged
+    said = []
+    run_ground_filter(str(bad), str(tmp_path / "out.laz"), SMRF(), options=tiled(), log=said.append)
+    assert any("cube.copc.laz: a damaged COPC file (its octree's cube" in m for m in said), said
+    _, _, folder = runs
+    got, plain = laspy.read(tmp_path / "out.laz"), laspy.read(folder / "plain.laz")
+    assert np.array_equal(got.gps_time, plain.gps_time) and np.array_equal(got.classification, plain.classification)
 
 
 def test_copc_and_plain_laz_in_one_folder_and_vpc(tmp_path):

@@ -243,3 +243,86 @@ def test_a_copc_headers_copy_keeps_the_other_vlrs_in_their_order():
     buffer.seek(0)
     with laspy.open(buffer) as reader:
         assert [(str(v.user_id), v.record_id) for v in reader.header.vlrs] == before[1:]
+
+
+def _append_record(path, samples: bytes, record_id=65535) -> int:
+    """Append a waveform-like EVLR to ``path``; its offset."""
+    data = bytearray(path.read_bytes())
+    at = len(data)
+    data += struct.pack("<H16sHQ32s", 0, b"LASF_Spec", record_id, len(samples), b"packets") + samples
+    path.write_bytes(bytes(data))
+    return at
+
+
+def test_the_waveform_record_the_header_points_at_is_the_one_carried(tmp_path):
+    """Two waveform records in a LAS 1.4 file, the header pointing at the second: the copy pointed at the
+    first (a QA reviewer: 4,000 bytes of the wrong samples, silently)."""
+    src = write_with_packets(tmp_path / "two.las", 9, "1.4", n=500)
+    second = _append_record(src, bytes(range(256)) * 160)
+    data = bytearray(src.read_bytes())
+    struct.pack_into("<Q", data, 227, second)
+    struct.pack_into("<I", data, 243, struct.unpack_from("<I", data, 243)[0] + 1)  # one more EVLR
+    src.write_bytes(bytes(data))
+    for ext in ("las", "laz"):
+        run_ground_filter(str(src), str(tmp_path / f"out.{ext}"), SMRF())
+        assert packets(tmp_path / f"out.{ext}") == packets(src) and len(packets(src)) == 60 + 256 * 160
+
+
+@pytest.mark.parametrize("pointer", ["into the points", "zero", "past the end"])
+def test_a_waveform_pointer_that_leads_nowhere_finds_the_record_after_the_points(tmp_path, pointer):
+    """A pointer into the point data was read as "the file holds 0 point records" and the run refused;
+    a pointer of 0 or past the end dropped the samples. The record right after the points is the one."""
+    src = write_with_packets(tmp_path / "p.las", 4, "1.3", n=2000)
+    right = packets(src)
+    data = bytearray(src.read_bytes())
+    offset = struct.unpack_from("<I", data, 96)[0]
+    struct.pack_into("<Q", data, 227, {"into the points": offset + 40, "zero": 0, "past the end": 10 ** 9}[pointer])
+    src.write_bytes(bytes(data))
+    said = []
+    run_ground_filter(str(src), str(tmp_path / "out.las"), SMRF(), log=said.append)
+    assert packets(tmp_path / "out.las") == right
+    assert len(laspy.read(str(tmp_path / "out.las")).points) == 2000
+    assert not any("point records" in line for line in said), said
+
+
+@pytest.mark.parametrize("tiled", [False, True])
+def test_waveform_packets_that_cannot_be_found_are_said_and_the_copy_claims_none(tmp_path, tiled):
+    """A record of another id where the header points (or one longer than the file): the samples were
+    dropped without a word, the copy still claiming them at its end."""
+    src = write_with_packets(tmp_path / "w.las", 4, "1.3", n=2000)
+    data = bytearray(src.read_bytes())
+    at = struct.unpack_from("<Q", data, 227)[0]
+    struct.pack_into("<H", data, at + 18, 65534)
+    src.write_bytes(bytes(data))
+    said = []
+    run_ground_filter(str(src), str(tmp_path / "out.las"), SMRF(), options=tiled_or_whole(tiled), log=said.append)
+    warned = [line for line in said if "w.las: its header says the waveform packets are in the file" in line]
+    assert len(warned) == 1 and "the classified copy is written without them" in warned[0], said
+    out = (tmp_path / "out.las").read_bytes()
+    assert not struct.unpack_from("<H", out, 6)[0] & 2 and struct.unpack_from("<Q", out, 227)[0] == 0
+
+
+@pytest.mark.parametrize("ext", ["las", "laz"])
+def test_undocumented_extra_bytes_run_tiled(tmp_path, ext):
+    """An extra-bytes description of data type 0 (undocumented bytes, their count in the options byte),
+    which LAS allows: a tiled run stopped with a traceback (laspy has no minimum or maximum for it)."""
+    header = laspy.LasHeader(point_format=1, version="1.2")
+    header.scales, header.offsets = [0.01] * 3, [500000.0, 4000000.0, 0.0]
+    header.add_extra_dim(laspy.ExtraBytesParams(name="foo", type=np.int32))
+    las = laspy.LasData(header)
+    rng = np.random.default_rng(5)
+    las.x, las.y = 500000 + rng.uniform(0, 120, 4000), 4000000 + rng.uniform(0, 120, 4000)
+    las.z = rng.uniform(0, 0.3, 4000)
+    las.foo = rng.integers(0, 1000, 4000)
+    src = tmp_path / "eb.las"
+    las.write(str(src))
+    data = bytearray(src.read_bytes())
+    at = struct.unpack_from("<H", data, 94)[0] + 54
+    data[at + 2], data[at + 3] = 0, 4  # undocumented, 4 bytes
+    src.write_bytes(bytes(data))
+    out = tmp_path / f"out.{ext}"
+    run_ground_filter(str(src), str(out), SMRF(), options=tiled_or_whole(True))
+    a, b = laspy.read(str(src)), laspy.read(str(out))
+    for dim in a.point_format.dimension_names:
+        if dim != "classification":
+            assert np.array_equal(a[dim], b[dim]), dim

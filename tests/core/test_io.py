@@ -343,6 +343,8 @@ def test_text_with_a_bom_comments_and_latin1_is_read(tmp_path):
     assert cloud.z.tolist() == [3.0, 6.0] and cloud.reference_label.tolist() == [0, 1]
     path.write_bytes(b"# caf\xe9\n1 2 3 0\n")
     assert read_cloud(str(path)).x.tolist() == [1.0]
+    path.write_bytes(b"\xef\xbb\xbf1 2 3 0\n4 5 6 1 # caf\xe9\n")  # a BOM and a Latin-1 comment: read as Latin-1
+    assert read_cloud(str(path)).x.tolist() == [1.0, 4.0]
 
 
 def test_text_is_read_in_chunks_with_progress_and_cancel(tmp_path, monkeypatch):
@@ -369,6 +371,32 @@ def test_text_is_read_in_chunks_with_progress_and_cancel(tmp_path, monkeypatch):
     # a later chunk with other columns is refused as a whole file's would be, naming the line
     path.write_text(path.read_text() + "1 2 3\n")
     with pytest.raises(UnsupportedFormatError, match=r"chunks\.txt: .*line 52 has 3 columns, the lines before it 4"):
+        read_cloud(str(path))
+
+
+def test_text_with_mixed_line_ends_and_one_that_changes_while_read(tmp_path, monkeypatch):
+    """The chunks fill an array sized by the line ends: a file mixing newlines and carriage returns
+    (500,000 lines of each kind in a QA reviewer's file) was undercounted and refused with numpy's
+    "could not broadcast"; a file that grew or shrank while read was read in part without a word."""
+    from groundsieve.core.io import clouds
+    monkeypatch.setattr(clouds, "TEXT_CHUNK_LINES", 7)
+    rows = [f"{i} {i + 1} {i % 5} {i % 2}" for i in range(40)]
+    path = tmp_path / "mixed.txt"
+    path.write_bytes(("\n".join(rows[:20]) + "\n" + "\r".join(rows[20:30]) + "\r"
+                      + "\r\n".join(rows[30:]) + "\r\n").encode())
+    cloud = read_cloud(str(path))
+    assert cloud.x.tolist() == [float(i) for i in range(40)]
+    real = np.loadtxt
+    calls = []
+
+    def growing(lines, *args, **kwargs):  # the file grows after the first chunk is read
+        calls.append(1)
+        if len(calls) == 1:
+            with open(path, "a") as f:
+                f.write("100 101 1 0\n")
+        return real(lines, *args, **kwargs)
+    monkeypatch.setattr(clouds.np, "loadtxt", growing)
+    with pytest.raises(InputError, match=r"mixed\.txt: the file changed while it was read .*run again once it is complete"):
         read_cloud(str(path))
 
 
