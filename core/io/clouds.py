@@ -761,48 +761,49 @@ def _text_problem(path: str) -> str:
     return ""
 
 
-#: Lines of a text cloud parsed at a time (about 0.1 s each): a cancel is seen between them.
+#: Rows of a text cloud parsed at a time (about 0.1 s each): a cancel is seen between them.
 TEXT_CHUNK_LINES = CHUNK_POINTS
 
 
 def _text_rows(path: str, encoding: str, steps: Steps) -> np.ndarray:
-    """The numbers of a text cloud as numpy's loadtxt reads them, read :data:`TEXT_CHUNK_LINES` lines at
-    a time, reporting the share of the file's characters read to ``steps`` and checking cancellation
-    between chunks (22 M lines read in one loadtxt call took 8 s deaf to Cancel). The chunks fill one
-    array sized by a count of the file's line ends (so the peak memory stays about one loadtxt's). A
-    ValueError when the rows are not numbers (loadtxt's row numbers counted from the file's start) or
-    their columns differ between chunks, as loadtxt raises within one."""
-    import itertools
+    """The numbers of a text cloud as numpy's loadtxt reads them, parsed :data:`TEXT_CHUNK_LINES` rows
+    at a time from the open file (loadtxt takes its lines one by one through its comment filter, so
+    each call stops at its last row), reporting the share of the file read to ``steps`` and checking
+    cancellation between chunks (22 M lines in one loadtxt call took 8 s deaf to Cancel). The chunks
+    fill one array sized from the first chunk's bytes per row (grown if short), so the time and the
+    peak memory stay about one loadtxt call's. A ValueError when the rows are not numbers (loadtxt's
+    row numbers counted from the file's start) or their columns differ between chunks, as loadtxt
+    raises within one; an InputError when the file changes while it is read."""
     before_read = os.stat(path)
     size = max(before_read.st_size, 1)
-    lines_at_most = _line_ends(path, steps) + 1
-    out, filled, done, before = None, 0, 0, 0
+    out, filled = None, 0
     with open(path, encoding=encoding) as f:
+        first = True
         while True:
             steps.check()
-            lines = list(itertools.islice(f, TEXT_CHUNK_LINES))
-            if not lines:
-                break
-            if not before and lines[0].startswith("\xef\xbb\xbf"):  # a UTF-8 BOM read as Latin-1 (a file
-                lines[0] = lines[0][3:]  # with a BOM and a Latin-1 comment: 'ï»¿161.45' was not a number)
             try:
-                rows = np.loadtxt(lines, dtype=np.float64, ndmin=2)
+                rows = np.loadtxt(_no_bom(f) if first else f, dtype=np.float64, ndmin=2, max_rows=TEXT_CHUNK_LINES)
+            except UnicodeDecodeError:
+                raise  # (the caller reads the file again as Latin-1)
             except ValueError as err:  # "... at row 12, column 3": the row counted in this chunk
-                raise ValueError(re.sub(r"\brow (\d+)", lambda m: f"row {int(m.group(1)) + before}", str(err))) from err
-            before += len(lines)
-            if rows.size:
-                if out is None:
-                    out = np.empty((max(lines_at_most, len(rows)), rows.shape[1]))
-                elif rows.shape[1] != out.shape[1]:
-                    raise ValueError("the number of columns changed")
-                if filled + len(rows) > len(out):  # (not expected: the line ends were counted as Python reads them)
-                    grown = np.empty((max(filled + len(rows), len(out) + len(out) // 2), out.shape[1]))
-                    grown[:filled] = out[:filled]
-                    out = grown
-                out[filled:filled + len(rows)] = rows
-                filled += len(rows)
-            done += sum(map(len, lines))
+                raise ValueError(re.sub(r"\brow (\d+)", lambda m: f"row {int(m.group(1)) + filled}", str(err))) from err
+            first = False
+            if not rows.size:
+                break
+            done = f.buffer.tell()  # (with what the text layer has read ahead: a few kB)
+            if out is None:
+                out = np.empty((max(len(rows), int(len(rows) * size / max(done, 1) * 1.02) + 16), rows.shape[1]))
+            elif rows.shape[1] != out.shape[1]:
+                raise ValueError("the number of columns changed")
+            if filled + len(rows) > len(out):
+                grown = np.empty((max(filled + len(rows), len(out) + len(out) // 2), out.shape[1]))
+                grown[:filled] = out[:filled]
+                out = grown
+            out[filled:filled + len(rows)] = rows
+            filled += len(rows)
             steps.report(READ_SHARE * min(done / size, 1.0))
+            if len(rows) < TEXT_CHUNK_LINES:
+                break
     after_read = os.stat(path)
     if (after_read.st_size, after_read.st_mtime_ns) != (before_read.st_size, before_read.st_mtime_ns):
         raise InputError(f"{path}: the file changed while it was read ({before_read.st_size:,} bytes, then "
@@ -812,20 +813,14 @@ def _text_rows(path: str, encoding: str, steps: Steps) -> np.ndarray:
     return out[:filled]
 
 
-def _line_ends(path: str, steps: Steps, block: int = 1 << 24) -> int:
-    """The line ends of the file as Python's text mode counts them: newlines, carriage returns and
-    their pairs (a file may mix them: 500,000 lines ending in a newline, then carriage returns only)."""
-    ends, last = 0, b""
-    with open(path, "rb") as f:
-        while True:
-            steps.check()
-            data = f.read(block)
-            if not data:
-                return ends
-            ends += data.count(b"\n") + data.count(b"\r") - data.count(b"\r\n")
-            if last == b"\r" and data[:1] == b"\n":  # a pair split between two blocks
-                ends -= 1
-            last = data[-1:]
+def _no_bom(f):
+    """The lines of ``f``, a UTF-8 BOM read as Latin-1 dropped from the first (a file with a BOM and a
+    Latin-1 comment: 'ï»¿161.45' was not a number)."""
+    for line in f:  # (not "yield from f": closing this generator would close the file)
+        yield line[3:] if line.startswith("\xef\xbb\xbf") else line
+        break
+    for line in f:
+        yield line
 
 
 def _read_isprs_text(path: str, steps: Optional[Steps] = None) -> PointCloud:

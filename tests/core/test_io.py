@@ -348,29 +348,33 @@ def test_text_with_a_bom_comments_and_latin1_is_read(tmp_path):
 
 
 def test_text_is_read_in_chunks_with_progress_and_cancel(tmp_path, monkeypatch):
-    """22 M lines in one loadtxt call took 8 s deaf to Cancel: the lines are parsed a chunk at a time,
-    the bar moves with the share of the file read, and a cancel stops the read between chunks."""
+    """22 M lines in one loadtxt call took 8 s deaf to Cancel: the rows are parsed a chunk at a time
+    from the open file (each chunk stops at its last row: none lost or read twice, comments and a BOM
+    as loadtxt reads them), the bar moves with the share of the file read, and a cancel stops the read
+    between chunks."""
     from groundsieve.core.errors import Cancelled
     from groundsieve.core.io import clouds
     from groundsieve.core.progress import Steps
-    monkeypatch.setattr(clouds, "TEXT_CHUNK_LINES", 7)
+    monkeypatch.setattr(clouds, "TEXT_CHUNK_LINES", 500)  # chunks of about 12 kB, beyond a text file's read-ahead
     rng = np.random.default_rng(3)
-    rows = np.c_[rng.uniform(0, 100, (50, 3)).round(2), rng.integers(0, 2, 50)]
+    rows = np.c_[rng.uniform(0, 100, (3000, 3)).round(2), rng.integers(0, 2, 3000)]
     path = tmp_path / "chunks.txt"
     write_text(path, rows)
-    path.write_text("# x y z label\n" + path.read_text().replace("\n", "  # a comment\n", 5))
+    text = path.read_text().replace("\n", "  # a comment\n", 5).splitlines(keepends=True)
+    text.insert(1200, "\n# a comment line and a blank line inside a chunk\n")
+    path.write_bytes(b"\xef\xbb\xbf" + ("# x y z label\n" + "".join(text)).encode())
     shown = []
     cloud = read_cloud(str(path), Steps(shown.append))
     assert np.array_equal(np.c_[cloud.x, cloud.y, cloud.z], rows[:, :3])
     assert cloud.reference_label.tolist() == rows[:, 3].astype(int).tolist()
-    assert len(shown) >= 7 and shown == sorted(shown) and 0 < shown[0] < shown[-1]
+    assert len(shown) >= 6 and shown == sorted(shown) and 0 < shown[0] < shown[-1]
     calls = []
     with pytest.raises(Cancelled):
         read_cloud(str(path), Steps(calls.append, lambda: len(calls) >= 2))
     assert len(calls) == 2  # stopped after the second chunk, not at the end of the file
     # a later chunk with other columns is refused as a whole file's would be, naming the line
-    path.write_text(path.read_text() + "1 2 3\n")
-    with pytest.raises(UnsupportedFormatError, match=r"chunks\.txt: .*line 52 has 3 columns, the lines before it 4"):
+    path.write_bytes(path.read_bytes() + b"1 2 3\n")
+    with pytest.raises(UnsupportedFormatError, match=r"chunks\.txt: .*line 3004 has 3 columns, the lines before it 4"):
         read_cloud(str(path))
 
 
