@@ -440,7 +440,7 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     for info in infos:  # as a run of the whole file says (a tiled one dropped 8,554 points without a word)
         if info.held is not None and info.held > info.count:
             log(extra_records_warning(info.path, info.count, info.held))
-        if output_path and info.version >= "1.3":  # (as the whole run's reading says)
+        if info.version >= "1.3":  # (as the whole run's reading says)
             from ..io.clouds import waveform_note
             note = waveform_note(info.path)
             if note:

@@ -502,8 +502,8 @@ def waveform_note(path: str) -> str:
     """A warning when a LAS file says it holds its waveform packets but they cannot be found: its
     classified copy says it holds none (the points' wave packet fields are kept as they are)."""
     _at, _total, why = internal_waveform(path)
-    return (f"{WARNING_PREFIX}{path}: {why}; the classified copy is written without them and says so in its "
-            "header") if why else ""
+    return (f"{WARNING_PREFIX}{path}: {why}; a classified copy leaves them out and says in its header that it "
+            "holds none") if why else ""
 
 
 def carry_waveform_packets(src: str, dst: str) -> None:
@@ -654,9 +654,18 @@ def records_held(path: str, header) -> Optional[int]:
     # LAS 1.3+ with the waveform packets in the file: they follow the points (a code reviewer's file was
     # said to hold 2,246 records more than announced); where the header points, or right after the points
     # when it points nowhere (a pointer into the points read as "0 point records": a QA reviewer)
-    packets, _total, _why = internal_waveform(path)
-    if packets is not None and packets > int(header.offset_to_point_data):
-        end = min(end, packets)
+    try:
+        internal = header.version.minor >= 3 and header.global_encoding.waveform_data_packets_internal
+    except AttributeError:
+        internal = False
+    if internal:
+        packets, _total, _why = internal_waveform(path)
+        pointer = int(header.start_of_waveform_data_packet_record or 0)
+        if packets is None and pointer >= int(header.offset_to_point_data) + int(header.point_count) * int(
+                header.point_format.size):  # a damaged record past the points: still where they end
+            packets = pointer
+        if packets is not None and packets > int(header.offset_to_point_data):
+            end = min(end, packets)
     return max(0, end - int(header.offset_to_point_data)) // int(header.point_format.size)
 
 

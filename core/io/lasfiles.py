@@ -658,8 +658,8 @@ def write_classified_piece(src: str, records: str, classification: np.ndarray, f
 
 
 def _header_stats(h) -> dict:
-    # (an "undocumented extra bytes" description, data type 0, has no minimum or maximum: None)
-    eb = [(None, None) if s._raw_min() is None else (s._raw_min().tolist(), s._raw_max().tolist())
+    # (a description without a minimum or without a maximum, e.g. undocumented bytes: None for it)
+    eb = [tuple(None if value is None else value.tolist() for value in (s._raw_min(), s._raw_max()))
           for v in h.vlrs.get("ExtraBytesVlr")[:1] for s in v.extra_bytes_structs]
     return dict(mins=[float(v) for v in h.mins], maxs=[float(v) for v in h.maxs], count=int(h.point_count),
                 min_gps=float(h.min_gps_time), max_gps=float(h.max_gps_time),
@@ -678,10 +678,10 @@ def _merge_stats(h, stats: Sequence[dict]) -> None:
     for v in h.vlrs.get("ExtraBytesVlr")[:1]:
         for i, struct in enumerate(v.extra_bytes_structs):
             lo, hi = struct._raw_min(), struct._raw_max()
-            if lo is None or hi is None:
-                continue
-            lo[:] = np.min([s["eb"][i][0] for s in stats], axis=0).astype(lo.dtype)
-            hi[:] = np.max([s["eb"][i][1] for s in stats], axis=0).astype(hi.dtype)
+            if lo is not None:
+                lo[:] = np.min([s["eb"][i][0] for s in stats], axis=0).astype(lo.dtype)
+            if hi is not None:
+                hi[:] = np.max([s["eb"][i][1] for s in stats], axis=0).astype(hi.dtype)
 
 
 def _copy_bytes(src, dst, n: int, block: int = 16 << 20) -> None:

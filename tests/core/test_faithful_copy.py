@@ -297,32 +297,40 @@ def test_waveform_packets_that_cannot_be_found_are_said_and_the_copy_claims_none
     said = []
     run_ground_filter(str(src), str(tmp_path / "out.las"), SMRF(), options=tiled_or_whole(tiled), log=said.append)
     warned = [line for line in said if "w.las: its header says the waveform packets are in the file" in line]
-    assert len(warned) == 1 and "the classified copy is written without them" in warned[0], said
+    assert len(warned) == 1 and "a classified copy leaves them out" in warned[0], said
+    assert not any("point records" in line for line in said), said  # (the record's bytes are no points)
     out = (tmp_path / "out.las").read_bytes()
     assert not struct.unpack_from("<H", out, 6)[0] & 2 and struct.unpack_from("<Q", out, 227)[0] == 0
 
 
 @pytest.mark.parametrize("ext", ["las", "laz"])
-def test_undocumented_extra_bytes_run_tiled(tmp_path, ext):
-    """An extra-bytes description of data type 0 (undocumented bytes, their count in the options byte),
-    which LAS allows: a tiled run stopped with a traceback (laspy has no minimum or maximum for it)."""
+@pytest.mark.parametrize("data_type, options, size", [(0, 4, 4), (0, 2, 2), (0, 3, 3), (4, 2, 2)],
+                         ids=["undocumented 4", "undocumented 2", "undocumented 3", "int16 with a minimum only"])
+def test_extra_bytes_without_a_minimum_or_maximum_run_tiled(tmp_path, ext, data_type, options, size):
+    """An extra-bytes description without a minimum, a maximum or both (undocumented bytes, data type 0,
+    their count in the options byte, whose bits 1 and 2 are also "minimum set" and "maximum set"; or a
+    documented type with a minimum only), which LAS allows: a tiled run stopped with a traceback (laspy
+    has None for them; a code reviewer found the min-only cases after the first fix)."""
     header = laspy.LasHeader(point_format=1, version="1.2")
     header.scales, header.offsets = [0.01] * 3, [500000.0, 4000000.0, 0.0]
-    header.add_extra_dim(laspy.ExtraBytesParams(name="foo", type=np.int32))
+    header.add_extra_dim(laspy.ExtraBytesParams(name="foo", type=np.int16 if size == 2 else np.int32 if size == 4
+                                                else "3u1"))
     las = laspy.LasData(header)
     rng = np.random.default_rng(5)
     las.x, las.y = 500000 + rng.uniform(0, 120, 4000), 4000000 + rng.uniform(0, 120, 4000)
     las.z = rng.uniform(0, 0.3, 4000)
-    las.foo = rng.integers(0, 1000, 4000)
+    las.foo = rng.integers(0, 100, las.foo.shape)
     src = tmp_path / "eb.las"
     las.write(str(src))
     data = bytearray(src.read_bytes())
     at = struct.unpack_from("<H", data, 94)[0] + 54
-    data[at + 2], data[at + 3] = 0, 4  # undocumented, 4 bytes
+    assert struct.unpack_from("<H", data, at - 54 + 20)[0] == 192  # one description
+    data[at + 2], data[at + 3] = data_type, options
     src.write_bytes(bytes(data))
     out = tmp_path / f"out.{ext}"
     run_ground_filter(str(src), str(out), SMRF(), options=tiled_or_whole(True))
     a, b = laspy.read(str(src)), laspy.read(str(out))
+    assert a.point_format.num_extra_bytes == b.point_format.num_extra_bytes == size
     for dim in a.point_format.dimension_names:
         if dim != "classification":
             assert np.array_equal(a[dim], b[dim]), dim
