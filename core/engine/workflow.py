@@ -415,7 +415,27 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions, why_none: str = "
         note = dtm_spacing_note(int(ground.sum()), int(np.count_nonzero(np.isfinite(dtm))), grid.cell)
         if note:
             log(note)
+    if log is not None:
+        from ..grids.rasterize import isolated_pits
+        count, depth, row, col = isolated_pits(dtm)
+        note = pits_note(count, depth, grid.x0 + (col + 0.5) * grid.cell, grid.top - (row + 0.5) * grid.cell)
+        if note:
+            log(note)
     return grid, dtm
+
+
+def pits_note(count: int, depth: float, x: float, y: float) -> str:
+    """What to say of a DTM's isolated pits (:func:`~groundsieve.core.grids.rasterize.isolated_pits`),
+    "" without one. An archaeologist's hillshade showed 1-2 m pits that looked like post-holes: low
+    points (multipath or noise echoes) that SMRF's low-outlier test lets through when less than 5 cells
+    deep, made ground, with nothing in the log."""
+    from ..grids.rasterize import PIT_DEPTH
+    if not count:
+        return ""
+    return (f"DTM: {count:,} cell(s) lie more than {PIT_DEPTH:g} m below all 8 cells around them, the deepest "
+            f"{depth:.2f} m at x {x:,.2f}, y {y:,.2f}: isolated pits, most often low points made ground (multipath "
+            "or noise echoes) rather than terrain. Check them; class such points as noise (7) beforehand, or with "
+            "SMRF lower the Low-outlier slope (1 catches points 1 m deep).")
 
 
 def dtm_spacing_note(points: int, valued_cells: int, cell: float) -> str:

@@ -364,3 +364,39 @@ def tin_dtm(x, y, z, grid: GridSpec, *, fill_outside: bool = False, points_per_c
         out[far] = np.nan
     steps.report(1.0)
     return out
+
+
+#: How far below all 8 cells around it a DTM cell must lie to be an isolated pit (in the CRS's unit).
+PIT_DEPTH = 0.5
+
+
+def isolated_pits(values: np.ndarray, depth: float = PIT_DEPTH, inner: Optional[tuple] = None,
+                  strip_rows: int = 1024) -> tuple:
+    """The cells of a DTM (NaN = no value) lying more than ``depth`` below every one of their 8
+    neighbours, all of which have a value: (count, the deepest's depth, its row, its column), or
+    (0, 0.0, -1, -1). A ditch or a valley has lower neighbours along it and is not one; a low point made
+    ground (a multipath or noise echo) is, as a 1-2 m pit in a hillshade. ``inner``: (row0, row1, col0,
+    col1), the cells to count (their neighbours may lie outside: a tile's block with its buffer's cells
+    around it). Row strips of ``strip_rows`` bound the memory to a few strips."""
+    nrows, ncols = values.shape
+    r0, r1, c0, c1 = inner if inner is not None else (0, nrows, 0, ncols)
+    r0, c0, r1, c1 = max(r0, 1), max(c0, 1), min(r1, nrows - 1), min(c1, ncols - 1)
+    count, deepest, where = 0, 0.0, (-1, -1)
+    for top in range(r0, r1, strip_rows):
+        bottom = min(top + strip_rows, r1)
+        centre = values[top:bottom, c0:c1]
+        lowest = np.full(centre.shape, np.inf)
+        for dr in (-1, 0, 1):
+            for dc in (-1, 0, 1):
+                if dr or dc:
+                    around = values[top + dr:bottom + dr, c0 + dc:c1 + dc]
+                    lowest = np.fmin(lowest, np.where(np.isnan(around), -np.inf, around))
+        drop = lowest - centre  # -inf where a neighbour has no value, NaN where the cell has none
+        pits = drop > depth
+        n = int(np.count_nonzero(pits))
+        if n:
+            k = int(np.nanargmax(np.where(pits, drop, np.nan)))
+            if drop.flat[k] > deepest:
+                deepest, where = float(drop.flat[k]), (top + k // centre.shape[1], c0 + k % centre.shape[1])
+            count += n
+    return count, deepest, where[0], where[1]

@@ -1282,3 +1282,31 @@ def test_a_dtm_much_finer_than_the_ground_points_spacing_is_said_whole_and_tiled
         spacing[name] = float(lines[0].split("about one point every ")[1].split(" m,")[0])
     assert 1.0 < spacing["whole"] < 3.0  # about 1.4 m: half the points are ground
     assert abs(spacing["tiled"] - spacing["whole"]) <= 0.1
+
+
+def test_isolated_pits_of_the_dtm_are_said_whole_and_tiled_alike(tmp_path):
+    """An archaeologist's 40 low points 1.5-5 m deep: SMRF's defaults made 31 of them ground, each a
+    1-2 m pit in the hillshade that looked like a post-hole, with nothing in the log. The run now counts
+    the DTM cells lying more than 0.5 m below all 8 around them and says where the deepest is; a tiled
+    run counts each block's against its buffer's cells, so both say the same; with the low-outlier
+    slope at 1 SMRF catches the points and nothing is said."""
+    scene = make_scene(SceneSpec(size_m=120.0, density_per_m2=5.0, seed=12, buildings_per_ha=0.0, trees_per_ha=0.0))
+    rng = np.random.default_rng(12)
+    k = rng.choice(len(scene.x), 12, replace=False)
+    z = scene.z.copy()
+    z[k] -= rng.uniform(2.0, 4.0, k.size)  # isolated low points (multipath echoes)
+    src = tmp_path / "lows.laz"
+    write_las(new_las(scene.x, scene.y, z, scale=0.01), str(src))
+    notes = {}
+    for name, algorithm, options in (("whole", SMRF(), FilterOptions()), ("tiled", SMRF(), tiled(60.0)),
+                                     ("caught", SMRF(low_outlier_slope=1.0), FilterOptions())):
+        logs = []
+        run_ground_filter(str(src), None, algorithm, dtm_path=str(tmp_path / f"{name}.tif"), options=options,
+                          log=logs.append)
+        notes[name] = [line for line in logs if "below all 8 cells around them" in line]
+    assert len(notes["whole"]) == 1 and notes["whole"] == notes["tiled"], notes
+    count = int(notes["whole"][0].split("DTM: ")[1].split(" cell(s)")[0])
+    assert 4 <= count <= 12
+    deepest = notes["whole"][0].split("the deepest ")[1].split(" m at")[0]
+    assert 1.5 <= float(deepest) <= 4.0
+    assert notes["caught"] == []
