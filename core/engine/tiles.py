@@ -1622,7 +1622,8 @@ def _dtm_block(cloud, ground, dtm, full, bounds, buffer_m):
     g = ground
     values = tin_dtm(cloud.x[g], cloud.y[g], cloud.z[g], ext, fill_outside=dtm.fill_outside_hull,
                      points_per_cell=dtm.points_per_cell, max_distance=dtm.max_distance_m)
-    # the block's isolated pits, each against its 8 neighbours (the buffer's cells around the block)
+    # the block's isolated pits, each against its 5 x 5 window (the buffer's cells around the block: with a
+    # buffer under a cell, those at the block's edge reach no value there and are not counted)
     count, depth, r, k = isolated_pits(values, inner=(pad, pad + row1 - row0, pad, pad + col1 - col0))
     pits = [count, depth, ext.x0 + (k + 0.5) * c, ext.top - (r + 0.5) * c] if count else None
     return (row0, col0, np.ascontiguousarray(values[pad:pad + row1 - row0, pad:pad + col1 - col0])), pits

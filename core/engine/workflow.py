@@ -417,7 +417,7 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions, why_none: str = "
             log(note)
     if log is not None:
         from ..grids.rasterize import isolated_pits
-        count, depth, row, col = isolated_pits(dtm)
+        count, depth, row, col = isolated_pits(dtm, check=steps.check if steps is not None else None)
         note = pits_note(count, depth, grid.x0 + (col + 0.5) * grid.cell, grid.top - (row + 0.5) * grid.cell)
         if note:
             log(note)
@@ -428,14 +428,17 @@ def pits_note(count: int, depth: float, x: float, y: float) -> str:
     """What to say of a DTM's isolated pits (:func:`~groundsieve.core.grids.rasterize.isolated_pits`),
     "" without one. An archaeologist's hillshade showed 1-2 m pits that looked like post-holes: low
     points (multipath or noise echoes) that SMRF's low-outlier test lets through when less than 5 cells
-    deep, made ground, with nothing in the log."""
+    deep, made ground, with nothing in the log. A narrow, deep ditch sampled by few points is beaded
+    into such pits too (a code reviewer: 1 m wide and 2 m deep, 0.5 m between points), so the note says
+    both and asks for a look before any change."""
     from ..grids.rasterize import PIT_DEPTH
     if not count:
         return ""
-    return (f"DTM: {count:,} cell(s) lie more than {PIT_DEPTH:g} m below all 8 cells around them, the deepest "
-            f"{depth:.2f} m at x {x:,.2f}, y {y:,.2f}: isolated pits, most often low points made ground (multipath "
-            "or noise echoes) rather than terrain. Check them; class such points as noise (7) beforehand, or with "
-            "SMRF lower the Low-outlier slope (1 catches points 1 m deep).")
+    return (f"DTM: {count:,} isolated pit(s), cells more than {PIT_DEPTH:g} m below every other cell within 2 cells, "
+            f"the deepest {depth:.2f} m at x {x:,.2f}, y {y:,.2f}. Low points made ground (multipath or noise "
+            "echoes) make them, and so does a narrow, deep ditch sampled by few points: look at them before "
+            "mapping them. Where they are low points, class those as noise (7) beforehand, or with SMRF lower the "
+            "Low-outlier slope (1 catches points 1 m deep).")
 
 
 def dtm_spacing_note(points: int, valued_cells: int, cell: float) -> str:
