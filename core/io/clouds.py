@@ -776,11 +776,11 @@ TEXT_CHUNK_LINES = CHUNK_POINTS
 
 def _text_rows(path: str, encoding: str, steps: Steps) -> np.ndarray:
     """The numbers of a text cloud as numpy's loadtxt reads them, parsed :data:`TEXT_CHUNK_LINES` rows
-    at a time from the open file (loadtxt takes its lines one by one through its comment filter, so
-    each call stops at its last row), reporting the share of the file read to ``steps`` and checking
+    at a time from the open file (given a file object, loadtxt's reader pulls its lines one at a time,
+    so each call stops at its last row), reporting the share of the file read to ``steps`` and checking
     cancellation between chunks (22 M lines in one loadtxt call took 8 s deaf to Cancel). The chunks
-    fill one array sized from the first chunk's bytes per row (grown if short), so the time and the
-    peak memory stay about one loadtxt call's. A ValueError when the rows are not numbers (loadtxt's
+    fill one array of as many rows as the file has lines, so the peak memory stays about one loadtxt
+    call's. A ValueError when the rows are not numbers (loadtxt's
     row numbers counted from the file's start) or their columns differ between chunks, as loadtxt
     raises within one; an InputError when the file changes while it is read."""
     before_read = os.stat(path)
@@ -800,8 +800,9 @@ def _text_rows(path: str, encoding: str, steps: Steps) -> np.ndarray:
             if not rows.size:
                 break
             done = f.buffer.tell()  # (with what the text layer has read ahead: a few kB)
-            if out is None:
-                out = np.empty((max(len(rows), int(len(rows) * size / max(done, 1) * 1.02) + 16), rows.shape[1]))
+            if out is None:  # as many rows as the file has lines at most (a guess from the first chunk's bytes
+                # per row could be 5 times too many, or too few, where line lengths change: a code reviewer)
+                out = np.empty((max(len(rows), _line_ends(path, steps) + 1), rows.shape[1]))
             elif rows.shape[1] != out.shape[1]:
                 raise ValueError("the number of columns changed")
             if filled + len(rows) > len(out):
@@ -820,6 +821,22 @@ def _text_rows(path: str, encoding: str, steps: Steps) -> np.ndarray:
     if out is None:
         return np.empty((0, 0))
     return out[:filled]
+
+
+def _line_ends(path: str, steps: Steps, block: int = 1 << 24) -> int:
+    """The line ends of the file as Python's text mode counts them: newlines, carriage returns and
+    their pairs (a file may mix them: 500,000 lines ending in a newline, then carriage returns only)."""
+    ends, last = 0, b""
+    with open(path, "rb") as f:
+        while True:
+            steps.check()
+            data = f.read(block)
+            if not data:
+                return ends
+            ends += data.count(b"\n") + data.count(b"\r") - data.count(b"\r\n")
+            if last == b"\r" and data[:1] == b"\n":  # a pair split between two blocks
+                ends -= 1
+            last = data[-1:]
 
 
 def _no_bom(f):
