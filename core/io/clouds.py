@@ -780,9 +780,9 @@ def _text_rows(path: str, encoding: str, steps: Steps) -> np.ndarray:
     so each call stops at its last row), reporting the share of the file read to ``steps`` and checking
     cancellation between chunks (22 M lines in one loadtxt call took 8 s deaf to Cancel). The chunks
     fill one array of as many rows as the file has lines, so the peak memory stays about one loadtxt
-    call's. A ValueError when the rows are not numbers (loadtxt's
-    row numbers counted from the file's start) or their columns differ between chunks, as loadtxt
-    raises within one; an InputError when the file changes while it is read."""
+    call's. A ValueError when the rows are not numbers (loadtxt's row numbers counted from the file's
+    start) or their columns differ between chunks, as loadtxt raises within one; an InputError when
+    the file changes while it is read."""
     before_read = os.stat(path)
     size = max(before_read.st_size, 1)
     out, filled = None, 0
