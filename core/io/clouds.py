@@ -684,6 +684,14 @@ def _read_points(reader, count: int, steps: Steps):
     return points if done == count else points[:done]
 
 
+def laspy_reason(err: BaseException) -> str:
+    """laspy's error in words: its message, or what its bare ones mean ("77" for an extra-bytes type)."""
+    if type(err).__name__ == "UnknownExtraType":
+        return (f"an extra-bytes description has the data type {err}, which LAS does not define: 0 is undocumented "
+                "bytes, 1-10 numbers")
+    return str(err) or type(err).__name__
+
+
 def _read_las(path: str, steps: Steps) -> PointCloud:
     import laspy
     check_las_layout(path)
@@ -712,7 +720,7 @@ def _read_las(path: str, steps: Steps) -> PointCloud:
     except GroundSieveError:
         raise  # cancelled
     except Exception as err:  # laspy raises many types for damaged files
-        msg = str(err) or type(err).__name__
+        msg = laspy_reason(err)
         if "signature" in msg.lower():
             raise UnsupportedFormatError(f"{path}: not a LAS/LAZ file ({msg})") from err
         raise InputError(f"{path}: cannot be read; the file is damaged or truncated ({msg})") from err

@@ -17,7 +17,7 @@ from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 import numpy as np
 
 from ..errors import GroundSieveError, InputError, OutputError, UnsupportedFormatError
-from .clouds import PointCloud, check_las_layout, finish_copy, header_crs_wkt, records_held
+from .clouds import PointCloud, check_las_layout, finish_copy, header_crs_wkt, laspy_reason, records_held
 from .outputs import LAS_EXTENSIONS, _ext, atomic_path, check_classes_fit
 
 VPC_EXTENSION = ".vpc"
@@ -81,7 +81,7 @@ def scan_header(path: str) -> LasInfo:
     except (InputError, UnsupportedFormatError):
         raise
     except Exception as err:  # laspy raises many types for damaged files
-        raise InputError(f"{path}: cannot read its LAS header ({str(err) or type(err).__name__})") from err
+        raise InputError(f"{path}: cannot read its LAS header ({laspy_reason(err)})") from err
 
 
 def _copc_damage(path: str) -> str:

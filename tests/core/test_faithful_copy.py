@@ -334,3 +334,22 @@ def test_extra_bytes_without_a_minimum_or_maximum_run_tiled(tmp_path, ext, data_
     for dim in a.point_format.dimension_names:
         if dim != "classification":
             assert np.array_equal(a[dim], b[dim]), dim
+
+
+@pytest.mark.parametrize("tiled", [False, True])
+def test_an_extra_bytes_type_las_does_not_define_is_refused_in_words(tmp_path, tiled):
+    """laspy says only "77"; the message said "cannot read its LAS header (77)" (a QA reviewer)."""
+    from groundsieve.core.errors import InputError
+    header = laspy.LasHeader(point_format=1, version="1.2")
+    header.add_extra_dim(laspy.ExtraBytesParams(name="foo", type=np.int32))
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = np.random.default_rng(6).uniform(0, 50, (3, 200))
+    src = tmp_path / "t77.las"
+    las.write(str(src))
+    data = bytearray(src.read_bytes())
+    data[struct.unpack_from("<H", data, 94)[0] + 54 + 2] = 77
+    src.write_bytes(bytes(data))
+    with pytest.raises(InputError, match=r"t77\.las: .*an extra-bytes description has the data type 77, which LAS "
+                                         r"does not define"):
+        run_ground_filter(str(src), str(tmp_path / "out.las"), SMRF(), options=tiled_or_whole(tiled))
+    assert not (tmp_path / "out.las").exists()
