@@ -433,9 +433,8 @@ def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_pat
         raise InputError(f"{input_path}: this cloud gives the features {names} but the model "
                          f"{model_path} was trained on {list(model.features)} (e.g. colour present in one "
                          "and not the other)")
-    from ..learn.rf import GPS_TIME_OF_WEEK
-    X = feature_matrix(part, names, steps.sub(0.0, 0.5),
-                       gps_time_of_week=model.meta.get("gps_time") == GPS_TIME_OF_WEEK)
+    from ..learn.rf import GPS_TIME_MODES
+    X = feature_matrix(part, names, steps.sub(0.0, 0.5), gps_time=GPS_TIME_MODES.get(model.meta.get("gps_time"), "raw"))
     from ..learn.rf import out_of_range_features
     for name, part_out, (low, high), median in out_of_range_features(model, X):
         if name in ("red", "green", "blue", "intensity"):

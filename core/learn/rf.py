@@ -337,11 +337,19 @@ def resolve_features(names: Sequence[str], cloud, log=None) -> List[str]:
 
 #: seconds of a GPS week: the gps_time feature is the time within its week (see _attribute)
 GPS_WEEK_S = 604800.0
-#: the model metadata that says so (models trained before it read the raw time in float32)
-GPS_TIME_OF_WEEK = "seconds of the GPS week"
+#: adjusted standard GPS time (global encoding bit 0, LAS 1.4's rule for formats 6-10) is GPS time less 1e9 s
+ADJUSTED_STANDARD_OFFSET_S = 1.0e9
+#: the model metadata of the gps_time feature: the time within its GPS week, adjusted standard time put
+#: back on the week first (from 2026-11-26: before, adjusted times were taken modulo a week as they are,
+#: so their "week" turned over at 265,600 s, Wednesday 01:46:40 GPS, 11:46 in Sydney, mid-flight)
+GPS_TIME_OF_WEEK = "seconds of the GPS week, adjusted standard time put back on the week"
+#: ... of the models trained before it: the stored time modulo a week
+GPS_TIME_MOD_WEEK = "seconds of the GPS week"
+#: how a model's gps_time is computed, by its metadata (a model without it: the raw time in float32)
+GPS_TIME_MODES = {GPS_TIME_OF_WEEK: "week", GPS_TIME_MOD_WEEK: "mod"}
 
 
-def _attribute(cloud, name: str, gps_time_of_week: bool = True) -> np.ndarray:
+def _attribute(cloud, name: str, gps_time: str = "week") -> np.ndarray:
     las = cloud.las
     if name in ("return_number", "number_of_returns"):
         return getattr(cloud, name).astype(np.float32)
@@ -353,21 +361,34 @@ def _attribute(cloud, name: str, gps_time_of_week: bool = True) -> np.ndarray:
             return (np.asarray(las.scan_angle, dtype=np.float32) * np.float32(0.006))
         if "scan_angle_rank" in dims:
             return np.asarray(las.scan_angle_rank, dtype=np.float32)
-    if name == "gps_time" and name in dims and gps_time_of_week:
+    if name == "gps_time" and name in dims and gps_time in ("week", "mod"):
         # adjusted standard GPS time is about 1e9 s: in float32 (the forest's type) its step is 64 s, so a
         # flight's times became a few values; within the week (< 604,800 s) the step is at most 0.06 s
-        return np.mod(np.asarray(las[name], dtype=np.float64), GPS_WEEK_S).astype(np.float32)
+        t = np.asarray(las[name], dtype=np.float64)
+        if gps_time == "week" and _adjusted_standard(las):
+            t = t + ADJUSTED_STANDARD_OFFSET_S
+        return np.mod(t, GPS_WEEK_S).astype(np.float32)
     if name in dims:
         return np.asarray(las[name], dtype=np.float32)
     raise InputError(f"{cloud.path}: the feature '{name}' is not in this file (dimensions: "
                      f"{', '.join(sorted(dims))})")
 
 
-def feature_matrix(cloud, names: Sequence[str], steps=None, *, gps_time_of_week: bool = True) -> np.ndarray:
+def _adjusted_standard(las) -> bool:
+    """Whether the file's GPS times are adjusted standard GPS time (global encoding bit 0)."""
+    try:
+        return bool(int(las.header.global_encoding.value) & 1)
+    except AttributeError:
+        return False
+
+
+def feature_matrix(cloud, names: Sequence[str], steps=None, *, gps_time: str = "week") -> np.ndarray:
     """(n, len(names)) float32 matrix of the named features of ``cloud``. Attributes are read from
     the file; geometric features (``<feature>_r<radius>``) are taken from the file's extra bytes when
-    present (e.g. written by groundsieve:features) and computed otherwise. ``gps_time_of_week``:
-    the GPS time as seconds within its week (False: as read, for models trained before)."""
+    present (e.g. written by groundsieve:features) and computed otherwise. ``gps_time``: "week", the
+    GPS time as seconds within its GPS week (adjusted standard time put back on the week first);
+    "mod", the stored time modulo a week, and "raw", the time as read: for models trained before
+    (GPS_TIME_MODES)."""
     from ..progress import Steps
     from .features import FeatureSpec, compute_features, parse_feature_name
     from .hybrid import GRID_FEATURES, hybrid_features, opening_radius
@@ -383,7 +404,7 @@ def feature_matrix(cloud, names: Sequence[str], steps=None, *, gps_time_of_week:
         if name in columns:
             continue
         if name in ATTRIBUTE_FEATURES or name in ("scan_angle",):
-            columns[name] = _attribute(cloud, name, gps_time_of_week)
+            columns[name] = _attribute(cloud, name, gps_time)
         elif name in dims:
             columns[name] = np.asarray(cloud.las[name], dtype=np.float32)
         else:

@@ -339,7 +339,7 @@ def test_gps_time_keeps_its_resolution_as_seconds_of_the_week(tmp_path):
     write_las(new_las(x, y, rng.normal(0, 0.1, n), point_format=1, classification=cls, gps_time=times), str(path))
     cloud = read_cloud(str(path))
     week = rf.feature_matrix(cloud, ["gps_time"])[:, 0]
-    raw = rf.feature_matrix(cloud, ["gps_time"], gps_time_of_week=False)[:, 0]
+    raw = rf.feature_matrix(cloud, ["gps_time"], gps_time="raw")[:, 0]
     assert np.unique(raw).size <= 2
     assert np.unique(week).size > 1000  # 8 s at the float32 step near 60,800 s (4 ms)
     np.testing.assert_allclose(week, np.mod(times, rf.GPS_WEEK_S), atol=0.07)
@@ -348,6 +348,37 @@ def test_gps_time_keeps_its_resolution_as_seconds_of_the_week(tmp_path):
                         learning.TrainOptions(features=("gps_time", "intensity"), params=rf.ForestParams(n_trees=2),
                                               block_m=10.0))
     assert load_model(str(model)).meta["gps_time"] == rf.GPS_TIME_OF_WEEK
+
+
+def test_adjusted_standard_gps_time_is_put_back_on_its_week(tmp_path):
+    """Adjusted standard GPS time (global encoding bit 0: GPS time less 1e9 s, the rule for LAS 1.4's
+    formats 6-10) was taken modulo a week as stored, so its "week" turned over at 265,600 s of the real
+    one (Wednesday 01:46:40 GPS, late morning in Australia): a flight then got times near 604,800 and
+    near 0 in one pass. It is put back on the week first; a model trained before gets the old values."""
+    import laspy
+    from groundsieve.core.io import read_cloud
+    rng = np.random.default_rng(4)
+    n = 2000
+    week_s = np.sort(rng.uniform(265_590.0, 265_610.0, n))  # a 20 s pass across the old turn-over
+    adjusted = 2300 * rf.GPS_WEEK_S + week_s - rf.ADJUSTED_STANDARD_OFFSET_S
+    las = new_las(rng.uniform(0, 50, n), rng.uniform(0, 50, n), rng.normal(0, 0.1, n), point_format=1,
+                  gps_time=adjusted)
+    las.header.global_encoding.gps_time_type = laspy.header.GpsTimeType.STANDARD
+    path = tmp_path / "adjusted.las"
+    write_las(las, str(path))
+    cloud = read_cloud(str(path))
+    week = rf.feature_matrix(cloud, ["gps_time"])[:, 0]
+    np.testing.assert_allclose(week, week_s, atol=0.05)
+    assert np.all(np.diff(week) >= 0)  # one pass, one run of times
+    old = rf.feature_matrix(cloud, ["gps_time"], gps_time="mod")[:, 0]
+    assert old.max() > 604_700 and old.min() < 100  # the old turn-over, kept for the models trained with it
+    assert rf.GPS_TIME_MODES[rf.GPS_TIME_MOD_WEEK] == "mod" and rf.GPS_TIME_MODES[rf.GPS_TIME_OF_WEEK] == "week"
+    # a file of GPS week time (bit 0 clear) is read as before
+    las.header.global_encoding.gps_time_type = laspy.header.GpsTimeType.WEEK_TIME
+    las.gps_time = week_s
+    write_las(las, str(tmp_path / "week.las"))
+    np.testing.assert_allclose(rf.feature_matrix(read_cloud(str(tmp_path / "week.las")), ["gps_time"])[:, 0], week_s,
+                               atol=0.05)
 
 
 def test_a_feature_far_outside_the_range_it_was_learnt_in_is_warned_about(tmp_path):
