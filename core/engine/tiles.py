@@ -881,7 +881,6 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                 "buffer.")
     tile_log = []
     ground_total = dtm_points = 0  # the tiles' own ground points; those that entered the DTM
-    pits = [0, 0.0, 0.0, 0.0]  # the DTM's isolated pits: how many, the deepest's depth, x and y
     kept_out: Dict[int, int] = {}  # points kept in classes of their own, left out of the DTM
     replaced: Dict[int, int] = {}  # points of the input's other classes given 1 or 2
     structures: Dict[int, int] = {}  # those of its structure classes made ground
@@ -931,11 +930,6 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             structures[int(code)] = structures.get(int(code), 0) + int(count)
         ground_total += result["ground"]
         dtm_points += result["dtm_points"]
-        if result["pits"]:
-            count, depth, x, y = result["pits"]
-            pits[0] += count
-            if depth > pits[1]:
-                pits[1:] = [depth, x, y]
         tile_log.append(dict(key=tuple(result["key"]), points=result["own"], read=result["read"],
                              ground=result["ground"], copc_read=result.get("copc_read", 0)))
         done_frac = len(tile_log) / len(keys)
@@ -1030,7 +1024,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             from .workflow import dtm_spacing_note, pits_note
             for note in ("" if dtm.fill_outside_hull else
                          dtm_spacing_note(dtm_points, dtm_writer.valued_cells, dtm_writer.grid.cell),
-                         pits_note(*pits)):
+                         pits_note(*dtm_writer.isolated_pits(check=steps.check))):
                 if note:
                     log(note)
             dtm_writer.finish(staging.stage(dtm_path), atomic=False)
@@ -1465,16 +1459,16 @@ def _tile_job(job) -> Optional[dict]:
             # (the write phase reads them there; a killed worker's writes stay too).
             del classes
             assigned[int(k)] = int(sel.sum())
-        block, pits, kept_out, dtm_own = None, None, {}, 0
+        block, kept_out, dtm_own = None, {}, 0
         if job["dtm"] is not None:
             area = workflow.processable(cloud, options)
             in_dtm = workflow.dtm_points(cloud, ground, area, job["dtm"])
             dtm_own = int(np.count_nonzero(in_dtm & own))
-            block, pits = _dtm_block(cloud, in_dtm, job["dtm"], job["dtm_grid"], job["bounds"], job["buffer"])
+            block = _dtm_block(cloud, in_dtm, job["dtm"], job["dtm_grid"], job["bounds"], job["buffer"])
             if options.keep_existing_classes:
                 kept_out = workflow.kept_out_of_dtm(cloud, cls, area & own, job["dtm"])
         result = dict(key=list(job["key"]), own=int(own.sum()), read=len(cloud), ground=int(ground[own].sum()),
-                      dtm_points=dtm_own, pits=pits, assigned=assigned, block=block, class_parts=class_parts, copc_read=copc_read,
+                      dtm_points=dtm_own, assigned=assigned, block=block, class_parts=class_parts, copc_read=copc_read,
                       kept_out=sorted(kept_out.items()), replaced=sorted(replaced.items()),
                       structures=sorted(structures.items()))
         _save_done(job["done_dir"], result)
@@ -1612,12 +1606,12 @@ def _python_executable() -> Optional[str]:
 def _dtm_block(cloud, ground, dtm, full, bounds, buffer_m):
     """Interpolate the DTM cells whose centres lie in the tile from the ground of the tile and its
     buffer, on a grid aligned with the whole DTM's (so the thinning picks the same points)."""
-    from ..grids.rasterize import isolated_pits, tin_dtm
+    from ..grids.rasterize import tin_dtm
     from ..grids.spec import GridSpec
     c = full.cell
     cells = _block_cells(full, bounds)
     if cells is None or not ground.any():
-        return None, None
+        return None
     row0, row1, col0, col1 = cells
     # one cell more than the buffer: a point on the buffer's outer edge still falls in the grid (the
     # thinning's one-pass kernel needs every point inside; same points kept, same surface)
@@ -1627,8 +1621,4 @@ def _dtm_block(cloud, ground, dtm, full, bounds, buffer_m):
     g = ground
     values = tin_dtm(cloud.x[g], cloud.y[g], cloud.z[g], ext, fill_outside=dtm.fill_outside_hull,
                      points_per_cell=dtm.points_per_cell, max_distance=dtm.max_distance_m)
-    # the block's isolated pits, each against its 5 x 5 window (the buffer's cells around the block: with a
-    # buffer under a cell, those at the block's edge reach no value there and are not counted)
-    count, depth, r, k = isolated_pits(values, inner=(pad, pad + row1 - row0, pad, pad + col1 - col0))
-    pits = [count, depth, ext.x0 + (k + 0.5) * c, ext.top - (r + 0.5) * c] if count else None
-    return (row0, col0, np.ascontiguousarray(values[pad:pad + row1 - row0, pad:pad + col1 - col0])), pits
+    return row0, col0, np.ascontiguousarray(values[pad:pad + row1 - row0, pad:pad + col1 - col0])

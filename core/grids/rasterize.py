@@ -371,17 +371,18 @@ PIT_DEPTH = 0.5
 
 
 def isolated_pits(values: np.ndarray, depth: float = PIT_DEPTH, inner: Optional[tuple] = None,
-                  strip_rows: int = 1024, check: Optional[Callable[[], None]] = None) -> tuple:
+                  strip_rows: int = 1024, check: Optional[Callable[[], None]] = None,
+                  batch: int = 200_000) -> tuple:
     """The cells of a DTM (NaN = no value) lying more than ``depth`` below every other cell of the 5 x 5
     window around them, all of which have a value: (count, the deepest's depth, its row, its column), or
     (0, 0.0, -1, -1). A low point made ground (a multipath or noise echo) is one, a 1-2 m pit in a
     hillshade; a ditch or a valley is not, at any angle to the grid: a ditch one cell wide crossing the
-    grid diagonally has all 8 nearest cells on its banks (a code reviewer found 7 such "pits" per 100 m),
-    but cells of it two cells away. ``inner``: (row0, row1, col0, col1), the cells to count (their
-    window may reach outside: a tile's block with its buffer's cells around it); the outer two rows and
+    grid at a steep angle has all 8 nearest cells on its banks (a code reviewer found 7 such "pits" per
+    100 m), but cells of it two cells away. ``inner``: (row0, row1, col0, col1), the cells to count (their
+    window may reach outside: a strip read with two rows above and below); the outer two rows and
     columns of ``values`` are never counted. Cells lower than their 4 nearest by ``depth`` are found in
-    row strips of ``strip_rows`` (few are), then tested against their whole window; ``check`` (e.g. a
-    run's cancel check) is called between strips."""
+    row strips of ``strip_rows`` (few are), then tested against their whole window ``batch`` at a time
+    (a rough DTM has many); ``check`` (e.g. a run's cancel check) is called between strips."""
     nrows, ncols = values.shape
     r0, r1, c0, c1 = inner if inner is not None else (0, nrows, 0, ncols)
     r0, c0, r1, c1 = max(r0, 2), max(c0, 2), min(r1, nrows - 2), min(c1, ncols - 2)
@@ -394,19 +395,18 @@ def isolated_pits(values: np.ndarray, depth: float = PIT_DEPTH, inner: Optional[
         if check is not None:
             check()
         bottom = min(top + strip_rows, r1)
-        low = values[top:bottom, c0:c1] + depth  # NaN where the cell has no value: never below anything
-        cand = ((low < values[top - 1:bottom - 1, c0:c1]) & (low < values[top + 1:bottom + 1, c0:c1])
-                & (low < values[top:bottom, c0 - 1:c1 - 1]) & (low < values[top:bottom, c0 + 1:c1 + 1]))
-        rows, cols = np.nonzero(cand)
-        if not rows.size:
-            continue
-        rows, cols = rows + top, cols + c0
-        around = values[rows[:, None] + dr, cols[:, None] + dc]
-        drop = np.where(np.isnan(around), -np.inf, around).min(axis=1) - values[rows, cols]
-        pits = drop > depth
-        if pits.any():
-            count += int(pits.sum())
-            k = int(np.argmax(np.where(pits, drop, -np.inf)))
-            if drop[k] > deepest:
-                deepest, where = float(drop[k]), (int(rows[k]), int(cols[k]))
+        centre = values[top:bottom, c0:c1]
+        nearest = np.minimum(np.minimum(values[top - 1:bottom - 1, c0:c1], values[top + 1:bottom + 1, c0:c1]),
+                             np.minimum(values[top:bottom, c0 - 1:c1 - 1], values[top:bottom, c0 + 1:c1 + 1]))
+        rows, cols = np.nonzero(nearest - centre > depth)  # (NaN anywhere: no candidate)
+        for start in range(0, rows.size, batch):
+            r, k = rows[start:start + batch] + top, cols[start:start + batch] + c0
+            around = values[r[:, None] + dr, k[:, None] + dc]
+            drop = np.where(np.isnan(around), -np.inf, around).min(axis=1) - values[r, k]
+            pits = drop > depth
+            if pits.any():
+                count += int(pits.sum())
+                j = int(np.argmax(np.where(pits, drop, -np.inf)))
+                if drop[j] > deepest:
+                    deepest, where = float(drop[j]), (int(r[j]), int(k[j]))
     return count, deepest, where[0], where[1]

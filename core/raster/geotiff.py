@@ -144,6 +144,29 @@ class BlockGeoTIFF:
         """Cells written with a value so far."""
         return int(self._valued.sum())
 
+    def isolated_pits(self, strip_rows: int = 1024, check=None) -> tuple:
+        """The isolated pits of the raster written (:func:`~groundsieve.core.grids.rasterize.isolated_pits`),
+        read back ``strip_rows`` rows at a time with the two rows around each strip: (count, the deepest's
+        depth, its x, its y). Counted on the mosaic, not tile by tile: a tile's own interpolation has no
+        values beyond its buffer, so with a small buffer it missed pits near its edges, and with a fill
+        it counted cells on the survey's edge a run of the whole cloud never counts (a code reviewer)."""
+        from ..grids.rasterize import isolated_pits
+        g = self.grid
+        count, deepest, x, y = 0, 0.0, 0.0, 0.0
+        with self._lock:
+            self._band.FlushCache()
+            for row0 in range(0, g.nrows, strip_rows):
+                n = min(strip_rows, g.nrows - row0)
+                above, below = min(2, row0), min(2, g.nrows - row0 - n)
+                values = self._band.ReadAsArray(0, row0 - above, g.ncols, n + above + below).astype(np.float64)
+                values[values == self.nodata] = np.nan
+                found, drop, r, k = isolated_pits(values, inner=(above, above + n, 0, g.ncols), check=check)
+                count += found
+                if found and drop > deepest:
+                    deepest = drop
+                    x, y = g.x0 + (k + 0.5) * g.cell, g.top - (row0 - above + r + 0.5) * g.cell
+        return count, deepest, x, y
+
     def enclosed_nodata(self, strip_rows: int = 512) -> int:
         """Cells without a value between cells with one both in their row and in their column, over
         the blocks written so far. A linear TIN of one cloud fills its ground's convex hull, which
