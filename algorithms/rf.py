@@ -84,8 +84,8 @@ label), as Matrone et al. (2024, Method 3) did to test whether the return number
 <p><b>Features</b>: the paper's configurations: C1 RGB; C2 RGB + return number; C3 + scan angle and
 GPS time; C4 + verticality (0.6 m), planarity (0.6 m), eigenentropy (0.4 m), surface variation
 (0.6 m); C5 = C4 without scan angle and GPS time (the paper's best). GPS time enters as the seconds of
-its GPS week (adjusted standard time put back on the week), which a forest's 32-bit values hold to
-0.06 s where the raw time is in steps of 64 s. Clouds without colour use the
+its GPS week (adjusted standard time put back on the week), which the Random Forest's 32-bit features
+hold to 0.06 s, where the raw time is in steps of 16-128 s. Clouds without colour use the
 intensity in place of RGB. <b>C5H</b> (ours) adds the height above the lowest point within
 2.5 m and the local point density, which carry the ground contrast on sparse airborne clouds where the
 paper's small spheres hold few points. <i>custom</i>: a comma-separated list such as

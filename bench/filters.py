@@ -81,6 +81,10 @@ FILTERS: Dict[str, Callable[[ParamsRow], Callable]] = {
     "smrf": make_smrf,
     # As Pingel's Python code runs by default: low-outlier cells are not refilled before the opening.
     "smrf-nofill": lambda row: make_smrf(row, low_outlier_fill=False),
+    # SMRF's low-outlier slope below the paper's 5 (the dialog's LOW_OUTLIER_SLOPE): 1 catches low points 1 m deep
+    "smrf-lo3": lambda row: make_smrf(row, low_outlier_slope=3.0),
+    "smrf-lo2": lambda row: make_smrf(row, low_outlier_slope=2.0),
+    "smrf-lo1": lambda row: make_smrf(row, low_outlier_slope=1.0),
     "echogrid": make_echogrid,
     "echogrid-evidence": lambda row: make_echogrid(row, mode="evidence"),
     "evc": make_evc,

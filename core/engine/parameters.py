@@ -4,7 +4,7 @@ and the command line (``python -m groundsieve``).
 The defaults are the filter dataclasses' own (never repeated here); this table adds what a user
 sees: the Processing name (``CELL``; on the command line ``--cell``), the label, the unit, and for
 a choice the values with their labels. Fields of a filter not listed are the core's finer
-settings: the command line offers them too (``--low-outlier-slope``), the toolbox does not.
+settings: the command line offers them too (``--low-outlier-max-share``), the toolbox does not.
 """
 from __future__ import annotations
 
@@ -216,7 +216,7 @@ def by_name(name: str) -> Dict[str, Param]:
 def preset_names(name: str) -> Dict[str, str]:
     """Every name a preset may give for the filter -> the dataclass field: the Processing names
     of the dialog's parameters and, for the core's finer settings, the field in upper case
-    (``LOW_OUTLIER_SLOPE``), as on the command line."""
+    (``LOW_OUTLIER_MAX_SHARE``), as on the command line."""
     names = {p.name: p.field for p in params(name)}
     for f in core_only_fields(name):
         names.setdefault(f.name.upper(), f.name)

@@ -362,8 +362,9 @@ def _attribute(cloud, name: str, gps_time: str = "week") -> np.ndarray:
         if "scan_angle_rank" in dims:
             return np.asarray(las.scan_angle_rank, dtype=np.float32)
     if name == "gps_time" and name in dims and gps_time in ("week", "mod"):
-        # adjusted standard GPS time is about 1e9 s: in float32 (the forest's type) its step is 64 s, so a
-        # flight's times became a few values; within the week (< 604,800 s) the step is at most 0.06 s
+        # adjusted standard GPS time is some 4e8-5e8 s (standard GPS time 1.4e9 s): in float32 (the forest's
+        # type) its step is 32 s (128 s), so a flight's times became a few values; within the week
+        # (< 604,800 s) the step is at most 0.06 s
         t = np.asarray(las[name], dtype=np.float64)
         if gps_time == "week" and _adjusted_standard(las):
             t = t + ADJUSTED_STANDARD_OFFSET_S

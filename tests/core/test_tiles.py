@@ -1288,7 +1288,7 @@ def test_isolated_pits_of_the_dtm_are_said_whole_and_tiled_alike(tmp_path):
     """An archaeologist's 40 low points 1.5-5 m deep: SMRF's defaults made 31 of them ground, each a
     1-2 m pit in the hillshade that looked like a post-hole, with nothing in the log. The run now counts
     the DTM cells lying more than 0.5 m below every other cell within 2 cells and says where the deepest
-    is; a tiled run counts each block's against its buffer's cells, so both say the same; with the
+    is; a tiled run counts them on its mosaic, read back, so both say the same; with the
     low-outlier slope at 1 SMRF catches the points and nothing is said. A ditch one cell wide across the
     grid at 45° is no pit (its 8 nearest cells are all on its banks: a code reviewer's 7 per 100 m)."""
     scene = make_scene(SceneSpec(size_m=120.0, density_per_m2=5.0, seed=12, buildings_per_ha=0.0, trees_per_ha=0.0))
