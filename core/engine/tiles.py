@@ -1024,7 +1024,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             from .workflow import dtm_spacing_note, pits_note
             for note in ("" if dtm.fill_outside_hull else
                          dtm_spacing_note(dtm_points, dtm_writer.valued_cells, dtm_writer.grid.cell),
-                         pits_note(*dtm_writer.isolated_pits(check=steps.check))):
+                         pits_note(*dtm_writer.isolated_pits(check=steps.check), dtm_writer.grid)):
                 if note:
                     log(note)
             dtm_writer.finish(staging.stage(dtm_path), atomic=False)

@@ -417,16 +417,15 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions, why_none: str = "
             log(note)
     if log is not None:
         from ..grids.rasterize import isolated_pits
-        count, depth, row, col = isolated_pits(dtm, check=steps.check if steps is not None else None)
-        note = pits_note(count, depth, grid.x0 + (col + 0.5) * grid.cell, grid.top - (row + 0.5) * grid.cell)
+        note = pits_note(*isolated_pits(dtm, check=steps.check if steps is not None else None), grid)
         if note:
             log(note)
     return grid, dtm
 
 
-def pits_note(count: int, depth: float, x: float, y: float) -> str:
-    """What to say of a DTM's isolated pits (:func:`~groundsieve.core.grids.rasterize.isolated_pits`),
-    "" without one. An archaeologist's hillshade showed 1-2 m pits that looked like post-holes: low
+def pits_note(count: int, depth: float, row: int, col: int, grid) -> str:
+    """What to say of a DTM's isolated pits (:func:`~groundsieve.core.grids.rasterize.isolated_pits`: the
+    deepest at ``row``, ``col`` of ``grid``), "" without one. An archaeologist's hillshade showed 1-2 m pits that looked like post-holes: low
     points (multipath or noise echoes) that SMRF's low-outlier test lets through when less than 5 cells
     deep, made ground, with nothing in the log. A narrow, deep ditch sampled by few points is beaded
     into such pits too (a code reviewer: 1 m wide and 2 m deep, 0.5 m between points), so the note says
@@ -434,6 +433,7 @@ def pits_note(count: int, depth: float, x: float, y: float) -> str:
     from ..grids.rasterize import PIT_DEPTH
     if not count:
         return ""
+    x, y = grid.x0 + (col + 0.5) * grid.cell, grid.top - (row + 0.5) * grid.cell
     return (f"DTM: {count:,} isolated pit(s), cells more than {PIT_DEPTH:g} m below every other cell within 2 cells, "
             f"the deepest {depth:.2f} m at x {x:,.2f}, y {y:,.2f}. Low points made ground (multipath or noise "
             "echoes) make them, and so does a narrow, deep ditch sampled by few points: look at them before "

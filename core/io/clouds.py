@@ -272,21 +272,15 @@ _VLR_BYTES, _EVLR_BYTES = 54, 60
 _HEADER_BYTES_14 = 375
 
 
-def _laszip_compressor(f, header_size: int, vlrs: int) -> Optional[int]:
-    """The compressor of the LASzip VLR among the ``vlrs`` after the header (0 none, 1 pointwise, 2
+def _laszip_compressor(f, header: bytes) -> Optional[int]:
+    """The compressor of the LASzip VLR among the VLRs after ``header`` (0 none, 1 pointwise, 2
     pointwise and chunked, 3 layered and chunked: LAS 1.4 formats 6-10); None without one."""
     import struct
-    at = header_size
-    for _ in range(vlrs):
-        f.seek(at)
-        head = f.read(_VLR_BYTES)
-        if len(head) < _VLR_BYTES:
-            return None
-        user, record, length = struct.unpack_from("<16sHH", head, 2)
-        if user.rstrip(b"\0") == b"laszip encoded" and record == 22204:
+    for at, user, record, _length in _vlrs(f, header):
+        if user == b"laszip encoded" and record == 22204:
+            f.seek(at)
             data = f.read(2)
             return struct.unpack("<H", data)[0] if len(data) == 2 else None
-        at += _VLR_BYTES + length
     return None
 
 
@@ -346,12 +340,14 @@ def finish_copy(dst: str, src: Optional[str] = None, name: Optional[str] = None)
 
 
 def _vlrs(f, header: bytes):
-    """(offset of the record's data, user id, record id, length) of each VLR after ``header``."""
+    """(offset of the record's data, user id, record id, length) of each VLR after ``header``, as many as
+    the bytes between the header and the points can hold at most (check_las_layout refuses a count
+    beyond that) and as far as the file holds them."""
     import struct
-    at, = struct.unpack_from("<H", header, 94)
+    at, offset = struct.unpack_from("<HI", header, 94)
     count, = struct.unpack_from("<I", header, 100)
     out = []
-    for _ in range(min(count, 10_000)):
+    for _ in range(min(count, max(offset - at, 0) // _VLR_BYTES)):
         f.seek(at)
         h = f.read(_VLR_BYTES)
         if len(h) < _VLR_BYTES:
@@ -443,20 +439,30 @@ def check_laz_wave_packets(src: str, out: Optional[str]) -> None:
         raise _lazrs_wave_packets_error(out, src)
 
 
+def _evlr_at(f, at: int, size: int) -> Tuple[int, bool]:
+    """The EVLR at byte ``at`` of a file of ``size`` bytes: (its length with its header, whether it is
+    the waveform packets' record), or (0, False) when its header does not lie in the file."""
+    import struct
+    if not 0 < at <= size - _EVLR_BYTES:
+        return 0, False
+    f.seek(at)
+    evlr = f.read(_EVLR_BYTES)
+    return _EVLR_BYTES + struct.unpack_from("<Q", evlr, 20)[0], _is_waveform_record(evlr)
+
+
 def _evlr_places(f, head: bytes, size: int) -> list:
-    """(offset, total length) of each EVLR a LAS 1.4 header lists, as far as they lie in the file."""
+    """(offset, total length, waveform record?) of each EVLR a LAS 1.4 header lists, as far as they
+    lie in the file."""
     import struct
     if head[25] < 4 or len(head) < 247:
         return []
     at, count = struct.unpack_from("<QI", head, 235)
     out = []
     for _ in range(min(count, 100_000)):
-        if not 0 < at <= size - _EVLR_BYTES:
+        total, wave = _evlr_at(f, at, size)
+        if not total:
             break
-        f.seek(at)
-        evlr = f.read(_EVLR_BYTES)
-        total = _EVLR_BYTES + struct.unpack_from("<Q", evlr, 20)[0]
-        out.append((at, total, _is_waveform_record(evlr)))
+        out.append((at, total, wave))
         at += total
     return out
 
@@ -474,12 +480,8 @@ def internal_waveform(path: str) -> Tuple[Optional[int], int, str]:
         size = os.fstat(f.fileno()).st_size
 
         def record_at(at: int) -> int:
-            if not 0 < at <= size - _EVLR_BYTES:
-                return 0
-            f.seek(at)
-            evlr = f.read(_EVLR_BYTES)
-            total = _EVLR_BYTES + struct.unpack_from("<Q", evlr, 20)[0]
-            return total if _is_waveform_record(evlr) and at + total <= size else 0
+            total, wave = _evlr_at(f, at, size)
+            return total if wave and at + total <= size else 0
 
         pointer, = struct.unpack_from("<Q", head, 227)
         total = record_at(pointer)
@@ -605,7 +607,7 @@ def check_las_layout(path: str) -> None:
                                          f"bytes, more than the file's {size:,} hold: the file is damaged")
             if not point_format & 0x80 or record <= 0 or offset + 8 > size:
                 return
-            if _laszip_compressor(f, header_size, vlrs) not in (2, 3):  # only chunked LASzip has the table
+            if _laszip_compressor(f, head) not in (2, 3):  # only chunked LASzip has the table
                 return
             f.seek(offset)
             table_at, = struct.unpack("<q", f.read(8))

@@ -144,28 +144,34 @@ class BlockGeoTIFF:
         """Cells written with a value so far."""
         return int(self._valued.sum())
 
-    def isolated_pits(self, strip_rows: int = 1024, check=None) -> tuple:
-        """The isolated pits of the raster written (:func:`~groundsieve.core.grids.rasterize.isolated_pits`),
-        read back ``strip_rows`` rows at a time with the two rows around each strip: (count, the deepest's
-        depth, its x, its y). Counted on the mosaic, not tile by tile: a tile's own interpolation has no
-        values beyond its buffer, so with a small buffer it missed pits near its edges, and with a fill
-        it counted cells on the survey's edge a run of the whole cloud never counts (a code reviewer)."""
-        from ..grids.rasterize import isolated_pits
+    def _strips(self, strip_rows: int, halo: int = 0):
+        """The raster written, read back ``strip_rows`` rows at a time with up to ``halo`` rows above and
+        below each strip: (its first row, its rows, the rows read above it, the values read). The caller
+        holds the lock."""
         g = self.grid
-        count, deepest, x, y = 0, 0.0, 0.0, 0.0
+        self._band.FlushCache()
+        for row0 in range(0, g.nrows, strip_rows):
+            n = min(strip_rows, g.nrows - row0)
+            above, below = min(halo, row0), min(halo, g.nrows - row0 - n)
+            yield row0, n, above, self._band.ReadAsArray(0, row0 - above, g.ncols, n + above + below)
+
+    def isolated_pits(self, strip_rows: int = 1024, check=None) -> tuple:
+        """The isolated pits of the raster written (:func:`~groundsieve.core.grids.rasterize.isolated_pits`:
+        count, the deepest's depth, its row and column), read back in strips with the two rows around
+        each. Counted on the mosaic, not tile by tile: a tile's own interpolation has no values beyond
+        its buffer, so with a small buffer it missed pits near its edges, and with a fill it counted
+        cells on the survey's edge a run of the whole cloud never counts (a code reviewer)."""
+        from ..grids.rasterize import isolated_pits
+        count, deepest, where = 0, 0.0, (-1, -1)
         with self._lock:
-            self._band.FlushCache()
-            for row0 in range(0, g.nrows, strip_rows):
-                n = min(strip_rows, g.nrows - row0)
-                above, below = min(2, row0), min(2, g.nrows - row0 - n)
-                values = self._band.ReadAsArray(0, row0 - above, g.ncols, n + above + below).astype(np.float64)
+            for row0, n, above, values in self._strips(strip_rows, halo=2):
+                values = values.astype(np.float64)
                 values[values == self.nodata] = np.nan
-                found, drop, r, k = isolated_pits(values, inner=(above, above + n, 0, g.ncols), check=check)
+                found, drop, r, k = isolated_pits(values, inner=(above, above + n, 0, self.grid.ncols), check=check)
                 count += found
                 if found and drop > deepest:
-                    deepest = drop
-                    x, y = g.x0 + (k + 0.5) * g.cell, g.top - (row0 - above + r + 0.5) * g.cell
-        return count, deepest, x, y
+                    deepest, where = drop, (row0 - above + r, k)
+        return count, deepest, where[0], where[1]
 
     def enclosed_nodata(self, strip_rows: int = 512) -> int:
         """Cells without a value between cells with one both in their row and in their column, over
@@ -179,12 +185,10 @@ class BlockGeoTIFF:
             has = self._last >= 0
             if not np.any(self._last[has] - self._first[has] + 1 - self._valued[has]):
                 return 0
-            self._band.FlushCache()
             cols = np.arange(self.grid.ncols)
             count = 0
-            for row0 in range(0, self.grid.nrows, strip_rows):
-                n = min(strip_rows, self.grid.nrows - row0)
-                empty = self._band.ReadAsArray(0, row0, self.grid.ncols, n) == self.nodata
+            for row0, n, _above, values in self._strips(strip_rows):
+                empty = values == self.nodata
                 rows = np.arange(row0, row0 + n)[:, None]
                 inside = ((cols[None, :] >= self._first[rows]) & (cols[None, :] <= self._last[rows])
                           & (rows >= self._top[None, :]) & (rows <= self._bottom[None, :]))
