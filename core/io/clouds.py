@@ -194,10 +194,12 @@ def _with_geokey_heights(crs, header):
     heights' datum and unit, its heights in feet were taken for metres without a word, and its DTM
     said metres (a flood modeller). The units key wins over the vertical CRS's own unit (LAStools
     writes NAVD88's code 5703, in metres, beside US survey feet); without a known vertical CRS the
-    heights get a vertical CRS of unknown datum in that unit. Only heights in another unit than x
-    and y are added: LAStools writes the units key (metres) into nearly every file, and a compound
-    CRS of "unknown height (metre)" told two tiles of one survey apart and took the EPSG code off
-    their DTMs (a code reviewer). A WKT CRS, and a 3D one, are kept as they are."""
+    heights get a vertical CRS of unknown datum in that unit. A vertical CRS the keys name by its EPSG
+    code is kept whatever its unit (a surveyor: "NAD83 / BC Albers + CGVD28 height" from LAStools lost
+    its datum in the DTM, where the same CRS as LAS 1.4 WKT kept it). A units key alone adds a vertical
+    CRS only for heights in another unit than x and y: LAStools writes it (metres) into nearly every
+    file, and a compound CRS of "unknown height (metre)" told two tiles of one survey apart and took
+    the EPSG code off their DTMs (a code reviewer). A WKT CRS, and a 3D one, are kept as they are."""
     from laspy.vlrs.known import GeoKeyDirectoryVlr, WktCoordinateSystemVlr
     records = list(header.vlrs) + list(header.evlrs or [])
     if any(isinstance(r, WktCoordinateSystemVlr) and r.string for r in records) or crs.is_compound \
@@ -213,7 +215,7 @@ def _with_geokey_heights(crs, header):
     import pyproj
     from pyproj.crs import CompoundCRS, VerticalCRS
     from pyproj.crs.coordinate_system import VerticalCS
-    vertical = None
+    vertical, by_code = None, False
     if code is not None and 0 < code < 32767:
         try:
             vertical = pyproj.CRS.from_epsg(code)
@@ -221,6 +223,7 @@ def _with_geokey_heights(crs, header):
             vertical = None
         if vertical is not None and not vertical.is_vertical:
             vertical = None
+        by_code = vertical is not None
     if unit in _HEIGHT_AXES:
         axis, name = _HEIGHT_AXES[unit]
         has = vertical.axis_info[0].unit_name if vertical is not None and vertical.axis_info else None
@@ -235,8 +238,8 @@ def _with_geokey_heights(crs, header):
     # metres per unit, as PROJ knows them (US survey and international feet, 2 ppm apart, are one unit
     # for the thresholds, as raster/crs.py's heights_differ has it)
     up, across = vertical.axis_info[0].unit_conversion_factor, crs.axis_info[0].unit_conversion_factor
-    if up and across and abs(up / across - 1) <= 1e-5:
-        return crs  # heights in the unit of x and y: nothing a run reads differently
+    if not by_code and up and across and abs(up / across - 1) <= 1e-5:
+        return crs  # an unknown datum in the unit of x and y: nothing a run reads differently
     return CompoundCRS(name=f"{crs.name} + {vertical.name}", components=[crs, vertical])
 
 

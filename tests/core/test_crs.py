@@ -129,12 +129,15 @@ def test_the_vertical_part_of_a_crs_given_by_geotiff_keys_is_kept(tmp_path):
     assert unit_only.is_compound and unit_only.axis_info[2].unit_name == "foot"
     assert crs("plain.las", utm).to_epsg() == 26917  # no vertical keys: as laspy reads it
     assert crs("odd.las", utm + [(4096, 26917)]).to_epsg() == 26917  # not a vertical CRS: ignored
-    # heights in the unit of x and y add nothing: LAStools writes the units key (metres) into nearly
+    # a units key alone, in the unit of x and y, adds nothing: LAStools writes it (metres) into nearly
     # every file, and "+ unknown height (metre)" told two tiles of one survey apart and took the EPSG
-    # code off their DTMs (a code reviewer); NAVD88 in metres stays EPSG:26917 for the same reason
-    for name, keys in (("units_m.las", [(4099, 9001)]), ("navd88_m.las", [(4096, 5703)]),
-                       ("both_m.las", [(4096, 5703), (4099, 9001)])):
-        assert crs(name, utm + keys).to_epsg() == 26917, name
+    # code off their DTMs (a code reviewer)
+    assert crs("units_m.las", utm + [(4099, 9001)]).to_epsg() == 26917
+    # a vertical CRS named by its code is kept in any unit (a surveyor: LAStools' "+ CGVD28 height"
+    # lost its datum, where the same CRS as LAS 1.4 WKT kept it)
+    for name, keys in (("navd88_m.las", [(4096, 5703)]), ("both_m.las", [(4096, 5703), (4099, 9001)])):
+        both = crs(name, utm + keys)
+        assert both.is_compound and [c.to_epsg() for c in both.sub_crs_list] == [26917, 5703], name
     # a 3D geographic CRS with a vertical key keeps its CRS (the compound failed and the whole CRS went)
     assert crs("geo3d.las", [(1024, 2), (1025, 1), (2048, 4979), (4099, 9001)]) is not None
 
@@ -155,3 +158,23 @@ def test_a_geotiff_keys_file_in_us_survey_feet_is_warned_and_its_dtm_says_so(tmp
     dtm = gdal.Open(str(tmp_path / "o.tif"))
     assert dtm.GetRasterBand(1).GetUnitType() == "US survey foot"
     assert "North American Vertical Datum 1988" in dtm.GetProjection()
+
+
+def test_a_vertical_datum_named_by_geotiff_keys_reaches_the_dtm_without_a_unit_warning(tmp_path):
+    """A LAS 1.2 file of UTM 17N + NAVD88 height (keys 3072 and 4096, heights in metres, as LAStools
+    writes them) made a DTM of plain UTM 17N: the delivery lost its vertical datum (a surveyor)."""
+    from osgeo import gdal, osr
+
+    from groundsieve.core.engine.workflow import DTMOptions, run_ground_filter
+    from groundsieve.core.filters.smrf import SMRF
+    from groundsieve.core.progress import WARNING_PREFIX
+    src = _geokey_las(tmp_path / "navd88m.las", [(1024, 1), (1025, 1), (3072, 26917), (4096, 5703)])
+    lines = []
+    run_ground_filter(str(src), str(tmp_path / "o.las"), SMRF(), dtm_path=str(tmp_path / "o.tif"),
+                      dtm=DTMOptions(), log=lines.append)
+    assert not [line for line in lines if line.startswith(WARNING_PREFIX)], lines
+    dtm = gdal.Open(str(tmp_path / "o.tif"))
+    srs = osr.SpatialReference(wkt=dtm.GetProjection())
+    assert srs.IsCompound() and srs.GetAuthorityCode("PROJCS") == "26917", dtm.GetProjection()
+    assert srs.GetAuthorityCode("VERT_CS") == "5703"
+    assert dtm.GetRasterBand(1).GetUnitType() == "m"
