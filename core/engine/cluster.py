@@ -38,6 +38,7 @@ import time
 from typing import Callable, List, Optional, Sequence, Tuple
 
 from ..errors import Cancelled, GroundSieveError, InvalidParameterError
+from ..io.provenance import PACKAGE_ROOT, package_version
 
 PIP_HINT = 'python -m pip install "dask[distributed]"'
 #: how long a scheduler address may take to answer
@@ -141,24 +142,6 @@ def import_distributed():
         raise ClusterError(f"A Dask scheduler was given but the Python package dask[distributed] is not installed "
                            f"here ({err}); install it with: {PIP_HINT} (on the client and on every worker)") from err
     return distributed
-
-
-#: the folder of this GroundSieve package (its metadata.txt, its core/)
-PACKAGE_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-
-
-def package_version() -> str:
-    """This GroundSieve's version (metadata.txt of the package)."""
-    return _version_of(PACKAGE_ROOT)
-
-
-def _version_of(root: str) -> str:
-    try:
-        with open(os.path.join(root, "metadata.txt"), encoding="utf-8") as f:
-            m = re.search(r"^version\s*=\s*(\S+)", f.read(), re.M)
-        return m.group(1) if m else "unknown"
-    except OSError:
-        return "unknown"
 
 
 # The probe runs on every worker before any tile. It is pickled by value (defined outside any

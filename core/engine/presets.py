@@ -97,11 +97,8 @@ def describe(name: str, built, preset: Optional["Preset"] = None, typed_wins: bo
 
 
 def _version() -> str:
-    import configparser
-    parser = configparser.ConfigParser()
-    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-    parser.read(os.path.join(root, "metadata.txt"), encoding="utf-8")
-    return parser.get("general", "version", fallback="0")
+    from ..io.provenance import package_version
+    return package_version()
 
 
 def check_value(name: str, key: str, value, where: str):

@@ -303,6 +303,8 @@ def finish_copy(dst: str, src: Optional[str] = None, name: Optional[str] = None)
     (a format reviewer compared every field):
 
     - the waveform data packets ``src`` holds inside the file (:func:`carry_waveform_packets`);
+    - the generating software: GroundSieve and its version (laspy kept ``src``'s: a classified copy
+      claimed the vendor's pipeline had written it, a surveyor);
     - the header's creation day and year, as ``src`` has them (laspy read day 0 as the last day of the
       year before and wrote an unset date as today's);
     - a LAS 1.4 file of point formats 0-5: the legacy point counts, which LAS 1.4 R15 wants filled in
@@ -325,6 +327,9 @@ def finish_copy(dst: str, src: Optional[str] = None, name: Optional[str] = None)
         a = bytearray(f.read(_HEADER_BYTES_14)) if f is not None else b""
         if len(a) < 227 or a[:4] != b"LASF":
             f = None
+        from .provenance import software
+        g.seek(58)
+        g.write(software().encode("ascii").ljust(32, b"\0"))  # generating software: the copy's writer
         if f is not None:
             g.seek(90)
             g.write(a[90:94])  # creation day of year, year

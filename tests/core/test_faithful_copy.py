@@ -13,6 +13,8 @@ import struct
 
 import laspy
 import numpy as np
+
+from groundsieve.core.io.provenance import package_version
 import pytest
 from laspy.vlrs.vlrlist import VLRList
 
@@ -138,6 +140,8 @@ def test_header_dates_legacy_counts_and_extra_bytes_descriptions_are_kept(tmp_pa
     run_ground_filter(str(src), str(out), SMRF(), options=tiled_or_whole(tiled))
     got = out.read_bytes()
     assert got[90:94] == data[90:94]
+    # the generating software is the copy's writer (the source's "laspy ..." or a vendor's was kept)
+    assert got[58:90].rstrip(b"\0") == f"GroundSieve {package_version()}".encode() and data[58:69] != b"GroundSieve"
     assert got[107:131] == data[107:131] and struct.unpack_from("<I", got, 107)[0] == n
     description = data[at:at + 192]
     assert description in got  # the same 192 bytes: name, type, options, min, max
