@@ -3,8 +3,9 @@ one shipped with the plugin in presets/) whose parameters replace the filter's d
 
 The rule (the same as the command line's ``--preset``): the preset replaces the filter's
 defaults; a dialog value set to something other than the filter's default wins over the preset
-(so "the preset, with a threshold of 0.3 m" is one change in the dialog); under qgis_process, whose
-parameters hold only what was typed, every given value wins, even at the default. A preset for another
+(so "the preset, with a threshold of 0.3 m" is one change in the dialog); where the parameters hold
+only what was typed (qgis_process's command line, a script's processing.run), every given value
+wins, even at the default (:func:`filled_by_qgis` tells the two apart, the same on every platform). A preset for another
 filter, another preset format version, an unknown or out-of-range parameter is refused with the
 file's name and the problem (core/engine/presets.py).
 
@@ -64,7 +65,7 @@ def build_filter(algorithm, parameters, context, log=None):
     kwargs = algorithm.filterArguments(parameters, context)
     path = preset_path(algorithm, parameters, context)
     preset = load_preset(path, algorithm.FILTER) if path else None
-    typed = typed_fields(algorithm.FILTER, parameters) if preset is not None else set()
+    typed = typed_fields(algorithm, algorithm.FILTER, parameters) if preset is not None else set()
     if preset is not None:
         kwargs = merge(algorithm.FILTER, preset.values, kwargs, typed)
     kwargs = algorithm.completeFilterArguments(kwargs)
@@ -75,29 +76,31 @@ def build_filter(algorithm, parameters, context, log=None):
     return built
 
 
-def running_in_qgis_process() -> bool:
-    """Whether this is qgis_process, whose parameters hold only what the command line gave (the
-    dialog, the modeler and the batch give every parameter, typed or not)."""
-    from qgis.core import QgsApplication
-    return QgsApplication.platform() == "qgis_process"
+def filled_by_qgis(algorithm, parameters) -> bool:
+    """Whether ``parameters`` were filled in by QGIS rather than typed: the dialog, the batch dialog,
+    a model's step and a copied Python command hold a value for (nearly) every parameter, typed or
+    left alone; qgis_process's command line and a script's ``processing.run`` hold what was given.
+    Nearly: a model saved before a parameter was added lacks it (a reviewer's model, saved before
+    LOW_OUTLIER_SLOPE, lost forest-smrf's values under qgis_process and kept them in PyQGIS: the rule
+    followed the platform). Two thirds of the algorithm's parameters tell one from the other."""
+    names = [d.name() for d in algorithm.parameterDefinitions()]
+    return sum(1 for n in names if n in parameters) * 3 >= 2 * len(names)
 
 
-def typed_fields(name: str, parameters) -> set:
-    """The filter's fields given on qgis_process's command line: there a value equal to the
-    default was typed on purpose and wins over the preset, as on GroundSieve's own command line.
-    Empty elsewhere, and when every parameter of the filter is there: a dialog, a model's step (also
-    run by qgis_process) or a batch fills them all, and cannot tell a typed default from an untouched one."""
-    if not running_in_qgis_process():
+def typed_fields(algorithm, name: str, parameters) -> set:
+    """The filter's fields given on purpose: where the parameters were typed (qgis_process's command
+    line, ``processing.run`` with some parameters), a value equal to the default was given on purpose
+    and wins over the preset, as on GroundSieve's own command line. Empty where QGIS filled every
+    parameter (:func:`filled_by_qgis`): there a typed default cannot be told from an untouched one."""
+    if filled_by_qgis(algorithm, parameters):
         return set()
     from ..core.engine import parameters as table
-    params = table.params(name)
-    given = {p.field for p in params if p.name in parameters}
-    return set() if len(given) == len(params) else given
+    return {p.field for p in table.params(name) if p.name in parameters}
 
 
 PRESET_HELP = """<p><b>Preset</b> (optional; every filter but the learned hybrid): a parameters file written by <i>Tune a ground filter on a
 labelled patch</i> (groundsieve:tune), or one shipped with the plugin, by its file or its name
 (<code>forest-smrf.json</code>; the plugin's <code>presets</code> folder).
 Its parameters replace the filter's defaults; a parameter you set in this dialog to a value other than
-its default wins over the preset (in qgis_process, every parameter given wins). A preset for another filter, of another format version, or with an
+its default wins over the preset (in qgis_process and in a script's processing.run with a few parameters, every parameter given wins). A preset for another filter, of another format version, or with an
 unknown or out-of-range parameter is refused with the file's name and the problem.</p>"""
