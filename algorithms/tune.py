@@ -137,6 +137,7 @@ sensitivity) and every set tried.</p>""")
             start = self.parameterAsFile(parameters, self.START_PRESET, context) \
                 if parameters.get(self.START_PRESET) else ""
             base = presets.load_preset(start, name).values if start else None
+            tune.check_tune_outputs(self.parameterAsFile(parameters, self.INPUT, context), preset_path, report_path)
             options = tune.TuneOptions(metric=METRICS[self.parameterAsEnum(parameters, self.METRIC, context)],
                                        budget=self.parameterAsInt(parameters, self.BUDGET, context),
                                        blocks=self.parameterAsInt(parameters, self.BLOCKS, context),

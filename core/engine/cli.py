@@ -250,10 +250,11 @@ class _Usage(Exception):
 def run_tune(args, out) -> dict:
     """Run ``tune``; return its JSON document (the summary is also logged to ``out``)."""
     from .presets import load_preset, write_preset
-    from .tune import TuneOptions, preset_source, preset_values, tune
+    from .tune import TuneOptions, check_tune_outputs, preset_source, preset_values, tune
     from .tune_report import write_report
     if not args.preset_out and not args.report:
         raise _Usage("give --preset-out and/or --report")
+    check_tune_outputs(args.input, args.preset_out, args.report)
     base = load_preset(args.start, args.tune_filter).values if args.start else None
     result = tune(args.input, args.tune_filter,
                   TuneOptions(metric=args.metric, budget=args.budget, blocks=args.blocks, seconds=args.seconds,

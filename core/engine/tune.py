@@ -462,6 +462,25 @@ RESCORE = {"smrf": (_smrf_surface, _smrf_ground)}
 CHEAP_STEPS = 5  #: values per cheap parameter tried on every filter run of the design
 
 
+#: what the tune's two outputs may end in
+PRESET_EXTENSIONS, REPORT_EXTENSIONS = (".json",), (".html", ".htm")
+
+
+def check_tune_outputs(input_path: str, preset_path: Optional[str], report_path: Optional[str]) -> None:
+    """Refuse the tune's outputs before the search (it takes minutes): a preset not named .json (the
+    filters' PRESET takes only those: a reviewer's p.txt was written, then refused by the filter), a
+    report not .html, a missing folder, the patch itself. A missing patch is said first."""
+    import os
+
+    from ..io import check_output_path
+    if isinstance(input_path, str) and not os.path.exists(input_path):
+        raise InputError(f"{input_path}: no such file")
+    if preset_path:
+        check_output_path(preset_path, inputs=(input_path,), extensions=PRESET_EXTENSIONS, what="preset")
+    if report_path:
+        check_output_path(report_path, inputs=(input_path,), extensions=REPORT_EXTENSIONS, what="report")
+
+
 def tune(cloud, name: str, options: TuneOptions = TuneOptions(), *, base: Optional[Mapping[str, object]] = None,
          progress: Optional[Callable[[float], None]] = None, is_cancelled: Optional[Callable[[], bool]] = None,
          log: Optional[Callable[[str], None]] = None) -> TuneResult:

@@ -145,6 +145,22 @@ def test_tune_refuses_a_patch_without_labels_in_one_line(tmp_path):
     assert out.getvalue().startswith(f"groundsieve: {path}: the tuning patch has no labels")
 
 
+def test_tune_refuses_outputs_the_filters_cannot_take_before_the_search(scene, tmp_path):
+    """A preset named p.txt was written after minutes of search, then refused by every filter's
+    PRESET (.json only): a modeler reviewer. Now the outputs are checked before the search."""
+    for option, name, said in (("--preset-out", "p.txt", "the preset must end in .json (got '.txt')"),
+                               ("--report", "r.pdf", "the report must end in .html or .htm (got '.pdf')"),
+                               ("--preset-out", "nowhere/p.json", "does not exist")):
+        out = io.StringIO()
+        assert main(["tune", "--input", scene, "--filter", "smrf", option, str(tmp_path / name)], out=out) == 1
+        assert said in out.getvalue() and "sets in" not in out.getvalue(), out.getvalue()
+    out = io.StringIO()
+    assert main(["tune", "--input", str(tmp_path / "typo.laz"), "--filter", "smrf", "--preset-out",
+                 str(tmp_path / "p.txt")], out=out) == 1
+    assert f"{tmp_path / 'typo.laz'}: no such file" in out.getvalue()
+    assert os.listdir(tmp_path) == []
+
+
 def test_a_mistyped_input_is_named_before_the_outputs(tmp_path):
     """A missing input given with a .vpc output: the error is the missing input, not the output's
     extension (which only follows from the input not being found)."""

@@ -41,6 +41,17 @@ def test_tune_chooses_by_the_one_standard_error_rule_when_asked(groundsieve_prov
     assert "one-standard-error rule" in open(report, encoding="utf-8").read()
 
 
+def test_tune_refuses_a_preset_name_the_filters_cannot_take_before_the_search(groundsieve_provider, patch, tmp_path):
+    """p.txt was written after the search, then refused by every filter's PRESET (a modeler reviewer)."""
+    import processing
+    from qgis.core import QgsProcessingException
+    with pytest.raises(QgsProcessingException, match=r"p\.txt: the preset must end in \.json"):
+        processing.run("groundsieve:tune", {"INPUT": patch, "FILTER": 0, "BUDGET": 4, "BLOCKS": 2,
+                                            "OUTPUT_PRESET": str(tmp_path / "p.txt"),
+                                            "OUTPUT_HTML": str(tmp_path / "r.html")})
+    assert os.listdir(tmp_path) == []
+
+
 def test_tune_refuses_a_patch_without_non_ground_naming_it(groundsieve_provider, tmp_path):
     import processing
     from qgis.core import QgsProcessingException
