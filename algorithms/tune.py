@@ -34,6 +34,7 @@ class TuneAlgorithm(Discoverable, QgsProcessingAlgorithm):
     OUTPUT_HTML = "OUTPUT_HTML"
     CV_TOTAL_ERROR = "CV_TOTAL_ERROR"
     CV_KAPPA = "CV_KAPPA"
+    CV_F1 = "CV_F1"
 
     def name(self):
         return "tune"
@@ -119,6 +120,7 @@ sensitivity) and every set tried.</p>""")
                                                                 fileFilter="HTML (*.html)"))
         self.addOutput(QgsProcessingOutputNumber(self.CV_TOTAL_ERROR, "Cross-validated total error (0-1)"))
         self.addOutput(QgsProcessingOutputNumber(self.CV_KAPPA, "Cross-validated kappa"))
+        self.addOutput(QgsProcessingOutputNumber(self.CV_F1, "Cross-validated F1 of the ground class (0-1)"))
 
     def checkParameterValues(self, parameters, context):  # noqa: N802
         """QGIS's checks, said in the dialog's words (the first wrong value, named by its label); a
@@ -158,4 +160,4 @@ sensitivity) and every set tried.</p>""")
         for _title, text in result.warnings:
             feedback.pushWarning(text)
         return {self.OUTPUT_PRESET: preset_path, self.OUTPUT_HTML: report_path,
-                self.CV_TOTAL_ERROR: cv.total, self.CV_KAPPA: cv.kappa}
+                self.CV_TOTAL_ERROR: cv.total, self.CV_KAPPA: cv.kappa, self.CV_F1: cv.f1}

@@ -28,6 +28,7 @@ def test_tune_writes_the_preset_and_a_report_for_the_results_viewer(groundsieve_
     data = json.load(open(preset, encoding="utf-8"))
     assert data["filter"] == "smrf" and data["source"]["metric"] == "kappa"
     assert abs(data["source"]["cv_kappa"] - result["CV_KAPPA"]) < 1e-5
+    assert 0.5 < result["CV_F1"] <= 1.0  # the third metric is returned too (only two were)
     assert "<svg" in open(report, encoding="utf-8").read()
     assert data["source"]["selection"] == "best"
 
