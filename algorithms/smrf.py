@@ -12,6 +12,7 @@ class SMRFAlgorithm(GroundFilterAlgorithm):
     SCALAR = "SCALAR"
     LOW_OUTLIER_FILL = "LOW_OUTLIER_FILL"
     LOW_OUTLIER_SLOPE = "LOW_OUTLIER_SLOPE"
+    LOW_OUTLIER_MAX_SHARE = "LOW_OUTLIER_MAX_SHARE"
 
     def name(self):
         return "smrf"
@@ -41,5 +42,11 @@ it lowers the mean ISPRS total error with the single parameter set, see <a href=
 <b>Low-outlier slope</b> (advanced): a cell is a low outlier when it lies more than this many cell
 sizes below the cells around it (5, the paper's: 5 m with 1 m cells). A low point less deep stays
 ground and leaves a pit in the DTM; 1 catches points 1 m deep, but cuts narrow ditches and steep
-ground (ISPRS samp41: 5.1 to 9.6 % total error), so classify isolated low points as noise (7) where you can.</p>
+ground (ISPRS samp41: 5.1 to 9.6 % total error), so classify isolated low points as noise (7) where you can.
+<b>Low-outlier share</b> (advanced): low outliers are refilled only where they are at most this share of the
+occupied cells within 10 m (0.05); where more are, they are taken for ground seen through gaps in a
+closed canopy and kept. A cloud of surface points (photogrammetry) sees no ground through a canopy:
+there 1 refills them all, and with a low-outlier slope of 1 it removes image-matching blunders below
+the ground, a few hundred of which made SMRF lose most of the ground of a dense cloud (the shipped
+preset <code>uav-photogrammetry-smrf.json</code> sets both).</p>
 """ + COMMON_HELP)

@@ -49,6 +49,9 @@ FILTERS: Dict[str, Tuple[str, str, Sequence[Param]]] = {
         Param("low_outlier_slope", "LOW_OUTLIER_SLOPE",
               "Low-outlier slope: a cell this many cell sizes below the cells around it is a low outlier",
               "rise/run", advanced=True, minimum=0.01),
+        Param("low_outlier_max_share", "LOW_OUTLIER_MAX_SHARE",
+              "Low-outlier share: refill low outliers only where they are at most this share of the occupied cells "
+              "within 10 m (1 = always, for clouds of surface points)", advanced=True, minimum=0.0, maximum=1.0),
     )),
     "pmf": ("pmf", "PMF", (
         Param("cell_size_m", "CELL", "Cell size", "m", minimum=0.01),

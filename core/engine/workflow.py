@@ -429,16 +429,20 @@ def pits_note(count: int, depth: float, row: int, col: int, grid) -> str:
     points (multipath or noise echoes) that SMRF's low-outlier test lets through when less than 5 cells
     deep, made ground, with nothing in the log. A narrow, deep ditch sampled by few points is beaded
     into such pits too (a code reviewer: 1 m wide and 2 m deep, 0.5 m between points), so the note says
-    both and asks for a look before any change."""
+    both and asks for a look before any change. A warning (``--json``'s ``warnings``, QGIS's log in
+    orange): a batch QA pipeline reads those only (a surveyor), and the pits were all a UAV reviewer's
+    log said of blunders that had taken 96 % of the ground."""
     from ..grids.rasterize import PIT_DEPTH
     if not count:
         return ""
     x, y = grid.x0 + (col + 0.5) * grid.cell, grid.top - (row + 0.5) * grid.cell
-    return (f"DTM: {count:,} isolated pit(s), cells more than {PIT_DEPTH:g} m below every other cell within 2 cells, "
-            f"the deepest {depth:.2f} m at x {x:,.2f}, y {y:,.2f}. Low points made ground (multipath or noise "
-            "echoes) make them, and so does a narrow, deep ditch sampled by few points: look at them before "
-            "mapping them. Where they are low points, class those as noise (7) beforehand, or with SMRF lower the "
-            "Low-outlier slope (1 catches points 1 m deep).")
+    return (f"{WARNING_PREFIX}DTM: {count:,} isolated pit(s), cells more than {PIT_DEPTH:g} m below every other cell "
+            f"within 2 cells, the deepest {depth:.2f} m at x {x:,.2f}, y {y:,.2f}. Low points made ground (multipath "
+            "or noise echoes, image-matching blunders) make them, and so does a narrow, deep ditch sampled by few "
+            "points: look at them before mapping them. Where they are low points, class those as noise (7) "
+            "beforehand, or with SMRF lower the Low-outlier slope (1 catches points 1 m deep); in a cloud of surface "
+            "points (photogrammetry) also set the Low-outlier share to 1 (the preset uav-photogrammetry-smrf.json "
+            "sets both): there a few blunders can take the ground around them too.")
 
 
 def dtm_spacing_note(points: int, valued_cells: int, cell: float) -> str:

@@ -8,6 +8,8 @@ import os
 
 import laspy
 import numpy as np
+
+from groundsieve.core.progress import WARNING_PREFIX
 import pytest
 
 from groundsieve.core.engine.tiles import TileOptions, TiledRun
@@ -1311,6 +1313,7 @@ def test_isolated_pits_of_the_dtm_are_said_whole_and_tiled_alike(tmp_path):
     # the mosaic's pits, read back: a tile's own interpolation missed those near its edges with a small
     # buffer, and with a fill counted the survey's edge a whole run never counts (a code reviewer)
     assert len(notes["whole"]) == 1 and notes["whole"] == notes["tiled"] == notes["small buffer"], notes
+    assert notes["whole"][0].startswith(WARNING_PREFIX)  # --json's warnings: what a QA pipeline reads
     assert notes["whole, fill"] == notes["tiled, fill"], notes
     count = int(notes["whole"][0].split("DTM: ")[1].split(" isolated")[0])
     assert 4 <= count <= 12
