@@ -156,8 +156,9 @@ class EchoGrid:
                     "single-return bypass would take every kernel as ground, so it is off and every kernel "
                     "gets the height test (mode 'evidence' uses the number of returns).")
             else:
-                log(f"{WARNING_PREFIX}Echo grid: the cloud has no return information (every point is 1 of 1: "
-                    "photogrammetry, or a file without returns); the single-return bypass is off and every "
+                log(f"{WARNING_PREFIX}Echo grid: the cloud has no return information (every point "
+                    "is 1 of 1, or 0 of 0 as image-matching software writes it: photogrammetry, or a file "
+                    "without returns); the single-return bypass is off and every "
                     "kernel gets the height test.")
         size = float(self.kernel_m)
         # Kernels sit on multiples of kernel_m (as GridSpec cells do), not on the cloud's lowest

@@ -108,6 +108,11 @@ def unit_warning(path: str, crs_wkt: Optional[str], lengths: str = "every length
     ``bounds`` (x0, y0, x1, y1), a geographic CRS whose coordinates cannot be degrees is said to be
     wrong instead."""
     if not crs_wkt:
+        if bounds is not None and in_degree_range(bounds) and max(bounds[2] - bounds[0], bounds[3] - bounds[1]) < 1.0:
+            return (f"{path}: no CRS in the file, and its coordinates (x {bounds[0]:g} to {bounds[2]:g}, y {bounds[1]:g} "
+                    f"to {bounds[3]:g}) span less than 1 unit: they look like longitudes and latitudes in degrees, "
+                    "in which every length parameter (m) would be read (1 m of cell: 1 degree, 111 km). If so, "
+                    "reproject the cloud to a projected CRS in metres (its UTM zone) first; outputs have no CRS.")
         return f"{path}: no CRS in the file; outputs have none either."
     unit = horizontal_unit(crs_wkt)
     if heights_differ(crs_wkt):

@@ -35,6 +35,16 @@ def test_a_local_survey_labelled_geographic_is_warned_not_refused_and_degrees_ar
     assert check_lengths_unit("utm.laz", pyproj.CRS.from_epsg(32632).to_wkt(), (10.0, 20.0, 60.0, 70.0)) is None
 
 
+def test_degrees_without_a_crs_are_said_and_local_coordinates_are_not():
+    """A UAV cloud in longitudes and latitudes with no CRS ran without a word but the DTM's size: 94 %
+    of the ground lost, a 1 x 1 cell DTM (a UAV reviewer); a local site near 0 must not be warned so."""
+    from groundsieve.core.raster.crs import check_lengths_unit
+    said = check_lengths_unit("uav.laz", None, (9.001, 47.002, 9.004, 47.005))
+    assert said.startswith("uav.laz: no CRS in the file, and its coordinates (x 9.001 to 9.004") and "degrees" in said
+    assert check_lengths_unit("site.laz", None, (-20.0, -20.0, 20.0, 20.0)) == \
+        "site.laz: no CRS in the file; outputs have none either."
+
+
 def test_a_local_crs_in_feet_is_said_to_be_in_feet():
     """A LOCAL_CS in feet was taken for metres, without a warning."""
     from groundsieve.core.raster.crs import horizontal_unit
