@@ -10,12 +10,15 @@ import numpy as np
 from ..errors import OutputError
 from ..grids.spec import GridSpec
 from ..io import atomic_path
+from ..io.provenance import software
 from .crs import elevation_unit
 
 #: a DTM band's description (QGIS names the band after it in the legend: "Band 1: elevation")
 ELEVATION_BAND = "elevation"
 
 NODATA = -9999.0
+#: every raster is a cloud-optimised GeoTIFF with these options (the floating-point predictor besides for heights)
+COG_OPTIONS = ["COMPRESS=DEFLATE", "BIGTIFF=IF_SAFER", "OVERVIEWS=AUTO"]
 RASTER_EXTENSIONS = (".tif", ".tiff")
 
 
@@ -37,28 +40,32 @@ def write_geotiff(path: str, values: np.ndarray, grid: GridSpec, *, crs_wkt: Opt
     path = check_raster_path(path)
     if values.shape != grid.shape:
         raise OutputError(f"{path}: raster of shape {values.shape} does not match its grid {grid.shape}")
-    gdal_type = {"float32": gdal.GDT_Float32, "float64": gdal.GDT_Float64,
-                 "uint8": gdal.GDT_Byte, "int16": gdal.GDT_Int16}[dtype]
+    if dtype not in ("float32", "float64", "uint8", "int16"):
+        raise OutputError(f"{path}: cannot write a raster of type {dtype}")
     data = np.where(np.isnan(values), nodata, values).astype(dtype) if values.dtype.kind == "f" else values.astype(dtype)
     try:
+        # the array as an in-memory dataset (no copy), written as a cloud-optimised GeoTIFF: tiles,
+        # overviews, DEFLATE, as a tiled run's DTM (BlockGeoTIFF.finish), so that a delivery's format
+        # does not depend on whether the run was tiled (a surveyor: 256-pixel blocks without
+        # overviews whole, a COG with 512-pixel blocks tiled)
+        from osgeo import gdal_array
+        data = np.ascontiguousarray(data)  # kept alive while the dataset reads from it
+        mem = gdal_array.OpenArray(data)
+        mem.SetGeoTransform(grid.geotransform)
+        mem.SetMetadataItem("TIFFTAG_SOFTWARE", software())
+        if crs_wkt:
+            mem.SetProjection(crs_wkt)
+        band = mem.GetRasterBand(1)
+        band.SetNoDataValue(nodata)
+        if elevation:
+            band.SetUnitType(elevation_unit(crs_wkt))
+            band.SetDescription(ELEVATION_BAND)
+        if categories:
+            _set_categories(band, categories)
         with (atomic_path(path) if atomic else contextlib.nullcontext(path)) as tmp:
-            driver = gdal.GetDriverByName("GTiff")
-            ds = driver.Create(tmp, grid.ncols, grid.nrows, 1, gdal_type,
-                               options=["COMPRESS=DEFLATE", "TILED=YES", "BIGTIFF=IF_SAFER"]
-                               + (["PREDICTOR=3"] if dtype.startswith("float") else []))
-            ds.SetGeoTransform(grid.geotransform)
-            if crs_wkt:
-                ds.SetProjection(crs_wkt)
-            band = ds.GetRasterBand(1)
-            band.SetNoDataValue(nodata)
-            if elevation:
-                band.SetUnitType(elevation_unit(crs_wkt))
-                band.SetDescription(ELEVATION_BAND)
-            if categories:
-                _set_categories(band, categories)
-            band.WriteArray(data)
-            band.FlushCache()
-            ds = None  # closes and flushes the file
+            gdal.Translate(tmp, mem, format="COG", creationOptions=COG_OPTIONS
+                           + (["PREDICTOR=YES"] if dtype.startswith("float") else []))
+        band = mem = None
     except RuntimeError as err:
         raise OutputError(f"{path}: cannot write the GeoTIFF ({err})") from err
     if not os.path.exists(path):
@@ -114,6 +121,7 @@ class BlockGeoTIFF:
                 work_path, grid.ncols, grid.nrows, 1, gdal.GDT_Float32,
                 options=["COMPRESS=DEFLATE", "TILED=YES", "BIGTIFF=IF_SAFER", "SPARSE_OK=TRUE", "PREDICTOR=3"])
             self._ds.SetGeoTransform(grid.geotransform)
+            self._ds.SetMetadataItem("TIFFTAG_SOFTWARE", software())
             if crs_wkt:
                 self._ds.SetProjection(crs_wkt)
             self._band = self._ds.GetRasterBand(1)
@@ -213,8 +221,6 @@ class BlockGeoTIFF:
         self.close()
         try:
             with (atomic_path(path) if atomic else contextlib.nullcontext(path)) as tmp:
-                gdal.Translate(tmp, self.work_path, format="COG",
-                               creationOptions=["COMPRESS=DEFLATE", "PREDICTOR=YES", "BIGTIFF=IF_SAFER",
-                                                "OVERVIEWS=AUTO"])
+                gdal.Translate(tmp, self.work_path, format="COG", creationOptions=COG_OPTIONS + ["PREDICTOR=YES"])
         except RuntimeError as err:
             raise OutputError(f"{path}: cannot write the DTM ({err})") from err

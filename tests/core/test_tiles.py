@@ -760,6 +760,8 @@ def test_tiled_dtm_unit_and_predictor_and_the_crs_advice(tmp_path):
     ds = gdal.Open(str(tmp_path / "d.tif"))
     assert ds.GetRasterBand(1).GetUnitType() == "m"
     assert ds.GetMetadata("IMAGE_STRUCTURE").get("PREDICTOR") == "3"
+    assert ds.GetMetadata("IMAGE_STRUCTURE").get("LAYOUT") == "COG"
+    assert ds.GetMetadataItem("TIFFTAG_SOFTWARE").startswith("GroundSieve ")
     write_las(new_las(scene.x[west], scene.y[west], scene.z[west], point_format=6, version="1.4"),
               str(folder / "w.laz"))
     with pytest.raises(InputError, match="w.laz.*assign the CRS to the files without one"):

@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import laspy
 import numpy as np
+
+from groundsieve.core.io.provenance import software
 import pytest
 from scipy.spatial import Delaunay
 
@@ -259,6 +261,10 @@ def test_dtm_geotiff(scene, tmp_path, cell):
     assert band.GetUnitType() == "m"  # heights in the CRS's unit (UTM: metres)
     assert band.GetDescription() == "elevation"  # (QGIS's legend: "Band 1: elevation", not "Band 1 (Gray)")
     assert ds.GetMetadata("IMAGE_STRUCTURE").get("PREDICTOR") == "3"  # floating-point predictor
+    # a cloud-optimised GeoTIFF as a tiled run's, naming its writer (a surveyor: the format followed
+    # whether the run was tiled, and nothing said which software made the DTM)
+    assert ds.GetMetadata("IMAGE_STRUCTURE").get("LAYOUT") == "COG"
+    assert ds.GetMetadataItem("TIFFTAG_SOFTWARE") == software()
     # The ground lies on [Y0, Y0 + 59.9] with points on y = Y0 exactly: that southern edge adds no
     # row of nodata (a closed grid: 60 m of points give 60 m of DTM, at 1 and at 2 m)
     assert ds.RasterYSize == round(SIZE / cell)
