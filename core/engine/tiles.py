@@ -454,6 +454,7 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
             log(f"{WARNING_PREFIX}{info.path}: {info.copc_damaged}: its points are read as a plain LAZ file's, "
                 "binned instead of read by bounds")
     workflow.warn_about_units(input_path, infos, log)
+    algorithm, dtm = workflow.defaults_in_crs_unit(algorithm, dtm, infos[0].crs_wkt, input_path, log)
     workflow.check_model_units(algorithm, input_path, infos[0].crs_wkt, log)
     # what a filter decides from the whole cloud (e.g. the echo grid: whether it has echoes), decided
     # once from the headers, so that no tile decides it from what it alone holds

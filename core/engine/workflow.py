@@ -22,14 +22,15 @@ same for a whole file and for each tile of a survey:
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import os
 from dataclasses import dataclass
-from typing import Callable, Optional
+from typing import Callable, List, Optional
 
 import numpy as np
 
-from ..errors import InputError, InvalidParameterError
+from ..errors import GroundSieveError, InputError, InvalidParameterError
 from ..grids.spec import MAX_CELL_M, GridSpec, memory_budget
 from ..io import (CLASS_GROUND, CLASS_UNCLASSIFIED, NOISE_CLASSES, PointCloud, atomic_path, check_output_path,
                  read_cloud, write_classified)
@@ -350,6 +351,52 @@ def check_model_units(algorithm, input_path: str, crs_wkt, log) -> None:
     check_model_unit(model, getattr(algorithm, "model_path", "") or "the model", input_path, crs_wkt, log)
 
 
+def length_fields(algorithm) -> List[str]:
+    """The fields of a table filter (core/engine/parameters.py) that are lengths or heights: the dialog's
+    in m (cells, windows, thresholds, SMRF's scalar, m per unit slope) and the core's finer settings
+    named ``*_m``; [] for another algorithm (the hybrid filter's model says its own unit)."""
+    from . import parameters as P
+    name = getattr(algorithm, "name", None)
+    if name not in P.FILTERS or not isinstance(algorithm, P.filter_class(name)):
+        return []
+    shown = [p.field for p in P.params(name) if p.unit.startswith("m")]
+    finer = [f.name for f in P.core_only_fields(name)
+             if f.name.endswith("_m") and isinstance(f.default, float) and not isinstance(f.default, bool)]
+    return shown + finer
+
+
+def defaults_in_crs_unit(algorithm, dtm: Optional["DTMOptions"], crs_wkt: Optional[str], path: str, log):
+    """``algorithm`` and ``dtm`` with the lengths left at their defaults (metres) converted to the
+    CRS's unit when x, y and z share one other than the metre (feet): a surveyor's state-plane cloud in
+    US survey feet ran SMRF with an 18 ft window, which left 16,566 of 23,305 building points ground
+    (3.95 % total error; 0.95 % converted). A value equal to the default is taken for the default, as
+    the preset's rule has it; values set otherwise are read in the CRS's unit (unit_warning says so).
+    Idempotent (converted values are no longer the defaults)."""
+    from ..raster.crs import horizontal_unit, metres_per_unit
+    factor = metres_per_unit(crs_wkt)
+    if factor is None:
+        return algorithm, dtm
+    unit = horizontal_unit(crs_wkt)
+    fields = length_fields(algorithm)
+    changed = {}
+    if fields:
+        defaults = {f.name: f.default for f in dataclasses.fields(algorithm) if f.name in fields}
+        changed = {k: d / factor for k, d in defaults.items() if d and getattr(algorithm, k) == d}
+    if changed:
+        from . import parameters as P
+        names = {fld: key for key, fld in P.preset_names(algorithm.name).items()}
+    said = [f"{names[k]} {v:.4g}" for k, v in changed.items()]
+    if changed:
+        algorithm = dataclasses.replace(algorithm, **changed)
+    if dtm is not None and dtm.cell_size_m == DTMOptions.cell_size_m:
+        dtm = dataclasses.replace(dtm, cell_size_m=DTMOptions.cell_size_m / factor)
+        said.append(f"DTM cell {dtm.cell_size_m:.4g}")
+    if said:
+        log(f"{path}: the CRS's unit is {unit}: the defaults, metres, are converted to it: " + ", ".join(said)
+            + f" ({unit}; 1 m = {1 / factor:.5g}). Values set otherwise are read in {unit}.")
+    return algorithm, dtm
+
+
 def warn_about_units(path: str, infos, log) -> None:
     """Before any work: refuse a cloud in longitudes and latitudes, and say when the CRS is missing
     or not in metres (every length is read in its unit), from the files' headers ``infos``."""
@@ -543,6 +590,15 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     if callable(describe):  # a filter whose parameters are not a table's (the hybrid: its model)
         log(describe())
     from .tiles import needs_tiling, run_tiled
+    header = None
+    if _ext(input_path) in LAS_EXTENSIONS and os.path.isfile(input_path):
+        from ..io.lasfiles import scan_header
+        try:
+            header = scan_header(input_path)
+        except GroundSieveError:
+            header = None  # said below, after the outputs are checked, as before
+        else:
+            algorithm, dtm = defaults_in_crs_unit(algorithm, dtm, header.crs_wkt, input_path, log)
     if needs_tiling(input_path, options.tiling, algorithm, dtm if dtm_path else None, log):
         # A folder, a .vpc, a set tile size or a cloud beyond the memory budget: buffered tiles.
         if rasters:
@@ -563,7 +619,7 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     check_outputs(input_path, output_path, [dtm_path, *rasters])
     if _ext(input_path) in LAS_EXTENSIONS:
         from ..io.lasfiles import scan_header
-        header = scan_header(input_path)
+        header = header or scan_header(input_path)
         warn_about_units(input_path, [header], log)
         check_model_units(algorithm, input_path, header.crs_wkt, log)
     elif _ext(input_path) in TEXT_EXTENSIONS and (output_path or dtm_path or rasters):

@@ -87,6 +87,17 @@ def heights_differ(crs_wkt: Optional[str]) -> bool:
     return abs(vertical / ref.GetLinearUnits() - 1.0) > 1e-5
 
 
+def metres_per_unit(crs_wkt: Optional[str]) -> Optional[float]:
+    """Metres per unit of a projected or local CRS whose x, y and heights share one linear unit other
+    than the metre (0.3048 for feet, 0.3048006 for US survey feet); None otherwise (metres, no CRS,
+    degrees, heights in another unit than x and y: those are said by :func:`unit_warning`)."""
+    ref = _spatial_reference(crs_wkt)
+    if ref is None or ref.IsGeographic() or not (ref.IsProjected() or ref.IsLocal()) or heights_differ(crs_wkt):
+        return None
+    factor = ref.GetLinearUnits()
+    return factor if factor > 0 and abs(factor - 1.0) > 1e-12 else None
+
+
 def elevation_unit(crs_wkt: Optional[str]) -> str:
     """A raster band's unit type for elevations: the vertical part's unit under a compound CRS, else
     the CRS's linear unit (the unit every length of a run is read in): "m", "ft" or "US survey foot";
@@ -128,7 +139,7 @@ def unit_warning(path: str, crs_wkt: Optional[str], lengths: str = "every length
                 "latitudes: the CRS is likely wrong, and the lengths were read in the coordinates' own unit. "
                 "Assign the right CRS to the file (outputs keep the wrong one).")
     return (f"{path}: the CRS's unit is {unit}, not metres: {lengths} was read in that unit (where the parameters "
-            f"say m, read one {unit}).")
+            f"say m, read one {unit}); a ground filter's lengths left at their defaults are converted to it.")
 
 
 #: the widest span (degrees) a cloud in longitudes and latitudes is taken to have: a local survey in
