@@ -327,7 +327,8 @@ def filter_document(args, algorithm, run, seconds: float, warnings=()) -> dict:
             "seconds": round(seconds, 3), "tiles": int(run.tiles) if tiled else None,
             "tile_size": float(run.tile_size_m) if tiled else None,
             "tile_buffer": float(run.buffer_m) if tiled else None,
-            "algorithm": args.filter, "parameters": filter_parameters(algorithm), "warnings": list(warnings)}
+            "algorithm": args.filter, "parameters": filter_parameters(getattr(run, "algorithm", None) or algorithm),
+            "warnings": list(warnings)}
 
 
 def filter_parameters(algorithm) -> dict:

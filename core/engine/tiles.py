@@ -310,6 +310,8 @@ class TiledRun:
     tile_log: List[dict] = field(default_factory=list)
     #: the COPC inputs, read by bounds by each tile instead of binned (io/copc.py)
     copc_inputs: List[str] = field(default_factory=list)
+    #: the filter as it ran (its lengths in the CRS's unit: workflow.defaults_in_crs_unit)
+    algorithm: object = None
 
 
 def output_files(inputs: Sequence[str], output_path: Optional[str]) -> List[Optional[str]]:
@@ -1038,7 +1040,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     log(f"Done in {time.perf_counter() - t_start:.1f} s.")
     return TiledRun(inputs, [o for o in outs if o], sum(i.count for i in infos), ground_total, crs_wkt,
                     grid.size, grid.buffer, len(tile_log), dtm_path, tile_log=tile_log,
-                    copc_inputs=[i.path for i in infos if i.copc])
+                    copc_inputs=[i.path for i in infos if i.copc], algorithm=algorithm)
 
 
 @contextlib.contextmanager

@@ -118,6 +118,7 @@ class FilterRun:
     dtm_grid: Optional[GridSpec] = None
     dtm: Optional[np.ndarray] = None
     detail: object = None       #: what the filter's ``run`` returned (see call_filter)
+    algorithm: object = None    #: the filter as it ran (its lengths in the CRS's unit: defaults_in_crs_unit)
 
     @property
     def ground_count(self) -> int:
@@ -641,7 +642,7 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     done = classify_cloud(cloud, algorithm, options, steps.sub(at_filter, at_dtm), log)
     cls, ground = done.classification, done.ground
     log(f"Ground: {int(ground.sum()):,} of {int(done.filtered.sum()):,} filtered points.")
-    run = FilterRun(cloud, cls, ground, done.filtered, detail=done.detail)
+    run = FilterRun(cloud, cls, ground, done.filtered, detail=done.detail, algorithm=algorithm)
     if dtm_path:
         # The DTM spans only the points that may enter it: not withheld, not ignored (noise may lie far away).
         area = done.processable
