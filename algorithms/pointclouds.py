@@ -164,8 +164,11 @@ def classified_output_path(algorithm, parameters, context, name, input_path):
 
 
 def make_input_optional(param):
-    """The file input is optional where a loaded layer may replace it."""
+    """The file input is optional where a loaded layer may replace it; its label says that one of the
+    two is needed (QGIS marks it "[optional]", and `qgis_process help` lists it optional: a modeler
+    reviewer's model without an input passed validation on 3.40)."""
     param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagOptional)
+    param.setDescription(param.description() + ": this or a loaded layer below is needed")
 
 
 # -- output ---------------------------------------------------------------------------------
