@@ -93,7 +93,7 @@ def test_every_table_filter_takes_a_preset_and_the_dialog_values_set_win(grounds
     lines = []
     algorithm.buildFilter(dict(dialog, PRESET=path, SCALAR=2.0, THRESHOLD=0.3), context, lines.append)
     assert lines == ["SMRF parameters: CELL 1 m, SLOPE 0.2, WINDOW 16 m, THRESHOLD 0.3 m, SCALAR 2, "
-                     "LOW_OUTLIER_FILL True, LOW_OUTLIER_SLOPE 5",
+                     "LOW_OUTLIER_FILL True, LOW_OUTLIER_SLOPE 5, LOW_OUTLIER_MAX_SHARE 0.05",
                      "From the preset smrf.json: SLOPE 0.2, WINDOW 16 m; changed from the preset: THRESHOLD 0.3 m "
                      "(a value equal to the filter's default never replaces the preset's)"]
     # a model saved before LOW_OUTLIER_SLOPE was a parameter lacks it and is still filled by QGIS: the
