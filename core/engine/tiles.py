@@ -343,20 +343,22 @@ def check_tiled_outputs(inputs: Sequence[str], output_path: Optional[str], dtm_p
     """The classified files of ``inputs`` (:func:`output_files`), their paths and the DTM's checked;
     ``point_formats`` (the inputs', from their headers) spare the wave-packet trial (0.9 ms a file) to
     all but formats 9 and 10."""
+    from ..io.outputs import check_not_copc_name, identities
     outs = output_files(inputs, output_path)
-    real_inputs = {os.path.realpath(p) for p in inputs}
-    in_folders = {os.path.dirname(p) for p in real_inputs}
+    # by any path to them (a share mounted twice: a reviewer's inputs were replaced by their copies)
+    input_files = identities(inputs)
     if output_path and _ext(output_path) == VPC_EXTENSION:
         check_output_path(output_path, extensions=(VPC_EXTENSION,), what="virtual point cloud output")
         folder = os.path.dirname(os.path.realpath(outs[0]))
-        if folder in in_folders:
+        if identities([folder]) & identities({os.path.dirname(os.path.abspath(p)) for p in inputs}):
             raise OutputError(f"{output_path}: the classified files would go into {folder}, which holds input "
                               "files; choose another output name or folder")
     from ..io.clouds import check_laz_wave_packets
-    from ..io.outputs import check_not_copc_name
     for k, (path, out) in enumerate(zip(inputs, outs)):
-        if out and os.path.realpath(out) in real_inputs:
+        if out and identities([out]) & input_files:
             raise OutputError(f"{out}: the output must not be an input file; choose another name")
+        if out and os.path.isdir(out):
+            raise OutputError(f"{out}: is a folder; the classified file must be a file name")
         if out and _ext(out) not in LAS_EXTENSIONS:
             raise OutputError(f"{out}: the output must end in .las or .laz")
         if out:

@@ -24,8 +24,36 @@ def _ext(path: str) -> str:
     return os.path.splitext(str(path))[1].lower()
 
 
+def same_file(a, b) -> bool:
+    """Whether paths ``a`` and ``b`` name one file or folder: the same real path, or, both existing, the
+    same device and inode (one share mounted at two places, a bind mount, autofs's /net beside /mnt:
+    a reviewer's input was replaced by its own classified copy through a second path to its folder)."""
+    a, b = os.fspath(a), os.fspath(b)
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def identities(paths) -> set:
+    """Keys telling the files or folders ``paths`` apart by any path to them (:func:`same_file`): each
+    one's real path and, where it exists, its (device, inode); one stat a path, for a survey's
+    thousands of files."""
+    keys = set()
+    for p in paths:
+        p = os.fspath(p)
+        keys.add(os.path.realpath(p))
+        with contextlib.suppress(OSError):
+            st = os.stat(p)
+            keys.add((st.st_dev, st.st_ino))
+    return keys
+
+
 def check_output_path(path: str, *, inputs=(), extensions=LAS_EXTENSIONS, what: str = "output") -> str:
-    """Refuse an output path that equals an input, has the wrong extension or an absent folder."""
+    """Refuse an output path that is an input (by any path to it), an existing folder, has the wrong
+    extension or an absent folder."""
     path = os.fspath(path)
     ext = _ext(path)
     if ext not in extensions:
@@ -33,8 +61,10 @@ def check_output_path(path: str, *, inputs=(), extensions=LAS_EXTENSIONS, what: 
     check_not_copc_name(path, what)
     real = os.path.realpath(path)
     for other in inputs:
-        if other and os.path.realpath(os.fspath(other)) == real:
+        if other and same_file(other, path):
             raise OutputError(f"{path}: the {what} must not be the input file; choose another name")
+    if os.path.isdir(path):  # (found only when its rename failed, after the work: a reviewer)
+        raise OutputError(f"{path}: is a folder; the {what} must be a file name")
     folder = os.path.dirname(real) or "."
     if not os.path.isdir(folder):
         raise OutputError(f"{path}: the folder {folder} does not exist")

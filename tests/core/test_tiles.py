@@ -438,6 +438,12 @@ def test_bad_surveys_are_refused_before_work(scene_laz, tmp_path):
         run_ground_filter(str(folder), str(tmp_path / "o.laz"), SMRF())
     with pytest.raises(OutputError, match="holds input files"):
         run_ground_filter(str(folder), str(tmp_path / "mixed.vpc"), SMRF())
+    # a classified file that is an input by another path (a share mounted twice: a reviewer's tiles
+    # were replaced by their copies; here a hard link, the same device and inode)
+    (tmp_path / "out").mkdir()
+    os.link(folder / "a.las", tmp_path / "out" / "a.las")
+    with pytest.raises(OutputError, match="a.las: the output must not be an input file"):
+        run_ground_filter(str(folder), str(tmp_path / "out.vpc"), SMRF())
 
 
 def test_cancel_leaves_nothing(scene_laz, tmp_path):

@@ -377,9 +377,20 @@ def test_output_equal_to_input_is_refused_before_anything(scene, tmp_path):
     link.symlink_to(scene.path)
     with pytest.raises(OutputError, match="must not be the input"):
         run_ground_filter(scene.path, str(link), spy, progress=seen.append)
+    # the same file by another path that realpath cannot see through (a share mounted twice, a bind
+    # mount: a reviewer's input was replaced by its copy); a hard link has the same device and inode
+    other = tmp_path / "other"
+    other.mkdir()
+    os.link(scene.path, other / "scene.laz")
+    with pytest.raises(OutputError, match="must not be the input"):
+        run_ground_filter(scene.path, str(other / "scene.laz"), spy, progress=seen.append)
+    # an output that is an existing folder is refused before the work, not at the rename after it
+    (tmp_path / "d.laz").mkdir()
+    with pytest.raises(OutputError, match="d.laz: is a folder"):
+        run_ground_filter(scene.path, str(tmp_path / "d.laz"), spy, progress=seen.append)
     assert calls == [] and seen == []
     assert sha256(scene.path) == digest
-    assert sorted(os.listdir(tmp_path)) == ["link.laz", "scene.laz"]
+    assert sorted(os.listdir(tmp_path)) == ["d.laz", "link.laz", "other", "scene.laz"]
 
 
 def test_bad_dtm_path_is_refused_before_the_las_is_written(scene, tmp_path):
