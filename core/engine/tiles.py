@@ -1032,7 +1032,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                          pits_note(*dtm_writer.isolated_pits(check=steps.check), dtm_writer.grid)):
                 if note:
                     log(note)
-            dtm_writer.finish(staging.stage(dtm_path), atomic=False)
+            dtm_writer.finish(staging.stage(dtm_path), atomic=False, name=dtm_path)
         steps.check()
         staging.commit()
     if dtm_writer is not None:

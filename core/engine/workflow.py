@@ -32,7 +32,7 @@ import numpy as np
 
 from ..errors import GroundSieveError, InputError, InvalidParameterError
 from ..grids.spec import MAX_CELL_M, GridSpec, memory_budget
-from ..io import (CLASS_GROUND, CLASS_UNCLASSIFIED, NOISE_CLASSES, PointCloud, atomic_path, check_output_path,
+from ..io import (CLASS_GROUND, CLASS_UNCLASSIFIED, NOISE_CLASSES, PointCloud, check_output_path,
                  read_cloud, write_classified)
 from ..io.clouds import TEXT_EXTENSIONS, parse_classes
 from ..io.outputs import LAS_EXTENSIONS, _ext, check_distinct_outputs
@@ -535,17 +535,19 @@ def write_outputs(cloud: PointCloud, classification: np.ndarray, output_path: Op
     steps = steps or Steps()
     log = log or (lambda _msg: None)
     share = cloud_share if (output_path and rasters) else (1.0 if output_path else 0.0)
-    with contextlib.ExitStack() as stack:
+    from ..io.outputs import StagedOutputs
+    with StagedOutputs() as staging:
         if output_path:
             log(f"Writing {len(cloud):,} classified points to {output_path} ...")
-            write_classified(cloud, classification, stack.enter_context(atomic_path(output_path)), atomic=False,
+            write_classified(cloud, classification, staging.stage(output_path), atomic=False,
                              steps=steps.sub(0.0, share * 0.99), name=output_path)
         for i, (path, values, grid, *how) in enumerate(rasters):  # how: write_geotiff's options, if any
             log(f"Writing {path} ...")
-            write_geotiff(stack.enter_context(atomic_path(path)), values, grid, crs_wkt=cloud.crs_wkt,
-                          atomic=False, **(how[0] if how else {}))
+            write_geotiff(staging.stage(path), values, grid, crs_wkt=cloud.crs_wkt, atomic=False, name=path,
+                          **(how[0] if how else {}))
             steps.report(share + (1 - share) * 0.99 * (i + 1) / len(rasters))
         steps.check()
+        staging.commit()  # all or none (a failed rename puts back what was there)
     steps.report(1.0)
 
 

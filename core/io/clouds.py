@@ -21,7 +21,7 @@ import numpy as np
 from ..errors import GroundSieveError, InputError, InvalidParameterError, OutputError, UnsupportedFormatError
 from ..progress import WARNING_PREFIX, Steps
 from ..validate import check_coordinates
-from .outputs import LAS_EXTENSIONS, _ext, atomic_path, check_classes_fit, check_output_path
+from .outputs import LAS_EXTENSIONS, _ext, _reason, atomic_path, check_classes_fit, check_output_path
 
 
 TEXT_EXTENSIONS = (".txt",)
@@ -944,7 +944,8 @@ def write_las(las, path: str, *, atomic: bool = True, steps: Optional[Steps] = N
     ``LasData.write`` otherwise (the same bytes). ``source``: the file ``las`` was read from, whose
     header fields, extra-bytes descriptions and waveform packets the copy then keeps (:func:`finish_copy`);
     ``name``: the path the messages give, when ``path`` is the caller's temporary."""
-    path = check_output_path(path)
+    if atomic:  # (a caller's temporary is its own: checking it made a probe longer than the file system takes)
+        path = check_output_path(path)
     try:
         if atomic:
             with atomic_path(path) as tmp:
@@ -954,7 +955,8 @@ def write_las(las, path: str, *, atomic: bool = True, steps: Optional[Steps] = N
             _write_chunks(las, path, _ext(path) == ".laz", steps)
             finish_copy(path, source, name)
     except OSError as err:
-        raise OutputError(f"{path}: cannot be written ({err})") from err
+        # the output's name and the reason in words (the temporary's name and "[Errno 28]" were said)
+        raise OutputError(f"{name or path}: cannot be written ({_reason(err)})") from err
 
 
 def _write_chunks(las, path: str, compress: bool, steps: Optional[Steps]) -> None:

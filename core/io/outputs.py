@@ -2,10 +2,11 @@
 the target folder, renamed over the target only when complete, deleted on any failure), so that
 a failed or cancelled run leaves nothing half-written.
 
-The temporary of an output ``NAME.EXT`` is the hidden file ``.NAME.EXT.gs<pid>-<random>.partEXT``
-beside it (``<pid>`` is the writing process). A run that is killed cannot delete it; the next run
-writing the same output removes every such temporary whose process is no longer running on this
-machine (and any of an unknown writer older than a day)."""
+The temporary of an output ``NAME.EXT`` is the hidden file ``.NAME.EXT.gs<host>.<pid>-<random>.partEXT``
+beside it (``<host>`` and ``<pid>``: the writing machine and process; NAME.EXT cut to 100 bytes). A run
+that is killed cannot delete it; the next run writing the same output removes every such temporary of
+this machine whose process is no longer running (and any of another machine or an unknown writer older
+than a day)."""
 from __future__ import annotations
 
 import contextlib
@@ -22,6 +23,32 @@ LAS_EXTENSIONS = (".las", ".laz")
 
 def _ext(path: str) -> str:
     return os.path.splitext(str(path))[1].lower()
+
+
+#: a temporary's name holds at most this many bytes of its output's name (a 204-byte output name made
+#: a temporary past the file system's 255: a reviewer's run failed after the work)
+TEMP_NAME_BYTES = 100
+
+
+def _short(base: str) -> str:
+    """``base`` cut to at most TEMP_NAME_BYTES bytes of UTF-8 (whole characters)."""
+    raw = base.encode("utf-8", "surrogateescape")
+    if len(raw) <= TEMP_NAME_BYTES:
+        return base
+    return raw[:TEMP_NAME_BYTES].decode("utf-8", "ignore") or "output"
+
+
+def _host() -> str:
+    """This machine's name as a temporary's name holds it: on a shared drive a process id means
+    nothing on another machine (a reviewer's run removed a live temporary of a writer elsewhere)."""
+    import socket
+    return re.sub(r"[^A-Za-z0-9-]", "", socket.gethostname())[:24] or "host"
+
+
+def _temp_beside(path: str):
+    """A new temporary for the output ``path`` (see the module's naming): (fd, its path)."""
+    return tempfile.mkstemp(prefix=f".{_short(os.path.basename(path))}.gs{_host()}.{os.getpid()}-",
+                            suffix=f".part{_ext(path)}", dir=os.path.dirname(os.path.abspath(path)) or ".")
 
 
 def same_file(a, b) -> bool:
@@ -68,6 +95,14 @@ def check_output_path(path: str, *, inputs=(), extensions=LAS_EXTENSIONS, what: 
     folder = os.path.dirname(real) or "."
     if not os.path.isdir(folder):
         raise OutputError(f"{path}: the folder {folder} does not exist")
+    size = len(os.path.basename(path).encode("utf-8", "surrogateescape"))
+    try:
+        most = os.pathconf(folder, "PC_NAME_MAX")
+    except (OSError, ValueError, AttributeError):
+        most = 255
+    if size > most:
+        raise OutputError(f"{path}: the file name is too long ({size} bytes; this folder's file system takes at most "
+                          f"{most}); choose a shorter name")
     check_folder_writable(path, folder)
     return path
 
@@ -86,8 +121,7 @@ def check_folder_writable(path: str, folder: str) -> None:
     in between leaves a file the next run removes): permissions alone do not tell (an
     administrator ignores them; a read-only mount does not show in them)."""
     try:
-        fd, probe = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.gs{os.getpid()}-", suffix=f".part{_ext(path)}",
-                                     dir=folder)
+        fd, probe = _temp_beside(os.path.join(folder, os.path.basename(path)))
     except OSError as err:
         raise OutputError(f"{path}: the folder {folder} cannot be written to ({_reason(err)}); "
                           "choose a folder where you may create files") from err
@@ -138,18 +172,21 @@ def remove_stale_temporaries(path: str, *, max_age_s: float = 86400.0) -> list:
     Returns the paths removed."""
     path = os.fspath(path)
     folder = os.path.dirname(os.path.abspath(path))
-    base = os.path.basename(path)
+    base = _short(os.path.basename(path))
     ext = _ext(path)
     pattern = os.path.join(glob.escape(folder), glob.escape(f".{base}.") + "*" + glob.escape(f".part{ext}"))
-    own = re.compile(re.escape(f".{base}.gs") + r"(\d+)-[^/]*" + re.escape(f".part{ext}") + "$")
+    # ".NAME.gs<host>.<pid>-...": this machine's writers by their process; another machine's by age
+    # only; ".NAME.gs<pid>-..." (before the host was named) as this machine's
+    own = re.compile(re.escape(f".{base}.gs") + r"(?:([A-Za-z0-9-]*)\.)?(\d+)-[^/]*" + re.escape(f".part{ext}") + "$")
+    here = _host()
     removed = []
     # (GDAL's COG writer keeps the overviews in "<its output>.ovr.tmp" until it ends: a DTM killed
     # while being written left one beside its temporary)
     for tmp in glob.glob(pattern) + glob.glob(pattern + ".ovr.tmp"):
         m = own.match(os.path.basename(tmp[:-len(".ovr.tmp")] if tmp.endswith(".ovr.tmp") else tmp))
         try:
-            if m:
-                stale = int(m.group(1)) != os.getpid() and not _process_alive(int(m.group(1)))
+            if m and m.group(1) in (None, here):
+                stale = int(m.group(2)) != os.getpid() and not _process_alive(int(m.group(2)))
             else:
                 stale = time.time() - os.path.getmtime(tmp) > max_age_s
             if stale and os.path.isfile(tmp):
@@ -162,7 +199,7 @@ def remove_stale_temporaries(path: str, *, max_age_s: float = 86400.0) -> list:
 
 class StagedOutputs:
     """Several outputs put in place together: each is written under the temporary name
-    :func:`atomic_path` would give it (``.NAME.EXT.gs<pid>-<random>.partEXT``, beside it), and
+    :func:`atomic_path` would give it (``.NAME.EXT.gs<host>.<pid>-<random>.partEXT``, beside it), and
     :meth:`commit` renames them all once every one is complete; :meth:`discard` (or leaving the
     ``with`` block on an error) deletes them. A survey's classified files, its .vpc and its DTM
     therefore appear together or not at all, and a failed run leaves the previous set untouched.
@@ -176,8 +213,7 @@ class StagedOutputs:
         path = os.fspath(path)
         remove_stale_temporaries(path)
         try:
-            fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.gs{os.getpid()}-",
-                                       suffix=f".part{_ext(path)}", dir=os.path.dirname(os.path.abspath(path)))
+            fd, tmp = _temp_beside(path)
         except OSError as err:
             raise OutputError(f"{path}: cannot be written ({_reason(err)})") from err
         os.close(fd)
@@ -185,15 +221,47 @@ class StagedOutputs:
         return tmp
 
     def commit(self) -> None:
-        """Rename every staged file to its output name, in the order staged."""
+        """Rename every staged file to its output name, in the order staged, all or none: each output
+        already there is moved aside first (under a temporary's name) and put back, and the outputs
+        renamed so far removed, if any rename fails (a reviewer's immutable classified file, as one
+        open in another program on Windows: the new DTM was in place beside the old cloud)."""
         umask = os.umask(0)
         os.umask(umask)
-        for tmp, path in self._pairs:
-            try:
+        done = []  # (output, its previous file moved aside, or None)
+        try:
+            for tmp, path in self._pairs:
                 os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; the output follows the umask
-                os.replace(tmp, path)
-            except OSError as err:
-                raise OutputError(f"{path}: cannot be written ({_reason(err)})") from err
+                backup = None
+                if os.path.lexists(path):
+                    fd, backup = _temp_beside(path)
+                    os.close(fd)
+                    try:
+                        os.replace(path, backup)
+                    except OSError:
+                        with contextlib.suppress(OSError):
+                            os.remove(backup)
+                        raise
+                try:
+                    os.replace(tmp, path)
+                except OSError:
+                    if backup is not None:
+                        os.replace(backup, path)
+                    raise
+                done.append((path, backup))
+        except OSError as err:
+            for put, backup in reversed(done):
+                with contextlib.suppress(OSError):
+                    if backup is not None:
+                        os.replace(backup, put)
+                    else:
+                        os.remove(put)
+            self.discard()
+            raise OutputError(f"{path}: cannot be written ({_reason(err)}); no output of the run was put in place, "
+                              "and those there before are as they were") from err
+        for _path, backup in done:
+            if backup is not None:
+                with contextlib.suppress(OSError):
+                    os.remove(backup)
         self._pairs = []
 
     def discard(self) -> None:
@@ -215,11 +283,9 @@ def atomic_path(path: str):
     """Yield a temporary path beside ``path`` (same extension); rename it to ``path`` on success,
     delete it on any failure. Stale temporaries of ``path`` left by killed runs are removed first."""
     path = os.fspath(path)
-    folder = os.path.dirname(os.path.abspath(path))
-    base = os.path.basename(path)
     remove_stale_temporaries(path)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{base}.gs{os.getpid()}-", suffix=f".part{_ext(path)}", dir=folder)
+        fd, tmp = _temp_beside(path)
     except OSError as err:
         raise OutputError(f"{path}: cannot be written ({_reason(err)})") from err
     os.close(fd)

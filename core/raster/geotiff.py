@@ -29,15 +29,18 @@ def check_raster_path(path: str, *, inputs=()) -> str:
 
 def write_geotiff(path: str, values: np.ndarray, grid: GridSpec, *, crs_wkt: Optional[str] = None,
                   nodata: float = NODATA, dtype: str = "float32", atomic: bool = True,
-                  categories: Sequence[Tuple[int, str, str]] = (), elevation: bool = False) -> None:
+                  categories: Sequence[Tuple[int, str, str]] = (), elevation: bool = False,
+                  name: Optional[str] = None) -> None:
     """Write ``values`` (row 0 = north, NaN = no data) as a single-band GeoTIFF, atomically unless
     the caller already writes to a temporary path of its own (``atomic=False``). ``categories``
     ``(value, name, "#rrggbb")`` of a class raster (``dtype`` uint8) are stored in the file: a
     palette, and the names in the band's description and metadata. ``elevation``: the values are
-    heights (a DTM): the band's unit is the CRS's linear unit (:func:`elevation_unit`)."""
+    heights (a DTM): the band's unit is the CRS's linear unit (:func:`elevation_unit`). ``name``: the
+    output the messages name when ``path`` is the caller's temporary."""
     from osgeo import gdal
     gdal.UseExceptions()
-    path = check_raster_path(path)
+    path = check_raster_path(path) if atomic else os.fspath(path)
+    name = name or path
     if values.shape != grid.shape:
         raise OutputError(f"{path}: raster of shape {values.shape} does not match its grid {grid.shape}")
     if dtype not in ("float32", "float64", "uint8", "int16"):
@@ -63,13 +66,52 @@ def write_geotiff(path: str, values: np.ndarray, grid: GridSpec, *, crs_wkt: Opt
         if categories:
             _set_categories(band, categories)
         with (atomic_path(path) if atomic else contextlib.nullcontext(path)) as tmp:
-            gdal.Translate(tmp, mem, format="COG", creationOptions=COG_OPTIONS
-                           + (["PREDICTOR=YES"] if dtype.startswith("float") else []))
+            _cog(tmp, mem, COG_OPTIONS + (["PREDICTOR=YES"] if dtype.startswith("float") else []))
         band = mem = None
     except RuntimeError as err:
-        raise OutputError(f"{path}: cannot write the GeoTIFF ({err})") from err
+        raise OutputError(f"{name}: cannot write the GeoTIFF ({_gdal_reason(err, path)})") from err
     if not os.path.exists(path):
-        raise OutputError(f"{path}: the GeoTIFF was not written")
+        raise OutputError(f"{name}: the GeoTIFF was not written")
+
+
+def _cog(path: str, source, options) -> None:
+    """Write ``source`` (a dataset or a file) to ``path`` as a COG, then check that the file holds every
+    block its header points at: GDAL's COG driver only logged a full disk ("_tiffWriteProc: No space
+    left on device", past any error handler) and returned, leaving a truncated DTM after a run that said
+    it was done (a reviewer's small disk). Raises RuntimeError."""
+    from osgeo import gdal
+    gdal.Translate(path, source, format="COG", creationOptions=options)  # (closed at once)
+    size = os.path.getsize(path)
+    ds = gdal.Open(path)
+    band = ds.GetRasterBand(1)
+    bx, by = band.GetBlockSize()
+    end = 0
+    for row in range(-(-ds.RasterYSize // by)):
+        for col in range(-(-ds.RasterXSize // bx)):
+            offset = band.GetMetadataItem(f"BLOCK_OFFSET_{col}_{row}", "TIFF")
+            length = band.GetMetadataItem(f"BLOCK_SIZE_{col}_{row}", "TIFF")
+            if offset and length:
+                end = max(end, int(offset) + int(length))
+    band = ds = None
+    if end > size:
+        raise RuntimeError(f"the file was cut short ({size:,} of {end:,} bytes written)")
+
+
+#: below this many bytes free, a GDAL write error is taken for a full disk
+FULL_DISK_BYTES = 64 * 2**20
+
+
+def _gdal_reason(err: RuntimeError, path: str) -> str:
+    """GDAL's error in the user's words: a full disk says so (GDAL said "TIFFAppendToStrip:Write error
+    at scanline 128", a reviewer), with what the disk has left."""
+    import shutil
+    try:
+        free = shutil.disk_usage(os.path.dirname(os.path.abspath(path)) or ".").free
+    except OSError:
+        return str(err)
+    if free < FULL_DISK_BYTES:
+        return f"No space left on device: {free / 2**20:.1f} MB free there; GDAL said: {err}"
+    return str(err)
 
 
 def _set_categories(band, categories) -> None:
@@ -212,15 +254,16 @@ class BlockGeoTIFF:
             self._band = None
             self._ds = None
 
-    def finish(self, path: str, *, atomic: bool = True) -> None:
+    def finish(self, path: str, *, atomic: bool = True, name: Optional[str] = None) -> None:
         """Close the work raster and write the COG to ``path`` (atomically; ``atomic=False`` when
         ``path`` is already a staged temporary: a second one inside it, ``..dtm.tif.gs<pid>-<random>.part.tif
         .gs<pid>-<random>.part.tif``, was not found by the next run's clean-up when a run was killed)."""
         from osgeo import gdal
-        path = check_raster_path(path)
+        path = check_raster_path(path) if atomic else os.fspath(path)
+        name = name or path
         self.close()
         try:
             with (atomic_path(path) if atomic else contextlib.nullcontext(path)) as tmp:
-                gdal.Translate(tmp, self.work_path, format="COG", creationOptions=COG_OPTIONS + ["PREDICTOR=YES"])
+                _cog(tmp, self.work_path, COG_OPTIONS + ["PREDICTOR=YES"])
         except RuntimeError as err:
-            raise OutputError(f"{path}: cannot write the DTM ({err})") from err
+            raise OutputError(f"{name}: cannot write the DTM ({_gdal_reason(err, path)})") from err

@@ -140,5 +140,67 @@ def test_a_dtm_killed_while_gdal_wrote_it_leaves_nothing_the_next_run_keeps(tmp_
                           options=FilterOptions(tiling=TileOptions(tile_size_m=20.0, workers=1)))
     finally:
         geotiff.BlockGeoTIFF.finish = original
-    assert len(seen) == 1 and seen[0][0].startswith(".dtm.tif.gs") and seen[0][1] == {"atomic": False}
+    assert len(seen) == 1 and seen[0][0].startswith(".dtm.tif.gs") and seen[0][1] == {"atomic": False, "name": str(dtm)}
     assert sorted(p.name for p in tmp_path.iterdir()) == ["dtm.tif", "in.las"]
+
+
+def test_a_failed_commit_puts_nothing_in_place_and_keeps_what_was_there(tmp_path):
+    """A rename that failed while a run put its outputs in place (a reviewer's immutable classified
+    file; on Windows, one open in QGIS) left the new DTM beside the old cloud: the commit is now all
+    or none, what was there before moved aside and put back."""
+    from groundsieve.core.io.outputs import StagedOutputs
+    old = tmp_path / "a.tif"
+    old.write_bytes(b"old dtm")
+    blocked = tmp_path / "b.las"
+    blocked.mkdir()  # a rename cannot replace a folder that holds a file: the commit's second step fails
+    (blocked / "x").write_bytes(b"")
+    with pytest.raises(OutputError, match=r"b\.las: cannot be written .*no output of the run was put in place"):
+        with StagedOutputs() as staging:
+            for path in (old, blocked):
+                open(staging.stage(str(path)), "wb").write(b"new")
+            staging.commit()
+    assert old.read_bytes() == b"old dtm"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.tif", "b.las"]  # no temporary, no backup left
+    with StagedOutputs() as staging:  # and when every rename works, every output is the new one
+        open(staging.stage(str(old)), "wb").write(b"new dtm")
+        open(staging.stage(str(tmp_path / "c.las")), "wb").write(b"new cloud")
+        staging.commit()
+    assert old.read_bytes() == b"new dtm" and (tmp_path / "c.las").read_bytes() == b"new cloud"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.tif", "b.las", "c.las"]
+
+
+def test_long_output_names_work_and_one_too_long_is_said_before_the_work(tmp_path):
+    """A legal 204-byte output name ran the whole job, then failed: its temporary (the name plus 27
+    bytes) and the probe of a second check on that temporary were past the file system's 255 bytes,
+    and the message blamed the folder (a reviewer)."""
+    src = tmp_path / "in.las"
+    plane_las(src)
+    name = "a" * 200 + ".las"
+    run_ground_filter(str(src), str(tmp_path / name), SMRF())
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["in.las", name])
+    cjk = "\u6797" * 90 + ".las"  # 270 bytes of UTF-8
+    seen = []
+    with pytest.raises(OutputError, match=r"the file name is too long \(274 bytes; .* at most 255\)"):
+        run_ground_filter(str(src), str(tmp_path / cjk), SMRF(), progress=seen.append)
+    assert seen == []
+
+
+def test_another_machines_temporary_is_removed_by_age_only(tmp_path):
+    """On a shared drive a process id means nothing on another machine: a reviewer's run removed a
+    live temporary of a writer elsewhere whose id was not running here. A temporary names its host."""
+    import socket
+    import time
+    from groundsieve.core.io.outputs import _host
+    out = tmp_path / "o.las"
+    dead = 2 ** 22 + 12345
+    elsewhere = tmp_path / f".o.las.gsotherhost.{dead}-abc.part.las"
+    here = tmp_path / f".o.las.gs{_host()}.{dead}-def.part.las"
+    for p in (elsewhere, here):
+        p.write_bytes(b"half")
+    assert remove_stale_temporaries(str(out)) == [str(here)]
+    week = time.time() - 7 * 86400
+    os.utime(elsewhere, (week, week))
+    assert remove_stale_temporaries(str(out)) == [str(elsewhere)]
+    with atomic_path(str(out)) as tmp:
+        assert os.path.basename(tmp).startswith(f".o.las.gs{_host()}.{os.getpid()}-")
+    assert socket.gethostname()

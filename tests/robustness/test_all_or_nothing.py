@@ -107,3 +107,23 @@ def test_a_dtm_cell_larger_than_any_map_is_refused(labelled, tmp_path, cell):
     assert "DTM cell size" in str(err.value) and "larger than" in str(err.value)
     assert not [w for w in caught if "overflow" in str(w.message)]
     assert everything_in(tmp_path) == []
+
+
+@pytest.mark.parametrize("what", ["cloud", "dtm"])
+def test_smrf_on_a_really_full_disk_names_the_output_and_the_reason(labelled, tmp_path, what):
+    """On a small tmpfs (root only): the message named the hidden temporary (".o.laz.gs…part.laz")
+    and said "[Errno 28] No space left on device", or, for the DTM, only GDAL's "TIFFAppendToStrip:
+    Write error at scanline 128" (a reviewer). It names the output and says the disk is full."""
+    from groundsieve.core.engine.workflow import DTMOptions
+    with full_disk(tmp_path, "8k") as out:
+        before = sha256(labelled)
+        target = out / ("c.las" if what == "cloud" else "d.tif")
+        with pytest.raises(OutputError) as err:
+            workflow.run_ground_filter(str(labelled), str(target) if what == "cloud" else None, SMRF(),
+                                       dtm_path=str(target) if what == "dtm" else None,
+                                       dtm=DTMOptions(cell_size_m=0.25))
+        message = str(err.value)
+        assert message.startswith(f"{target}: cannot ") and "No space left on device" in message, message
+        assert "[Errno" not in message and ".gs" not in message
+        assert everything_in(out) == []
+        assert sha256(labelled) == before
