@@ -68,6 +68,8 @@ def scan_header(path: str) -> LasInfo:
             if held is not None and held < int(h.point_count) and not (h.version.minor >= 4 and h.number_of_evlrs):
                 raise InputError(f"{path}: the header announces {int(h.point_count):,} points but the file holds "
                                  f"{held:,} point records: the file is truncated or its header's count is wrong")
+            if int(h.point_count) == 0:
+                _check_not_growing(path, h, held)
             damaged = _copc_damage(path) if is_copc_header(h) else ""
             if not all(math.isfinite(float(v)) for v in (*h.mins, *h.maxs)):
                 raise InputError(f"{path}: the header's bounds are not numbers ({list(h.mins)} to {list(h.maxs)}): "
@@ -82,6 +84,24 @@ def scan_header(path: str) -> LasInfo:
         raise
     except Exception as err:  # laspy raises many types for damaged files
         raise InputError(f"{path}: cannot read its LAS header ({laspy_reason(err)})") from err
+
+
+#: what a complete LAZ without points holds after its header at most (the chunk table's offset and table)
+EMPTY_LAZ_TAIL = 65536
+
+
+def _check_not_growing(path: str, header, held: Optional[int]) -> None:
+    """Refuse a file whose header announces no point but which holds point data: LAS writers (laspy,
+    PDAL, LAStools) set the count when they close the file, so one still being written looked empty,
+    and a survey made it an empty classified copy without a word (a reviewer copying into the folder)."""
+    end = os.path.getsize(path)
+    if header.version.minor >= 4 and header.number_of_evlrs and int(header.start_of_first_evlr or 0) > 0:
+        end = min(end, int(header.start_of_first_evlr))
+    beyond = end - int(header.offset_to_point_data)
+    if (held or 0) > 0 or (header.are_points_compressed and beyond > EMPTY_LAZ_TAIL):
+        raise InputError(f"{path}: its header announces no point, but {beyond:,} bytes of point data follow it: "
+                         "the file is still being written (LAS writers set the count when they close it) or its "
+                         "header is damaged; use it once it is complete")
 
 
 def _copc_damage(path: str) -> str:
@@ -564,8 +584,10 @@ def write_classified_stream(src: str, dst: str, classification: np.ndarray, *,
     try:
         with laspy.open(src) as reader:
             n_total = int(reader.header.point_count)
-            if classification.shape[0] != n_total:
-                raise OutputError(f"{dst}: {classification.shape[0]} classes for {n_total} points of {src}")
+            if classification.shape[0] != n_total:  # (a file still being written when the run read it)
+                raise InputError(f"{src}: it changed during the run (its header announced "
+                                 f"{classification.shape[0]:,} points when it was read, {n_total:,} now): run "
+                                 "again once it is complete")
             check_classes_fit(dst, reader.header.point_format.id, classification)
             with atomic_path(dst) as tmp:
                 # Not COPC any more (the LAZ chunks are not the octree's nodes): no COPC records.

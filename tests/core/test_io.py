@@ -724,3 +724,30 @@ def test_a_las_1_0_input_is_classified_into_a_las_1_2_copy(tmp_path, tiles):
     got, want = laspy.read(str(out)), laspy.read(str(path))
     assert str(got.header.version) == "1.2" and len(got.points) == len(want.points)
     assert np.array_equal(got.X, want.X) and np.array_equal(got.Z, want.Z) and (got.classification == 2).any()
+
+
+@pytest.mark.parametrize("ext", ["las", "laz"])
+def test_a_file_still_being_written_is_refused_not_read_as_empty(tmp_path, ext):
+    """LAS writers set the point count when they close the file: a LAZ still being copied into a
+    survey folder announced 0 points and became an empty classified copy, exit 0 (a reviewer). A
+    file whose header announces no point but which holds point data is refused; a truly empty one is not."""
+    import struct
+
+    import laspy
+
+    from groundsieve.core.io.lasfiles import scan_header
+    from groundsieve.core.io.clouds import new_las, write_las
+    rng = np.random.default_rng(0)
+    growing = tmp_path / f"growing.{ext}"
+    write_las(new_las(rng.uniform(0, 100, 50_000), rng.uniform(0, 100, 50_000), rng.uniform(0, 5, 50_000),
+                      point_format=1, version="1.2"), str(growing))
+    data = bytearray(growing.read_bytes())
+    struct.pack_into("<I5I", data, 107, 0, 0, 0, 0, 0, 0)  # what the header says before its writer closes it
+    growing.write_bytes(bytes(data))
+    with pytest.raises(InputError, match=rf"growing\.{ext}: its header announces no point, but [\d,]+ bytes of point "
+                                         "data follow it: the file is still being written"):
+        scan_header(str(growing))
+    empty = tmp_path / f"empty.{ext}"
+    las = laspy.LasData(laspy.LasHeader(point_format=1, version="1.2"))
+    las.write(str(empty))
+    assert scan_header(str(empty)).count == 0
