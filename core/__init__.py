@@ -12,3 +12,46 @@ Layers, each importing only from the ones below it (tests/core/test_architecture
 
 ``synthetic.py`` makes scenes with known truth for tests, benches and the demo (it uses io).
 """
+
+
+def _numba_cache_folder() -> None:
+    """Give numba a cache folder where it has none: its kernels are compiled with ``cache=True`` and
+    numba refuses to compile them ("cannot cache function ...: no locator available", a traceback) when
+    neither the package's folders nor the user's cache folder can be written (a root-owned install run
+    by a service account, cron, QGIS Server or ``docker --user`` with an unwritable HOME: a release
+    engineer). Then the cache goes to ``<temp>/groundsieve-numba-<uid>``. Nothing is changed where
+    numba can cache, or where NUMBA_CACHE_DIR is set."""
+    import os
+    import sys
+    import tempfile
+
+    def writable(folder: str) -> bool:
+        try:
+            os.makedirs(folder, exist_ok=True)
+            with tempfile.TemporaryFile(dir=folder):
+                return True
+        except OSError:
+            return False
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return
+    if writable(os.path.join(os.path.dirname(os.path.abspath(__file__)), "grids", "__pycache__")):
+        return
+    user = os.path.join(os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "numba")
+    if writable(user):
+        return
+    folder = os.path.join(tempfile.gettempdir(), f"groundsieve-numba-{os.getuid() if hasattr(os, 'getuid') else 'user'}")
+    try:
+        os.makedirs(folder, mode=0o700, exist_ok=True)
+        st = os.lstat(folder)
+        # numba loads its cache as code: only a folder of this user's that no one else may write
+        mine = not hasattr(os, "getuid") or (st.st_uid == os.getuid() and not st.st_mode & 0o022)
+        if not (mine and os.path.isdir(folder) and not os.path.islink(folder)):
+            folder = tempfile.mkdtemp(prefix="groundsieve-numba-")  # this run's own (compiled again next time)
+    except OSError:
+        return  # (numba then says why it cannot cache)
+    os.environ["NUMBA_CACHE_DIR"] = folder
+    if "numba" in sys.modules:  # (imported before the core: numba reads it when a kernel is compiled)
+        sys.modules["numba"].config.CACHE_DIR = folder
+
+
+_numba_cache_folder()

@@ -1,0 +1,36 @@
+"""Where numba caches the kernels (core/__init__.py _numba_cache_folder)."""
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import groundsieve
+
+PLUGINS = os.path.dirname(os.path.dirname(os.path.abspath(groundsieve.__file__)))  # the folder holding the package
+
+
+def test_kernels_import_for_a_user_who_can_write_neither_the_install_nor_a_home():
+    """A root-owned install run by a service account with an unwritable HOME (cron, QGIS Server,
+    docker --user) stopped with numba's "cannot cache function '_cell_of': no locator available"
+    and a traceback (a release engineer). The cache then goes to <temp>/groundsieve-numba-<uid>."""
+    if os.geteuid() != 0 or not shutil.which("setpriv"):
+        pytest.skip("needs root and setpriv to run as another user (nobody)")
+    if not os.access(PLUGINS, os.X_OK) or any(not os.stat(p).st_mode & 0o001 for p in Path(PLUGINS).parents
+                                              if str(p) != "/"):
+        pytest.skip(f"{PLUGINS} cannot be reached by another user")
+    code = ("import os, groundsieve.core.grids._kernels as k\n"
+            "print(os.environ.get('NUMBA_CACHE_DIR', ''))\n")
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "XDG_CACHE_HOME")}
+    env.update(HOME="/nonexistent", PYTHONPATH=PLUGINS)
+    proc = subprocess.run(["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups", sys.executable, "-c", code],
+                          capture_output=True, text=True, env=env, cwd="/", timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    folder = proc.stdout.strip()
+    assert os.path.basename(folder).startswith("groundsieve-numba-"), proc.stdout
+    st = os.stat(folder)
+    assert st.st_uid == 65534 and not st.st_mode & 0o077  # nobody's own, no one else's to write
