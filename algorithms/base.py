@@ -18,6 +18,7 @@ from qgis.core import (Qgis, QgsCoordinateReferenceSystem, QgsFeature, QgsFeatur
 from qgis.PyQt.QtCore import QVariant
 from qgis.PyQt.QtGui import QIcon
 
+from ..core.engine.kernels import COMPILING  # noqa: F401 (the standard library only; tests read it here)
 from .discovery import Discoverable
 from .presets import PRESET_HELP
 
@@ -105,10 +106,10 @@ def dialog_help(html):
     return re.sub(r"\s*\n\s*", " ", html).strip()
 
 
-def core_modules(extra=None, feedback=None):
+def core_modules(extra=None, feedback=None, kernels_of=None):
     """Import the core, turning a missing dependency into a clear Processing error. With
-    ``feedback``, the first run of the session says so when the kernels are to be compiled
-    (``say_if_compiling``)."""
+    ``feedback``, the first run of the algorithm ``kernels_of`` (a filter's name; None: any) in the
+    session says so when its kernels are to be compiled (``say_if_compiling``)."""
     from ..dependencies import require_dependencies
     try:
         require_dependencies(extra)
@@ -117,66 +118,37 @@ def core_modules(extra=None, feedback=None):
     except ImportError as err:
         raise QgsProcessingException(str(err)) from err
     if feedback is not None:
-        say_if_compiling(feedback)
+        say_if_compiling(feedback, kernels_of)
     return errors, workflow
 
 
 def kernel_modules():
-    """The dotted names of the core's modules whose numba kernels are cached on disk
-    (``@njit(cache=True)``), found by their source."""
-    root = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "core")
-    package = __package__.rsplit(".", 1)[0] + ".core"
-    names = []
-    for folder, dirs, files in os.walk(root):
-        dirs[:] = sorted(d for d in dirs if d != "__pycache__")
-        for name in sorted(f for f in files if f.endswith(".py")):
-            path = os.path.join(folder, name)
-            with open(path, encoding="utf-8") as f:
-                if "cache=True" not in f.read():
-                    continue
-            names.append(package + "." + os.path.relpath(path, root)[:-3].replace(os.sep, "."))
-    return names
+    """The core's modules of cached numba kernels (core/engine/kernels.py)."""
+    from ..core.engine.kernels import kernel_modules as modules
+    return modules()
 
 
 def kernel_cache_state(modules=None):
-    """(cached, total): of the numba kernels of ``modules`` (default ``kernel_modules()``) cached
-    on disk, how many have their index file in numba's cache (where numba itself looks: beside
-    the source in __pycache__, NUMBA_CACHE_DIR when set, the user's cache when the plugin's folder
-    is read-only). Importing the modules compiles nothing. None when it cannot be told."""
-    try:
-        from numba.core.dispatcher import Dispatcher
-        cached = total = 0
-        for name in kernel_modules() if modules is None else modules:
-            module = importlib.import_module(name)
-            for obj in vars(module).values():
-                if not isinstance(obj, Dispatcher) or getattr(obj.py_func, "__module__", None) != module.__name__:
-                    continue
-                index = getattr(getattr(getattr(obj, "_cache", None), "_cache_file", None), "_index_path", None)
-                if index is None:  # not cached on disk
-                    continue
-                total += 1
-                cached += os.path.isfile(index)
-        return cached, total
-    except Exception:  # noqa: BLE001 - another numba's internals, a broken module: say nothing
-        return None
+    """(cached, total) of those kernels (core/engine/kernels.py); None when it cannot be told."""
+    from ..core.engine.kernels import kernel_cache_state as state
+    return state(modules)
 
 
-#: once per QGIS session (the first run's check)
-_SESSION = {"kernels_checked": False}
-
-COMPILING = ("First run since the plugin was installed or upgraded: compiling the numerical kernels "
-             "(about 15-20 s, once; the progress bar waits meanwhile).")
+#: the algorithms whose kernels were checked this QGIS session (one check each)
+_SESSION = {"kernels_checked": set()}
 
 
-def say_if_compiling(feedback):
-    """At the first run of the session, say that the kernels are compiled now when numba's cache
-    holds none of them (a new install, or an upgrade that replaced the plugin's folder): the
-    first run then takes 15-20 s longer with the bar still."""
-    if _SESSION["kernels_checked"]:
+def say_if_compiling(feedback, name=None):
+    """At the first run of algorithm ``name`` (None: any) in a session, say that its kernels are
+    compiled now when numba's cache holds fewer than half of them or of the grids' (a new install, an
+    upgrade that replaced the plugin's folder, or an algorithm run for the first time: PTD compiled
+    for 30 s with nothing said after SMRF had filled the cache, a release engineer;
+    core/engine/kernels.py ``about_to_compile``)."""
+    from ..core.engine.kernels import COMPILING, about_to_compile
+    if name in _SESSION["kernels_checked"]:
         return False
-    _SESSION["kernels_checked"] = True
-    state = kernel_cache_state()
-    if state is None or not state[1] or state[0]:
+    _SESSION["kernels_checked"].add(name)
+    if not about_to_compile(name):
         return False
     feedback.pushInfo(COMPILING)
     return True
@@ -487,7 +459,7 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         """The filter's intermediate rasters (evcrasters): optional, not created by default."""
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        errors, workflow = core_modules(feedback=feedback)
+        errors, workflow = core_modules(feedback=feedback, kernels_of=self.name())
         self.checkGroundPointsDestination(parameters, context)
         from . import pointclouds, styles
         input_path = pointclouds.input_path(self, parameters, context, self.INPUT, self.INPUT_LAYER)

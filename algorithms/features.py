@@ -138,7 +138,7 @@ the cloud's CRS. The output is written under a temporary name and renamed when c
         return pairs
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        errors, _workflow = core_modules(feedback=feedback)
+        errors, _workflow = core_modules(feedback=feedback, kernels_of="features")
         from ..core.engine import features_run
         from ..core.learn import features
         input_path = self.parameterAsFile(parameters, self.INPUT, context)

@@ -25,7 +25,7 @@ SURVEY_FILTER = CLOUD_FILTER + ";;Virtual point clouds (*.vpc);;All files and fo
 
 
 def _rf(extra=None, feedback=None):
-    errors, _workflow = core_modules(extra, feedback)
+    errors, _workflow = core_modules(extra, feedback, kernels_of="rf")
     from ..core.engine import learning
     from ..core.learn import rf
     return errors, rf, learning

@@ -1,0 +1,85 @@
+"""The numba kernels cached on disk (``@njit(cache=True)``): which modules hold them, how many of
+them numba's cache holds, and what to say when a run is about to compile them (the first run of an
+algorithm after an install or upgrade waits 20-60 s with its progress bar still). Imports nothing
+but the standard library until asked (the plugin's dialog reads COMPILING without numpy)."""
+from __future__ import annotations
+
+import importlib
+import os
+from typing import List, Optional, Sequence, Tuple
+
+COMPILING = ("First run of this algorithm since the plugin was installed or upgraded: compiling its numerical "
+             "kernels (about 20-60 s, once; the progress bar waits meanwhile).")
+
+_CORE = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+_PACKAGE = __package__.rsplit(".", 1)[0]  # "groundsieve.core"
+
+#: the kernel modules of each filter beyond those named after it (core/filters/_<name>_*.py): the
+#: learned hybrid computes SMRF's and PTD's surfaces and the point features
+_ALSO = {"hybrid": ("filters._smrf", "filters._ptd", "learn."), "rf": ("learn.",), "features": ("learn.",),
+         "evcrasters": ("filters._evc",)}
+
+
+def kernel_modules() -> List[str]:
+    """The dotted names of the core's modules whose numba kernels are cached on disk, found by their
+    source (no import)."""
+    names = []
+    for folder, dirs, files in os.walk(_CORE):
+        dirs[:] = sorted(d for d in dirs if d != "__pycache__")
+        for name in sorted(f for f in files if f.endswith(".py")):
+            path = os.path.join(folder, name)
+            with open(path, encoding="utf-8") as f:
+                if "cache=True" not in f.read():
+                    continue
+            names.append(_PACKAGE + "." + os.path.relpath(path, _CORE)[:-3].replace(os.sep, "."))
+    return names
+
+
+def modules_for(name: str) -> Optional[List[str]]:
+    """The kernel modules an algorithm's own work compiles (a filter's ``_<name>_*`` modules, and
+    those ``_ALSO`` names); None (all of them) for an algorithm without its own."""
+    prefixes = (f"filters._{name}",) + _ALSO.get(name, ())
+    found = [m for m in kernel_modules() if any(m[len(_PACKAGE) + 1:].startswith(p) for p in prefixes)]
+    return found or None
+
+
+def shared_modules() -> List[str]:
+    """The kernel modules every ground filter's run compiles (the grids': surfaces, morphology, the DTM)."""
+    return [m for m in kernel_modules() if m.startswith(_PACKAGE + ".grids.")]
+
+
+def about_to_compile(name: Optional[str]) -> bool:
+    """Whether a run of algorithm ``name`` (None: any) is about to compile kernels: fewer than half of
+    its own (:func:`modules_for`), or of the shared ones (:func:`shared_modules`), are cached."""
+    own = modules_for(name) if name else None
+    return any(compiling_note(kernel_cache_state(group)) for group in ((own, shared_modules()) if own else (None,)))
+
+
+def kernel_cache_state(modules: Optional[Sequence[str]] = None) -> Optional[Tuple[int, int]]:
+    """(cached, total): of the numba kernels of ``modules`` (default: :func:`kernel_modules`) cached on
+    disk, how many have their index file in numba's cache (where numba itself looks: beside the
+    source in __pycache__, NUMBA_CACHE_DIR when set, the user's cache when the plugin's folder is
+    read-only). Importing the modules compiles nothing. None when it cannot be told."""
+    try:
+        from numba.core.dispatcher import Dispatcher
+        cached = total = 0
+        for name in kernel_modules() if modules is None else modules:
+            module = importlib.import_module(name)
+            for obj in vars(module).values():
+                if not isinstance(obj, Dispatcher) or getattr(obj.py_func, "__module__", None) != module.__name__:
+                    continue
+                index = getattr(getattr(getattr(obj, "_cache", None), "_cache_file", None), "_index_path", None)
+                if index is None:  # not cached on disk
+                    continue
+                total += 1
+                cached += os.path.isfile(index)
+        return cached, total
+    except Exception:  # noqa: BLE001 - another numba's internals, a broken module: say nothing
+        return None
+
+
+def compiling_note(state: Optional[Tuple[int, int]]) -> bool:
+    """Whether a run whose kernels' cache ``state`` is (cached, total) is about to compile them: fewer
+    than half cached (some kernels of a module compile only on paths a run never takes, so "all"
+    would be said again every session)."""
+    return state is not None and state[1] > 0 and 2 * state[0] < state[1]
