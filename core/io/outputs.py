@@ -92,6 +92,8 @@ def check_output_path(path: str, *, inputs=(), extensions=LAS_EXTENSIONS, what: 
             raise OutputError(f"{path}: the {what} must not be the input file; choose another name")
     if os.path.isdir(path):  # (found only when its rename failed, after the work: a reviewer)
         raise OutputError(f"{path}: is a folder; the {what} must be a file name")
+    if os.path.isfile(path) and not os.stat(path).st_mode & 0o222:  # (a rename replaced it: PDAL, GDAL, cp refuse)
+        raise OutputError(f"{path}: the file there is read-only; make it writable or choose another name")
     folder = os.path.dirname(real) or "."
     if not os.path.isdir(folder):
         raise OutputError(f"{path}: the folder {folder} does not exist")

@@ -388,9 +388,15 @@ def test_output_equal_to_input_is_refused_before_anything(scene, tmp_path):
     (tmp_path / "d.laz").mkdir()
     with pytest.raises(OutputError, match="d.laz: is a folder"):
         run_ground_filter(scene.path, str(tmp_path / "d.laz"), spy, progress=seen.append)
+    # a read-only file there is not replaced (a rename did, and made it writable: PDAL, GDAL and cp refuse)
+    (tmp_path / "ro.laz").write_bytes(b"keep")
+    os.chmod(tmp_path / "ro.laz", 0o444)
+    with pytest.raises(OutputError, match="ro.laz: the file there is read-only"):
+        run_ground_filter(scene.path, str(tmp_path / "ro.laz"), spy, progress=seen.append)
+    assert (tmp_path / "ro.laz").read_bytes() == b"keep"
     assert calls == [] and seen == []
     assert sha256(scene.path) == digest
-    assert sorted(os.listdir(tmp_path)) == ["d.laz", "link.laz", "other", "scene.laz"]
+    assert sorted(os.listdir(tmp_path)) == ["d.laz", "link.laz", "other", "ro.laz", "scene.laz"]
 
 
 def test_bad_dtm_path_is_refused_before_the_las_is_written(scene, tmp_path):
