@@ -65,13 +65,16 @@ def build_filter(algorithm, parameters, context, log=None):
     kwargs = algorithm.filterArguments(parameters, context)
     path = preset_path(algorithm, parameters, context)
     preset = load_preset(path, algorithm.FILTER) if path else None
-    typed = typed_fields(algorithm, algorithm.FILTER, parameters) if preset is not None else set()
+    typed = typed_fields(algorithm, algorithm.FILTER, parameters)
+    # what the user set: lengths in the cloud's CRS unit; the defaults and a preset's values are metres
+    # (converted for a cloud in feet: workflow.defaults_in_crs_unit)
+    chosen = {k for k, v in kwargs.items() if v != table.default(algorithm.FILTER, k)} | typed
     if preset is not None:
         kwargs = merge(algorithm.FILTER, preset.values, kwargs, typed)
     kwargs = algorithm.completeFilterArguments(kwargs)
-    built = table.filter_class(algorithm.FILTER)(**kwargs)
+    built = table.mark_user_set(table.filter_class(algorithm.FILTER)(**kwargs), chosen)
     if log is not None:
-        for line in describe(algorithm.FILTER, built, preset, typed_wins=bool(typed)):
+        for line in describe(algorithm.FILTER, built, preset, typed_wins=bool(typed) and preset is not None):
             log(line)
     return built
 

@@ -410,7 +410,7 @@ def options_from(args, log=None):
         preset = load_preset(args.preset, args.filter)
         algorithm = preset.build(given, typed=getattr(args, "typed", None) or ())
     else:
-        algorithm = P.filter_class(args.filter)(**given)
+        algorithm = P.mark_user_set(P.filter_class(args.filter)(**given), getattr(args, "typed", None) or ())
     if log is not None and args.filter != "hybrid":
         for line in describe(args.filter, algorithm, preset, typed_wins=True):  # (what is typed wins)
             log(line)

@@ -412,7 +412,12 @@ def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_pat
                          "train a model with ground points")
     if input_path.lower().endswith((".las", ".laz")) and os.path.isfile(input_path):
         from ..io.lasfiles import scan_header  # before reading the points: a wrong unit is said at once
-        check_model_unit(model, model_path, input_path, scan_header(input_path).crs_wkt, log)
+        from .workflow import defaults_in_crs_unit
+        crs_wkt = scan_header(input_path).crs_wkt
+        check_model_unit(model, model_path, input_path, crs_wkt, log)
+        # the DTM cell's default (1 m) in feet for a cloud in feet, as a tiled run converts it (a code reviewer:
+        # 1 ft whole, 3.28 ft tiled)
+        _same, dtm = defaults_in_crs_unit(None, dtm, crs_wkt, input_path, log)
     cloud = read_cloud(input_path)
     for note in cloud.notes:
         log(note)

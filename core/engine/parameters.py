@@ -224,3 +224,19 @@ def preset_names(name: str) -> Dict[str, str]:
     for f in core_only_fields(name):
         names.setdefault(f.name.upper(), f.name)
     return names
+
+
+def mark_user_set(algorithm, fields):
+    """``algorithm`` (a table filter) noting which of its fields the user set (a dialog value other than
+    the default, an option typed on the command line): their lengths are in the cloud's CRS unit, while
+    the others (defaults and a preset's values) are metres, converted for a cloud in feet
+    (workflow.defaults_in_crs_unit). Kept on the object, not a field: it never changes what the filter
+    computes, nor its equality."""
+    object.__setattr__(algorithm, "user_set", frozenset(fields))
+    return algorithm
+
+
+def user_set(algorithm):
+    """The fields :func:`mark_user_set` noted, or None when the filter was built otherwise (the Python
+    API: then a field equal to its default is taken for the default)."""
+    return getattr(algorithm, "user_set", None)

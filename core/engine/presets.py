@@ -53,7 +53,9 @@ class Preset:
         """The filter with this preset's values over its defaults and, over both, the ``given``
         values (field -> value) that differ from the filter's defaults, and those of the fields in
         ``typed`` whatever their value (the command line knows what was typed)."""
-        return P.filter_class(self.filter)(**merge(self.filter, self.values, given or {}, typed))
+        given, typed = given or {}, set(typed)
+        built = P.filter_class(self.filter)(**merge(self.filter, self.values, given, typed))
+        return P.mark_user_set(built, {k for k, v in given.items() if v != P.default(self.filter, k) or k in typed})
 
 
 def merge(name: str, preset_values: Mapping[str, object], given: Mapping[str, object],

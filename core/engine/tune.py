@@ -462,6 +462,22 @@ RESCORE = {"smrf": (_smrf_surface, _smrf_ground)}
 CHEAP_STEPS = 5  #: values per cheap parameter tried on every filter run of the design
 
 
+def _in_metres(cloud: PointCloud, log) -> PointCloud:
+    """The patch with x, y and z in metres when its CRS's unit is another (feet): the search spans
+    the papers' ranges in metres and the preset it writes is in metres, as every preset is, converted
+    for each cloud it runs on (workflow.defaults_in_crs_unit). A patch in feet was searched over
+    3-49 ft windows and gave a preset read in feet on the patch and in metres elsewhere (a code reviewer)."""
+    import dataclasses
+
+    from ..raster.crs import horizontal_unit, metres_per_unit
+    factor = metres_per_unit(cloud.crs_wkt)
+    if factor is None:
+        return cloud
+    log(f"{cloud.path or 'the tuning patch'}: the CRS's unit is {horizontal_unit(cloud.crs_wkt)}: the patch is "
+        "tuned in metres, and the preset's lengths are metres (converted for each cloud it runs on).")
+    return dataclasses.replace(cloud, x=cloud.x * factor, y=cloud.y * factor, z=cloud.z * factor)
+
+
 #: what the tune's two outputs may end in
 PRESET_EXTENSIONS, REPORT_EXTENSIONS = (".json",), (".html", ".htm")
 
@@ -497,6 +513,7 @@ def tune(cloud, name: str, options: TuneOptions = TuneOptions(), *, base: Option
     if isinstance(cloud, str):
         cloud = read_cloud(cloud)
     where = cloud.path or "the tuning patch"
+    cloud = _in_metres(cloud, log)
     use, ref_all = reference_ground(cloud, where)
     idx = np.flatnonzero(use)
     ref = ref_all[idx]

@@ -367,28 +367,36 @@ def length_fields(algorithm) -> List[str]:
 
 
 def defaults_in_crs_unit(algorithm, dtm: Optional["DTMOptions"], crs_wkt: Optional[str], path: str, log):
-    """``algorithm`` and ``dtm`` with the lengths left at their defaults (metres) converted to the
-    CRS's unit when x, y and z share one other than the metre (feet): a surveyor's state-plane cloud in
-    US survey feet ran SMRF with an 18 ft window, which left 16,566 of 23,305 building points ground
-    (3.95 % total error; 0.95 % converted). A value equal to the default is taken for the default, as
-    the preset's rule has it; values set otherwise are read in the CRS's unit (unit_warning says so).
-    Idempotent (converted values are no longer the defaults)."""
+    """``algorithm`` and ``dtm`` with the lengths in metres converted to the CRS's unit when x, y and z
+    share one other than the metre (feet): a surveyor's state-plane cloud in US survey feet ran SMRF
+    with an 18 ft window, which left 16,566 of 23,305 building points ground (3.95 % total error; 0.95 %
+    converted). In metres: the filter's defaults and a preset's values (shipped presets, and tune's,
+    which tunes in metres); in the CRS's unit: what the user set (parameters.user_set: a dialog value
+    other than the default, an option typed on the command line; unit_warning says so). A preset whose
+    cell alone was converted ran its other lengths in feet (a code reviewer: 12.4 % total error). A filter
+    built by the Python API, which notes nothing, has the fields equal to their defaults converted. The
+    DTM cell is converted when it is the default. Converting twice changes nothing."""
     from ..raster.crs import horizontal_unit, metres_per_unit
     factor = metres_per_unit(crs_wkt)
     if factor is None:
         return algorithm, dtm
     unit = horizontal_unit(crs_wkt)
+    from . import parameters as P
     fields = length_fields(algorithm)
     changed = {}
     if fields:
-        defaults = {f.name: f.default for f in dataclasses.fields(algorithm) if f.name in fields}
-        changed = {k: d / factor for k, d in defaults.items() if d and getattr(algorithm, k) == d}
+        chosen = P.user_set(algorithm)
+        if chosen is None:  # (built by the Python API: a field equal to its default is the default)
+            defaults = {f.name: f.default for f in dataclasses.fields(algorithm) if f.name in fields}
+            metres = [k for k, d in defaults.items() if getattr(algorithm, k) == d]
+        else:  # the defaults and a preset's values are metres; what the user set is in the CRS's unit
+            metres = [k for k in fields if k not in chosen]
+        changed = {k: getattr(algorithm, k) / factor for k in metres if getattr(algorithm, k)}
     if changed:
-        from . import parameters as P
         names = {fld: key for key, fld in P.preset_names(algorithm.name).items()}
     said = [f"{names[k]} {v:.4g}" for k, v in changed.items()]
-    if changed:
-        algorithm = dataclasses.replace(algorithm, **changed)
+    if changed:  # (the user's fields stay noted: a second call, a tiled run after the whole run's, converts nothing)
+        algorithm = P.mark_user_set(dataclasses.replace(algorithm, **changed), set(fields))
     if dtm is not None and dtm.cell_size_m == DTMOptions.cell_size_m:
         dtm = dataclasses.replace(dtm, cell_size_m=DTMOptions.cell_size_m / factor)
         said.append(f"DTM cell {dtm.cell_size_m:.4g}")

@@ -90,6 +90,9 @@ def test_every_table_filter_takes_a_preset_and_the_dialog_values_set_win(grounds
         SMRF(slope=0.2, window_m=16.0, elevation_threshold_m=0.45)
     assert algorithm.buildFilter(dict(dialog, PRESET=path, SCALAR=2.0), context) == \
         SMRF(slope=0.2, window_m=16.0, elevation_threshold_m=0.45, elevation_scalar=2.0)
+    # what the user set is noted (in the cloud's CRS unit; the preset's values and the defaults are metres)
+    from groundsieve.core.engine.parameters import user_set
+    assert user_set(algorithm.buildFilter(dict(dialog, PRESET=path, SCALAR=2.0), context)) == {"elevation_scalar"}
     lines = []
     algorithm.buildFilter(dict(dialog, PRESET=path, SCALAR=2.0, THRESHOLD=0.3), context, lines.append)
     assert lines == ["SMRF parameters: CELL 1 m, SLOPE 0.2, WINDOW 16 m, THRESHOLD 0.3 m, SCALAR 2, "
