@@ -127,7 +127,8 @@ def _add_json(group, fields: str = FILTER_JSON) -> None:
 
 def _add_filter(sub, name: str) -> None:
     summary = P.SUMMARY[name]
-    parser = sub.add_parser(name, help=summary, description=f"{summary}. Lengths in the unit of the cloud's CRS.")
+    parser = sub.add_parser(name, help=summary, description=f"{summary}. Lengths in metres; for a cloud in feet the defaults and a "
+                                "preset's values are converted, and the options you type are read in feet.")
     _add_common(parser)
     group = parser.add_argument_group(f"{name} parameters (as in the Processing dialog)")
     group.add_argument("--preset", metavar="FILE",
@@ -198,8 +199,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="python -m groundsieve",
         description="Ground filtering of point clouds (LAS/LAZ, folders, .vpc) without QGIS: classified "
-                    "LAS/LAZ (ground = 2, other = 1) and an optional DTM GeoTIFF. Lengths in the unit of "
-                    "the cloud's CRS (metres for a metric CRS). `python -m groundsieve FILTER --help` lists "
+                    "LAS/LAZ (ground = 2, other = 1) and an optional DTM GeoTIFF. Lengths in metres; for a "
+                    "cloud in feet the defaults and a preset's values are converted, and the options you "
+                    "type are read in feet. `python -m groundsieve FILTER --help` lists "
                     "a filter's parameters.",
         epilog="Exit status: 0 done, 1 refused or failed (one line saying why), 2 bad usage, 130 interrupted "
                "(Ctrl-C or SIGTERM; a survey's finished tiles are kept in --work-folder, when given, for the "
