@@ -359,6 +359,8 @@ def check_tiled_outputs(inputs: Sequence[str], output_path: Optional[str], dtm_p
             raise OutputError(f"{out}: the output must not be an input file; choose another name")
         if out and os.path.isdir(out):
             raise OutputError(f"{out}: is a folder; the classified file must be a file name")
+        if out and os.path.isfile(out) and not os.stat(out).st_mode & 0o222:  # (as check_output_path: a reviewer)
+            raise OutputError(f"{out}: the file there is read-only; make it writable or choose another name")
         if out and _ext(out) not in LAS_EXTENSIONS:
             raise OutputError(f"{out}: the output must end in .las or .laz")
         if out:
@@ -1222,9 +1224,9 @@ def _assemble_job(job) -> dict:
     input, or one without points) is streamed with the classes its tiles wrote."""
     if not job["pieces"]:
         write_classified_stream(job["path"], job["out"], _file_classes(job, 0, job["count"]),
-                                check=job.get("check"), name=job.get("name"))
+                                check=job.get("check"), name=job.get("name"), atomic=False)  # (staged already)
     else:
-        assemble_classified(job["path"], job["out"], job["pieces"], name=job.get("name"))
+        assemble_classified(job["path"], job["out"], job["pieces"], name=job.get("name"), atomic=False)
         for piece in job["pieces"]:
             os.remove(piece["path"])
     return dict(out=job["out"])

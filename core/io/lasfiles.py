@@ -6,6 +6,7 @@ Nothing here holds a whole file's points: every pass goes through laspy's chunk 
 """
 from __future__ import annotations
 
+import contextlib
 import copy
 import dataclasses
 import json
@@ -18,7 +19,7 @@ import numpy as np
 
 from ..errors import GroundSieveError, InputError, OutputError, UnsupportedFormatError
 from .clouds import PointCloud, check_las_layout, finish_copy, header_crs_wkt, laspy_reason, records_held
-from .outputs import LAS_EXTENSIONS, _ext, atomic_path, check_classes_fit
+from .outputs import LAS_EXTENSIONS, _ext, _reason, atomic_path, check_classes_fit
 
 VPC_EXTENSION = ".vpc"
 #: points per chunk of the streamed passes (about 100 MB of laspy records for the largest formats)
@@ -573,11 +574,13 @@ def _part_cloud(part: TilePart, rec: np.ndarray) -> PointCloud:
 # -- the classified copy --------------------------------------------------------------------------
 
 def write_classified_stream(src: str, dst: str, classification: np.ndarray, *,
-                            chunk_points: int = CHUNK_POINTS, check=None, name: Optional[str] = None) -> None:
+                            chunk_points: int = CHUNK_POINTS, check=None, name: Optional[str] = None,
+                            atomic: bool = True) -> None:
     """Copy ``src`` to ``dst`` (LAZ when it ends in .laz) with ``classification`` (one uint8 per
     point, in file order; a memmap is fine) in one streamed pass, every other dimension, the VLRs
-    and the CRS kept. Atomic: ``dst`` appears only when complete. ``name``: the path its messages give
-    (``dst`` may be a staged name)."""
+    and the CRS kept. Atomic: ``dst`` appears only when complete (``atomic=False``: ``dst`` is already the
+    caller's staged temporary; a second one inside it outlived a killed run: a code reviewer). ``name``:
+    the path its messages give."""
     import laspy
     from .copc import plain_evlrs, plain_header
     classification = np.asarray(classification)
@@ -589,7 +592,7 @@ def write_classified_stream(src: str, dst: str, classification: np.ndarray, *,
                                  f"{classification.shape[0]:,} points when it was read, {n_total:,} now): run "
                                  "again once it is complete")
             check_classes_fit(dst, reader.header.point_format.id, classification)
-            with atomic_path(dst) as tmp:
+            with atomic_path(dst) if atomic else contextlib.nullcontext(dst) as tmp:
                 # Not COPC any more (the LAZ chunks are not the octree's nodes): no COPC records.
                 with laspy.open(tmp, mode="w", header=plain_header(reader.header),
                                 do_compress=_ext(dst) == ".laz") as writer:
@@ -605,7 +608,7 @@ def write_classified_stream(src: str, dst: str, classification: np.ndarray, *,
                         writer.write_evlrs(plain_evlrs(reader.header))
                 finish_copy(tmp, src, name or dst)
     except OSError as err:
-        raise OutputError(f"{dst}: cannot be written ({err})") from err
+        raise OutputError(f"{name or dst}: cannot be written ({_reason(err)})") from err
     except GroundSieveError:
         raise
     except Exception as err:  # laspy / lazrs on a damaged or truncated input
@@ -761,7 +764,8 @@ def _pieces_backend(pieces):
     return Backend()
 
 
-def assemble_classified(src: str, dst: str, pieces: Sequence[dict], name: Optional[str] = None) -> None:
+def assemble_classified(src: str, dst: str, pieces: Sequence[dict], name: Optional[str] = None,
+                        atomic: bool = True) -> None:
     """Write ``dst`` (LAZ when it ends in .laz; atomic) from the pieces of
     :func:`write_classified_piece` (in file order, together every point of ``src``): ``src``'s
     header and VLRs as laspy's writer writes them for a streamed copy, the pieces' records or LAZ
@@ -774,7 +778,7 @@ def assemble_classified(src: str, dst: str, pieces: Sequence[dict], name: Option
         with laspy.open(src) as reader:
             header = plain_header(reader.header)  # as write_classified_stream: no COPC records
             evlrs = plain_evlrs(reader.header) if reader.header.version.minor >= 4 else []
-        with atomic_path(dst) as tmp:
+        with atomic_path(dst) if atomic else contextlib.nullcontext(dst) as tmp:
             with open(tmp, "wb") as f:
                 writer = laspy.LasWriter(f, header=header, do_compress=compress, closefd=False,
                                          laz_backend=_pieces_backend(pieces) if compress else None)
@@ -788,7 +792,7 @@ def assemble_classified(src: str, dst: str, pieces: Sequence[dict], name: Option
                 writer.close()
             finish_copy(tmp, src, name or dst)
     except OSError as err:
-        raise OutputError(f"{dst}: cannot be written ({err})") from err
+        raise OutputError(f"{name or dst}: cannot be written ({_reason(err)})") from err
 
 
 def iter_chunks(path: str, chunk_points: int = CHUNK_POINTS, first: int = 0) -> Iterable:

@@ -10,6 +10,7 @@ than a day)."""
 from __future__ import annotations
 
 import contextlib
+import errno
 import glob
 import os
 import re
@@ -45,10 +46,11 @@ def _host() -> str:
     return re.sub(r"[^A-Za-z0-9-]", "", socket.gethostname())[:24] or "host"
 
 
-def _temp_beside(path: str):
-    """A new temporary for the output ``path`` (see the module's naming): (fd, its path)."""
+def _temp_beside(path: str, kind: str = "part"):
+    """A new temporary for the output ``path`` (see the module's naming): (fd, its path). ``kind``
+    "keep": the previous output kept while a commit puts the new one in place."""
     return tempfile.mkstemp(prefix=f".{_short(os.path.basename(path))}.gs{_host()}.{os.getpid()}-",
-                            suffix=f".part{_ext(path)}", dir=os.path.dirname(os.path.abspath(path)) or ".")
+                            suffix=f".{kind}{_ext(path)}", dir=os.path.dirname(os.path.abspath(path)) or ".")
 
 
 def same_file(a, b) -> bool:
@@ -184,15 +186,22 @@ def remove_stale_temporaries(path: str, *, max_age_s: float = 86400.0) -> list:
     removed = []
     # (GDAL's COG writer keeps the overviews in "<its output>.ovr.tmp" until it ends: a DTM killed
     # while being written left one beside its temporary)
-    for tmp in glob.glob(pattern) + glob.glob(pattern + ".ovr.tmp"):
-        m = own.match(os.path.basename(tmp[:-len(".ovr.tmp")] if tmp.endswith(".ovr.tmp") else tmp))
+    keep = pattern[:-len(glob.escape(f".part{ext}"))] + glob.escape(f".keep{ext}")
+    kept = re.compile(own.pattern[:-len(re.escape(f".part{ext}") + "$")] + re.escape(f".keep{ext}") + "$")
+    for tmp in glob.glob(pattern) + glob.glob(pattern + ".ovr.tmp") + glob.glob(keep):
+        previous = tmp.endswith(f".keep{ext}")
+        name = os.path.basename(tmp[:-len(".ovr.tmp")] if tmp.endswith(".ovr.tmp") else tmp)
+        m = (kept if previous else own).match(name)
         try:
             if m and m.group(1) in (None, here):
                 stale = int(m.group(2)) != os.getpid() and not _process_alive(int(m.group(2)))
             else:
                 stale = time.time() - os.path.getmtime(tmp) > max_age_s
             if stale and os.path.isfile(tmp):
-                os.remove(tmp)
+                if previous and not os.path.lexists(path):
+                    os.replace(tmp, path)  # a commit killed while the output was moved aside: put it back
+                else:
+                    os.remove(tmp)
                 removed.append(tmp)
         except OSError:
             continue
@@ -224,42 +233,55 @@ class StagedOutputs:
 
     def commit(self) -> None:
         """Rename every staged file to its output name, in the order staged, all or none: each output
-        already there is moved aside first (under a temporary's name) and put back, and the outputs
-        renamed so far removed, if any rename fails (a reviewer's immutable classified file, as one
-        open in another program on Windows: the new DTM was in place beside the old cloud)."""
+        already there is kept first (a hard link beside it, so that its name is never missing; moved
+        aside where the file system has no links) and put back, and the outputs renamed so far
+        removed, if any rename fails or the run is interrupted meanwhile (a reviewer's immutable
+        classified file, as one open in another program on Windows: the new DTM was in place beside
+        the old cloud). A kept file a killed commit left is put back by the next run when its output
+        is missing (remove_stale_temporaries)."""
         umask = os.umask(0)
         os.umask(umask)
-        done = []  # (output, its previous file moved aside, or None)
+        done = []  # (output, its previous file kept, or None)
+        path = ""
         try:
             for tmp, path in self._pairs:
                 os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; the output follows the umask
                 backup = None
+                if os.path.isdir(path):  # (refused before the work; a folder made there meanwhile stays)
+                    raise IsADirectoryError(errno.EISDIR, "Is a directory", path)
                 if os.path.lexists(path):
-                    fd, backup = _temp_beside(path)
+                    fd, backup = _temp_beside(path, "keep")
                     os.close(fd)
+                    os.remove(backup)
                     try:
+                        os.link(path, backup)
+                    except OSError:  # (no hard links here: FAT, some shares)
                         os.replace(path, backup)
-                    except OSError:
-                        with contextlib.suppress(OSError):
-                            os.remove(backup)
-                        raise
                 try:
                     os.replace(tmp, path)
-                except OSError:
-                    if backup is not None:
+                except BaseException:
+                    if backup is not None and not os.path.lexists(path):
                         os.replace(backup, path)
+                    elif backup is not None:
+                        os.remove(backup)
                     raise
                 done.append((path, backup))
-        except OSError as err:
+        except BaseException as err:
+            unrestored = []
             for put, backup in reversed(done):
-                with contextlib.suppress(OSError):
+                try:
                     if backup is not None:
                         os.replace(backup, put)
                     else:
                         os.remove(put)
+                except OSError:
+                    unrestored.append(backup or put)
             self.discard()
-            raise OutputError(f"{path}: cannot be written ({_reason(err)}); no output of the run was put in place, "
-                              "and those there before are as they were") from err
+            if not isinstance(err, OSError):
+                raise
+            said = ("no output of the run was put in place, and those there before are as they were" if not unrestored
+                    else "and putting back what was there failed too: the previous files are " + ", ".join(unrestored))
+            raise OutputError(f"{path}: cannot be written ({_reason(err)}); {said}") from err
         for _path, backup in done:
             if backup is not None:
                 with contextlib.suppress(OSError):

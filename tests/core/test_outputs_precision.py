@@ -204,3 +204,60 @@ def test_another_machines_temporary_is_removed_by_age_only(tmp_path):
     with atomic_path(str(out)) as tmp:
         assert os.path.basename(tmp).startswith(f".o.las.gs{_host()}.{os.getpid()}-")
     assert socket.gethostname()
+
+
+def test_an_interrupted_commit_puts_back_what_was_there_and_a_killed_ones_kept_file_is_restored(tmp_path,
+                                                                                              monkeypatch):
+    """A Ctrl-C or SIGTERM (python -m groundsieve makes them KeyboardInterrupt) between two renames
+    skipped the rollback, and a kill left the previous output under a temporary's name, which the next
+    run deleted (a code reviewer). The previous file is kept as a hard link, put back on any exception,
+    and a kept file whose output is missing is put back by the next run."""
+    import groundsieve.core.io.outputs as outputs
+    from groundsieve.core.io.outputs import StagedOutputs, _host
+    a, b = tmp_path / "a.tif", tmp_path / "b.las"
+    a.write_bytes(b"old a")
+    b.write_bytes(b"old b")
+    real = os.replace
+    calls = []
+
+    def interrupted(src, dst):
+        calls.append(dst)
+        if str(dst) == str(b) and str(src).endswith(".part.las"):
+            raise KeyboardInterrupt
+        return real(src, dst)
+    monkeypatch.setattr(outputs.os, "replace", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        with StagedOutputs() as staging:
+            for path in (a, b):
+                open(staging.stage(str(path)), "wb").write(b"new")
+            staging.commit()
+    monkeypatch.setattr(outputs.os, "replace", real)
+    assert (a.read_bytes(), b.read_bytes()) == (b"old a", b"old b")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.tif", "b.las"]
+    # a commit killed where the output was moved aside (no hard links): the next run puts it back
+    dead = 2 ** 22 + 12345
+    kept = tmp_path / f".c.las.gs{_host()}.{dead}-xyz.keep.las"
+    kept.write_bytes(b"old c")
+    assert remove_stale_temporaries(str(tmp_path / "c.las")) == [str(kept)]
+    assert (tmp_path / "c.las").read_bytes() == b"old c" and not kept.exists()
+    # where the output is there (the link kept it), the kept copy just goes
+    kept.write_bytes(b"older c")
+    assert remove_stale_temporaries(str(tmp_path / "c.las")) == [str(kept)]
+    assert (tmp_path / "c.las").read_bytes() == b"old c"
+
+
+def test_a_surveys_classified_copies_are_written_straight_to_their_staged_temporaries(tmp_path, monkeypatch):
+    """A survey's classified copy went to a temporary inside its staged temporary; a killed run left
+    "..t1.laz.gs…part.laz.gs…part.laz", which no later run removed, as large as the copy (a code reviewer)."""
+    import groundsieve.core.io.lasfiles as lasfiles
+    from groundsieve.core.engine.tiles import TileOptions
+    from groundsieve.core.engine.workflow import FilterOptions
+    src = tmp_path / "in.las"
+    plane_las(src)
+    seen = []
+    real = lasfiles.atomic_path
+    monkeypatch.setattr(lasfiles, "atomic_path", lambda path: seen.append(os.path.basename(path)) or real(path))
+    run_ground_filter(str(src), str(tmp_path / "out.las"), SMRF(),
+                      options=FilterOptions(tiling=TileOptions(tile_size_m=20.0, workers=1, parallel="threads")))
+    assert [name for name in seen if name.startswith(".")] == []
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.las", "out.las"]

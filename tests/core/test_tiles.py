@@ -444,6 +444,13 @@ def test_bad_surveys_are_refused_before_work(scene_laz, tmp_path):
     os.link(folder / "a.las", tmp_path / "out" / "a.las")
     with pytest.raises(OutputError, match="a.las: the output must not be an input file"):
         run_ground_filter(str(folder), str(tmp_path / "out.vpc"), SMRF())
+    # a read-only classified file of an earlier run is not replaced (nor made writable)
+    os.remove(tmp_path / "out" / "a.las")
+    (tmp_path / "out" / "b.las").write_bytes(b"keep")
+    os.chmod(tmp_path / "out" / "b.las", 0o444)
+    with pytest.raises(OutputError, match="b.las: the file there is read-only"):
+        run_ground_filter(str(folder), str(tmp_path / "out.vpc"), SMRF())
+    assert (tmp_path / "out" / "b.las").read_bytes() == b"keep"
 
 
 def test_cancel_leaves_nothing(scene_laz, tmp_path):
