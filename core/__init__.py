@@ -32,8 +32,8 @@ def _numba_cache_folder() -> None:
                 return True
         except OSError:
             return False
-    if os.environ.get("NUMBA_CACHE_DIR"):
-        return
+    if os.environ.get("NUMBA_CACHE_DIR") or not sys.platform.startswith("linux"):
+        return  # (elsewhere numba's user cache is not ~/.cache/numba, and the plugin's folder is the user's)
     if writable(os.path.join(os.path.dirname(os.path.abspath(__file__)), "grids", "__pycache__")):
         return
     user = os.path.join(os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "numba")
@@ -46,7 +46,10 @@ def _numba_cache_folder() -> None:
         # numba loads its cache as code: only a folder of this user's that no one else may write
         mine = not hasattr(os, "getuid") or (st.st_uid == os.getuid() and not st.st_mode & 0o022)
         if not (mine and os.path.isdir(folder) and not os.path.islink(folder)):
+            import atexit
+            import shutil
             folder = tempfile.mkdtemp(prefix="groundsieve-numba-")  # this run's own (compiled again next time)
+            atexit.register(shutil.rmtree, folder, True)
     except OSError:
         return  # (numba then says why it cannot cache)
     os.environ["NUMBA_CACHE_DIR"] = folder

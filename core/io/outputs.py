@@ -99,13 +99,16 @@ def check_output_path(path: str, *, inputs=(), extensions=LAS_EXTENSIONS, what: 
     folder = os.path.dirname(real) or "."
     if not os.path.isdir(folder):
         raise OutputError(f"{path}: the folder {folder} does not exist")
-    size = len(os.path.basename(path).encode("utf-8", "surrogateescape"))
-    try:
-        most = os.pathconf(folder, "PC_NAME_MAX")
-    except (OSError, ValueError, AttributeError):
-        most = 255
+    if os.name == "nt":  # NTFS counts UTF-16 units, 255 at most (and Windows has no pathconf)
+        size, most, unit = len(os.path.basename(path).encode("utf-16-le")) // 2, 255, "characters"
+    else:
+        size, unit = len(os.path.basename(path).encode("utf-8", "surrogateescape")), "bytes"
+        try:
+            most = os.pathconf(folder, "PC_NAME_MAX")
+        except (OSError, ValueError, AttributeError):
+            most = 255
     if size > most:
-        raise OutputError(f"{path}: the file name is too long ({size} bytes; this folder's file system takes at most "
+        raise OutputError(f"{path}: the file name is too long ({size} {unit}; this folder's file system takes at most "
                           f"{most}); choose a shorter name")
     check_folder_writable(path, folder)
     return path
@@ -161,6 +164,8 @@ def check_distinct_outputs(outputs) -> None:
 
 
 def _process_alive(pid: int) -> bool:
+    if os.name == "nt":  # os.kill(pid, 0) sends Ctrl-C there (signal 0 is CTRL_C_EVENT: a code reviewer)
+        return _windows_process_alive(pid)
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -168,6 +173,23 @@ def _process_alive(pid: int) -> bool:
     except (PermissionError, OSError):
         return True  # exists (another user's) or cannot tell: keep its file
     return True
+
+
+def _windows_process_alive(pid: int) -> bool:
+    """Whether process ``pid`` runs, asked of Windows (OpenProcess, GetExitCodeProcess); True when it
+    cannot tell (its file is then kept)."""
+    import ctypes
+    kernel32 = ctypes.windll.kernel32  # type: ignore[attr-defined]
+    handle = kernel32.OpenProcess(0x1000, False, pid)  # PROCESS_QUERY_LIMITED_INFORMATION
+    if not handle:
+        return kernel32.GetLastError() == 5  # access denied: another user's, running
+    try:
+        code = ctypes.c_ulong()
+        if not kernel32.GetExitCodeProcess(handle, ctypes.byref(code)):
+            return True
+        return code.value == 259  # STILL_ACTIVE
+    finally:
+        kernel32.CloseHandle(handle)
 
 
 def remove_stale_temporaries(path: str, *, max_age_s: float = 86400.0) -> list:
