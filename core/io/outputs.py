@@ -36,7 +36,8 @@ def _short(base: str) -> str:
     raw = base.encode("utf-8", "surrogateescape")
     if len(raw) <= TEMP_NAME_BYTES:
         return base
-    return raw[:TEMP_NAME_BYTES].decode("utf-8", "ignore") or "output"
+    import hashlib  # (two names sharing their first bytes must not share temporaries: a code reviewer)
+    return raw[:TEMP_NAME_BYTES - 9].decode("utf-8", "ignore") + "~" + hashlib.sha1(raw).hexdigest()[:8]
 
 
 def _host() -> str:
@@ -44,6 +45,13 @@ def _host() -> str:
     nothing on another machine (a reviewer's run removed a live temporary of a writer elsewhere)."""
     import socket
     return re.sub(r"[^A-Za-z0-9-]", "", socket.gethostname())[:24] or "host"
+
+
+def _follow_umask(path: str, umask: int) -> None:
+    """Give a temporary (mkstemp makes 0600) the mode a new file gets; best effort: a FUSE FAT drive
+    has no chmod, and every output there was refused ("Function not implemented": a code reviewer)."""
+    with contextlib.suppress(OSError):
+        os.chmod(path, 0o666 & ~umask)
 
 
 def _temp_beside(path: str, kind: str = "part"):
@@ -179,12 +187,17 @@ def _windows_process_alive(pid: int) -> bool:
     """Whether process ``pid`` runs, asked of Windows (OpenProcess, GetExitCodeProcess); True when it
     cannot tell (its file is then kept)."""
     import ctypes
-    kernel32 = ctypes.windll.kernel32  # type: ignore[attr-defined]
+    from ctypes import wintypes
+    kernel32 = ctypes.WinDLL("kernel32", use_last_error=True)  # type: ignore[attr-defined]
+    kernel32.OpenProcess.argtypes = (wintypes.DWORD, wintypes.BOOL, wintypes.DWORD)
+    kernel32.OpenProcess.restype = wintypes.HANDLE
+    kernel32.GetExitCodeProcess.argtypes = (wintypes.HANDLE, ctypes.POINTER(wintypes.DWORD))
+    kernel32.CloseHandle.argtypes = (wintypes.HANDLE,)
     handle = kernel32.OpenProcess(0x1000, False, pid)  # PROCESS_QUERY_LIMITED_INFORMATION
     if not handle:
-        return kernel32.GetLastError() == 5  # access denied: another user's, running
+        return ctypes.get_last_error() == 5  # access denied: another user's, running
     try:
-        code = ctypes.c_ulong()
+        code = wintypes.DWORD()
         if not kernel32.GetExitCodeProcess(handle, ctypes.byref(code)):
             return True
         return code.value == 259  # STILL_ACTIVE
@@ -264,31 +277,37 @@ class StagedOutputs:
         umask = os.umask(0)
         os.umask(umask)
         done = []  # (output, its previous file kept, or None)
+        pending = None  # (temporary, output, its previous file kept) while its rename is under way
         path = ""
         try:
             for tmp, path in self._pairs:
-                os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; the output follows the umask
-                backup = None
+                _follow_umask(tmp, umask)
                 if os.path.isdir(path):  # (refused before the work; a folder made there meanwhile stays)
                     raise IsADirectoryError(errno.EISDIR, "Is a directory", path)
+                pending = (tmp, path, None)
                 if os.path.lexists(path):
                     fd, backup = _temp_beside(path, "keep")
                     os.close(fd)
                     os.remove(backup)
+                    pending = (tmp, path, backup)  # (before it is made: an interrupt may come in between)
                     try:
-                        os.link(path, backup)
-                    except OSError:  # (no hard links here: FAT, some shares)
+                        os.link(path, backup, follow_symlinks=False)
+                    except (OSError, NotImplementedError):  # (no hard links here: FAT, some shares)
                         os.replace(path, backup)
-                try:
-                    os.replace(tmp, path)
-                except BaseException:
-                    if backup is not None and not os.path.lexists(path):
-                        os.replace(backup, path)
-                    elif backup is not None:
-                        os.remove(backup)
-                    raise
-                done.append((path, backup))
+                os.replace(tmp, path)
+                done.append(pending[1:])
+                pending = None
         except BaseException as err:
+            if pending is not None:  # the output whose rename was under way
+                tmp, put, backup = pending
+                if not os.path.lexists(tmp):  # renamed already: undone with the others
+                    done.append((put, backup))
+                elif backup is not None:
+                    with contextlib.suppress(OSError):
+                        if os.path.lexists(put):  # (linked: the output is still the previous one)
+                            os.remove(backup)
+                        else:
+                            os.replace(backup, put)
             unrestored = []
             for put, backup in reversed(done):
                 try:
@@ -339,7 +358,7 @@ def atomic_path(path: str):
         yield tmp
         umask = os.umask(0)
         os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; the output follows the umask like any file
+        _follow_umask(tmp, umask)  # mkstemp makes 0600; the output follows the umask like any file
         os.replace(tmp, path)
     except OSError as err:
         with contextlib.suppress(OSError):

@@ -261,3 +261,48 @@ def test_a_surveys_classified_copies_are_written_straight_to_their_staged_tempor
                       options=FilterOptions(tiling=TileOptions(tile_size_m=20.0, workers=1, parallel="threads")))
     assert [name for name in seen if name.startswith(".")] == []
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.las", "out.las"]
+
+
+@pytest.mark.parametrize("when", ["after b's rename", "after b was moved aside, no hard links"])
+def test_an_interrupt_at_either_side_of_a_rename_puts_back_what_was_there(tmp_path, monkeypatch, when):
+    """An interrupt just after b's rename took b's new file for its old one and deleted the kept copy;
+    one just after b was moved aside (no hard links: FAT, SMB) left b missing (a code reviewer)."""
+    import groundsieve.core.io.outputs as outputs
+    from groundsieve.core.io.outputs import StagedOutputs
+    a, b = tmp_path / "a.laz", tmp_path / "b.laz"
+    for p in (a, b):
+        p.write_bytes(b"old " + p.name.encode())
+    real = os.replace
+    fired = []
+
+    def replace(src, dst):  # one interrupt, right after the rename it follows
+        real(src, dst)
+        if not fired and ((str(dst) == str(b)) if when.startswith("after b's") else (str(src) == str(b))):
+            fired.append(1)
+            raise KeyboardInterrupt
+    monkeypatch.setattr(outputs.os, "replace", replace)
+    if "no hard links" in when:
+        monkeypatch.setattr(outputs.os, "link", lambda *a, **k: (_ for _ in ()).throw(PermissionError(1, "no")))
+    with pytest.raises(KeyboardInterrupt):
+        with StagedOutputs() as staging:
+            for p in (a, b):
+                open(staging.stage(str(p)), "wb").write(b"new")
+            staging.commit()
+    assert (a.read_bytes(), b.read_bytes()) == (b"old a.laz", b"old b.laz")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.laz", "b.laz"]
+
+
+def test_long_names_sharing_their_first_bytes_do_not_share_temporaries(tmp_path):
+    """Temporaries hold 100 bytes of their output's name: two outputs sharing those shared their
+    temporaries, and one's clean-up deleted the other's kept previous file (a code reviewer)."""
+    from groundsieve.core.io.outputs import _short
+    one, two = "x" * 120 + "_001.laz", "x" * 120 + "_002.laz"
+    assert _short(one) != _short(two) and len(_short(one).encode()) <= 100
+    assert _short("short.laz") == "short.laz"
+    dead = 2 ** 22 + 12345
+    from groundsieve.core.io.outputs import _host
+    kept = tmp_path / f".{_short(two)}.gs{_host()}.{dead}-abc.keep.laz"
+    kept.write_bytes(b"old 002")
+    assert remove_stale_temporaries(str(tmp_path / one)) == []
+    assert remove_stale_temporaries(str(tmp_path / two)) == [str(kept)]
+    assert (tmp_path / two).read_bytes() == b"old 002"
