@@ -154,6 +154,20 @@ def say_if_compiling(feedback, name=None):
     return True
 
 
+def dtm_cell_set(algorithm, parameters, context, name) -> bool:
+    """Whether the user set the DTM cell: another value than the default where QGIS filled every
+    parameter (the dialog, a model), or given at all where they were typed (qgis_process, a script's
+    processing.run): then it is in the CRS's unit; otherwise the default 1 m, converted for a cloud
+    in feet (core/engine/workflow.py defaults_in_crs_unit)."""
+    from .presets import filled_by_qgis
+    if parameters.get(name) in (None, ""):
+        return False
+    if not filled_by_qgis(algorithm, parameters):
+        return True
+    default = algorithm.parameterDefinition(name).defaultValue()
+    return algorithm.parameterAsDouble(parameters, name, context) != float(default)
+
+
 def feedback_callables(feedback):
     """The core's plain callables for a Processing feedback: progress, is_cancelled, log."""
     from ..core.progress import warning_of
@@ -478,6 +492,7 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
                 tiling=self.tileOptions(parameters, context))
             dtm = workflow.DTMOptions(
                 cell_size_m=self.parameterAsDouble(parameters, self.DTM_CELL, context),
+                cell_set=dtm_cell_set(self, parameters, context, self.DTM_CELL),
                 fill_outside_hull=self.parameterAsBoolean(parameters, self.DTM_FILL, context),
                 classes=self.parameterAsString(parameters, self.DTM_CLASSES, context) or "",
                 max_distance_m=self.parameterAsDouble(parameters, self.DTM_MAX_DISTANCE, context))

@@ -11,7 +11,7 @@ from qgis.PyQt.QtGui import QIcon
 
 from . import pointclouds
 from .base import (check_parameter_values, core_modules, dialog_help, dtm_classes_parameter, dtm_max_distance_parameter,
-                   feedback_callables)
+                   dtm_cell_set, feedback_callables)
 from .discovery import Discoverable
 
 _ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
@@ -262,6 +262,7 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
         dtm_path = self.parameterAsOutputLayer(parameters, self.DTM, context) or None
         try:
             dtm = DTMOptions(cell_size_m=self.parameterAsDouble(parameters, self.DTM_CELL, context),
+                             cell_set=dtm_cell_set(self, parameters, context, self.DTM_CELL),
                              fill_outside_hull=self.parameterAsBoolean(parameters, self.DTM_FILL, context),
                              classes=self.parameterAsString(parameters, self.DTM_CLASSES, context) or "",
                              max_distance_m=self.parameterAsDouble(parameters, self.DTM_MAX_DISTANCE, context))

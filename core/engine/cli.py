@@ -69,7 +69,7 @@ def _add_common(parser: argparse.ArgumentParser) -> None:
     io.add_argument("--output", metavar="PATH", help="classified LAS/LAZ (a .vpc for several input files)")
     io.add_argument("--dtm", metavar="PATH", help="DTM GeoTIFF (optional)")
     _add_json(io)
-    io.add_argument("--dtm-cell", type=float, default=dt["cell_size_m"], metavar="M",
+    io.add_argument("--dtm-cell", type=float, default=dt["cell_size_m"], metavar="M", action=_TYPED_CELL,
                     help="DTM cell size (m; default %(default)s)")
     io.add_argument("--dtm-fill", action=argparse.BooleanOptionalAction, default=dt["fill_outside_hull"],
                     help="fill DTM cells outside the ground hull (nearest value; default %(default)s)")
@@ -180,6 +180,13 @@ def _typed_action(base):
 
 
 _TYPED_STORE = _typed_action(argparse._StoreAction)
+
+
+class _TYPED_CELL(argparse._StoreAction):  # noqa: N801
+    """--dtm-cell, noting that it was typed: then in the CRS's unit even at the default (DTMOptions.cell_set)."""
+    def __call__(self, parser, namespace, values, option_string=None):
+        super().__call__(parser, namespace, values, option_string)
+        namespace.dtm_cell_typed = True
 _TYPED_BOOL = _typed_action(argparse.BooleanOptionalAction)
 
 
@@ -422,7 +429,8 @@ def options_from(args, log=None):
     options = FilterOptions(last_returns_only=args.last_returns, ignore_noise=args.ignore_noise,
                             ignore_classes=args.ignore_classes, keep_existing_classes=args.keep_classes,
                             tiling=tiling)
-    return algorithm, options, DTMOptions(cell_size_m=args.dtm_cell, fill_outside_hull=args.dtm_fill,
+    return algorithm, options, DTMOptions(cell_size_m=args.dtm_cell, cell_set=bool(getattr(args, "dtm_cell_typed", False)),
+                                          fill_outside_hull=args.dtm_fill,
                                           classes=args.dtm_classes, max_distance_m=args.dtm_max_distance)
 
 

@@ -412,8 +412,10 @@ def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_pat
                          "train a model with ground points")
     if input_path.lower().endswith((".las", ".laz")) and os.path.isfile(input_path):
         from ..io.lasfiles import scan_header  # before reading the points: a wrong unit is said at once
-        from .workflow import defaults_in_crs_unit
-        crs_wkt = scan_header(input_path).crs_wkt
+        from .workflow import defaults_in_crs_unit, warn_about_units
+        header = scan_header(input_path)
+        crs_wkt = header.crs_wkt
+        warn_about_units(input_path, [header], log)  # (as the tiled run said it: a code reviewer)
         check_model_unit(model, model_path, input_path, crs_wkt, log)
         # the DTM cell's default (1 m) in feet for a cloud in feet, as a tiled run converts it (a code reviewer:
         # 1 ft whole, 3.28 ft tiled)

@@ -93,6 +93,10 @@ class DTMOptions:
     #: cells farther than this (m) from every DTM point stay empty, so that a data gap (a missing
     #: tile, a lake without returns) is not bridged by invented terrain; 0 = no limit
     max_distance_m: float = 0.0
+    #: the cell was set by the user (typed, or another value than the default in the dialog): in the
+    #: CRS's unit; otherwise a cell equal to the default is the default, 1 m, converted for a cloud in
+    #: feet (defaults_in_crs_unit; a typed --dtm-cell 1 was converted: a code reviewer)
+    cell_set: bool = False
 
     def __post_init__(self):
         _check_budget(self.memory_budget_bytes, "memory_budget_bytes")
@@ -375,7 +379,8 @@ def defaults_in_crs_unit(algorithm, dtm: Optional["DTMOptions"], crs_wkt: Option
     other than the default, an option typed on the command line; unit_warning says so). A preset whose
     cell alone was converted ran its other lengths in feet (a code reviewer: 12.4 % total error). A filter
     built by the Python API, which notes nothing, has the fields equal to their defaults converted. The
-    DTM cell is converted when it is the default. Converting twice changes nothing."""
+    DTM cell is converted when it is the default and not set by the user (DTMOptions.cell_set). Converting
+    twice changes nothing."""
     from ..raster.crs import horizontal_unit, metres_per_unit
     factor = metres_per_unit(crs_wkt)
     if factor is None:
@@ -392,17 +397,19 @@ def defaults_in_crs_unit(algorithm, dtm: Optional["DTMOptions"], crs_wkt: Option
         else:  # the defaults and a preset's values are metres; what the user set is in the CRS's unit
             metres = [k for k in fields if k not in chosen]
         changed = {k: getattr(algorithm, k) / factor for k in metres if getattr(algorithm, k)}
+        if hasattr(algorithm, "metres_per_unit") and algorithm.metres_per_unit == 1.0:
+            changed["metres_per_unit"] = factor  # the filter's built-in lengths (CSF's, PTD's, SMRF's)
     if changed:
         names = {fld: key for key, fld in P.preset_names(algorithm.name).items()}
-    said = [f"{names[k]} {v:.4g}" for k, v in changed.items()]
+    said = [f"{names[k]} {v:.4g}" for k, v in changed.items() if k != "metres_per_unit"]
     if changed:  # (the user's fields stay noted: a second call, a tiled run after the whole run's, converts nothing)
         algorithm = P.mark_user_set(dataclasses.replace(algorithm, **changed), set(fields))
-    if dtm is not None and dtm.cell_size_m == DTMOptions.cell_size_m:
+    if dtm is not None and not dtm.cell_set and dtm.cell_size_m == DTMOptions.cell_size_m:
         dtm = dataclasses.replace(dtm, cell_size_m=DTMOptions.cell_size_m / factor)
         said.append(f"DTM cell {dtm.cell_size_m:.4g}")
     if said:
-        log(f"{path}: the CRS's unit is {unit}: the defaults, metres, are converted to it: " + ", ".join(said)
-            + f" ({unit}; 1 m = {1 / factor:.5g}). Values set otherwise are read in {unit}.")
+        log(f"{path}: the CRS's unit is {unit}: lengths in metres (the defaults, a preset's) are converted to it: "
+            + ", ".join(said) + f" ({unit}; 1 m = {1 / factor:.5g}). Values you set are read in {unit}.")
     return algorithm, dtm
 
 

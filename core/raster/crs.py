@@ -139,7 +139,7 @@ def unit_warning(path: str, crs_wkt: Optional[str], lengths: str = "every length
                 "latitudes: the CRS is likely wrong, and the lengths were read in the coordinates' own unit. "
                 "Assign the right CRS to the file (outputs keep the wrong one).")
     return (f"{path}: the CRS's unit is {unit}, not metres: {lengths} was read in that unit (where the parameters "
-            f"say m, read one {unit}); a ground filter's lengths left at their defaults are converted to it.")
+            f"say m, read one {unit}); a ground filter's defaults and a preset's lengths, which are metres, are converted to it.")
 
 
 #: the widest span (degrees) a cloud in longitudes and latitudes is taken to have: a local survey in

@@ -75,8 +75,8 @@ def test_heights_in_feet_under_a_compound_crs_in_metres_are_warned_and_the_dtm_s
     # US survey feet across and international feet up (2 ppm apart): the same unit for the thresholds
     said = unit_warning("ft.laz", pyproj.CRS("EPSG:2249+8228").to_wkt())
     assert said.startswith("ft.laz: the CRS's unit is US survey foot")
-    assert said.endswith("(where the parameters say m, read one US survey foot); a ground filter's lengths left at "
-                         "their defaults are converted to it.")  # values set otherwise: "CELL 1 m" is 1 ft
+    assert said.endswith("(where the parameters say m, read one US survey foot); a ground filter's defaults and a "
+                         "preset's lengths, which are metres, are converted to it.")  # values set: "CELL 1 m" is 1 ft
     said = unit_warning("a.laz", feet)
     assert said.startswith("a.laz: the heights are in US survey foot (the CRS's vertical part), x and y in metres")
     assert elevation_unit(feet) == "US survey foot" and elevation_unit(metres) == "m"
@@ -218,7 +218,7 @@ def test_a_cloud_in_us_survey_feet_runs_the_defaults_in_metres_converted(tmp_pat
         runs[name] = np.asarray(laspy.read(str(tmp_path / f"{name}_c.las")).classification) == 2
         runs[name + " log"] = lines
         runs[name + " cell"] = gdal.Open(str(tmp_path / f"{name}.tif")).GetGeoTransform()[1]
-    said = [line for line in runs["ft log"] if "the defaults, metres, are converted" in line]
+    said = [line for line in runs["ft log"] if "lengths in metres (the defaults, a preset's) are converted" in line]
     assert len(said) == 1 and "WINDOW 59.05" in said[0] and "THRESHOLD 1.64" in said[0] and "DTM cell 3.281" in said[0]
     assert not any("are converted" in line for line in runs["m log"])
     assert runs["ft cell"] == pytest.approx(1 / ft) and runs["m cell"] == 1.0
@@ -283,3 +283,45 @@ def test_tune_on_a_patch_in_feet_tunes_in_metres(tmp_path):
     result = tune(str(src), "smrf", TuneOptions(budget=4, blocks=2), log=lines.append)
     assert any("the patch is tuned in metres" in line for line in lines), lines
     assert 3.0 <= result.best_values["window_m"] <= 49.0 and result.best_values["cell_size_m"] == 1.0
+
+
+@pytest.mark.parametrize("name", ["csf", "ptd", "smrf"])
+def test_a_filter_in_feet_classifies_as_in_metres(tmp_path, name):
+    """CSF's and PTD's built-in lengths (the cloth's gravity and start, PTD's support radius and
+    thinning) stayed metres read as feet with the parameters converted: CSF 1.34 -> 1.83 %, PTD 1.09
+    -> 1.23 % total error on a scene in feet (a code reviewer). The same scene in metres and in feet,
+    its origin at 0 so that every grid falls on the same ground, classifies alike."""
+    import laspy
+    import numpy as np
+    import pyproj
+
+    from groundsieve.core.engine import parameters as P
+    from groundsieve.core.engine.workflow import run_ground_filter
+    from groundsieve.core.io import new_las, write_las
+    from groundsieve.core.synthetic import SceneSpec, make_scene
+    ft = 1200.0 / 3937.0
+    scene = make_scene(SceneSpec(size_m=80.0, density_per_m2=4.0, seed=12, buildings_per_ha=6.0))
+    x, y = scene.x - np.floor(scene.x.min()), scene.y - np.floor(scene.y.min())
+    got = {}
+    for unit, crs, factor in (("m", 32617, 1.0), ("ft", 2264, ft)):
+        src = tmp_path / f"{unit}.las"
+        write_las(new_las(x / factor, y / factor, scene.z / factor, crs_wkt=pyproj.CRS.from_epsg(crs).to_wkt(),
+                          scale=1e-4), str(src))
+        run_ground_filter(str(src), str(tmp_path / f"{unit}_c.las"), P.filter_class(name)())
+        got[unit] = np.asarray(laspy.read(str(tmp_path / f"{unit}_c.las")).classification) == 2
+    assert np.mean(got["m"] == got["ft"]) >= 0.999, np.mean(got["m"] == got["ft"])
+
+
+def test_a_typed_dtm_cell_is_in_feet_and_the_default_is_converted(tmp_path):
+    """--dtm-cell 1 on a cloud in feet made 3.28 ft cells where --dtm-cell 2 made 2 ft (a code reviewer)."""
+    import pyproj
+
+    from groundsieve.core.engine.cli import build_parser, options_from
+    from groundsieve.core.engine.workflow import defaults_in_crs_unit
+    feet = pyproj.CRS.from_epsg(2264).to_wkt()
+    for argv, cell in (([], 1200.0 / 3937.0), (["--dtm-cell", "1"], 1.0), (["--dtm-cell", "2"], 2.0)):
+        args = build_parser().parse_args(["smrf", "--input", "ft.laz", "--output", "o.laz", *argv])
+        _algorithm, _options, dtm = options_from(args)
+        _same, converted = defaults_in_crs_unit(None, dtm, feet, "ft.laz", lambda _l: None)
+        expected = 1.0 / cell if not argv else cell
+        assert converted.cell_size_m == pytest.approx(expected), argv

@@ -93,6 +93,12 @@ def test_every_table_filter_takes_a_preset_and_the_dialog_values_set_win(grounds
     # what the user set is noted (in the cloud's CRS unit; the preset's values and the defaults are metres)
     from groundsieve.core.engine.parameters import user_set
     assert user_set(algorithm.buildFilter(dict(dialog, PRESET=path, SCALAR=2.0), context)) == {"elevation_scalar"}
+    # and the DTM cell: set in a filled dialog when not the default, in typed parameters when given at all
+    from groundsieve.algorithms.base import dtm_cell_set
+    assert not dtm_cell_set(algorithm, dict(dialog, DTM_CELL=1.0), context, "DTM_CELL")
+    assert dtm_cell_set(algorithm, dict(dialog, DTM_CELL=2.0), context, "DTM_CELL")
+    assert dtm_cell_set(algorithm, {"INPUT": "a.laz", "DTM_CELL": 1.0}, context, "DTM_CELL")
+    assert not dtm_cell_set(algorithm, {"INPUT": "a.laz"}, context, "DTM_CELL")
     lines = []
     algorithm.buildFilter(dict(dialog, PRESET=path, SCALAR=2.0, THRESHOLD=0.3), context, lines.append)
     assert lines == ["SMRF parameters: CELL 1 m, SLOPE 0.2, WINDOW 16 m, THRESHOLD 0.3 m, SCALAR 2, "
