@@ -47,6 +47,18 @@ def _host() -> str:
     return re.sub(r"[^A-Za-z0-9-]", "", socket.gethostname())[:24] or "host"
 
 
+def _keep_name(path: str) -> str:
+    """A free name for the previous output kept while a commit puts the new one in place (the
+    temporaries' naming with ``.keepEXT``), not created: os.link and os.replace make it."""
+    import secrets
+    folder = os.path.dirname(os.path.abspath(path)) or "."
+    while True:
+        name = os.path.join(folder, f".{_short(os.path.basename(path))}.gs{_host()}.{os.getpid()}-"
+                                    f"{secrets.token_hex(4)}.keep{_ext(path)}")
+        if not os.path.lexists(name):
+            return name
+
+
 def _follow_umask(path: str, umask: int) -> None:
     """Give a temporary (mkstemp makes 0600) the mode a new file gets; best effort: a FUSE FAT drive
     has no chmod, and every output there was refused ("Function not implemented": a code reviewer)."""
@@ -54,11 +66,10 @@ def _follow_umask(path: str, umask: int) -> None:
         os.chmod(path, 0o666 & ~umask)
 
 
-def _temp_beside(path: str, kind: str = "part"):
-    """A new temporary for the output ``path`` (see the module's naming): (fd, its path). ``kind``
-    "keep": the previous output kept while a commit puts the new one in place."""
+def _temp_beside(path: str):
+    """A new temporary for the output ``path`` (see the module's naming): (fd, its path)."""
     return tempfile.mkstemp(prefix=f".{_short(os.path.basename(path))}.gs{_host()}.{os.getpid()}-",
-                            suffix=f".{kind}{_ext(path)}", dir=os.path.dirname(os.path.abspath(path)) or ".")
+                            suffix=f".part{_ext(path)}", dir=os.path.dirname(os.path.abspath(path)) or ".")
 
 
 def same_file(a, b) -> bool:
@@ -230,8 +241,8 @@ def remove_stale_temporaries(path: str, *, max_age_s: float = 86400.0) -> list:
         try:
             if m and m.group(1) in (None, here):
                 stale = int(m.group(2)) != os.getpid() and not _process_alive(int(m.group(2)))
-            else:
-                stale = time.time() - os.path.getmtime(tmp) > max_age_s
+            else:  # (a kept file has its output's old mtime; its ctime is when it was kept)
+                stale = time.time() - (os.stat(tmp).st_ctime if previous else os.path.getmtime(tmp)) > max_age_s
             if stale and os.path.isfile(tmp):
                 if previous and not os.path.lexists(path):
                     os.replace(tmp, path)  # a commit killed while the output was moved aside: put it back
@@ -241,6 +252,47 @@ def remove_stale_temporaries(path: str, *, max_age_s: float = 86400.0) -> list:
         except OSError:
             continue
     return removed
+
+
+def _undo(pending, done) -> list:
+    """Put back what a failed or interrupted commit had changed: the output whose rename was under way
+    (``pending``: temporary, output, kept previous file) and those renamed (``done``: output, kept file),
+    in reverse. A second interrupt meanwhile (Ctrl-C twice, a scheduler's repeated SIGTERM) is let wait
+    until it is done: a half-undone commit left a mixed set (a code reviewer). Returns the files that
+    could not be put back."""
+    steps = []
+    if pending is not None:
+        tmp, put, backup = pending
+        if not os.path.lexists(tmp):  # renamed already: undone as the others
+            done = list(done) + [(put, backup)]
+        elif backup is not None:
+            steps.append(("settle", put, backup))
+    steps += [("restore", put, backup) for put, backup in reversed(done)]
+    unrestored, interrupted = [], None
+    while steps:
+        kind, put, backup = steps[0]
+        try:
+            if kind == "settle":  # its rename never happened: the output is the previous one, or moved aside
+                if os.path.lexists(put):
+                    with contextlib.suppress(OSError):
+                        os.remove(backup)
+                else:
+                    os.replace(backup, put)
+            elif backup is not None:
+                if os.path.lexists(backup) or not os.path.lexists(put):  # (done already, if interrupted after)
+                    os.replace(backup, put)
+            else:
+                with contextlib.suppress(FileNotFoundError):
+                    os.remove(put)
+        except OSError:
+            unrestored.append(backup or put)
+        except BaseException as err:  # noqa: BLE001 - the step is done again (each is idempotent)
+            interrupted = interrupted or err
+            continue
+        steps.pop(0)
+    if interrupted is not None and not isinstance(interrupted, KeyboardInterrupt):
+        raise interrupted
+    return unrestored
 
 
 class StagedOutputs:
@@ -286,10 +338,8 @@ class StagedOutputs:
                     raise IsADirectoryError(errno.EISDIR, "Is a directory", path)
                 pending = (tmp, path, None)
                 if os.path.lexists(path):
-                    fd, backup = _temp_beside(path, "keep")
-                    os.close(fd)
-                    os.remove(backup)
-                    pending = (tmp, path, backup)  # (before it is made: an interrupt may come in between)
+                    backup = _keep_name(path)  # (named, not created: nothing to remove if interrupted here)
+                    pending = (tmp, path, backup)
                     try:
                         os.link(path, backup, follow_symlinks=False)
                     except (OSError, NotImplementedError):  # (no hard links here: FAT, some shares)
@@ -298,36 +348,27 @@ class StagedOutputs:
                 done.append(pending[1:])
                 pending = None
         except BaseException as err:
-            if pending is not None:  # the output whose rename was under way
-                tmp, put, backup = pending
-                if not os.path.lexists(tmp):  # renamed already: undone with the others
-                    done.append((put, backup))
-                elif backup is not None:
-                    with contextlib.suppress(OSError):
-                        if os.path.lexists(put):  # (linked: the output is still the previous one)
-                            os.remove(backup)
-                        else:
-                            os.replace(backup, put)
-            unrestored = []
-            for put, backup in reversed(done):
-                try:
-                    if backup is not None:
-                        os.replace(backup, put)
-                    else:
-                        os.remove(put)
-                except OSError:
-                    unrestored.append(backup or put)
+            unrestored = _undo(pending, done)
             self.discard()
             if not isinstance(err, OSError):
                 raise
             said = ("no output of the run was put in place, and those there before are as they were" if not unrestored
                     else "and putting back what was there failed too: the previous files are " + ", ".join(unrestored))
             raise OutputError(f"{path}: cannot be written ({_reason(err)}); {said}") from err
-        for _path, backup in done:
-            if backup is not None:
-                with contextlib.suppress(OSError):
-                    os.remove(backup)
         self._pairs = []
+        interrupted = None
+        for _path, backup in done:  # (every one, an interrupt meanwhile or not: a kept copy is the old output)
+            if backup is not None:
+                try:
+                    os.remove(backup)
+                except OSError:
+                    pass
+                except BaseException as err:  # noqa: BLE001 - finish the loop, then stop as asked
+                    interrupted = interrupted or err
+                    with contextlib.suppress(OSError):
+                        os.remove(backup)
+        if interrupted is not None:
+            raise interrupted
 
     def discard(self) -> None:
         for tmp, _path in self._pairs:

@@ -306,3 +306,31 @@ def test_long_names_sharing_their_first_bytes_do_not_share_temporaries(tmp_path)
     assert remove_stale_temporaries(str(tmp_path / one)) == []
     assert remove_stale_temporaries(str(tmp_path / two)) == [str(kept)]
     assert (tmp_path / two).read_bytes() == b"old 002"
+
+
+def test_a_second_interrupt_while_a_commit_is_undone_still_leaves_the_previous_outputs(tmp_path, monkeypatch):
+    """Ctrl-C twice (or a scheduler's repeated SIGTERM): the second, during the undo, left one output new
+    and the other old, the old copy in a kept file the next run deleted (a code reviewer)."""
+    import groundsieve.core.io.outputs as outputs
+    from groundsieve.core.io.outputs import StagedOutputs
+    a, b = tmp_path / "a.laz", tmp_path / "b.laz"
+    for p in (a, b):
+        p.write_bytes(b"old " + p.name.encode())
+    real = os.replace
+    calls = []
+
+    def replace(src, dst):
+        real(src, dst)
+        calls.append((str(src), str(dst)))
+        renamed_in = [c for c in calls if c[1] in (str(a), str(b)) and ".part" in c[0]]
+        put_back = [c for c in calls if c[1] in (str(a), str(b)) and ".keep" in c[0]]
+        if len(renamed_in) == 2 and len(put_back) in (0, 1) and len(calls) in (2, 3):
+            raise KeyboardInterrupt  # after b's rename, then again after the first undo step
+    monkeypatch.setattr(outputs.os, "replace", replace)
+    with pytest.raises(KeyboardInterrupt):
+        with StagedOutputs() as staging:
+            for p in (a, b):
+                open(staging.stage(str(p)), "wb").write(b"new")
+            staging.commit()
+    assert (a.read_bytes(), b.read_bytes()) == (b"old a.laz", b"old b.laz")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.laz", "b.laz"]
