@@ -304,7 +304,7 @@ def run_filter(args, out) -> dict:
     from .workflow import run_ground_filter
     if not args.output and not args.dtm:
         raise _Usage("give --output and/or --dtm")
-    for flag, unset in (("--dtm-cell", args.dtm_cell == _defaults(DTMOptions)["cell_size_m"]),
+    for flag, unset in (("--dtm-cell", not getattr(args, "dtm_cell_typed", False)),
                         ("--dtm-classes", not args.dtm_classes), ("--dtm-max-distance", not args.dtm_max_distance)):
         if not args.dtm and not unset:
             print(f"groundsieve: {flag} is set but no --dtm is named: no DTM is made", file=out)

@@ -140,9 +140,16 @@ def filter_class(name: str):
     return getattr(importlib.import_module(f"..filters.{module}", __package__), cls)
 
 
+#: fields a run sets and no user does: ``metres_per_unit`` (the coordinates' unit, from the cloud's CRS:
+#: workflow.defaults_in_crs_unit). Offered as --metres-per-unit and a preset's METRES_PER_UNIT, it only
+#: scaled the hidden constants and made CSF worse on a cloud in metres or in feet without a CRS (a code
+#: reviewer): it is in no dialog, command line or preset.
+RUN_FIELDS = ("metres_per_unit",)
+
+
 def filter_fields(name: str) -> List[dataclasses.Field]:
-    """The filter dataclass's init fields, in their order."""
-    return [f for f in dataclasses.fields(filter_class(name)) if f.init]
+    """The filter dataclass's init fields a user may set, in their order (not RUN_FIELDS)."""
+    return [f for f in dataclasses.fields(filter_class(name)) if f.init and f.name not in RUN_FIELDS]
 
 
 def params(name: str) -> Sequence[Param]:
@@ -181,7 +188,8 @@ def source_defaults(name: str) -> Dict[str, object]:
     for node in tree.body:
         if isinstance(node, ast.ClassDef) and node.name == cls:
             return {stmt.target.id: ast.literal_eval(stmt.value) for stmt in node.body
-                    if isinstance(stmt, ast.AnnAssign) and isinstance(stmt.target, ast.Name) and stmt.value is not None}
+                    if isinstance(stmt, ast.AnnAssign) and isinstance(stmt.target, ast.Name) and stmt.value is not None
+                    and stmt.target.id not in RUN_FIELDS}
     raise KeyError(f"no class {cls} in {path}")
 
 

@@ -177,9 +177,9 @@ class PTD:
                  f"metres_per_unit must be > 0 (got {self.metres_per_unit})")
         _require(math.isfinite(self.seed_cell_m) and self.seed_cell_m > 0,
                  f"seed_cell_m must be > 0 (got {self.seed_cell_m})")
-        _require(self.seed_cell_m <= MAX_SEED_CELL_M,
+        _require(self.seed_cell_m * self.metres_per_unit <= MAX_SEED_CELL_M,  # (in metres: a preset's 400 m in feet)
                  f"seed_cell_m must be at most {MAX_SEED_CELL_M:g} m, the size of the largest buildings "
-                 f"(got {self.seed_cell_m:g})")
+                 f"(got {self.seed_cell_m * self.metres_per_unit:g} m)")
         _require(math.isfinite(self.max_angle_deg) and 0 < self.max_angle_deg < 90,
                  f"max_angle_deg must be in (0, 90) degrees (got {self.max_angle_deg})")
         _require(math.isfinite(self.max_distance_m) and self.max_distance_m > 0,
