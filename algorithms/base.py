@@ -1,7 +1,6 @@
 """What every ground-filter algorithm shares: the INPUT/OUTPUT/DTM/GROUND_POINTS
 parameters, the adaptation of QGIS feedback to the core's plain callables, and the
 translation of core errors into QgsProcessingException."""
-import importlib
 import math
 import os
 import re
@@ -144,7 +143,7 @@ def say_if_compiling(feedback, name=None):
     upgrade that replaced the plugin's folder, or an algorithm run for the first time: PTD compiled
     for 30 s with nothing said after SMRF had filled the cache, a release engineer;
     core/engine/kernels.py ``about_to_compile``)."""
-    from ..core.engine.kernels import COMPILING, about_to_compile
+    from ..core.engine.kernels import about_to_compile
     if name in _SESSION["kernels_checked"]:
         return False
     _SESSION["kernels_checked"].add(name)

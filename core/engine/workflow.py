@@ -21,7 +21,6 @@ same for a whole file and for each tile of a survey:
 """
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import math
 import os

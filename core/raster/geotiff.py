@@ -258,7 +258,6 @@ class BlockGeoTIFF:
         """Close the work raster and write the COG to ``path`` (atomically; ``atomic=False`` when
         ``path`` is already a staged temporary: a second one inside it, ``..dtm.tif.gs<pid>-<random>.part.tif
         .gs<pid>-<random>.part.tif``, was not found by the next run's clean-up when a run was killed)."""
-        from osgeo import gdal
         path = check_raster_path(path) if atomic else os.fspath(path)
         name = name or path
         self.close()
