@@ -548,7 +548,10 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
     note = getattr(algorithm, "tiled_note", "")
     if note:
         log(note)
-    log(f"{len(inputs)} file(s), {total:,} points; tiles of {size:g} m with a buffer of {buffer_m:g} m "
+    from ..raster.crs import metres_per_unit
+    from .workflow import length_label
+    unit = length_label(metres_per_unit(infos[0].crs_wkt) or 1.0)  # (a survey in feet: feet)
+    log(f"{len(inputs)} file(s), {total:,} points; tiles of {size:g} {unit} with a buffer of {buffer_m:g} {unit} "
         f"({'set' if tiling.buffer_m is not None else 'the filter reach'}); {tiling.worker_count} worker(s).")
     steps.check()
     parent = tiling.work_dir or os.path.dirname(os.path.abspath(output_path or dtm_path or inputs[0]))
@@ -1028,10 +1031,13 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             if note:
                 log(note)
             _say_enclosed_nodata(dtm_writer, dtm, grid.buffer, log)
-            from .workflow import dtm_spacing_note, pits_note
+            from ..grids.rasterize import PIT_DEPTH
+            from .workflow import dtm_spacing_note, length_label, pits_note
+            mpu = dtm.metres_per_unit
             for note in ("" if dtm.fill_outside_hull else
-                         dtm_spacing_note(dtm_points, dtm_writer.valued_cells, dtm_writer.grid.cell),
-                         pits_note(*dtm_writer.isolated_pits(check=steps.check), dtm_writer.grid)):
+                         dtm_spacing_note(dtm_points, dtm_writer.valued_cells, dtm_writer.grid.cell, length_label(mpu)),
+                         pits_note(*dtm_writer.isolated_pits(check=steps.check, depth=PIT_DEPTH / mpu),
+                                   dtm_writer.grid, mpu)):
                 if note:
                     log(note)
             dtm_writer.finish(staging.stage(dtm_path), atomic=False, name=dtm_path)
@@ -1039,7 +1045,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         staging.commit()
     if dtm_writer is not None:
         g = dtm_writer.grid
-        log(f"Wrote the DTM {dtm_path} ({g.ncols:,} x {g.nrows:,} cells of {g.cell:g} m).")
+        from .workflow import length_label
+        log(f"Wrote the DTM {dtm_path} ({g.ncols:,} x {g.nrows:,} cells of {g.cell:g} {length_label(dtm.metres_per_unit)}).")
     steps.report(1.0)
     log(f"Done in {time.perf_counter() - t_start:.1f} s.")
     return TiledRun(inputs, [o for o in outs if o], sum(i.count for i in infos), ground_total, crs_wkt,

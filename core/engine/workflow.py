@@ -96,6 +96,9 @@ class DTMOptions:
     #: CRS's unit; otherwise a cell equal to the default is the default, 1 m, converted for a cloud in
     #: feet (defaults_in_crs_unit; a typed --dtm-cell 1 was converted: a code reviewer)
     cell_set: bool = False
+    #: metres per unit of the cloud's coordinates, set by the run (defaults_in_crs_unit): the DTM's
+    #: notes (the isolated pits' 0.5 m depth, the lengths they give) in the CRS's unit
+    metres_per_unit: float = 1.0
 
     def __post_init__(self):
         _check_budget(self.memory_budget_bytes, "memory_budget_bytes")
@@ -403,6 +406,8 @@ def defaults_in_crs_unit(algorithm, dtm: Optional["DTMOptions"], crs_wkt: Option
     said = [f"{names[k]} {v:.4g}" for k, v in changed.items() if k != "metres_per_unit"]
     if changed:  # (the user's fields stay noted: a second call, a tiled run after the whole run's, converts nothing)
         algorithm = P.mark_user_set(dataclasses.replace(algorithm, **changed), set(fields))
+    if dtm is not None and dtm.metres_per_unit == 1.0:
+        dtm = dataclasses.replace(dtm, metres_per_unit=factor)
     if dtm is not None and not dtm.cell_set and dtm.cell_size_m == DTMOptions.cell_size_m:
         dtm = dataclasses.replace(dtm, cell_size_m=DTMOptions.cell_size_m / factor)
         said.append(f"DTM cell {dtm.cell_size_m:.4g}")
@@ -474,18 +479,31 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions, why_none: str = "
                   points_per_cell=options.points_per_cell, threads=None, steps=steps, log=log,
                   max_distance=options.max_distance_m)
     if log is not None and not options.fill_outside_hull:
-        note = dtm_spacing_note(int(ground.sum()), int(np.count_nonzero(np.isfinite(dtm))), grid.cell)
+        note = dtm_spacing_note(int(ground.sum()), int(np.count_nonzero(np.isfinite(dtm))), grid.cell,
+                                length_label(options.metres_per_unit))
         if note:
             log(note)
     if log is not None:
-        from ..grids.rasterize import isolated_pits
-        note = pits_note(*isolated_pits(dtm, check=steps.check if steps is not None else None), grid)
+        from ..grids.rasterize import PIT_DEPTH, isolated_pits
+        note = pits_note(*isolated_pits(dtm, depth=PIT_DEPTH / options.metres_per_unit,
+                                        check=steps.check if steps is not None else None), grid,
+                         options.metres_per_unit)
         if note:
             log(note)
     return grid, dtm
 
 
-def pits_note(count: int, depth: float, row: int, col: int, grid) -> str:
+def length_label(metres_per_unit: float) -> str:
+    """How the log names lengths in the cloud's unit: "m", "ft" (international or US survey), else
+    the unit's size in metres."""
+    if abs(metres_per_unit - 1.0) < 1e-12:
+        return "m"
+    if abs(metres_per_unit - 0.3048) < 1e-5:
+        return "ft"
+    return f"units of {metres_per_unit:g} m"
+
+
+def pits_note(count: int, depth: float, row: int, col: int, grid, metres_per_unit: float = 1.0) -> str:
     """What to say of a DTM's isolated pits (:func:`~groundsieve.core.grids.rasterize.isolated_pits`: the
     deepest at ``row``, ``col`` of ``grid``), "" without one. An archaeologist's hillshade showed 1-2 m pits that looked like post-holes: low
     points (multipath or noise echoes) that SMRF's low-outlier test lets through when less than 5 cells
@@ -498,8 +516,9 @@ def pits_note(count: int, depth: float, row: int, col: int, grid) -> str:
     if not count:
         return ""
     x, y = grid.x0 + (col + 0.5) * grid.cell, grid.top - (row + 0.5) * grid.cell
-    return (f"{WARNING_PREFIX}DTM: {count:,} isolated pit(s), cells more than {PIT_DEPTH:g} m below every other cell "
-            f"within 2 cells, the deepest {depth:.2f} m at x {x:,.2f}, y {y:,.2f}. Low points made ground (multipath "
+    unit = length_label(metres_per_unit)  # (a cloud in feet: 0.5 m is 1.64 ft, and said so)
+    return (f"{WARNING_PREFIX}DTM: {count:,} isolated pit(s), cells more than {PIT_DEPTH / metres_per_unit:.3g} {unit} "
+            f"below every other cell within 2 cells, the deepest {depth:.2f} {unit} at x {x:,.2f}, y {y:,.2f}. Low points made ground (multipath "
             "or noise echoes, image-matching blunders) make them, and so does a narrow, deep ditch sampled by few "
             "points: look at them before mapping them. Where they are low points, class those as noise (7) "
             "beforehand, or with SMRF lower the Low-outlier slope (1 catches points 1 m deep); in a cloud of surface "
@@ -507,7 +526,7 @@ def pits_note(count: int, depth: float, row: int, col: int, grid) -> str:
             "sets both): there a few blunders can take the ground around them too.")
 
 
-def dtm_spacing_note(points: int, valued_cells: int, cell: float) -> str:
+def dtm_spacing_note(points: int, valued_cells: int, cell: float, unit: str = "m") -> str:
     """What to say when the DTM's cells are much finer than its ground points are apart (on average
     over the cells with a value: more than 2 cells apart), "" otherwise. An archaeologist's 0.5 m DTMs
     of 1 point/m² data were mosaics of the TIN's triangles in the hillshade, without a word."""
@@ -516,9 +535,10 @@ def dtm_spacing_note(points: int, valued_cells: int, cell: float) -> str:
     spacing = cell * math.sqrt(valued_cells / points)
     if spacing < 2 * cell:
         return ""
-    return (f"DTM: {points:,} ground points for {valued_cells:,} cells of {cell:g} m with a value: about one point every "
-            f"{spacing:.1f} m, so most cells are interpolated between points, and a hillshade shows the triangles "
-            f"between them rather than finer terrain. A cell of about {spacing:.1f} m shows what the data hold.")
+    return (f"DTM: {points:,} ground points for {valued_cells:,} cells of {cell:g} {unit} with a value: about one point "
+            f"every {spacing:.1f} {unit}, so most cells are interpolated between points, and a hillshade shows the "
+            f"triangles between them rather than finer terrain. A cell of about {spacing:.1f} {unit} shows what the "
+            "data hold.")
 
 
 def check_outputs(input_path: str, output_path: Optional[str], raster_paths=()) -> None:

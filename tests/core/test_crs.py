@@ -325,3 +325,36 @@ def test_a_typed_dtm_cell_is_in_feet_and_the_default_is_converted(tmp_path):
         _same, converted = defaults_in_crs_unit(None, dtm, feet, "ft.laz", lambda _l: None)
         expected = 1.0 / cell if not argv else cell
         assert converted.cell_size_m == pytest.approx(expected), argv
+
+
+@pytest.mark.parametrize("tiled", [False, True])
+def test_the_dtm_notes_of_a_cloud_in_feet_are_in_feet(tmp_path, tiled):
+    """In a run in feet the isolated pits were cells 0.5 ft below the others (15 cm, not 0.5 m) and the
+    notes said "m" for feet (a code reviewer)."""
+    import numpy as np
+    import pyproj
+
+    from groundsieve.core.engine.tiles import TileOptions
+    from groundsieve.core.engine.workflow import DTMOptions, FilterOptions, run_ground_filter
+    from groundsieve.core.filters.smrf import SMRF
+    from groundsieve.core.io import new_las, write_las
+    from groundsieve.core.synthetic import SceneSpec, make_scene
+    ft = 1200.0 / 3937.0
+    scene = make_scene(SceneSpec(size_m=120.0, density_per_m2=3.0, seed=4, buildings_per_ha=0.0, trees_per_ha=0.0))
+    rng = np.random.default_rng(3)
+    z = scene.z.copy()
+    deep = rng.choice(len(z), 8, replace=False)
+    z[deep] -= 2.5  # low points 2.5 m deep: pits
+    shallow = rng.choice(np.setdiff1d(np.arange(len(z)), deep), 8, replace=False)
+    z[shallow] -= 0.3  # 0.3 m: no pit (it was one in feet: 0.98 ft > 0.5)
+    src = tmp_path / "ft.las"
+    write_las(new_las((scene.x - scene.x.min()) / ft + 2000000.0, (scene.y - scene.y.min()) / ft + 600000.0, z / ft,
+                      crs_wkt=pyproj.CRS.from_epsg(2264).to_wkt(), scale=0.001), str(src))
+    lines = []
+    options = FilterOptions(tiling=TileOptions(tile_size_m=200.0, workers=1, parallel="threads")) if tiled else FilterOptions()
+    run_ground_filter(str(src), None, SMRF(), dtm_path=str(tmp_path / "d.tif"), dtm=DTMOptions(), options=options,
+                      log=lines.append)
+    pits = [line for line in lines if "isolated pit(s)" in line]
+    assert len(pits) == 1 and "cells more than 1.64 ft below" in pits[0], pits
+    count = int(pits[0].split("DTM: ")[1].split(" isolated")[0])
+    assert 1 <= count <= 8, pits  # the deep ones only
