@@ -343,7 +343,7 @@ def check_tiled_outputs(inputs: Sequence[str], output_path: Optional[str], dtm_p
     """The classified files of ``inputs`` (:func:`output_files`), their paths and the DTM's checked;
     ``point_formats`` (the inputs', from their headers) spare the wave-packet trial (0.9 ms a file) to
     all but formats 9 and 10."""
-    from ..io.outputs import check_not_copc_name, identities
+    from ..io.outputs import check_existing_target, check_not_copc_name, identities
     outs = output_files(inputs, output_path)
     # by any path to them (a share mounted twice: a reviewer's inputs were replaced by their copies)
     input_files = identities(inputs)
@@ -357,10 +357,8 @@ def check_tiled_outputs(inputs: Sequence[str], output_path: Optional[str], dtm_p
     for k, (path, out) in enumerate(zip(inputs, outs)):
         if out and identities([out]) & input_files:
             raise OutputError(f"{out}: the output must not be an input file; choose another name")
-        if out and os.path.isdir(out):
-            raise OutputError(f"{out}: is a folder; the classified file must be a file name")
-        if out and os.path.isfile(out) and not os.stat(out).st_mode & 0o222:  # (as check_output_path: a reviewer)
-            raise OutputError(f"{out}: the file there is read-only; make it writable or choose another name")
+        if out:
+            check_existing_target(out, "classified file")
         if out and _ext(out) not in LAS_EXTENSIONS:
             raise OutputError(f"{out}: the output must end in .las or .laz")
         if out:
@@ -881,6 +879,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     dtm_writer = None
     if dtm_path:
         from ..raster.geotiff import BlockGeoTIFF
+        from .workflow import length_label
+        unit = length_label(dtm.metres_per_unit)  # (the notes' and the log's lengths, in the cloud's unit)
         dtm_writer = BlockGeoTIFF(os.path.join(work, "dtm.tif"), dtm_grid, crs_wkt=crs_wkt)
         if rasters is not None:
             rasters.append(dtm_writer)
@@ -1032,10 +1032,10 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                 log(note)
             _say_enclosed_nodata(dtm_writer, dtm, grid.buffer, log)
             from ..grids.rasterize import PIT_DEPTH
-            from .workflow import dtm_spacing_note, length_label, pits_note
+            from .workflow import dtm_spacing_note, pits_note
             mpu = dtm.metres_per_unit
             for note in ("" if dtm.fill_outside_hull else
-                         dtm_spacing_note(dtm_points, dtm_writer.valued_cells, dtm_writer.grid.cell, length_label(mpu)),
+                         dtm_spacing_note(dtm_points, dtm_writer.valued_cells, dtm_writer.grid.cell, unit),
                          pits_note(*dtm_writer.isolated_pits(check=steps.check, depth=PIT_DEPTH / mpu),
                                    dtm_writer.grid, mpu)):
                 if note:
@@ -1045,8 +1045,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         staging.commit()
     if dtm_writer is not None:
         g = dtm_writer.grid
-        from .workflow import length_label
-        log(f"Wrote the DTM {dtm_path} ({g.ncols:,} x {g.nrows:,} cells of {g.cell:g} {length_label(dtm.metres_per_unit)}).")
+        log(f"Wrote the DTM {dtm_path} ({g.ncols:,} x {g.nrows:,} cells of {g.cell:g} {unit}).")
     steps.report(1.0)
     log(f"Done in {time.perf_counter() - t_start:.1f} s.")
     return TiledRun(inputs, [o for o in outs if o], sum(i.count for i in infos), ground_total, crs_wkt,

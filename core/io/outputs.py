@@ -47,14 +47,19 @@ def _host() -> str:
     return re.sub(r"[^A-Za-z0-9-]", "", socket.gethostname())[:24] or "host"
 
 
+def _temp_prefix(path: str) -> str:
+    """What this process's temporaries of the output ``path`` start with (the module's naming):
+    ``.NAME.EXT.gs<host>.<pid>-``."""
+    return f".{_short(os.path.basename(path))}.gs{_host()}.{os.getpid()}-"
+
+
 def _keep_name(path: str) -> str:
     """A free name for the previous output kept while a commit puts the new one in place (the
     temporaries' naming with ``.keepEXT``), not created: os.link and os.replace make it."""
     import secrets
     folder = os.path.dirname(os.path.abspath(path)) or "."
     while True:
-        name = os.path.join(folder, f".{_short(os.path.basename(path))}.gs{_host()}.{os.getpid()}-"
-                                    f"{secrets.token_hex(4)}.keep{_ext(path)}")
+        name = os.path.join(folder, f"{_temp_prefix(path)}{secrets.token_hex(4)}.keep{_ext(path)}")
         if not os.path.lexists(name):
             return name
 
@@ -68,27 +73,16 @@ def _follow_umask(path: str, umask: int) -> None:
 
 def _temp_beside(path: str):
     """A new temporary for the output ``path`` (see the module's naming): (fd, its path)."""
-    return tempfile.mkstemp(prefix=f".{_short(os.path.basename(path))}.gs{_host()}.{os.getpid()}-",
-                            suffix=f".part{_ext(path)}", dir=os.path.dirname(os.path.abspath(path)) or ".")
-
-
-def same_file(a, b) -> bool:
-    """Whether paths ``a`` and ``b`` name one file or folder: the same real path, or, both existing, the
-    same device and inode (one share mounted at two places, a bind mount, autofs's /net beside /mnt:
-    a reviewer's input was replaced by its own classified copy through a second path to its folder)."""
-    a, b = os.fspath(a), os.fspath(b)
-    if os.path.realpath(a) == os.path.realpath(b):
-        return True
-    try:
-        return os.path.samefile(a, b)
-    except OSError:
-        return False
+    return tempfile.mkstemp(prefix=_temp_prefix(path), suffix=f".part{_ext(path)}",
+                            dir=os.path.dirname(os.path.abspath(path)) or ".")
 
 
 def identities(paths) -> set:
-    """Keys telling the files or folders ``paths`` apart by any path to them (:func:`same_file`): each
-    one's real path and, where it exists, its (device, inode); one stat a path, for a survey's
-    thousands of files."""
+    """Keys telling the files or folders ``paths`` apart by any path to them: each one's real path and,
+    where it exists, its (device, inode), so that two paths share a key when they name one file or
+    folder (one share mounted at two places, a bind mount, autofs's /net beside /mnt: a reviewer's
+    input was replaced by its own classified copy through a second path to its folder). One stat a
+    path, for a survey's thousands of files."""
     keys = set()
     for p in paths:
         p = os.fspath(p)
@@ -108,13 +102,9 @@ def check_output_path(path: str, *, inputs=(), extensions=LAS_EXTENSIONS, what: 
         raise OutputError(f"{path}: the {what} must end in {' or '.join(extensions)} (got '{ext or '(none)'}')")
     check_not_copc_name(path, what)
     real = os.path.realpath(path)
-    for other in inputs:
-        if other and same_file(other, path):
-            raise OutputError(f"{path}: the {what} must not be the input file; choose another name")
-    if os.path.isdir(path):  # (found only when its rename failed, after the work: a reviewer)
-        raise OutputError(f"{path}: is a folder; the {what} must be a file name")
-    if os.path.isfile(path) and not os.stat(path).st_mode & 0o222:  # (a rename replaced it: PDAL, GDAL, cp refuse)
-        raise OutputError(f"{path}: the file there is read-only; make it writable or choose another name")
+    if identities([path]) & identities([o for o in inputs if o]):
+        raise OutputError(f"{path}: the {what} must not be the input file; choose another name")
+    check_existing_target(path, what)
     folder = os.path.dirname(real) or "."
     if not os.path.isdir(folder):
         raise OutputError(f"{path}: the folder {folder} does not exist")
@@ -131,6 +121,16 @@ def check_output_path(path: str, *, inputs=(), extensions=LAS_EXTENSIONS, what: 
                           f"{most}); choose a shorter name")
     check_folder_writable(path, folder)
     return path
+
+
+def check_existing_target(path: str, what: str = "output") -> None:
+    """Refuse an output that is an existing folder (found only when its rename failed, after the work:
+    a reviewer) or an existing read-only file (a rename replaced it and made it writable; PDAL, GDAL
+    and cp refuse it)."""
+    if os.path.isdir(path):
+        raise OutputError(f"{path}: is a folder; the {what} must be a file name")
+    if os.path.isfile(path) and not os.stat(path).st_mode & 0o222:
+        raise OutputError(f"{path}: the file there is read-only; make it writable or choose another name")
 
 
 def check_not_copc_name(path: str, what: str = "output") -> None:
@@ -224,16 +224,19 @@ def remove_stale_temporaries(path: str, *, max_age_s: float = 86400.0) -> list:
     folder = os.path.dirname(os.path.abspath(path))
     base = _short(os.path.basename(path))
     ext = _ext(path)
-    pattern = os.path.join(glob.escape(folder), glob.escape(f".{base}.") + "*" + glob.escape(f".part{ext}"))
-    # ".NAME.gs<host>.<pid>-...": this machine's writers by their process; another machine's by age
-    # only; ".NAME.gs<pid>-..." (before the host was named) as this machine's
-    own = re.compile(re.escape(f".{base}.gs") + r"(?:([A-Za-z0-9-]*)\.)?(\d+)-[^/]*" + re.escape(f".part{ext}") + "$")
+
+    def named(kind: str):
+        """The glob and the pattern of ``.NAME.gs…<kind>EXT``: ".NAME.gs<host>.<pid>-...", this machine's
+        writers by their process, another machine's by age only; ".NAME.gs<pid>-..." (before the host
+        was named) as this machine's."""
+        return (os.path.join(glob.escape(folder), glob.escape(f".{base}.") + "*" + glob.escape(f".{kind}{ext}")),
+                re.compile(re.escape(f".{base}.gs") + r"(?:([A-Za-z0-9-]*)\.)?(\d+)-[^/]*"
+                           + re.escape(f".{kind}{ext}") + "$"))
+    (pattern, own), (keep, kept) = named("part"), named("keep")
     here = _host()
     removed = []
     # (GDAL's COG writer keeps the overviews in "<its output>.ovr.tmp" until it ends: a DTM killed
     # while being written left one beside its temporary)
-    keep = pattern[:-len(glob.escape(f".part{ext}"))] + glob.escape(f".keep{ext}")
-    kept = re.compile(own.pattern[:-len(re.escape(f".part{ext}") + "$")] + re.escape(f".keep{ext}") + "$")
     for tmp in glob.glob(pattern) + glob.glob(pattern + ".ovr.tmp") + glob.glob(keep):
         previous = tmp.endswith(f".keep{ext}")
         name = os.path.basename(tmp[:-len(".ovr.tmp")] if tmp.endswith(".ovr.tmp") else tmp)
