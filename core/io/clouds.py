@@ -653,14 +653,20 @@ def _records_before_evlrs(header) -> Optional[int]:
     return (start - int(header.offset_to_point_data)) // int(header.point_format.size)
 
 
+def point_data_end(path: str, header) -> int:
+    """Where a LAS/LAZ file's point data end at most: its first EVLR (LAS 1.4), else the file's end."""
+    end = os.path.getsize(path)
+    if header.version.minor >= 4 and header.number_of_evlrs and int(header.start_of_first_evlr or 0) > 0:
+        end = min(end, int(header.start_of_first_evlr))
+    return end
+
+
 def records_held(path: str, header) -> Optional[int]:
     """How many whole point records an uncompressed LAS file holds between the point data's start
     and its end (the first EVLR, or the end of the file); None for LAZ (no cheap bound)."""
     if header.are_points_compressed:
         return None
-    end = os.path.getsize(path)
-    if header.version.minor >= 4 and header.number_of_evlrs and int(header.start_of_first_evlr or 0) > 0:
-        end = min(end, int(header.start_of_first_evlr))
+    end = point_data_end(path, header)
     # LAS 1.3+ with the waveform packets in the file: they follow the points (a code reviewer's file was
     # said to hold 2,246 records more than announced); where the header points, or right after the points
     # when it points nowhere (a pointer into the points read as "0 point records": a QA reviewer)

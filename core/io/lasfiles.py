@@ -18,7 +18,8 @@ from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 import numpy as np
 
 from ..errors import GroundSieveError, InputError, OutputError, UnsupportedFormatError
-from .clouds import PointCloud, check_las_layout, finish_copy, header_crs_wkt, laspy_reason, records_held
+from .clouds import (PointCloud, check_las_layout, finish_copy, header_crs_wkt, laspy_reason, point_data_end,
+                     records_held)
 from .outputs import LAS_EXTENSIONS, _ext, _reason, atomic_path, check_classes_fit
 
 VPC_EXTENSION = ".vpc"
@@ -95,10 +96,7 @@ def _check_not_growing(path: str, header, held: Optional[int]) -> None:
     """Refuse a file whose header announces no point but which holds point data: LAS writers (laspy,
     PDAL, LAStools) set the count when they close the file, so one still being written looked empty,
     and a survey made it an empty classified copy without a word (a reviewer copying into the folder)."""
-    end = os.path.getsize(path)
-    if header.version.minor >= 4 and header.number_of_evlrs and int(header.start_of_first_evlr or 0) > 0:
-        end = min(end, int(header.start_of_first_evlr))
-    beyond = end - int(header.offset_to_point_data)
+    beyond = point_data_end(path, header) - int(header.offset_to_point_data)
     if (held or 0) > 0 or (header.are_points_compressed and beyond > EMPTY_LAZ_TAIL):
         raise InputError(f"{path}: its header announces no point, but {beyond:,} bytes of point data follow it: "
                          "the file is still being written (LAS writers set the count when they close it) or its "
