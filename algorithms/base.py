@@ -17,7 +17,7 @@ from qgis.core import (Qgis, QgsCoordinateReferenceSystem, QgsFeature, QgsFeatur
 from qgis.PyQt.QtCore import QVariant
 from qgis.PyQt.QtGui import QIcon
 
-from ..core.engine.kernels import COMPILING  # noqa: F401 (the standard library only; tests read it here)
+from ..core.engine.kernels import COMPILING  # (the standard library only: the plugin loads without numpy)
 from .discovery import Discoverable
 from .presets import PRESET_HELP
 
@@ -119,18 +119,6 @@ def core_modules(extra=None, feedback=None, kernels_of=None):
     if feedback is not None:
         say_if_compiling(feedback, kernels_of)
     return errors, workflow
-
-
-def kernel_modules():
-    """The core's modules of cached numba kernels (core/engine/kernels.py)."""
-    from ..core.engine.kernels import kernel_modules as modules
-    return modules()
-
-
-def kernel_cache_state(modules=None):
-    """(cached, total) of those kernels (core/engine/kernels.py); None when it cannot be told."""
-    from ..core.engine.kernels import kernel_cache_state as state
-    return state(modules)
 
 
 #: the algorithms whose kernels were checked this QGIS session (one check each)

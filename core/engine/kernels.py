@@ -4,6 +4,7 @@ algorithm after an install or upgrade waits 20-60 s with its progress bar still)
 but the standard library until asked (the plugin's dialog reads COMPILING without numpy)."""
 from __future__ import annotations
 
+import functools
 import importlib
 import os
 import re
@@ -26,6 +27,13 @@ _ALSO = {"hybrid": ("filters._smrf", "filters._ptd", "learn."), "rf": ("learn.",
 def kernel_modules() -> List[str]:
     """The dotted names of the core's modules whose numba kernels are cached on disk, found by their
     source (no import)."""
+    return list(_kernel_modules())
+
+
+@functools.lru_cache(maxsize=1)
+def _kernel_modules() -> Tuple[str, ...]:
+    """:func:`kernel_modules`, found once a process: a run's check (about_to_compile) asks twice, and
+    each walk reads every source file of the core."""
     names = []
     for folder, dirs, files in os.walk(_CORE):
         dirs[:] = sorted(d for d in dirs if d != "__pycache__")
@@ -35,7 +43,7 @@ def kernel_modules() -> List[str]:
                 if not _CACHED.search(f.read()):  # (a docstring naming cache=True is no kernel: a code reviewer)
                     continue
             names.append(_PACKAGE + "." + os.path.relpath(path, _CORE)[:-3].replace(os.sep, "."))
-    return names
+    return tuple(names)
 
 
 def modules_for(name: str) -> Optional[List[str]]:

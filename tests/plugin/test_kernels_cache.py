@@ -12,28 +12,28 @@ def test_the_cache_state_is_read_where_numba_keeps_it(tmp_path, monkeypatch):
     import importlib
     import shutil
 
-    from groundsieve.algorithms import base
+    from groundsieve.core.engine import kernels
     name = f"gs_kernel_probe_{uuid.uuid4().hex[:8]}"
     (tmp_path / f"{name}.py").write_text(
         "from numba import njit\n\n\n@njit(cache=True)\ndef twice(x):\n    return 2 * x\n\n\n"
         "@njit\ndef not_cached(x):\n    return x\n")
     monkeypatch.syspath_prepend(str(tmp_path))
     module = importlib.import_module(name)
-    assert base.kernel_cache_state([name]) == (0, 1)  # the kernel not cached on disk is not counted
+    assert kernels.kernel_cache_state([name]) == (0, 1)  # the kernel not cached on disk is not counted
     assert module.twice(3) == 6
-    assert base.kernel_cache_state([name]) == (1, 1)
+    assert kernels.kernel_cache_state([name]) == (1, 1)
     shutil.rmtree(tmp_path / "__pycache__")
-    assert base.kernel_cache_state([name]) == (0, 1)
+    assert kernels.kernel_cache_state([name]) == (0, 1)
 
 
 def test_the_core_kernels_are_found():
-    from groundsieve.algorithms import base
-    modules = base.kernel_modules()
+    from groundsieve.core.engine import kernels
+    modules = kernels.kernel_modules()
     for kernel in ("core.filters._smrf_kernels", "core.grids._delaunay", "core.grids._kernels",
                    "core.learn._features_kernels"):
         assert f"groundsieve.{kernel}" in modules
     assert not [m for m in modules if m.endswith((".workflow", ".smrf"))]  # only modules of cached kernels
-    cached, total = base.kernel_cache_state()
+    cached, total = kernels.kernel_cache_state()
     assert total >= 50 and 0 <= cached <= total
 
 
