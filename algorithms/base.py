@@ -142,17 +142,13 @@ def say_if_compiling(feedback, name=None):
 
 
 def dtm_cell_set(algorithm, parameters, context, name) -> bool:
-    """Whether the user set the DTM cell: another value than the default where QGIS filled every
-    parameter (the dialog, a model), or given at all where they were typed (qgis_process, a script's
-    processing.run): then it is in the CRS's unit; otherwise the default 1 m, converted for a cloud
-    in feet (core/engine/workflow.py defaults_in_crs_unit)."""
-    from .presets import filled_by_qgis
+    """Whether the user set the DTM cell (presets.set_by_user): then it is in the CRS's unit; otherwise
+    the default 1 m, converted for a cloud in feet (core/engine/workflow.py defaults_in_crs_unit)."""
+    from .presets import set_by_user
     if parameters.get(name) in (None, ""):
         return False
-    if not filled_by_qgis(algorithm, parameters):
-        return True
-    default = algorithm.parameterDefinition(name).defaultValue()
-    return algorithm.parameterAsDouble(parameters, name, context) != float(default)
+    return set_by_user(algorithm, parameters, name, algorithm.parameterAsDouble(parameters, name, context),
+                       float(algorithm.parameterDefinition(name).defaultValue()))
 
 
 def feedback_callables(feedback):

@@ -68,7 +68,8 @@ def build_filter(algorithm, parameters, context, log=None):
     typed = typed_fields(algorithm, algorithm.FILTER, parameters)
     # what the user set: lengths in the cloud's CRS unit; the defaults and a preset's values are metres
     # (converted for a cloud in feet: workflow.defaults_in_crs_unit)
-    chosen = {k for k, v in kwargs.items() if v != table.default(algorithm.FILTER, k)} | typed
+    chosen = {p.field for p in table.params(algorithm.FILTER)
+              if set_by_user(algorithm, parameters, p.name, kwargs[p.field], table.default(algorithm.FILTER, p.field))}
     if preset is not None:
         kwargs = merge(algorithm.FILTER, preset.values, kwargs, typed)
     kwargs = algorithm.completeFilterArguments(kwargs)
@@ -90,15 +91,27 @@ def filled_by_qgis(algorithm, parameters) -> bool:
     return sum(1 for n in names if n in parameters) * 3 >= 2 * len(names)
 
 
+def typed_names(algorithm, parameters) -> set:
+    """The parameters given on purpose: where the parameters were typed (qgis_process's command line,
+    ``processing.run`` with some parameters), every one given, a value equal to the default included.
+    Empty where QGIS filled every parameter (:func:`filled_by_qgis`): there a typed default cannot be
+    told from an untouched one."""
+    return set() if filled_by_qgis(algorithm, parameters) else set(parameters)
+
+
 def typed_fields(algorithm, name: str, parameters) -> set:
-    """The filter's fields given on purpose: where the parameters were typed (qgis_process's command
-    line, ``processing.run`` with some parameters), a value equal to the default was given on purpose
-    and wins over the preset, as on GroundSieve's own command line. Empty where QGIS filled every
-    parameter (:func:`filled_by_qgis`): there a typed default cannot be told from an untouched one."""
-    if filled_by_qgis(algorithm, parameters):
-        return set()
+    """The filter's fields given on purpose (:func:`typed_names`): a value equal to the default given
+    there wins over the preset, as on GroundSieve's own command line."""
     from ..core.engine import parameters as table
-    return {p.field for p in table.params(name) if p.name in parameters}
+    typed = typed_names(algorithm, parameters)
+    return {p.field for p in table.params(name) if p.name in typed}
+
+
+def set_by_user(algorithm, parameters, name: str, value, default) -> bool:
+    """Whether the user set parameter ``name`` (its ``value``): another value than the ``default``, or one
+    given on purpose (:func:`typed_names`). Such lengths are in the cloud's CRS unit; the defaults and
+    a preset's values are metres (core/engine/workflow.py defaults_in_crs_unit)."""
+    return value != default or name in typed_names(algorithm, parameters)
 
 
 PRESET_HELP = """<p><b>Preset</b> (optional; every filter but the learned hybrid): a parameters file written by <i>Tune a ground filter on a
