@@ -368,7 +368,7 @@ def length_fields(algorithm) -> List[str]:
         return []
     shown = [p.field for p in P.params(name) if p.unit.startswith("m")]
     finer = [f.name for f in P.core_only_fields(name)
-             if f.name.endswith("_m") and isinstance(f.default, float) and not isinstance(f.default, bool)]
+             if f.name.endswith("_m") and isinstance(f.default, float)]
     return shown + finer
 
 
