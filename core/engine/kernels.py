@@ -19,9 +19,9 @@ _CACHED = re.compile(r"^\s*@(?:numba\.)?njit\([^)]*cache\s*=\s*True", re.M)
 _PACKAGE = __package__.rsplit(".", 1)[0]  # "groundsieve.core"
 
 #: the kernel modules of each filter beyond those named after it (core/filters/_<name>_*.py): the
-#: learned hybrid computes SMRF's and PTD's surfaces and the point features
+#: learned hybrid computes SMRF's and PTD's surfaces and the point features; the DTM from classes only the DTM's
 _ALSO = {"hybrid": ("filters._smrf", "filters._ptd", "learn."), "rf": ("learn.",), "features": ("learn.",),
-         "evcrasters": ("filters._evc",)}
+         "evcrasters": ("filters._evc",), "dtm": ("grids.",)}
 
 
 def kernel_modules() -> List[str]:

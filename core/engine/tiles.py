@@ -995,6 +995,10 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             raise InputError(f"{info.path}: {assigned[k]:,} of {info.count:,} points were classified; "
                              "the file's header and its points disagree")
     log(f"Filtered {len(keys)} tile(s) in {time.perf_counter() - t_tiles:.1f} s.")
+    if dtm_writer is not None and not dtm_points:  # (as a whole run refuses it, not an empty DTM written)
+        why = getattr(algorithm, "no_ground_in_survey", "")
+        raise InvalidParameterError(f"{inputs[0] if len(inputs) == 1 else f'{len(inputs)} input files'}: the filter "
+                                    "found no ground point in any tile: no DTM can be made" + (f". Why: {why}" if why else ""))
     # every tile is done (and marked so for a resumed run): its parts make room for the write's pieces
     for parts in tiles.values():
         for part in parts:
@@ -1013,7 +1017,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         staged = [staging.stage(out) if out else None for out in outs]
         _write_classified(infos, outs, staged, work, class_paths, class_parts, tiling, steps, log, write_steps,
                           written, cluster, pool)
-        log(f"Wrote {len(written)} classified file(s) in {time.perf_counter() - t_write:.1f} s.")
+        if written:  # (a run for its DTM alone writes none)
+            log(f"Wrote {len(written)} classified file(s) in {time.perf_counter() - t_write:.1f} s.")
         if output_path and _ext(output_path) == VPC_EXTENSION:
             from ..raster.crs import lonlat_box
             write_vpc(staging.stage(output_path), [scan_header(o) for o in staged], outs, lonlat=lonlat_box)
@@ -1027,7 +1032,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             log(warning)
         if dtm_writer is not None:
             from .workflow import kept_out_note
-            note = kept_out_note(kept_out)
+            note = kept_out_note(kept_out, algorithm)
             if note:
                 log(note)
             _say_enclosed_nodata(dtm_writer, dtm, grid.buffer, log)
@@ -1479,7 +1484,7 @@ def _tile_job(job) -> Optional[dict]:
             dtm_own = int(np.count_nonzero(in_dtm & own))
             block = _dtm_block(cloud, in_dtm, job["dtm"], job["dtm_grid"], job["bounds"], job["buffer"])
             if options.keep_existing_classes:
-                kept_out = workflow.kept_out_of_dtm(cloud, cls, area & own, job["dtm"])
+                kept_out = workflow.kept_out_of_dtm(cloud, cls, area & own & ~in_dtm, job["dtm"])
         result = dict(key=list(job["key"]), own=int(own.sum()), read=len(cloud), ground=int(ground[own].sum()),
                       dtm_points=dtm_own, assigned=assigned, block=block, class_parts=class_parts, copc_read=copc_read,
                       kept_out=sorted(kept_out.items()), replaced=sorted(replaced.items()),

@@ -243,13 +243,14 @@ def classify_cloud(cloud: PointCloud, algorithm, options: FilterOptions = Filter
             log(note)
     ground = np.zeros(len(cloud), dtype=bool)
     ground[idx[sub_ground]] = True
-    ground &= touched
+    if not getattr(algorithm, "ground_of_any_class", False):
+        ground &= touched
     if not options.keep_existing_classes:
         warning = structures_warning(structures_made_ground(cls, ground), replaced, cloud.path, algorithm)
         if warning:
             log(warning)
     cls[touched] = CLASS_UNCLASSIFIED
-    cls[ground] = CLASS_GROUND
+    cls[ground & touched] = CLASS_GROUND  # (the ground of a kept class keeps it: ground_of_any_class)
     return Classified(cls.astype(np.uint8), ground, filtered, detail, may)
 
 
@@ -335,15 +336,18 @@ def kept_out_of_dtm(cloud: PointCloud, classification: np.ndarray, processable_m
     return {int(c): int(n) for c, n in zip(codes, counts)}
 
 
-def kept_out_note(counts: dict) -> str:
-    """The log's line on points kept in classes of their own and left out of the DTM ("" if none)."""
+def kept_out_note(counts: dict, algorithm=None) -> str:
+    """The log's line on points kept in classes of their own and left out of the DTM ("" if none);
+    ``algorithm`` may name where a class is added to the DTM (``dtm_classes_words``: the DTM from
+    classes takes its ground classes, not the DTM classes)."""
     if not counts:
         return ""
-    from ..learn.report import ASPRS_NAMES
+    from ..io.clouds import ASPRS_NAMES
+    where = getattr(algorithm, "dtm_classes_words", "the DTM classes")
     parts = ", ".join(f"{c} ({ASPRS_NAMES.get(c, 'class ' + str(c))}): {n:,}" for c, n in sorted(counts.items()))
     return (f"DTM: {sum(counts.values()):,} points kept in classes of their own are not ground and stay out of "
             f"it ({parts}); the DTM is interpolated across them. To make it hold a class (e.g. 9, the water "
-            "surface, for a flood model), name it in the DTM classes.")
+            f"surface, for a flood model), name it in {where}.")
 
 
 def check_model_units(algorithm, input_path: str, crs_wkt, log) -> None:
@@ -682,7 +686,7 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     if dtm_path:
         # The DTM spans only the points that may enter it: not withheld, not ignored (noise may lie far away).
         area = done.processable
-        note = kept_out_note(kept_out_of_dtm(cloud, cls, area, dtm)) if options.keep_existing_classes else ""
+        note = kept_out_note(kept_out_of_dtm(cloud, cls, area & ~ground, dtm), algorithm) if options.keep_existing_classes else ""
         if note:
             log(note)
         run.dtm_grid, run.dtm = make_dtm(*_where(area, cloud.x, cloud.y, cloud.z, dtm_points(cloud, ground, area, dtm)),

@@ -33,6 +33,14 @@ CLASS_GROUND = 2
 NOISE_CLASSES = (7, 18)
 
 
+#: the ASPRS LAS 1.4 names of the standard classes (the log and the reports name classes by them)
+ASPRS_NAMES = {0: "never classified", 1: "unclassified", 2: "ground", 3: "low vegetation",
+               4: "medium vegetation", 5: "high vegetation", 6: "building", 7: "low point (noise)",
+               9: "water", 10: "rail", 11: "road surface", 13: "wire guard", 14: "wire conductor",
+               15: "transmission tower", 16: "wire-structure connector", 17: "bridge deck", 18: "high noise",
+               19: "overhead structure"}
+
+
 def parse_classes(text, *, what: str = "classes") -> tuple:
     """ASPRS class codes from ``"7, 18"``, ``"7 18"``, ``"2-5,9"`` or ``"[7:18]"`` (PDAL's
     ``ignore`` range form) or from a sequence of ints; an empty text or ``None`` gives ``()``.

@@ -14,14 +14,11 @@ from typing import Dict, List, Optional, Sequence
 import numpy as np
 
 from ..io import atomic_path
+from ..io.clouds import ASPRS_NAMES
 from ..metrics import ClassReport
 
 #: ASPRS class names for the report.
-ASPRS_NAMES = {0: "never classified", 1: "unclassified", 2: "ground", 3: "low vegetation",
-               4: "medium vegetation", 5: "high vegetation", 6: "building", 7: "low point (noise)",
-               9: "water", 10: "rail", 11: "road surface", 13: "wire guard", 14: "wire conductor",
-               15: "transmission tower", 16: "wire-structure connector", 17: "bridge deck", 18: "high noise",
-               19: "overhead structure"}
+
 
 
 def class_name(code: int) -> str:

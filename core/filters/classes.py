@@ -1,0 +1,99 @@
+"""The ground as the input's classes say: no filtering at all.
+
+A vendor's deliverable, or a cloud classified by hand or by an earlier run, already holds its
+ground (ASPRS class 2, perhaps model key points 8 and water 9 beside it). Making a DTM from it
+should not filter it again: that changes the ground the vendor checked, and costs the filter's
+time. :class:`ClassGround` takes the points of the given classes as the ground, so that the
+engine's DTM (whole or in buffered tiles) is made from them as from any filter's ground
+(PDAL's ``filters.range`` with ``Classification[2:2]`` before ``writers.gdal``; lasR's
+``rasterize(1, tin(filter = keep_ground()))``).
+
+It is a ground filter in form only: a small frozen parameter object called on the points of one
+cloud or one buffered tile, which reads their class (``point_fields``) and nothing of their x, y, z
+but the count.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError, InvalidParameterError
+from ..io.clouds import ASPRS_NAMES, parse_classes
+from ..progress import Steps
+from ..validate import validate_xyz
+
+
+def class_list(counts: dict, most: int = 6) -> str:
+    """ "1 (unclassified): 1,234, 6 (building): 56" for {class: points}, the largest first."""
+    items = sorted(counts.items(), key=lambda kv: -kv[1])
+    parts = [f"{c} ({ASPRS_NAMES.get(c, 'class ' + str(c))}): {n:,}" for c, n in items[:most]]
+    if len(items) > most:
+        parts.append(f"{len(items) - most} more")
+    return ", ".join(parts)
+
+
+@dataclass(frozen=True)
+class ClassGroundResult:
+    ground: np.ndarray
+    #: why no point is ground (quoted when the DTM is refused), "" when some are
+    no_ground_reason: str = ""
+
+
+@dataclass(frozen=True)
+class ClassGround:
+    """The points whose class in the input is one of ``classes`` are the ground."""
+    #: ASPRS codes: (2,), "2", "2, 8, 9", "2-3" (as the ignored classes are written)
+    classes: object = (2,)
+
+    name = "classes"
+    point_fields = ("classification",)
+    #: its ground is of any class (water 9 as well as ground 2): with the input's classes kept, it stays
+    #: ground and keeps its class (workflow.classify_cloud)
+    ground_of_any_class = True
+    #: the engine's note on the classes left out of the DTM says where to add one
+    dtm_classes_words = "the ground classes"
+    #: A tiled run's buffer (m): a tile's DTM cells are triangulated from the ground of the tile and
+    #: of this much around it, so a gap in the ground up to this wide (a building, a pond without
+    #: returns) is bridged as one triangulation of the whole survey bridges it; wider gaps may show the
+    #: tile lines (the run's "Tile buffer" sets another). SMRF's own reach at its defaults is 38 m.
+    reach_m = 40.0
+    #: a tile or a whole run costs no memory beyond its points and the DTM's (tiles.whole_run_bytes)
+    extra_bytes_per_point = 0
+
+    @property
+    def no_ground_in_survey(self) -> str:
+        """Why a survey's tiles found no ground (a tiled run's refusal quotes it)."""
+        return (f"no point of class {', '.join(str(c) for c in self.classes)} in it: classify the ground first with "
+                "a ground filter, or name the classes that hold it")
+
+    def __post_init__(self):
+        codes = parse_classes(self.classes, what="ground classes")
+        if not codes:
+            raise InvalidParameterError("ground classes: name at least one class (2 is ground)")
+        object.__setattr__(self, "classes", codes)
+
+    def __call__(self, xyz, steps=None, **fields) -> np.ndarray:
+        return self.run(xyz, steps, **fields).ground
+
+    def run(self, xyz, steps: Steps | None = None, *, classification=None) -> ClassGroundResult:
+        steps = steps or Steps()
+        xyz = validate_xyz(xyz)
+        if classification is None:
+            raise InputError("the ground from classes needs the points' classes (a LAS/LAZ file)")
+        classification = np.asarray(classification)
+        if classification.shape != (xyz.shape[0],):
+            raise InputError(f"classification: {classification.shape[0] if classification.ndim else 0:,} values "
+                             f"for {xyz.shape[0]:,} points")
+        steps.check()
+        ground = np.isin(classification, self.classes)
+        steps.report(1.0)
+        if not ground.any():
+            found = np.bincount(classification.astype(np.intp, copy=False), minlength=256)
+            counts = {int(c): int(found[c]) for c in np.flatnonzero(found)}
+            wanted = ", ".join(str(c) for c in self.classes)
+            reason = (f"no point of class {wanted} among the {xyz.shape[0]:,} points (their classes: "
+                      f"{class_list(counts)}): classify the ground first with a ground filter, or name the "
+                      "classes that hold it")
+            return ClassGroundResult(ground, reason)
+        return ClassGroundResult(ground)

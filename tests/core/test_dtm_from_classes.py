@@ -1,0 +1,190 @@
+"""A DTM from the classes a cloud already has (``filters.classes.ClassGround``; groundsieve:dtm, the CLI's
+``dtm``): a vendor's class 2 becomes the DTM without being filtered again. The roofs and the canopy
+stay out of it, the water enters it when named, a whole run and a tiled run give the same DTM, the
+input is only read, and a cloud without the classes is refused with the classes it holds, whole or
+tiled, leaving nothing behind."""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+from groundsieve.core.engine.tiles import TileOptions
+from groundsieve.core.engine.workflow import DTMOptions, FilterOptions, run_ground_filter
+from groundsieve.core.errors import Cancelled, InputError, InvalidParameterError
+from groundsieve.core.filters.classes import ClassGround
+from groundsieve.core.io import new_las, write_las
+from groundsieve.core.progress import Steps
+
+from groundsieve.tests.core.test_dtm_classes import BANK_Z, RIVER, WATER_Z, _channel_values, river_points
+
+#: the building's footprint (x, y) and how far its roof is above the terrain
+HOUSE = (100.0, 130.0, 100.0, 140.0)
+ROOF = 8.0
+
+
+def terrain(x, y):
+    return 100.0 + 0.05 * x - 0.02 * y
+
+
+@pytest.fixture(scope="module")
+def delivery(tmp_path_factory):
+    """A vendor's classified delivery over 300 x 300 m: a tilted plane of ground (2), one building (6),
+    trees (5) over 10 % of it, a few low-noise points (7) far below."""
+    rng = np.random.default_rng(1)
+    n = 120_000
+    x, y = rng.uniform(0, 300, n), rng.uniform(0, 300, n)
+    z = terrain(x, y) + rng.normal(0, 0.02, n)
+    cls = np.full(n, 2, np.uint8)
+    house = (x > HOUSE[0]) & (x < HOUSE[1]) & (y > HOUSE[2]) & (y < HOUSE[3])
+    z[house] += ROOF
+    cls[house] = 6
+    tree = ~house & (rng.random(n) < 0.1)
+    z[tree] += rng.uniform(2, 15, tree.sum())
+    cls[tree] = 5
+    noise = rng.choice(np.flatnonzero(cls == 2), 20, replace=False)
+    z[noise] -= 30.0
+    cls[noise] = 7
+    path = tmp_path_factory.mktemp("delivery") / "delivery.laz"
+    write_las(new_las(x, y, z, classification=cls), str(path))
+    return path
+
+
+def _read(path):
+    from osgeo import gdal
+    ds = gdal.Open(str(path))
+    band = ds.GetRasterBand(1)
+    values = band.ReadAsArray().astype(float)
+    values[values == band.GetNoDataValue()] = np.nan
+    x0, cell, _, top, _, _ = ds.GetGeoTransform()
+    return values, x0, top, cell
+
+
+def _tiling(tiled):
+    return TileOptions(tile_size_m=100.0, workers=2, parallel="threads") if tiled else TileOptions()
+
+
+@pytest.mark.parametrize("tiled", [False, True], ids=["whole", "tiled"])
+def test_the_dtm_is_the_ground_class_under_roofs_and_trees(delivery, tmp_path, tiled):
+    before = delivery.read_bytes()
+    logs = []
+    dtm_path = tmp_path / "dtm.tif"
+    run = run_ground_filter(str(delivery), None, ClassGround(),
+                            options=FilterOptions(keep_existing_classes=True, tiling=_tiling(tiled)),
+                            dtm_path=str(dtm_path), log=logs.append)
+    assert delivery.read_bytes() == before
+    assert sorted(os.listdir(tmp_path)) == ["dtm.tif"]  # no classified copy, no temporary left
+    values, x0, top, cell = _read(dtm_path)
+    rows, cols = np.indices(values.shape)
+    cx, cy = x0 + (cols + 0.5) * cell, top - (rows + 0.5) * cell
+    inside = np.isfinite(values)
+    assert inside.mean() > 0.95
+    # the terrain everywhere, under the roof and the trees too (noise 7 is ignored: not 30 m below)
+    error = np.abs(values - terrain(cx, cy))[inside]
+    assert np.percentile(error, 99) < 0.1 and error.max() < 0.5
+    under = inside & (cx > HOUSE[0] + 2) & (cx < HOUSE[1] - 2) & (cy > HOUSE[2] + 2) & (cy < HOUSE[3] - 2)
+    assert under.sum() > 500 and np.abs(values - terrain(cx, cy))[under].max() < 0.2
+    ground = run.ground_count
+    assert ground == int(np.sum(_classes(delivery) == 2))
+    text = "\n".join(logs)
+    assert "5 (high vegetation)" in text and "6 (building)" in text and "name it in the ground classes" in text
+
+
+def _classes(path):
+    import laspy
+    return np.asarray(laspy.read(str(path)).classification)
+
+
+def test_a_whole_run_and_a_tiled_run_give_the_same_dtm(delivery, tmp_path):
+    made = []
+    for tiled in (False, True):
+        path = tmp_path / f"dtm{int(tiled)}.tif"
+        run_ground_filter(str(delivery), None, ClassGround(),
+                          options=FilterOptions(keep_existing_classes=True, tiling=_tiling(tiled)),
+                          dtm_path=str(path))
+        made.append(_read(path)[0])
+    assert made[0].shape == made[1].shape
+    np.testing.assert_allclose(made[0], made[1], atol=1e-4)
+
+
+@pytest.mark.parametrize("tiled", [False, True], ids=["whole", "tiled"])
+def test_water_enters_the_dtm_when_named_among_the_ground_classes(tmp_path, tiled):
+    rng = np.random.default_rng(3)
+    x, y, z, cls, _wet = river_points(rng, 24_000)
+    src = tmp_path / "river.laz"
+    write_las(new_las(x, y, z, classification=cls), str(src))
+    levels = {}
+    for classes in ("2", "2,9"):
+        out = tmp_path / f"dtm{classes.replace(',', '_')}.tif"
+        run_ground_filter(str(src), None, ClassGround(classes),
+                          options=FilterOptions(keep_existing_classes=True, tiling=_tiling(tiled)),
+                          dtm_path=str(out))
+        levels[classes] = _channel_values(out)
+    assert RIVER  # the channel's middle: bridged from bank to bank, or the water surface
+    assert np.nanmedian(levels["2"]) == pytest.approx(BANK_Z, abs=0.05)
+    assert np.nanmedian(levels["2,9"]) == pytest.approx(WATER_Z, abs=0.05)
+
+
+@pytest.mark.parametrize("tiled", [False, True], ids=["whole", "tiled"])
+def test_a_cloud_without_the_ground_classes_is_refused_and_nothing_is_written(tmp_path, tiled):
+    rng = np.random.default_rng(2)
+    n = 20_000
+    x, y = rng.uniform(0, 200, n), rng.uniform(0, 200, n)
+    src = tmp_path / "unclassified.laz"
+    write_las(new_las(x, y, 50 + rng.normal(0, 0.02, n), classification=np.ones(n, np.uint8)), str(src))
+    out = tmp_path / "dtm.tif"
+    with pytest.raises(InvalidParameterError) as err:
+        run_ground_filter(str(src), None, ClassGround(),
+                          options=FilterOptions(keep_existing_classes=True, tiling=_tiling(tiled)),
+                          dtm_path=str(out))
+    text = str(err.value)
+    assert str(src) in text and "no point of class 2" in text and "ground filter" in text
+    if not tiled:
+        assert "1 (unclassified): 20,000" in text
+    assert sorted(os.listdir(tmp_path)) == ["unclassified.laz"]
+
+
+def test_the_dtm_cell_default_follows_a_cloud_in_feet(tmp_path):
+    """The default 1 m cell becomes 3.28 ft on a cloud in feet (workflow.defaults_in_crs_unit), as for
+    the filters; a cell set by the user is read in feet."""
+    import pyproj
+    feet = pyproj.CRS.from_epsg(2264).to_wkt()  # NAD83 / North Carolina (ftUS)
+    rng = np.random.default_rng(4)
+    n = 20_000
+    x, y = 1_000_000 + rng.uniform(0, 300, n), 500_000 + rng.uniform(0, 300, n)
+    las = new_las(x, y, 300 + rng.normal(0, 0.05, n), classification=np.full(n, 2, np.uint8), crs_wkt=feet)
+    src = tmp_path / "feet.laz"
+    write_las(las, str(src))
+    for dtm, cell in ((DTMOptions(), 3937.0 / 1200.0), (DTMOptions(cell_size_m=2.0, cell_set=True), 2.0)):
+        out = tmp_path / "dtm.tif"
+        run_ground_filter(str(src), None, ClassGround(), options=FilterOptions(keep_existing_classes=True),
+                          dtm_path=str(out), dtm=dtm)
+        assert _read(out)[3] == pytest.approx(cell, rel=1e-4)
+
+
+@pytest.mark.parametrize("given, message", [("", "name at least one class"), ("2,x", "'x' is not a class code"),
+                                            (300, "0-255"), ("5-3", "ends before it starts")])
+def test_bad_ground_classes_are_refused_in_words(given, message):
+    with pytest.raises(InvalidParameterError, match=message):
+        ClassGround(given)
+
+
+def test_classes_are_parsed_as_the_ignored_classes_are():
+    assert ClassGround("2, 8-9").classes == (2, 8, 9)
+    assert ClassGround([9, 2]).classes == (2, 9)
+
+
+def test_the_filter_needs_the_classes_and_honours_steps():
+    xyz = np.column_stack([np.arange(10.0), np.zeros(10), np.zeros(10)])
+    cls = np.array([2, 1] * 5, np.uint8)
+    with pytest.raises(InputError, match="classes"):
+        ClassGround().run(xyz)
+    with pytest.raises(InputError, match="9 values for 10 points"):
+        ClassGround().run(xyz, classification=cls[:9])
+    with pytest.raises(Cancelled):
+        ClassGround().run(xyz, Steps(is_cancelled=lambda: True), classification=cls)
+    seen = []
+    result = ClassGround().run(xyz, Steps(progress=seen.append).sub(0.2, 0.6), classification=cls)
+    np.testing.assert_array_equal(result.ground, cls == 2)
+    assert seen and seen[-1] == pytest.approx(0.6) and min(seen) >= 0.2
