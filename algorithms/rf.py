@@ -207,6 +207,8 @@ class RFClassifyAlgorithm(_RFBase):
     DTM_CLASSES = "DTM_CLASSES"
     DTM_MAX_DISTANCE = "DTM_MAX_DISTANCE"
     IGNORE_CLASSES = "IGNORE_CLASSES"
+    GROUND_COUNT = "GROUND_COUNT"
+    POINT_COUNT = "POINT_COUNT"
 
     def name(self):
         return "rfclassify"
@@ -253,6 +255,10 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
             self.DTM_FILL, "Fill DTM cells outside the ground hull (nearest value)", defaultValue=False))
         self.addParameter(dtm_classes_parameter(self.DTM_CLASSES))
         self.addParameter(dtm_max_distance_parameter(self.DTM_MAX_DISTANCE))
+        # the counts the ground filters return too, for a model's next step (a power user's model could
+        # not branch on rfclassify's result)
+        self.addOutput(QgsProcessingOutputNumber(self.GROUND_COUNT, "Ground points"))
+        self.addOutput(QgsProcessingOutputNumber(self.POINT_COUNT, "Points classified"))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         errors, rf, learning = _rf(feedback=feedback)
@@ -266,14 +272,14 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
                              fill_outside_hull=self.parameterAsBoolean(parameters, self.DTM_FILL, context),
                              classes=self.parameterAsString(parameters, self.DTM_CLASSES, context) or "",
                              max_distance_m=self.parameterAsDouble(parameters, self.DTM_MAX_DISTANCE, context))
-            learning.classify_file(input_path, output,
-                                   self.parameterAsFile(parameters, self.MODEL, context), dtm_path=dtm_path,
-                                   dtm=dtm, ignore_classes=self.parameterAsString(
-                                       parameters, self.IGNORE_CLASSES, context) or "",
-                                   **feedback_callables(feedback))
+            ignored = self.parameterAsString(parameters, self.IGNORE_CLASSES, context) or ""
+            run = learning.classify_file(input_path, output, self.parameterAsFile(parameters, self.MODEL, context),
+                                         dtm_path=dtm_path, dtm=dtm, ignore_classes=ignored,
+                                         **feedback_callables(feedback))
+            ground, points = learning.classified_counts(run, ignored)
         except errors.GroundSieveError as err:
             raise QgsProcessingException(str(err)) from err
-        results = {self.OUTPUT: output}
+        results = {self.OUTPUT: output, self.GROUND_COUNT: ground, self.POINT_COUNT: points}
         # loaded as the ground filters load theirs (the same rules for a model's intermediate step)
         pointclouds.load_or_log(context, feedback, output, self.parameterDefinition(self.OUTPUT).description().split(" (")[0],
                                 self.OUTPUT, parameters.get(self.OUTPUT))

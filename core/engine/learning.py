@@ -378,6 +378,17 @@ def classify_survey(input_path: str, output_path: str, model_path: str, *, dtm_p
                              is_cancelled=is_cancelled, log=log)
 
 
+def classified_counts(run, ignore_classes=(7, 18)) -> tuple:
+    """(ground, points) of what :func:`classify_file` returned, as the ground filters count them: the
+    points predicted ground (class 2; neither withheld nor of an ignored class) and the points read."""
+    if not isinstance(run, tuple):  # a survey's TiledRun
+        return int(run.ground_count), int(run.point_count)
+    from .workflow import FilterOptions, processable
+    cloud, predicted = run
+    may = processable(cloud, FilterOptions(ignore_classes=ignore_classes if ignore_classes is not None else ()))
+    return int(np.count_nonzero(predicted[may] == 2)), len(cloud)
+
+
 def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_path: Optional[str] = None,
                   dtm=None, ignore_classes=(7, 18), tiling=None, progress=None, is_cancelled=None, log=None):
     """Apply a saved model to ``input_path``; write the classified cloud (the model's ASPRS codes)

@@ -36,9 +36,11 @@ def test_train_with_defaults_then_classify_another_cloud(groundsieve_provider, l
     assert "<svg" in html and "Permutation" in html and "test set" in html
     assert (tmp_path / "report.csv").read_text().startswith("set,class,precision")
     out, dtm = tmp_path / "classified.laz", tmp_path / "dtm.tif"
-    _run("rfclassify", {"INPUT": str(test), "MODEL": str(model), "OUTPUT": str(out), "DTM": str(dtm)})
+    counts = _run("rfclassify", {"INPUT": str(test), "MODEL": str(model), "OUTPUT": str(out), "DTM": str(dtm)})
     truth = classes_of(test) == 2
     predicted = classes_of(out)
+    # the counts a model's next step takes, as the ground filters return them
+    assert counts["GROUND_COUNT"] == int(np.sum(predicted == 2)) and counts["POINT_COUNT"] == len(predicted)
     assert set(np.unique(predicted)) <= {1, 2}
     acc = ground_accuracy(truth, predicted == 2)
     assert acc.total < 0.05, acc.summary()
@@ -132,8 +134,11 @@ def test_rfclassify_on_a_vpc_equals_the_file_run(groundsieve_provider, labelled_
     # a .vpc, and the folder of the two files (its label says it takes one: it once was refused)
     for source, out in ((tmp_path / "survey.vpc", "out"), (tmp_path / "tiles", "out_folder")):
         (tmp_path / out).mkdir()
-        _run("rfclassify", {"INPUT": str(source), "MODEL": str(model),
-                            "OUTPUT": str(tmp_path / out / "classified.vpc")})
+        counts = _run("rfclassify", {"INPUT": str(source), "MODEL": str(model),
+                                     "OUTPUT": str(tmp_path / out / "classified.vpc")})
+        ground = 0
         for name, part in (("west.laz", west), ("east.laz", ~west)):
             got = classes_of(tmp_path / out / "classified" / name)
             assert np.mean(got == whole[part]) >= 0.999, (source, name)
+            ground += int(np.sum(got == 2))
+        assert counts["GROUND_COUNT"] == ground and counts["POINT_COUNT"] == len(whole), source
