@@ -339,10 +339,11 @@ def output_files(inputs: Sequence[str], output_path: Optional[str]) -> List[Opti
 
 
 def check_tiled_outputs(inputs: Sequence[str], output_path: Optional[str], dtm_path: Optional[str],
-                        point_formats: Optional[Sequence[int]] = None) -> List:
+                        point_formats: Optional[Sequence[int]] = None, log=None) -> List:
     """The classified files of ``inputs`` (:func:`output_files`), their paths and the DTM's checked;
     ``point_formats`` (the inputs', from their headers) spare the wave-packet trial (0.9 ms a file) to
-    all but formats 9 and 10."""
+    all but formats 9 and 10. ``log`` is told of point clouds in a .vpc's folder of classified files
+    that this run does not write (:func:`_say_other_files`)."""
     from ..io.outputs import check_existing_target, check_not_copc_name, identities
     outs = output_files(inputs, output_path)
     # by any path to them (a share mounted twice: a reviewer's inputs were replaced by their copies)
@@ -353,6 +354,8 @@ def check_tiled_outputs(inputs: Sequence[str], output_path: Optional[str], dtm_p
         if identities([folder]) & identities({os.path.dirname(os.path.abspath(p)) for p in inputs}):
             raise OutputError(f"{output_path}: the classified files would go into {folder}, which holds input "
                               "files; choose another output name or folder")
+        if log is not None:
+            _say_other_files(output_path, folder, outs, log)
     from ..io.clouds import check_laz_wave_packets
     for k, (path, out) in enumerate(zip(inputs, outs)):
         if out and identities([out]) & input_files:
@@ -369,6 +372,23 @@ def check_tiled_outputs(inputs: Sequence[str], output_path: Optional[str], dtm_p
         from ..raster.geotiff import check_raster_path
         check_raster_path(dtm_path, inputs=list(inputs) + [output_path])
     return outs
+
+
+def _say_other_files(output_path: str, folder: str, outs: Sequence[str], log) -> None:
+    """Warn when the .vpc's folder of classified files holds point clouds this run does not write: a
+    survey run again after some inputs were dropped or renamed left their earlier classified copies
+    beside the new ones (a release engineer), and a user who loads the folder rather than the .vpc gets
+    both. They are left as they are (they may be someone's), and the .vpc names only this run's."""
+    if not os.path.isdir(folder):
+        return
+    mine = {os.path.normcase(os.path.basename(o)) for o in outs if o}
+    others = sorted(n for n in os.listdir(folder) if _ext(n) in LAS_EXTENSIONS and not n.startswith(".")
+                    and os.path.normcase(n) not in mine)
+    if others:
+        log(f"{WARNING_PREFIX}{folder}: {len(others):,} point cloud file(s) there are not written by this run "
+            f"({', '.join(others[:3])}{', ...' if len(others) > 3 else ''}): an earlier run's classified copies of "
+            f"inputs this run does not have? They are left as they are; {os.path.basename(output_path)} names "
+            "only this run's files. Delete them, or write into an empty folder, to keep only this run's.")
 
 
 def _check_disk(work_dir: str, infos: Sequence[LasInfo], buffer_m: float, size: float) -> None:
@@ -465,7 +485,7 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     for_survey = getattr(algorithm, "for_survey", None)
     if for_survey is not None:
         algorithm = for_survey(infos, log)
-    outs = check_tiled_outputs(inputs, output_path, dtm_path, [i.point_format for i in infos])
+    outs = check_tiled_outputs(inputs, output_path, dtm_path, [i.point_format for i in infos], log)
     # the DTM's grid from the headers: a DTM cell far too small for the survey is refused now
     dtm_grid = survey_dtm_grid(infos, dtm.cell_size_m) if dtm_path else None
     # The reach rounded up to whole metres: the buffer's edges then sit on whole metres, where the

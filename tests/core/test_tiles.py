@@ -380,6 +380,28 @@ def test_a_survey_of_files_in_different_point_formats_and_versions_is_one_survey
     assert (laspy.read(tmp_path / "mix" / "east.laz").red == 1000).all()
 
 
+def test_a_survey_run_again_after_an_input_went_names_the_stale_classified_copy(scene_laz, tmp_path):
+    """A survey of two files run into out.vpc, then again with one file renamed: the earlier classified
+    copy of the renamed file stayed in out/ beside the new one without a word (a release engineer). It
+    is left as it is, the .vpc names only this run's files, and the run says so; a run whose folder
+    holds only its own files says nothing."""
+    xs = laspy.read(scene_laz).x
+    west, east = _split_files(scene_laz, tmp_path / "in", float(np.median(xs)))
+    out = tmp_path / "out.vpc"
+    first = []
+    run_ground_filter(str(tmp_path / "in"), str(out), SMRF(), options=tiled(), log=first.append)
+    again = []
+    run_ground_filter(str(tmp_path / "in"), str(out), SMRF(), options=tiled(), log=again.append)
+    assert not any("not written by this run" in line for line in first + again)
+    os.rename(east, tmp_path / "in" / "east2.laz")
+    logs = []
+    run_ground_filter(str(tmp_path / "in"), str(out), SMRF(), options=tiled(), log=logs.append)
+    said = [line for line in logs if "not written by this run" in line]
+    assert len(said) == 1 and said[0].startswith(WARNING_PREFIX) and "(east.laz)" in said[0] and "out.vpc" in said[0]
+    assert sorted(os.listdir(tmp_path / "out")) == ["east.laz", "east2.laz", "west.laz"]
+    assert sorted(os.path.basename(f) for f in read_vpc(str(out))) == ["east2.laz", "west.laz"]
+
+
 def test_folder_and_vpc_inputs_make_one_seamless_survey(scene_laz, tmp_path):
     xs = laspy.read(scene_laz).x
     at_x = float(np.floor(np.median(xs))) + 0.5  # a file seam inside a tile, off the tile edges
