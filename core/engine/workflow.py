@@ -487,6 +487,10 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions, why_none: str = "
                                 length_label(options.metres_per_unit))
         if note:
             log(note)
+        if not options.max_distance_m:
+            note = data_gaps_note(x, y, dtm, grid, length_label(options.metres_per_unit))
+            if note:
+                log(note)
     if log is not None:
         from ..grids.rasterize import PIT_DEPTH, isolated_pits
         note = pits_note(*isolated_pits(dtm, depth=PIT_DEPTH / options.metres_per_unit,
@@ -543,6 +547,54 @@ def dtm_spacing_note(points: int, valued_cells: int, cell: float, unit: str = "m
             f"every {spacing:.1f} {unit}, so most cells are interpolated between points, and a hillshade shows the "
             f"triangles between them rather than finer terrain. A cell of about {spacing:.1f} {unit} shows what the "
             "data hold.")
+
+
+#: a gap is blocks of this many times the points' mean spacing on a side with no point in them (the
+#: chance that such a block is empty where the points are spread at random: e^-25)
+GAP_BLOCK_SPACINGS = 5
+#: ... and the blocks a gap holds at least, to be named
+GAP_MIN_BLOCKS = 4
+
+
+def data_gaps_note(x, y, dtm: np.ndarray, grid: GridSpec, unit: str = "m") -> str:
+    """What to say when the DTM has values over gaps in the data: blocks of GAP_BLOCK_SPACINGS point
+    spacings with no point at all (``x, y``: every point that may enter a DTM), GAP_MIN_BLOCKS or more
+    together, whose cells the triangulation filled (water without returns, a missing strip, a shadow of
+    image matching). A tiled run leaves gaps wider than its buffer empty and warns; a whole run
+    interpolated across them without a word (a UAV photogrammetry practitioner). "" when there are none."""
+    valued = np.isfinite(dtm)
+    if x.size == 0 or not valued.any():
+        return ""
+    cell = grid.cell
+    spacing = cell * math.sqrt(np.count_nonzero(valued) / x.size)
+    k = max(1, int(math.ceil(GAP_BLOCK_SPACINGS * spacing / cell)))  # the block's side in cells
+    rows, cols = -(-grid.nrows // k), -(-grid.ncols // k)
+    if rows * cols < GAP_MIN_BLOCKS:
+        return ""
+    col = np.clip(((np.asarray(x) - grid.x0) / cell).astype(np.int64) // k, 0, cols - 1)
+    row = np.clip(((grid.top - np.asarray(y)) / cell).astype(np.int64) // k, 0, rows - 1)
+    points = np.bincount(row * cols + col, minlength=rows * cols).reshape(rows, cols)
+    padded = np.zeros((rows * k, cols * k), dtype=bool)
+    padded[:grid.nrows, :grid.ncols] = valued
+    filled = padded.reshape(rows, k, cols, k).mean(axis=(1, 3)) > 0.5
+    from scipy import ndimage
+    labels, found = ndimage.label((points == 0) & filled)
+    if not found:
+        return ""
+    sizes = np.bincount(labels.ravel())[1:]
+    big = np.flatnonzero(sizes >= GAP_MIN_BLOCKS)
+    if big.size == 0:
+        return ""
+    largest = int(big[np.argmax(sizes[big])])
+    r, c = ndimage.center_of_mass(labels == largest + 1)
+    side = k * cell
+    cx, cy = grid.x0 + (c + 0.5) * side, grid.top - (r + 0.5) * side
+    return (f"DTM: the data have {big.size:,} gap(s) of {GAP_MIN_BLOCKS * side * side:,.0f} {unit}² or more without "
+            f"any point (the largest about {sizes[largest] * side * side:,.0f} {unit}² around x {cx:,.0f}, y {cy:,.0f}), "
+            "which the triangulation interpolates across: the DTM's values there are not measured (water without "
+            "returns, a missing strip, a shadow of the image matching). To leave such gaps empty, set 'DTM: leave "
+            "cells farther than this from any ground point empty' to more than half the widest building (the cells "
+            "under a roof are that far from the ground).")
 
 
 def check_outputs(input_path: str, output_path: Optional[str], raster_paths=()) -> None:

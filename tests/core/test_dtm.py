@@ -343,3 +343,27 @@ def test_a_dtm_cell_larger_than_the_cloud_is_warned():
     lines = []
     make_dtm(x * 8 - 7 * X0, (y - Y0) / 20 + Y0, z, ground, DTMOptions(cell_size_m=1.0), log=lines.append)
     assert not any(line.startswith(WARNING_PREFIX + "DTM: a cell of") for line in lines), lines
+
+
+def test_a_whole_run_names_the_gaps_in_the_data_it_interpolates_across():
+    """A photogrammetry cloud with a pond that gave no point: the whole run's DTM interpolated across it
+    without a word, while a tiled run warns about gaps wider than its buffer (a UAV practitioner). The
+    run now names the gap, its size and where it is; a cloud without gaps, or a run that leaves gaps empty
+    (a maximum distance), says nothing."""
+    from groundsieve.core.engine.workflow import DTMOptions, make_dtm
+    rng = np.random.default_rng(1)
+    n = 300_000
+    x, y = rng.uniform(0, 300, n), rng.uniform(0, 300, n)
+    z = 100 + 0.02 * x + rng.normal(0, 0.02, n)
+    pond = (x - 150) ** 2 + (y - 120) ** 2 < 40 ** 2
+    said = {}
+    for name, keep, options in (("pond", ~pond, DTMOptions()), ("none", np.ones(n, bool), DTMOptions()),
+                                ("limited", ~pond, DTMOptions(max_distance_m=5.0))):
+        logs = []
+        make_dtm(x[keep], y[keep], z[keep], np.ones(int(keep.sum()), bool), options, log=logs.append)
+        said[name] = [line for line in logs if "gap(s)" in line]
+    assert not said["none"] and not said["limited"]
+    (line,) = said["pond"]
+    area = float(line.split("the largest about ")[1].split(" m²")[0].replace(",", ""))
+    assert 0.85 * np.pi * 40 ** 2 < area <= np.pi * 40 ** 2  # the blocks wholly inside the pond
+    assert "around x 150, y 120" in line and "1 gap(s)" in line
