@@ -30,6 +30,8 @@ TAGS = {
                 "ground", "model", "matrone"),
     "rfclassify": ("random forest", "machine learning", "classification", "classify", "ground", "model", "dtm",
                    "dem", "matrone"),
+    "accuracy": ("dtm", "dem", "accuracy", "vertical accuracy", "checkpoints", "check points", "rmse", "rmsez",
+                 "nva", "vva", "asprs", "qa", "qc", "quality", "survey", "residuals"),
 }
 
 SHORT = {
@@ -53,6 +55,8 @@ SHORT = {
                "HTML report.",
     "rfclassify": "Classifies a LAS/LAZ with a trained Random Forest model; optional DTM from the ground "
                   "points.",
+    "accuracy": "Checks a DTM's vertical accuracy against surveyed checkpoints: RMSEz, bias, NVA and VVA "
+                "(ASPRS Editions 1 and 2), with an HTML report.",
 }
 
 
@@ -70,6 +74,7 @@ GUIDE_SECTIONS = {
     "rftrain": "Classification: features, training, classifying",
     "rfclassify": "Classification: features, training, classifying",
     "tune": "Tune a ground filter on a labelled patch",
+    "accuracy": "Check DTM accuracy against checkpoints",
 }
 
 

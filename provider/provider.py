@@ -5,6 +5,7 @@ import os
 from qgis.core import QgsProcessingProvider
 from qgis.PyQt.QtGui import QIcon
 
+from ..algorithms.accuracy import AccuracyAlgorithm
 from ..algorithms.csf import CSFAlgorithm
 from ..algorithms.echogrid import EchoGridAlgorithm
 from ..algorithms.evc import EVCAlgorithm, EVCRastersAlgorithm
@@ -17,7 +18,8 @@ from ..algorithms.smrf import SMRFAlgorithm
 from ..algorithms.tune import TuneAlgorithm
 
 ALGORITHMS = (SMRFAlgorithm, EchoGridAlgorithm, EVCAlgorithm, EVCRastersAlgorithm, PMFAlgorithm, CSFAlgorithm,
-              PTDAlgorithm, HybridAlgorithm, FeaturesAlgorithm, RFTrainAlgorithm, RFClassifyAlgorithm, TuneAlgorithm)
+              PTDAlgorithm, HybridAlgorithm, FeaturesAlgorithm, RFTrainAlgorithm, RFClassifyAlgorithm, TuneAlgorithm,
+              AccuracyAlgorithm)
 
 _ROOT = os.path.dirname(os.path.dirname(__file__))
 

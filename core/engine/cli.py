@@ -11,6 +11,9 @@ defaults; the options typed win over it, even at their default value (argparse k
 ``python -m groundsieve tune --input patch.laz --filter smrf --preset-out smrf.json --report
 tune.html`` tunes a filter on a labelled patch (engine/tune.py).
 
+``python -m groundsieve accuracy DTM.tif CHECKPOINTS.csv [--report r.html] [--csv residuals.csv]`` checks a
+DTM's vertical accuracy against surveyed checkpoints (core/raster/accuracy.py; ASPRS NVA/VVA).
+
 ``--json`` (every command) writes one JSON document to stdout at the end, for scripts and job
 schedulers: what the run made (:func:`filter_document`, :func:`tune_document`), or
 ``{"status": "failed" | "interrupted", "kind": ..., "error": "..."}``; the log stays on stderr, and while the run
@@ -116,6 +119,9 @@ JSON_HELP = ("write one JSON document to stdout at the end, nothing else (the lo
 FILTER_JSON = ("\"input\", \"output\", \"outputs\" (the classified files), \"dtm\" (or null), \"points\", "
                "\"ground\", \"seconds\", \"tiles\" (null without tiles), \"algorithm\", \"parameters\" (the "
                "filter's, as run), \"warnings\"")
+ACCURACY_JSON = ("\"dtm\", \"checkpoints\", \"unit\", \"sign\", \"count\", \"skipped\" ([{id, reason}]), "
+                 "\"all\", \"nva\", \"vva\" (each null or {count, mean, std, rmse, min, max, p95_abs, ed1_95, "
+                 "ed1_95_method, ed2_rmse}), \"outliers\", \"report\", \"csv\", \"warnings\"")
 TUNE_JSON = ("\"input\", \"filter\", \"metric\", \"parameters\" (chosen), \"searched\", \"cv\" (cross-validated "
              "total_error, kappa, f1), \"patch\" (in-sample), \"sets\", \"runs\", \"seconds\", \"stopped\", "
              "\"preset\", \"report\", \"warnings\"")
@@ -214,14 +220,64 @@ def build_parser() -> argparse.ArgumentParser:
                "(Ctrl-C or SIGTERM; a survey's finished tiles are kept in --work-folder, when given, for the "
                "next run to resume). The log goes to stderr. With --json, stdout holds one JSON document "
                f"alone: for a filter {{\"status\": \"done\", {FILTER_JSON}}}; for tune the chosen \"parameters\" "
-               "and the cross-validated \"cv\" figures; when the exit status is not 0, {\"status\": \"failed\" "
+               "and the cross-validated \"cv\" figures; for accuracy the \"all\", \"nva\" and \"vva\" figures; when the exit status is not 0, {\"status\": \"failed\" "
                f"(1, 2) or \"interrupted\" (130), \"kind\" ({JSON_KINDS}), \"error\": the one-line message}}.")
     sub = parser.add_subparsers(title="filters", metavar="FILTER", required=True)
     for name in P.FILTERS:
         _add_filter(sub, name)
     _add_hybrid(sub)
     _add_tune(sub)
+    _add_accuracy(sub)
     return parser
+
+
+def _add_accuracy(sub) -> None:
+    """``accuracy``: a DTM's vertical accuracy against surveyed checkpoints (core/raster/accuracy.py),
+    groundsieve:accuracy's figures and report."""
+    parser = sub.add_parser(
+        "accuracy", help="check a DTM's vertical accuracy against surveyed checkpoints (ASPRS NVA/VVA)",
+        description="Check a DTM GeoTIFF (ours or any other) against independently surveyed checkpoints: RMSEz, "
+                    "mean error, standard deviation, min/max, and per land cover NVA and VVA as ASPRS Edition 1 "
+                    "(2014: 1.96 x RMSEz, 95th percentile of |dz|) and Edition 2 (2023: RMSEz) report them. "
+                    "dz = DTM - checkpoint z, the DTM sampled bilinearly between its four cell centres around each "
+                    "checkpoint (the checkpoint's own cell when one of them is nodata; skipped when that is nodata "
+                    "too or it lies outside). The checkpoints must be in the DTM's CRS and vertical datum.",
+        epilog="Checkpoint file: text or CSV, the delimiter found on the first line (semicolon, tab, comma, else "
+               "spaces; a decimal comma with semicolons or tabs). An optional header names the columns: x/easting/e, "
+               "y/northing/n, z/elevation/height/h, id/name/point, class/landcover/cover; without one the columns "
+               "are x y z, x y z class, or id x y z [class]. Land cover: NVA, VVA, non-vegetated, vegetated, or "
+               "any value mapped with --land-cover-map.")
+    parser.add_argument("dtm", metavar="DTM", help="the DTM: a GeoTIFF or any raster GDAL reads")
+    parser.add_argument("checkpoints", metavar="CHECKPOINTS", help="the checkpoints: a text or CSV file")
+    parser.add_argument("--band", type=int, default=1, metavar="N", help="the DTM's band (default %(default)s)")
+    parser.add_argument("--land-cover-map", default="", metavar="MAP",
+                        help="land-cover values of the file as NVA or VVA, e.g. 'road=NVA,grass=NVA,forest=VVA'")
+    parser.add_argument("--report", metavar="PATH", help="the HTML report to write")
+    parser.add_argument("--csv", metavar="PATH", dest="residuals_csv",
+                        help="the residuals to write as CSV (every checkpoint, skipped ones with empty dz)")
+    _add_json(parser, ACCURACY_JSON)
+    parser.set_defaults(filter="accuracy")
+
+
+def run_accuracy(args, out) -> dict:
+    """Run ``accuracy``; return its JSON document (the figures are also logged to ``out``)."""
+    from ..io.checkpoints import UnknownLandCover, parse_land_cover_mapping, read_checkpoints
+    from ..raster import accuracy as A
+    try:
+        checkpoints = read_checkpoints(args.checkpoints, mapping=parse_land_cover_mapping(args.land_cover_map))
+    except UnknownLandCover as err:
+        raise UnknownLandCover(f"{err} with --land-cover-map") from None
+    A.check_accuracy_outputs([args.dtm, args.checkpoints], args.report, args.residuals_csv)
+    result = A.check_accuracy_of(args.dtm, checkpoints, band=args.band)
+    if args.report:
+        A.write_report(args.report, result)
+    if args.residuals_csv:
+        A.write_residuals_csv(args.residuals_csv, result)
+    for line in A.summary_lines(result):
+        print(line, file=out)
+    for text in result.warnings:
+        print(f"WARNING: {text}", file=out)
+    return dict({"status": "done"}, **A.document(result), report=args.report, csv=args.residuals_csv)
 
 
 def _add_tune(sub) -> None:
@@ -460,7 +516,8 @@ def _wants_json(argv: List[str]) -> bool:
 def _run(args, out):
     """(exit status, JSON document) of the command, the log and the one-line errors on ``out``."""
     try:
-        return 0, (run_tune if args.filter == "tune" else run_filter)(args, out)
+        run = {"tune": run_tune, "accuracy": run_accuracy}.get(args.filter, run_filter)
+        return 0, run(args, out)
     except _Usage as err:
         print(f"groundsieve: {err}", file=out)
         return 2, {"status": "failed", "kind": "usage", "error": str(err)}

@@ -19,6 +19,9 @@ QUERIES = {
     "cloth": {"csf"},
     "random forest": {"rftrain", "rfclassify"},
     "photogrammetry": {"evc", "evcrasters"},
+    "accuracy": {"accuracy"},
+    "checkpoints": {"accuracy"},
+    "rmse": {"accuracy"},
 }
 
 
@@ -53,6 +56,7 @@ def test_toolbox_search_finds_the_right_algorithms(toolbox, text):
 def test_a_specific_search_finds_only_its_algorithm(toolbox):
     assert _found(toolbox, "csf") == {"csf"}
     assert _found(toolbox, "smrf") == {"smrf"}
+    assert _found(toolbox, "checkpoints") == {"accuracy"}
     assert _found(toolbox, "nothing-like-this") == set()
 
 

@@ -1,0 +1,302 @@
+"""groundsieve:accuracy — Check DTM accuracy against checkpoints (core/raster/accuracy.py): a
+surveyor's vertical accuracy figures (RMSEz, bias, NVA and VVA under ASPRS Editions 1 and 2) of any
+DTM raster, from a point layer of surveyed checkpoints."""
+import math
+import os
+
+from qgis.core import (Qgis, QgsCoordinateTransform, QgsCsException, QgsFeature, QgsFeatureSink, QgsField,
+                       QgsFields, QgsGeometry, QgsPoint, QgsPointXY, QgsProcessing, QgsProcessingAlgorithm,
+                       QgsProcessingException, QgsProcessingOutputNumber, QgsProcessingParameterNumber,
+                       QgsProcessingParameterDefinition, QgsProcessingParameterFeatureSink,
+                       QgsProcessingParameterFeatureSource, QgsProcessingParameterField,
+                       QgsProcessingParameterFileDestination, QgsProcessingParameterRasterLayer,
+                       QgsProcessingParameterString, QgsWkbTypes)
+from qgis.PyQt.QtCore import QVariant
+from qgis.PyQt.QtGui import QIcon
+
+from .base import check_parameter_values, core_modules, dialog_help
+from .discovery import TAGS, Discoverable
+
+_ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
+
+
+def _field(name, kind):
+    """An attribute field of ``kind`` "Int", "Double" or "String": QgsField takes a QMetaType from QGIS
+    3.38 on (the QVariant form warns there), a QVariant type before (as base._int_field)."""
+    if Qgis.QGIS_VERSION_INT >= 33800:
+        from qgis.PyQt.QtCore import QMetaType
+        return QgsField(name, getattr(QMetaType.Type, "QString" if kind == "String" else kind))
+    return QgsField(name, getattr(QVariant, kind))
+
+
+def _number(value):
+    """An attribute value as a finite float, or None (NULL, text, NaN)."""
+    if value is None or (hasattr(value, "isNull") and value.isNull()):
+        return None
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        return None
+    return number if math.isfinite(number) else None
+
+
+def _text(value):
+    """An attribute value as text ("" for NULL)."""
+    if value is None or (hasattr(value, "isNull") and value.isNull()):
+        return ""
+    return str(value)
+
+
+class AccuracyAlgorithm(Discoverable, QgsProcessingAlgorithm):
+    DTM = "DTM"
+    BAND = "BAND"
+    CHECKPOINTS = "CHECKPOINTS"
+    Z_FIELD = "Z_FIELD"
+    ID_FIELD = "ID_FIELD"
+    LAND_COVER_FIELD = "LAND_COVER_FIELD"
+    LAND_COVER_MAP = "LAND_COVER_MAP"
+    OUTPUT_HTML = "OUTPUT_HTML"
+    OUTPUT = "OUTPUT"
+    RMSEZ = "RMSEZ"
+    MEAN = "MEAN"
+    COUNT = "COUNT"
+    SKIPPED = "SKIPPED"
+    NVA95 = "NVA95"
+    VVA95 = "VVA95"
+    NVA_RMSEZ = "NVA_RMSEZ"
+    VVA_RMSEZ = "VVA_RMSEZ"
+
+    def name(self):
+        return "accuracy"
+
+    def displayName(self):  # noqa: N802
+        return "Check DTM accuracy against checkpoints"
+
+    def group(self):
+        return "Quality control"
+
+    def groupId(self):  # noqa: N802
+        return "qualitycontrol"
+
+    def icon(self):
+        return QIcon(os.path.join(_ICONS, "groundsieve.svg"))
+
+    def tags(self):
+        """Its own words (a DTM of any source, not only of point clouds) and the survey's sensors."""
+        return list(TAGS[self.name()] + ("lidar", "uav", "drone", "photogrammetry"))
+
+    def createInstance(self):  # noqa: N802
+        return type(self)()
+
+    def shortHelpString(self):  # noqa: N802
+        return dialog_help("""<p>The vertical accuracy of a DTM (this plugin's or any raster GDAL reads) against
+independently surveyed <b>checkpoints</b>, as a surveyor's QA under the ASPRS Positional Accuracy Standards
+reports it.</p>
+<p><b>dz = DTM - checkpoint z</b>: a positive mean error is a DTM lying too high. The DTM's height at a
+checkpoint is interpolated bilinearly between the four cell centres around it; when one of them is nodata
+or beyond the raster's edge, the value of the cell the checkpoint lies in is taken; when that cell is
+nodata too, or the checkpoint lies outside the DTM, the checkpoint is skipped, counted and named.</p>
+<p><b>Checkpoints</b>: a point layer; z from the points' Z, or from the <i>Checkpoint elevation field</i>.
+Their x and y are reprojected to the DTM's CRS when the layer's CRS differs; <b>their heights are taken
+as they are</b>: they must be in the DTM's vertical datum (geoid) and unit.</p>
+<p><b>Land cover</b> (optional field): NVA (non-vegetated) or VVA (vegetated); the values NVA, VVA,
+non-vegetated and vegetated are known, any other is mapped in <i>Land cover values</i>, e.g.
+<code>road=NVA,grass=NVA,forest=VVA</code>. An empty value leaves a checkpoint in the overall figures only.</p>
+<p><b>Figures</b> (all checkpoints used, and each land cover): count, mean error, standard deviation,
+RMSEz, min, max. ASPRS Edition 1 (2014): NVA at 95 % confidence = 1.96 x RMSEz, VVA at 95 % = the 95th
+percentile of |dz|. Edition 2 (2023) dropped the 95 % figures: NVA and VVA are each their RMSEz. Both
+are reported, each named by its edition. A land cover with fewer than 20 checkpoints is warned about
+(Edition 2 asks for 30); checkpoints with |dz| greater than 3 x their land cover's RMSEz are named as
+outliers and kept in every figure.</p>
+<p><b>Outputs</b>: an HTML report (it opens in the results viewer) with the figures, warnings, a
+histogram and every residual; optionally the checkpoints as a layer with their DTM height, dz, |dz|,
+sampling (bilinear, cell, outside, nodata) and outlier flag; and the numbers RMSEZ, MEAN, COUNT,
+SKIPPED, NVA95, VVA95 (Edition 1), NVA_RMSEZ, VVA_RMSEZ (Edition 2), empty for a land cover without
+checkpoints.</p>""")
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.addParameter(QgsProcessingParameterRasterLayer(self.DTM, "DTM (raster of ground heights)"))
+        # (a number, not a QgsProcessingParameterBand: QGIS 3.22 refused that one's default 1 when the DTM was
+        # given as a path; the core names the bands the DTM has when the one asked for is not there)
+        band = QgsProcessingParameterNumber(self.BAND, "DTM band", type=QgsProcessingParameterNumber.Type.Integer,
+                                            defaultValue=1, minValue=1)
+        band.setFlags(band.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
+        self.addParameter(band)
+        self.addParameter(QgsProcessingParameterFeatureSource(
+            self.CHECKPOINTS, "Checkpoints (surveyed points)", types=[QgsProcessing.SourceType.TypeVectorPoint]))
+        self.addParameter(QgsProcessingParameterField(
+            self.Z_FIELD, "Checkpoint elevation field (empty = the points' Z)", parentLayerParameterName=self.CHECKPOINTS,
+            type=QgsProcessingParameterField.DataType.Numeric, optional=True))
+        self.addParameter(QgsProcessingParameterField(
+            self.ID_FIELD, "Checkpoint id field (empty = the feature id)", parentLayerParameterName=self.CHECKPOINTS,
+            optional=True))
+        self.addParameter(QgsProcessingParameterField(
+            self.LAND_COVER_FIELD, "Land cover field (NVA / VVA, non-vegetated / vegetated)",
+            parentLayerParameterName=self.CHECKPOINTS, optional=True))
+        self.addParameter(QgsProcessingParameterString(
+            self.LAND_COVER_MAP, "Land cover values (e.g. road=NVA,grass=NVA,forest=VVA)", defaultValue="",
+            optional=True))
+        self.addParameter(QgsProcessingParameterFileDestination(self.OUTPUT_HTML, "Accuracy report",
+                                                                fileFilter="HTML (*.html)"))
+        self.addParameter(QgsProcessingParameterFeatureSink(
+            self.OUTPUT, "Checkpoints with their dz", type=QgsProcessing.SourceType.TypeVectorPoint, optional=True,
+            createByDefault=True))
+        for name, label in ((self.RMSEZ, "RMSEz of all checkpoints used"), (self.MEAN, "Mean error (DTM - checkpoint)"),
+                            (self.COUNT, "Checkpoints used"), (self.SKIPPED, "Checkpoints skipped"),
+                            (self.NVA95, "NVA at 95 % (ASPRS Edition 1: 1.96 x RMSEz)"),
+                            (self.VVA95, "VVA at 95 % (ASPRS Edition 1: 95th percentile of |dz|)"),
+                            (self.NVA_RMSEZ, "NVA (ASPRS Edition 2: RMSEz)"),
+                            (self.VVA_RMSEZ, "VVA (ASPRS Edition 2: RMSEz)")):
+            self.addOutput(QgsProcessingOutputNumber(name, label))
+
+    def checkParameterValues(self, parameters, context):  # noqa: N802
+        """QGIS's checks, said in the dialog's words (a band of 0 named by its label)."""
+        ok, message = super().checkParameterValues(parameters, context)
+        return check_parameter_values(self, parameters, context, ok, message)
+
+    def label(self, name):
+        return self.parameterDefinition(name).description()
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        errors, _workflow = core_modules()
+        from ..core.io.checkpoints import land_cover_of, parse_land_cover_mapping
+        from ..core.raster import accuracy
+        layer = self.parameterAsRasterLayer(parameters, self.DTM, context)
+        if layer is None:
+            raise QgsProcessingException(f"{self.label(self.DTM)}: no raster layer given")
+        if layer.providerType() != "gdal":
+            raise QgsProcessingException(f"{self.label(self.DTM)}: '{layer.name()}' is a {layer.providerType()} layer; "
+                                         "give a raster file GDAL reads (e.g. a GeoTIFF)")
+        dtm_path = layer.source()
+        source = self.parameterAsSource(parameters, self.CHECKPOINTS, context)
+        if source is None:
+            raise QgsProcessingException(f"{self.label(self.CHECKPOINTS)}: no point layer given")
+        points_name = f"the layer '{source.sourceName()}'"
+        report = self.parameterAsFileOutput(parameters, self.OUTPUT_HTML, context)
+        try:
+            mapping = parse_land_cover_mapping(self.parameterAsString(parameters, self.LAND_COVER_MAP, context) or "")
+            accuracy.check_accuracy_outputs([dtm_path], report)
+            x, y, z, ids, covers, geometries = self.readCheckpoints(parameters, context, feedback, source, layer,
+                                                                    mapping, land_cover_of, errors)
+            result = accuracy.check_accuracy(
+                dtm_path, x, y, z, ids=ids, land_cover=covers, band=self.parameterAsInt(parameters, self.BAND, context),
+                name=f"DTM '{layer.name()}' ({dtm_path})", checkpoints_name=points_name)
+            accuracy.write_report(report, result)
+        except errors.GroundSieveError as err:
+            raise QgsProcessingException(str(err)) from err
+        for line in accuracy.summary_lines(result):
+            feedback.pushInfo(line)
+        for text in result.warnings:
+            feedback.pushWarning(text)
+        results = {self.OUTPUT_HTML: report, self.RMSEZ: result.overall.rmse, self.MEAN: result.overall.mean,
+                   self.COUNT: result.count, self.SKIPPED: len(result.skipped),
+                   self.NVA95: result.nva.ed1_95 if result.nva else None,
+                   self.VVA95: result.vva.ed1_95 if result.vva else None,
+                   self.NVA_RMSEZ: result.nva.rmse if result.nva else None,
+                   self.VVA_RMSEZ: result.vva.rmse if result.vva else None}
+        sink_id = self.writeResiduals(parameters, context, source, result, geometries)
+        if sink_id is not None:
+            results[self.OUTPUT] = sink_id
+        return results
+
+    def readCheckpoints(self, parameters, context, feedback, source, layer, mapping, land_cover_of,  # noqa: N802
+                        errors):
+        """The checkpoints' x, y (in the DTM's CRS), z, ids, land covers (None without a field) and
+        their points as given (for the output layer), read from the layer; a value that cannot be used
+        is refused naming the field and the feature."""
+        z_field = self.parameterAsString(parameters, self.Z_FIELD, context) or ""
+        id_field = self.parameterAsString(parameters, self.ID_FIELD, context) or ""
+        cover_field = self.parameterAsString(parameters, self.LAND_COVER_FIELD, context) or ""
+        label = self.label(self.CHECKPOINTS).split(" (")[0]
+        if not z_field and not QgsWkbTypes.hasZ(source.wkbType()):
+            raise QgsProcessingException(f"{label} '{source.sourceName()}': the points have no Z; choose the field "
+                                         f"holding their heights in '{self.label(self.Z_FIELD)}'")
+        transform = self.transformTo(source, layer, context, feedback)
+        x, y, z, ids, covers, geometries, empty = [], [], [], [], [], [], []
+        total = max(source.featureCount(), 1)
+        for k, feature in enumerate(source.getFeatures()):
+            if feedback.isCanceled():
+                raise QgsProcessingException("cancelled by the user")
+            feedback.setProgress(90.0 * k / total)
+            fid = _text(feature[id_field]) if id_field else str(feature.id())
+            where = f"{label} '{source.sourceName()}', feature {feature.id()}"
+            geometry = feature.geometry()
+            if geometry is None or geometry.isNull() or geometry.isEmpty():
+                empty.append(fid)
+                continue
+            cover = ""
+            if cover_field:
+                try:
+                    cover = land_cover_of(feature[cover_field], mapping)
+                except errors.GroundSieveError as err:
+                    raise QgsProcessingException(f"{where}, {self.label(self.LAND_COVER_FIELD).split(' (')[0]} "
+                                                 f"'{cover_field}': {err} in '{self.label(self.LAND_COVER_MAP)}'") from err
+            if z_field:
+                height = _number(feature[z_field])
+                if height is None:
+                    raise QgsProcessingException(f"{where}, {self.label(self.Z_FIELD).split(' (')[0]} '{z_field}': "
+                                                 f"'{_text(feature[z_field])}' is not a number")
+            vertices = list(geometry.vertices())
+            for part, vertex in enumerate(vertices, 1):
+                height_here = height if z_field else vertex.z()
+                if not math.isfinite(height_here):
+                    raise QgsProcessingException(f"{where}: the point has no Z value; choose the field holding its "
+                                                 f"height in '{self.label(self.Z_FIELD)}'")
+                px, py = vertex.x(), vertex.y()
+                if transform is not None:
+                    try:
+                        moved = transform.transform(QgsPointXY(px, py))
+                    except QgsCsException as err:
+                        raise QgsProcessingException(f"{where}: cannot be reprojected to the DTM's CRS ({err})") from err
+                    px, py = moved.x(), moved.y()
+                x.append(px)
+                y.append(py)
+                z.append(height_here)
+                ids.append(fid if len(vertices) == 1 else f"{fid}.{part}")
+                covers.append(cover)
+                geometries.append((vertex.x(), vertex.y()))
+        if empty:
+            feedback.pushWarning(f"{len(empty)} checkpoint(s) without a geometry left out: {', '.join(empty[:12])}")
+        if not x:
+            raise QgsProcessingException(f"{label} '{source.sourceName()}': holds no points")
+        return x, y, z, ids, (covers if cover_field else None), geometries
+
+    def transformTo(self, source, layer, context, feedback):  # noqa: N802
+        """The transform of the checkpoints' x and y to the DTM's CRS (None when they share it, or when
+        either has none: then the coordinates are taken as they are, with a warning)."""
+        source_crs, dtm_crs = source.sourceCrs(), layer.crs()
+        datum = ("their heights are taken as they are: they must be in the DTM's vertical datum (geoid) "
+                 "and unit")
+        if not source_crs.isValid() or not dtm_crs.isValid():
+            feedback.pushWarning(f"{'the checkpoints' if not source_crs.isValid() else 'the DTM'} have no CRS: the "
+                                 f"checkpoints' x and y are taken as in the DTM's CRS; {datum}")
+            return None
+        if source_crs == dtm_crs:
+            feedback.pushInfo(f"Checkpoints and DTM in {dtm_crs.authid() or dtm_crs.description()}; {datum}.")
+            return None
+        feedback.pushWarning(f"the checkpoints' x and y are reprojected from {source_crs.authid() or source_crs.description()} "
+                             f"to the DTM's {dtm_crs.authid() or dtm_crs.description()}; {datum}")
+        return QgsCoordinateTransform(source_crs, dtm_crs, context.transformContext())
+
+    def writeResiduals(self, parameters, context, source, result, geometries):  # noqa: N802
+        """The checkpoints with their residuals as a PointZ layer in the checkpoints' CRS (z the
+        checkpoint's height), skipped ones too (empty DTM height and dz); None when not asked for."""
+        fields = QgsFields()
+        for name, kind in (("id", "String"), ("land_cover", "String"), ("z_check", "Double"), ("z_dtm", "Double"),
+                           ("dz", "Double"), ("abs_dz", "Double"), ("sampling", "String"), ("outlier", "Int")):
+            fields.append(_field(name, kind))
+        sink, sink_id = self.parameterAsSink(parameters, self.OUTPUT, context, fields, QgsWkbTypes.Type.PointZ,
+                                             source.sourceCrs())
+        if sink is None:
+            return None
+        outliers, used_all = result.outlier_mask(), result.used
+        for i, (px, py) in enumerate(geometries):
+            feature = QgsFeature(fields)
+            feature.setGeometry(QgsGeometry(QgsPoint(px, py, float(result.z[i]))))
+            used = bool(used_all[i])
+            feature.setAttributes([result.ids[i], result.land_cover[i], float(result.z[i]),
+                                   float(result.dtm_z[i]) if used else None, float(result.dz[i]) if used else None,
+                                   abs(float(result.dz[i])) if used else None, result.status[i],
+                                   int(bool(outliers[i]))])
+            sink.addFeature(feature, QgsFeatureSink.Flag.FastInsert)
+        return sink_id

@@ -1,0 +1,227 @@
+"""Surveyed checkpoints for a DTM's accuracy check (core/raster/accuracy.py): a text or CSV file of
+x, y, z, optionally an id and a land cover, read into plain arrays, and the land-cover labels
+reduced to the two classes of the ASPRS standards, NVA (non-vegetated) and VVA (vegetated).
+
+The file, as survey software exports it:
+
+- the delimiter is found on the first line: a semicolon, a tab or a comma, else spaces; with a
+  semicolon or a tab, a decimal comma is read as well (``500000,25``);
+- an optional header names the columns (case, spaces, ``_`` and ``-`` ignored): x / e / east / easting,
+  y / n / north / northing, z / h / elev / elevation / height, id / name / point / pt, class / landcover /
+  land_cover / cover / lc; other columns are ignored. With a header the columns may come in any order
+  (PNEZD exports: point, northing, easting, elevation, description);
+- without a header the columns are ``x y z``, ``x y z class`` (a 4th column that is not a number) or
+  ``id x y z [class]`` (a 4th column that is a number): x (easting) before y (northing);
+- empty lines and lines starting with ``#`` are skipped.
+
+Land cover: ``NVA``, ``non-vegetated`` (or ``nonvegetated``, ``non vegetated``), ``VVA``, ``vegetated``, in any
+case; an empty cell leaves the checkpoint unlabelled (it counts in the overall figures only); anything
+else is refused unless the caller's mapping names it (``road=NVA, forest=VVA``:
+:func:`parse_land_cover_mapping`). May import: errors."""
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass
+from typing import Dict, Optional, Tuple
+
+import numpy as np
+
+from ..errors import InputError, InvalidParameterError
+
+NVA, VVA = "NVA", "VVA"
+#: the label of a checkpoint without a land cover
+UNLABELLED = ""
+
+#: header names of each column (compared after :func:`_key`)
+COLUMN_NAMES = {
+    "x": ("x", "e", "east", "easting"),
+    "y": ("y", "n", "north", "northing"),
+    "z": ("z", "h", "elev", "elevation", "height"),
+    "id": ("id", "name", "point", "pt", "pointid", "pointname"),
+    "land_cover": ("class", "landcover", "cover", "lc"),
+}
+#: land-cover words known without a mapping (compared after :func:`_key`)
+KNOWN_LAND_COVERS = {"nva": NVA, "nonvegetated": NVA, "vva": VVA, "vegetated": VVA}
+KNOWN_TEXT = "NVA, VVA, non-vegetated, vegetated"
+
+
+class UnknownLandCover(InputError):
+    """A land-cover value that is neither known nor in the caller's mapping (the caller says where to map it)."""
+
+
+def _key(text: str) -> str:
+    """``text`` lower case without spaces, ``_``, ``-`` and dots: "Land_Cover" and "land cover" alike."""
+    return re.sub(r"[\s_\-.]", "", str(text)).lower()
+
+
+@dataclass(frozen=True)
+class Checkpoints:
+    """Checkpoints as arrays: ``x``, ``y``, ``z`` (float64), ``ids`` (text, one each) and
+    ``land_cover`` (``"NVA"``, ``"VVA"`` or ``""`` each; None when the source had no land cover)."""
+    x: np.ndarray
+    y: np.ndarray
+    z: np.ndarray
+    ids: Tuple[str, ...]
+    land_cover: Optional[Tuple[str, ...]] = None
+    source: str = "checkpoints"
+
+    def __len__(self) -> int:
+        return len(self.x)
+
+
+def parse_land_cover_mapping(text: str) -> Dict[str, str]:
+    """``"road=NVA, forest=VVA; 1=NVA"`` as {key: "NVA" or "VVA"} (keys compared as :func:`_key` makes
+    them); empty text: {}. Raises InvalidParameterError naming the item that is wrong."""
+    mapping = {}
+    for item in re.split(r"[,;]", text or ""):
+        item = item.strip()
+        if not item:
+            continue
+        if "=" not in item:
+            raise InvalidParameterError(f"land cover mapping: '{item}' has no '=': write it as {item}=NVA or {item}=VVA")
+        value, target = (part.strip() for part in item.rsplit("=", 1))
+        known = KNOWN_LAND_COVERS.get(_key(target))
+        if not value or known is None:
+            raise InvalidParameterError(f"land cover mapping: '{item}' must map a value to NVA or VVA "
+                                        f"(e.g. {value or 'road'}=NVA)")
+        mapping[_key(value)] = known
+    return mapping
+
+
+def land_cover_of(value, mapping: Optional[Dict[str, str]] = None) -> str:
+    """``"NVA"``, ``"VVA"`` or ``""`` (unlabelled: an empty value) for a land-cover value; the
+    caller's ``mapping`` (:func:`parse_land_cover_mapping`) wins over the known words. Raises
+    InputError saying what is accepted (the caller adds where the value is)."""
+    if value is None:
+        return UNLABELLED
+    text = str(value).strip()
+    if not text:
+        return UNLABELLED
+    key = _key(text)
+    if mapping and key in mapping:
+        return mapping[key]
+    if key in KNOWN_LAND_COVERS:
+        return KNOWN_LAND_COVERS[key]
+    raise UnknownLandCover(f"'{text}' is not a land cover this check knows ({KNOWN_TEXT}): map it, e.g. "
+                           f"{text}=NVA or {text}=VVA")
+
+
+def _read_lines(path: str):
+    """The file's lines (UTF-8, with or without BOM; else Windows-1252, as older survey software writes)."""
+    try:
+        with open(path, "rb") as f:
+            raw = f.read()
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise InputError(f"{path}: is a folder, not a checkpoint file") from None
+    except OSError as err:
+        raise InputError(f"{path}: cannot be read ({err.strerror or err})") from None
+    if b"\0" in raw[:4096]:
+        raise InputError(f"{path}: is not a text file (give the checkpoints as x, y, z text or CSV)")
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        text = raw.decode("cp1252", errors="replace")
+    return text.splitlines()
+
+
+def _delimiter(line: str) -> Optional[str]:
+    """The delimiter of ``line``: ";", tab or ","; None for spaces."""
+    for d in (";", "\t", ","):
+        if d in line:
+            return d
+    return None
+
+
+def _split(line: str, delimiter: Optional[str]):
+    if delimiter is None:
+        return line.split()
+    fields = [f.strip() for f in line.split(delimiter)]
+    return [f[1:-1] if len(f) >= 2 and f[0] == f[-1] and f[0] in "\"'" else f for f in fields]
+
+
+def _number(text: str, decimal_comma: bool) -> Optional[float]:
+    """``text`` as a finite number, or None."""
+    t = text.strip()
+    if decimal_comma and "," in t and "." not in t:
+        t = t.replace(",", ".")
+    try:
+        value = float(t)
+    except ValueError:
+        return None
+    return value if np.isfinite(value) else None
+
+
+def _header_columns(fields, path: str) -> Dict[str, int]:
+    """{column: index} from a header row; raises InputError when x, y or z is not named."""
+    columns = {}
+    for i, name in enumerate(fields):
+        key = _key(name)
+        for column, names in COLUMN_NAMES.items():
+            if key in names and column not in columns:
+                columns[column] = i
+    missing = [c for c in ("x", "y", "z") if c not in columns]
+    if missing:
+        raise InputError(f"{path}, line 1: the header ({', '.join(repr(f) for f in fields)}) names no "
+                         f"{' and no '.join(missing)} column (x: x/easting/e, y: y/northing/n, z: z/elevation/height/h)")
+    return columns
+
+
+def read_checkpoints(path: str, *, mapping: Optional[Dict[str, str]] = None) -> Checkpoints:
+    """The checkpoints of a text/CSV file (see the module's notes on the format). Checkpoints without
+    an id column are named by their line ("line 14"). Raises InputError naming the file and line."""
+    path = os.fspath(path)
+    lines = [(n, line) for n, line in enumerate(_read_lines(path), 1)
+             if line.strip() and not line.lstrip().startswith("#")]
+    if not lines:
+        raise InputError(f"{path}: holds no checkpoints (an empty file)")
+    delimiter = _delimiter(lines[0][1])
+    decimal_comma = delimiter in (";", "\t")
+    first = _split(lines[0][1], delimiter)
+    if len(first) < 3:
+        raise InputError(f"{path}, line {lines[0][0]}: {len(first)} field(s); a checkpoint needs x, y and z "
+                         f"({'spaces' if delimiter is None else repr(delimiter)} taken as the delimiter)")
+    header = any(_number(f, decimal_comma) is None for f in first[:3]) and \
+        not (len(first) >= 4 and _number(first[0], decimal_comma) is None
+             and all(_number(f, decimal_comma) is not None for f in first[1:4]))
+    if header:
+        columns = _header_columns(first, path)
+        lines = lines[1:]
+    elif len(first) >= 4 and _number(first[3], decimal_comma) is not None:
+        columns = {"id": 0, "x": 1, "y": 2, "z": 3}
+        if len(first) >= 5:
+            columns["land_cover"] = 4
+    else:
+        columns = {"x": 0, "y": 1, "z": 2}
+        if len(first) >= 4:
+            columns["land_cover"] = 3
+    if not lines:
+        raise InputError(f"{path}: holds a header and no checkpoints")
+    needed = max(columns.values()) + 1
+    xyz, ids, covers = [], [], []
+    for n, line in lines:
+        fields = _split(line, delimiter)
+        if len(fields) < max(columns[c] for c in ("x", "y", "z")) + 1:
+            raise InputError(f"{path}, line {n}: {len(fields)} field(s), expected {needed} "
+                             f"({', '.join(c for c, _i in sorted(columns.items(), key=lambda kv: kv[1]))})")
+        row = []
+        for column in ("x", "y", "z"):
+            value = _number(fields[columns[column]], decimal_comma)
+            if value is None:
+                raise InputError(f"{path}, line {n}: '{fields[columns[column]]}' is not a number (column {column})")
+            row.append(value)
+        xyz.append(row)
+        i = columns.get("id")
+        ids.append(fields[i] if i is not None and i < len(fields) and fields[i] else f"line {n}")
+        i = columns.get("land_cover")
+        if i is not None:
+            value = fields[i] if i < len(fields) else ""
+            try:
+                covers.append(land_cover_of(value, mapping))
+            except UnknownLandCover as err:
+                raise UnknownLandCover(f"{path}, line {n}: {err}") from None
+    xyz = np.asarray(xyz, dtype=np.float64)
+    return Checkpoints(xyz[:, 0].copy(), xyz[:, 1].copy(), xyz[:, 2].copy(), tuple(ids),
+                       tuple(covers) if "land_cover" in columns else None, source=path)

@@ -1,0 +1,211 @@
+"""groundsieve:accuracy through processing.run (as the toolbox calls it) and qgis_process: a DTM plane
+of known heights (written by the core's own write_geotiff, so bilinear interpolation is exact), point
+layers of checkpoints with known offsets (PointZ, or 2D with a height field, or in another CRS), and
+the figures, report and residual layer checked against those offsets."""
+import json
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+X0, TOP, CELL, N = 500000.0, 5000200.0, 2.0, 100  # EPSG:32633, 200 m x 200 m
+
+
+def plane(x, y):
+    return 150.0 + 0.03 * (x - X0) - 0.02 * (y - (TOP - N * CELL))
+
+
+@pytest.fixture(scope="module")
+def dtm(tmp_path_factory):
+    """A tilted plane in EPSG:32633 (float64), with one nodata cell at row 50, column 50."""
+    from osgeo import osr
+
+    from groundsieve.core.grids.spec import GridSpec
+    from groundsieve.core.raster.geotiff import write_geotiff
+    grid = GridSpec(x0=X0, top=TOP, cell=CELL, nrows=N, ncols=N)
+    cx = X0 + (np.arange(N) + 0.5) * CELL
+    cy = TOP - (np.arange(N) + 0.5) * CELL
+    values = plane(cx[None, :], cy[:, None])
+    values[50, 50] = np.nan
+    ref = osr.SpatialReference()
+    ref.ImportFromEPSG(32633)
+    path = tmp_path_factory.mktemp("accuracy") / "dtm.tif"
+    write_geotiff(str(path), values, grid, crs_wkt=ref.ExportToWkt(), dtype="float64", elevation=True)
+    return str(path)
+
+
+def checkpoints():
+    """20 NVA checkpoints dz = +-0.05 (RMSEz 0.05, mean 0), 20 VVA dz = 0.01 .. 0.20, one outside the
+    DTM, one on the nodata cell's centre (its own cell nodata: skipped) and one beside it (its
+    neighbour nodata: the value of its own cell)."""
+    rng = np.random.default_rng(5)
+    x = rng.uniform(X0 + 10, X0 + 90, 40)  # west half: far from the nodata cell at x0 + 101 m
+    y = rng.uniform(TOP - 190, TOP - 10, 40)
+    dz = np.concatenate([np.where(np.arange(20) % 2 == 0, 0.05, -0.05), np.arange(1, 21) * 0.01])
+    cover = ["NVA"] * 20 + ["VVA"] * 20
+    nodata_centre = (X0 + 50.5 * CELL, TOP - 50.5 * CELL)
+    beside = (X0 + 51.2 * CELL, TOP - 50.5 * CELL)  # in cell (50, 51), whose west neighbour is nodata
+    x = np.append(x, [X0 - 500.0, nodata_centre[0], beside[0]])
+    y = np.append(y, [TOP - 100.0, nodata_centre[1], beside[1]])
+    cell_value = plane(X0 + 51.5 * CELL, TOP - 50.5 * CELL)
+    z = np.append(plane(x[:40], y[:40]) - dz, [100.0, 100.0, cell_value - 0.05])
+    ids = [f"CP{i + 1}" for i in range(len(x))]
+    return x, y, z, ids, cover + ["NVA", "NVA", "NVA"], dz
+
+
+def memory_layer(crs, fields, z_geometry=True):
+    from qgis.core import QgsVectorLayer
+    kind = "PointZ" if z_geometry else "Point"
+    return QgsVectorLayer(f"{kind}?crs={crs}&" + "&".join(f"field={f}" for f in fields), "checkpoints", "memory")
+
+
+def add_points(layer, rows):
+    from qgis.core import QgsFeature, QgsGeometry, QgsPoint
+    features = []
+    for geometry, attributes in rows:
+        feature = QgsFeature(layer.fields())
+        feature.setGeometry(QgsGeometry(QgsPoint(*geometry)))
+        feature.setAttributes(attributes)
+        features.append(feature)
+    assert layer.dataProvider().addFeatures(features)[0]
+    return layer
+
+
+def read_layer(path):
+    from qgis.core import QgsVectorLayer
+    layer = QgsVectorLayer(str(path), "dz", "ogr")
+    assert layer.isValid()
+    return {f["id"]: f for f in layer.getFeatures()}, layer
+
+
+def test_figures_report_and_layer_of_a_pointz_layer_with_land_cover(groundsieve_provider, dtm, tmp_path):
+    import processing
+    from qgis.core import NULL, QgsApplication
+    x, y, z, ids, cover, dz = checkpoints()
+    layer = add_points(memory_layer("EPSG:32633", ["name:string", "lc:string"]),
+                       [((x[i], y[i], z[i]), [ids[i], cover[i]]) for i in range(len(x))])
+    algorithm = QgsApplication.processingRegistry().algorithmById("groundsieve:accuracy")
+    assert algorithm.outputDefinition("OUTPUT_HTML").type() == "outputHtml"  # opens in the results viewer
+    report, out = tmp_path / "accuracy.html", tmp_path / "dz.gpkg"
+    result = processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": layer, "ID_FIELD": "name",
+                                                     "LAND_COVER_FIELD": "lc", "OUTPUT_HTML": str(report),
+                                                     "OUTPUT": str(out)})
+    used = np.append(dz, 0.05)  # the checkpoint beside the nodata cell: its own cell's value, 0.05 above it
+    nva = np.append(dz[:20], 0.05)
+    assert result["COUNT"] == 41 and result["SKIPPED"] == 2
+    assert result["RMSEZ"] == pytest.approx(np.sqrt(np.mean(used ** 2)), abs=1e-9)
+    assert result["MEAN"] == pytest.approx(used.mean(), abs=1e-9)
+    assert result["NVA_RMSEZ"] == pytest.approx(np.sqrt(np.mean(nva ** 2)), abs=1e-9)
+    assert result["NVA95"] == pytest.approx(1.96 * np.sqrt(np.mean(nva ** 2)), abs=1e-9)
+    assert result["VVA_RMSEZ"] == pytest.approx(np.sqrt(np.mean(dz[20:] ** 2)), abs=1e-9)
+    assert result["VVA95"] == pytest.approx(np.percentile(dz[20:], 95), abs=1e-9)  # 0.1905
+    text = report.read_text(encoding="utf-8")
+    assert "dz = DTM - checkpoint z" in text and "Edition 1 (2014)" in text and "Edition 2 (2023)" in text
+    assert f"{result['VVA95']:.4f}" in text and f"{result['NVA_RMSEZ']:.4f}" in text
+    assert "CP41" in text and "outside the DTM" in text and "CP42" in text and "nodata" in text
+    features, written = read_layer(out)
+    assert written.crs().authid() == "EPSG:32633" and len(features) == 43
+    assert features["CP1"]["dz"] == pytest.approx(dz[0], abs=1e-9) and features["CP1"]["sampling"] == "bilinear"
+    assert features["CP43"]["sampling"] == "cell" and features["CP43"]["dz"] == pytest.approx(0.05, abs=1e-9)
+    assert features["CP41"]["sampling"] == "outside" and features["CP42"]["sampling"] == "nodata"
+    assert features["CP42"]["z_dtm"] in (None, NULL) and features["CP42"]["dz"] in (None, NULL)
+
+
+def test_heights_from_a_field_of_a_2d_layer_without_land_cover(groundsieve_provider, dtm, tmp_path):
+    import processing
+    x, y, z, _ids, _cover, dz = checkpoints()
+    layer = add_points(memory_layer("EPSG:32633", ["h:double"], z_geometry=False),
+                       [((x[i], y[i]), [float(z[i])]) for i in range(40)])
+    report = tmp_path / "r.html"
+    result = processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": layer, "Z_FIELD": "h",
+                                                     "OUTPUT_HTML": str(report)})
+    assert result["COUNT"] == 40 and result["SKIPPED"] == 0
+    assert result["RMSEZ"] == pytest.approx(np.sqrt(np.mean(dz ** 2)), abs=1e-9)
+    for name in ("NVA95", "VVA95", "NVA_RMSEZ", "VVA_RMSEZ"):  # no land cover: absent, not NaN, no crash
+        assert result[name] is None, name
+    assert "no land cover given" in report.read_text(encoding="utf-8")
+
+
+def test_checkpoints_in_another_crs_are_reprojected_to_the_dtm(groundsieve_provider, dtm, tmp_path):
+    import processing
+    from qgis.core import QgsCoordinateReferenceSystem, QgsCoordinateTransform, QgsPointXY, QgsProject
+    x, y, z, _ids, _cover, dz = checkpoints()
+    to_wgs84 = QgsCoordinateTransform(QgsCoordinateReferenceSystem("EPSG:32633"),
+                                      QgsCoordinateReferenceSystem("EPSG:4326"), QgsProject.instance())
+    lonlat = [to_wgs84.transform(QgsPointXY(x[i], y[i])) for i in range(40)]
+    assert 14.9 < lonlat[0].x() < 15.1 and 45 < lonlat[0].y() < 45.2  # near UTM 33's central meridian
+    layer = add_points(memory_layer("EPSG:4326", ["n:integer"]),
+                       [((p.x(), p.y(), z[i]), [i]) for i, p in enumerate(lonlat)])
+    result = processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": layer,
+                                                     "OUTPUT_HTML": str(tmp_path / "r.html")})
+    assert result["COUNT"] == 40
+    assert result["RMSEZ"] == pytest.approx(np.sqrt(np.mean(dz ** 2)), abs=1e-6)
+    assert result["MEAN"] == pytest.approx(dz.mean(), abs=1e-6)
+    # taken as they are, without reprojection, degrees miss the DTM by 500 km: said so
+    from qgis.core import QgsProcessingException
+    wrong = add_points(memory_layer("EPSG:32633", ["n:integer"]),
+                       [((p.x(), p.y(), z[i]), [i]) for i, p in enumerate(lonlat)])
+    with pytest.raises(QgsProcessingException, match=r"none of the 40 checkpoints .* another CRS"):
+        processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": wrong,
+                                                "OUTPUT_HTML": str(tmp_path / "r2.html")})
+    assert not (tmp_path / "r2.html").exists()
+
+
+def test_bad_input_is_refused_in_the_dialog_s_words(groundsieve_provider, dtm, tmp_path):
+    import processing
+    from qgis.core import QgsProcessingException
+    x, y, z, _ids, _cover, _dz = checkpoints()
+    report = str(tmp_path / "r.html")
+    flat = add_points(memory_layer("EPSG:32633", ["h:string"], z_geometry=False),
+                      [((x[i], y[i]), ["abc" if i == 3 else str(z[i])]) for i in range(5)])
+    with pytest.raises(QgsProcessingException, match=r"the points have no Z; choose the field .*Checkpoint elevation field"):
+        processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": flat, "OUTPUT_HTML": report})
+    meadow = add_points(memory_layer("EPSG:32633", ["lc:string"]),
+                        [((x[i], y[i], z[i]), ["meadow" if i == 2 else "NVA"]) for i in range(5)])
+    with pytest.raises(QgsProcessingException, match=r"feature \d+, Land cover field 'lc': 'meadow' is not a land "
+                                                     r"cover.*meadow=NVA or meadow=VVA in 'Land cover values"):
+        processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": meadow, "LAND_COVER_FIELD": "lc",
+                                                "OUTPUT_HTML": report})
+    # ... and mapped, it runs
+    result = processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": meadow, "LAND_COVER_FIELD": "lc",
+                                                     "LAND_COVER_MAP": "meadow=VVA", "OUTPUT_HTML": report})
+    assert result["COUNT"] == 5 and result["VVA_RMSEZ"] is not None
+    with pytest.raises(QgsProcessingException, match=r"land cover mapping: 'meadow' has no '='"):
+        processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": meadow, "LAND_COVER_FIELD": "lc",
+                                                "LAND_COVER_MAP": "meadow", "OUTPUT_HTML": report})
+    with pytest.raises(QgsProcessingException, match=r"feature \d+, Checkpoint elevation field 'h': 'abc' is not a number"):
+        processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": flat, "Z_FIELD": "h", "OUTPUT_HTML": report})
+    with pytest.raises(QgsProcessingException, match=r"has no band 2 \(it has 1 band\)"):
+        processing.run("groundsieve:accuracy", {"DTM": dtm, "BAND": 2, "CHECKPOINTS": meadow, "LAND_COVER_MAP":
+                                                "meadow=VVA", "LAND_COVER_FIELD": "lc", "OUTPUT_HTML": report})
+    with pytest.raises(QgsProcessingException, match=r"DTM band must be at least 1 \(got 0\)"):
+        processing.run("groundsieve:accuracy", {"DTM": dtm, "BAND": 0, "CHECKPOINTS": meadow, "OUTPUT_HTML": report})
+    with pytest.raises(QgsProcessingException, match=r"the report must end in \.html"):
+        processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": meadow, "LAND_COVER_MAP": "meadow=VVA",
+                                                "LAND_COVER_FIELD": "lc", "OUTPUT_HTML": str(tmp_path / "r.pdf")})
+
+
+def test_qgis_process_runs_it_on_files(groundsieve_provider, dtm, tmp_path):
+    """As a user runs it: a GeoPackage of checkpoints, the numbers in qgis_process's JSON."""
+    from qgis.core import QgsVectorFileWriter, QgsProject
+    x, y, z, ids, cover, dz = checkpoints()
+    layer = add_points(memory_layer("EPSG:32633", ["name:string", "lc:string"]),
+                       [((x[i], y[i], z[i]), [ids[i], cover[i]]) for i in range(40)])
+    gpkg = tmp_path / "checkpoints.gpkg"
+    options = QgsVectorFileWriter.SaveVectorOptions()
+    options.driverName = "GPKG"
+    error = QgsVectorFileWriter.writeAsVectorFormatV3(layer, str(gpkg), QgsProject.instance().transformContext(),
+                                                      options)
+    assert error[0] == QgsVectorFileWriter.WriterError.NoError, error
+    report = tmp_path / "r.html"
+    proc = subprocess.run([str(REPO / "scripts" / "qgis-process"), "--json", "run", "groundsieve:accuracy",
+                           f"--DTM={dtm}", f"--CHECKPOINTS={gpkg}", "--ID_FIELD=name", "--LAND_COVER_FIELD=lc",
+                           f"--OUTPUT_HTML={report}"], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    results = json.loads(proc.stdout)["results"]
+    assert results["COUNT"] == 40
+    assert results["NVA_RMSEZ"] == pytest.approx(0.05, abs=1e-9)
+    assert results["VVA95"] == pytest.approx(np.percentile(dz[20:], 95), abs=1e-9)
+    assert report.exists()
