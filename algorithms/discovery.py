@@ -30,6 +30,8 @@ TAGS = {
                 "ground", "model", "matrone"),
     "rfclassify": ("random forest", "machine learning", "classification", "classify", "ground", "model", "dtm",
                    "dem", "matrone"),
+    "dtm": ("dtm", "dem", "dsm", "bare earth", "terrain", "raster", "rasterize", "tin", "triangulation",
+            "classified", "class", "ground class", "las", "laz"),
     "accuracy": ("dtm", "dem", "accuracy", "vertical accuracy", "checkpoints", "check points", "rmse", "rmsez",
                  "nva", "vva", "asprs", "qa", "qc", "quality", "survey", "residuals"),
 }
@@ -55,6 +57,8 @@ SHORT = {
                "HTML report.",
     "rfclassify": "Classifies a LAS/LAZ with a trained Random Forest model; optional DTM from the ground "
                   "points.",
+    "dtm": "A DTM from the points a classification already made ground (class 2, or the classes you name), "
+           "without filtering them again; surveys in buffered tiles.",
     "accuracy": "Checks a DTM's vertical accuracy against surveyed checkpoints: RMSEz, bias, NVA and VVA "
                 "(ASPRS Editions 1 and 2), with an HTML report.",
 }
@@ -74,6 +78,7 @@ GUIDE_SECTIONS = {
     "rftrain": "Classification: features, training, classifying",
     "rfclassify": "Classification: features, training, classifying",
     "tune": "Tune a ground filter on a labelled patch",
+    "dtm": "DTM from classified points",
     "accuracy": "Check DTM accuracy against checkpoints",
 }
 

@@ -7,6 +7,7 @@ from qgis.PyQt.QtGui import QIcon
 
 from ..algorithms.accuracy import AccuracyAlgorithm
 from ..algorithms.csf import CSFAlgorithm
+from ..algorithms.dtm import DTMFromClassesAlgorithm
 from ..algorithms.echogrid import EchoGridAlgorithm
 from ..algorithms.evc import EVCAlgorithm, EVCRastersAlgorithm
 from ..algorithms.features import FeaturesAlgorithm
@@ -19,7 +20,7 @@ from ..algorithms.tune import TuneAlgorithm
 
 ALGORITHMS = (SMRFAlgorithm, EchoGridAlgorithm, EVCAlgorithm, EVCRastersAlgorithm, PMFAlgorithm, CSFAlgorithm,
               PTDAlgorithm, HybridAlgorithm, FeaturesAlgorithm, RFTrainAlgorithm, RFClassifyAlgorithm, TuneAlgorithm,
-              AccuracyAlgorithm)
+              DTMFromClassesAlgorithm, AccuracyAlgorithm)
 
 _ROOT = os.path.dirname(os.path.dirname(__file__))
 

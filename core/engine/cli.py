@@ -65,7 +65,7 @@ def _number(kind):
 
 
 def _add_common(parser: argparse.ArgumentParser) -> None:
-    fo, dt, to = _defaults(FilterOptions), _defaults(DTMOptions), _defaults(TileOptions)
+    fo, dt = _defaults(FilterOptions), _defaults(DTMOptions)
     io = parser.add_argument_group("input and outputs")
     io.add_argument("--input", required=True, metavar="PATH",
                     help="LAS/LAZ (1.2-1.4, point formats 0-10), a folder of them, a .vpc, or an ISPRS .txt")
@@ -93,6 +93,12 @@ def _add_common(parser: argparse.ArgumentParser) -> None:
     io.add_argument("--keep-classes", action=argparse.BooleanOptionalAction, default=fo["keep_existing_classes"],
                     help="keep every class other than 0, 1, 2 as it is (never made ground, so out of the DTM "
                          "unless named in --dtm-classes; default %(default)s)")
+    _add_tiles(parser)
+
+
+def _add_tiles(parser: argparse.ArgumentParser) -> None:
+    """The options of tiled runs (every filter's, and the DTM from classes')."""
+    to = _defaults(TileOptions)
     tiles = parser.add_argument_group("survey scale: tiles")
     tiles.add_argument("--tile-size", type=float, default=to["tile_size_m"], metavar="M",
                        help="tile size (m; 0 = from the memory budget; default %(default)s)")
@@ -227,8 +233,63 @@ def build_parser() -> argparse.ArgumentParser:
         _add_filter(sub, name)
     _add_hybrid(sub)
     _add_tune(sub)
+    _add_dtm(sub)
     _add_accuracy(sub)
     return parser
+
+
+def _add_dtm(sub) -> None:
+    """``dtm``: a DTM from the classes the cloud already has (filters/classes.py ClassGround),
+    groundsieve:dtm's options."""
+    dt = _defaults(DTMOptions)
+    summary = "a DTM from the points a classification already made ground, without filtering them again"
+    parser = sub.add_parser("dtm", help=summary, description=f"{summary}: the points of --classes (2 by default) "
+                            "are triangulated as the ground filters' DTMs are. A folder or a .vpc runs in buffered "
+                            "tiles (a buffer of 40 m unless --tile-buffer says otherwise).")
+    io = parser.add_argument_group("input and output")
+    io.add_argument("--input", required=True, metavar="PATH", help="LAS/LAZ (1.2-1.4), a folder of them, or a .vpc")
+    io.add_argument("--dtm", required=True, metavar="PATH", help="the DTM GeoTIFF")
+    _add_json(io)
+    io.add_argument("--classes", default="2", metavar="LIST",
+                    help="the classes of the DTM's points: 2 (ground), e.g. 2,9 with water; a list or ranges as "
+                         "--ignore-classes (default %(default)s)")
+    io.add_argument("--ignore-classes", default="7,18", metavar="LIST",
+                    help="classes left out of the DTM and of its extent, e.g. noise; '' = none (default %(default)s)")
+    io.add_argument("--dtm-cell", type=float, default=dt["cell_size_m"], metavar="M", action=_TYPED_CELL,
+                    help="DTM cell size (m; default %(default)s)")
+    io.add_argument("--dtm-fill", action=argparse.BooleanOptionalAction, default=dt["fill_outside_hull"],
+                    help="fill DTM cells outside the ground hull (nearest value; default %(default)s)")
+    io.add_argument("--dtm-max-distance", type=float, default=dt["max_distance_m"], metavar="M",
+                    help="leave DTM cells farther than this from any ground point empty, so that data gaps are "
+                         "not bridged (m; 0 = no limit; default %(default)s)")
+    _add_tiles(parser)
+    parser.set_defaults(filter="dtm", output=None)
+
+
+def run_dtm(args, out) -> dict:
+    """Run ``dtm``; return its JSON document, as a filter's (``filter_document``)."""
+    from ..filters.classes import ClassGround
+    from .workflow import run_ground_filter
+    warnings = []
+
+    def log(msg):
+        warning = warning_of(msg)
+        if warning is not None:
+            warnings.append(warning)
+        print(msg, file=out, flush=True)
+    ground = ClassGround(args.classes)
+    options = FilterOptions(ignore_classes=args.ignore_classes, keep_existing_classes=True, tiling=_tiling(args))
+    dtm = DTMOptions(cell_size_m=args.dtm_cell, cell_set=bool(getattr(args, "dtm_cell_typed", False)),
+                     fill_outside_hull=args.dtm_fill, max_distance_m=args.dtm_max_distance)
+    from .kernels import COMPILING, about_to_compile
+    if about_to_compile("dtm"):
+        print(COMPILING, file=out, flush=True)
+    start = time.monotonic()
+    run = run_ground_filter(args.input, None, ground, options=options, dtm_path=args.dtm, dtm=dtm,
+                            progress=_progress_printer(out), is_cancelled=_interrupt_seen, log=log)
+    document = filter_document(args, ground, run, time.monotonic() - start, warnings)
+    print(f"{document['points']:,} points, {document['ground']:,} of the ground classes.", file=out)
+    return document
 
 
 def _add_accuracy(sub) -> None:
@@ -479,15 +540,19 @@ def options_from(args, log=None):
     if log is not None and args.filter != "hybrid":
         for line in describe(args.filter, algorithm, preset, typed_wins=True):  # (what is typed wins)
             log(line)
-    tiling = TileOptions(tile_size_m=args.tile_size, buffer_m=None if args.tile_buffer < 0 else args.tile_buffer,
-                         memory_budget_mb=args.memory_budget, workers=args.workers,
-                         work_dir=args.work_folder or None, scheduler=args.scheduler or "")
+    tiling = _tiling(args)
     options = FilterOptions(last_returns_only=args.last_returns, ignore_noise=args.ignore_noise,
                             ignore_classes=args.ignore_classes, keep_existing_classes=args.keep_classes,
                             tiling=tiling)
     return algorithm, options, DTMOptions(cell_size_m=args.dtm_cell, cell_set=bool(getattr(args, "dtm_cell_typed", False)),
                                           fill_outside_hull=args.dtm_fill,
                                           classes=args.dtm_classes, max_distance_m=args.dtm_max_distance)
+
+
+def _tiling(args) -> TileOptions:
+    return TileOptions(tile_size_m=args.tile_size, buffer_m=None if args.tile_buffer < 0 else args.tile_buffer,
+                       memory_budget_mb=args.memory_budget, workers=args.workers,
+                       work_dir=args.work_folder or None, scheduler=args.scheduler or "")
 
 
 #: set once the run has ended (its outputs in place or its error said): a SIGTERM then changes nothing
@@ -516,7 +581,7 @@ def _wants_json(argv: List[str]) -> bool:
 def _run(args, out):
     """(exit status, JSON document) of the command, the log and the one-line errors on ``out``."""
     try:
-        run = {"tune": run_tune, "accuracy": run_accuracy}.get(args.filter, run_filter)
+        run = {"tune": run_tune, "dtm": run_dtm, "accuracy": run_accuracy}.get(args.filter, run_filter)
         return 0, run(args, out)
     except _Usage as err:
         print(f"groundsieve: {err}", file=out)

@@ -188,3 +188,29 @@ def test_the_filter_needs_the_classes_and_honours_steps():
     result = ClassGround().run(xyz, Steps(progress=seen.append).sub(0.2, 0.6), classification=cls)
     np.testing.assert_array_equal(result.ground, cls == 2)
     assert seen and seen[-1] == pytest.approx(0.6) and min(seen) >= 0.2
+
+
+def test_the_command_line_makes_the_dtm_and_reports_it_in_json(delivery, tmp_path):
+    import io
+    import json
+
+    from groundsieve.core.engine.cli import main
+    out, stdout = io.StringIO(), io.StringIO()
+    dtm = tmp_path / "dtm.tif"
+    code = main(["dtm", "--input", str(delivery), "--dtm", str(dtm), "--classes", "2,6", "--json"], out=out,
+                stdout=stdout)
+    assert code == 0, out.getvalue()
+    document = json.loads(stdout.getvalue())
+    classes = _classes(delivery)
+    assert document["status"] == "done" and document["algorithm"] == "dtm" and document["dtm"] == str(dtm)
+    assert document["ground"] == int(np.isin(classes, (2, 6)).sum()) and document["points"] == len(classes)
+    assert document["parameters"] == {"classes": [2, 6]} and document["outputs"] == []
+    values, *_ = _read(dtm)
+    assert np.nanmax(values) > terrain(0.0, 300.0) + ROOF - 1.0  # the roofs (class 6) are in it
+    # a cloud without the classes: exit 1, the reason on one line, nothing written
+    out, stdout = io.StringIO(), io.StringIO()
+    code = main(["dtm", "--input", str(delivery), "--dtm", str(tmp_path / "none.tif"), "--classes", "9", "--json"],
+                out=out, stdout=stdout)
+    failed = json.loads(stdout.getvalue())
+    assert code == 1 and failed["status"] == "failed" and "no point of class 9" in failed["error"]
+    assert "Traceback" not in out.getvalue() and not (tmp_path / "none.tif").exists()

@@ -1,0 +1,128 @@
+"""groundsieve:dtm — DTM from classified points: the ground an earlier classification made (a vendor's
+class 2, an earlier run's, a hand-edited one) as a DTM, without filtering it again."""
+from qgis.core import (QgsProcessingException, QgsProcessingOutputNumber, QgsProcessingParameterBoolean,
+                       QgsProcessingParameterNumber, QgsProcessingParameterRasterDestination,
+                       QgsProcessingParameterString)
+
+from .base import (INPUT_FILTER, GroundFilterAlgorithm, core_modules, dialog_help, dtm_cell_set, dtm_max_distance_parameter,
+                   feedback_callables)
+
+
+class DTMFromClassesAlgorithm(GroundFilterAlgorithm):
+    """A ground filter's input, tiles and DTM options, with the input's classes as the ground: the
+    engine makes the DTM (whole, or in buffered tiles for a survey) as it makes any filter's."""
+    CLASSES = "CLASSES"
+    OUTPUT = "OUTPUT"
+    GROUND_COUNT = "GROUND_COUNT"
+    POINT_COUNT = "POINT_COUNT"
+
+    def name(self):
+        return "dtm"
+
+    def displayName(self):  # noqa: N802
+        return "DTM from classified points"
+
+    def group(self):
+        return "Raster workflows"
+
+    def groupId(self):  # noqa: N802
+        return "rasterworkflows"
+
+    def iconName(self):  # noqa: N802
+        return "groundsieve.svg"
+
+    def shortHelpString(self):  # noqa: N802
+        return dialog_help("""<p>Makes a DTM from the points an earlier classification made ground: a vendor's
+delivery, an earlier run of a ground filter, a cloud edited by hand. Nothing is filtered again: the
+points of the <i>Ground classes</i> (2 by default) are interpolated linearly on their Delaunay
+triangulation, as the ground filters' DTMs are, and every other point stays out of it. The run says how
+many points of each other class it left out.</p>
+<h3>Parameters</h3>
+<p><b>Input point cloud</b>: LAS 1.2-1.4 or LAZ, a folder of them or a .vpc (a survey, run in buffered
+tiles). Only read, never changed. <b>Ground classes</b>: the classes of the DTM's points: 2 (ground);
+add 8 (model key points) or 9 (water) for a flood model's water surface, e.g. <code>2,9</code>.
+<b>Ignored classes</b> (default <code>7,18</code>, noise): left out of the DTM's extent too, so that a
+stray noise point far away does not stretch the grid; withheld points always are.
+<b>DTM cell size (m)</b>: in the unit of the cloud's CRS when you set it; the default 1 m is converted
+for a cloud in feet. <b>Fill cells outside the ground hull</b>: nearest value instead of nodata (-9999).
+<b>Leave cells farther than this from any ground point empty</b> (advanced, 0 = no limit): data gaps
+are otherwise bridged by the triangulation.</p>
+<h3>Surveys</h3>
+<p>A folder, a .vpc, a tile size or a cloud beyond the memory budget runs in square tiles, each
+triangulated with a buffer of 40 m around it (or <i>Tile buffer</i>): a gap in the ground up to that
+wide (a building, a pond) is bridged as one triangulation of the whole survey bridges it, so the DTM
+shows no tile lines; set a larger buffer for wider gaps. The DTM is one seamless cloud-optimised
+GeoTIFF.</p>
+<p>A cloud with no point of the ground classes is refused with the classes it holds: filter it first
+with one of the ground filters.</p>""")
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.addInputParameters()
+        # an ISPRS text file has no classes: not offered (the ground filters' input takes one)
+        param = self.parameterDefinition(self.INPUT)
+        param.setDescription(param.description().replace(", or ISPRS .txt)", ", or a .vpc)").replace(
+            "a folder of them, a .vpc, or a .vpc)", "a folder of them, or a .vpc)"))
+        param.setFileFilter(INPUT_FILTER.replace(";;ISPRS text (*.txt)", ""))
+        self.addParameter(QgsProcessingParameterString(
+            self.CLASSES, "Ground classes: the classes of the DTM's points (e.g. 2, or 2,9 with water)",
+            defaultValue="2"))
+        self.addParameter(QgsProcessingParameterString(
+            self.IGNORE_CLASSES, "Ignored classes: out of the DTM and of its extent (e.g. 7,18)",
+            defaultValue="7,18", optional=True))
+        self.addTileParameters()
+        self.addParameter(QgsProcessingParameterNumber(
+            self.DTM_CELL, "DTM cell size (m)", type=QgsProcessingParameterNumber.Type.Double,
+            defaultValue=1.0, minValue=0.0))
+        self.addParameter(QgsProcessingParameterBoolean(
+            self.DTM_FILL, "DTM: fill cells outside the ground hull (nearest value)", defaultValue=False))
+        self.addParameter(dtm_max_distance_parameter(self.DTM_MAX_DISTANCE))
+        self.addParameter(QgsProcessingParameterRasterDestination(self.OUTPUT, "DTM (ground surface)"))
+        self.addOutput(QgsProcessingOutputNumber(self.GROUND_COUNT, "Ground points"))
+        self.addOutput(QgsProcessingOutputNumber(self.POINT_COUNT, "Points read"))
+
+    def buildFilter(self, parameters, context, log=None):  # noqa: N802
+        """The "filter": the points of the ground classes (core/filters/classes.py)."""
+        from ..core.filters.classes import ClassGround
+        ground = ClassGround(self.parameterAsString(parameters, self.CLASSES, context) or "")
+        if log is not None:
+            log(f"Ground classes: {', '.join(str(c) for c in ground.classes)}.")
+        return ground
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        errors, workflow = core_modules(feedback=feedback, kernels_of=self.name())
+        from . import pointclouds, styles
+        input_path = pointclouds.input_path(self, parameters, context, self.INPUT, self.INPUT_LAYER)
+        dtm_path = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
+        try:
+            ground = self.buildFilter(parameters, context, feedback.pushInfo)
+            # the input's classes are kept as they are (no classified copy is written): no point's class
+            # is said to be replaced, and the classes left out of the DTM are named
+            options = workflow.FilterOptions(ignore_classes=self.parameterAsString(parameters, self.IGNORE_CLASSES, context)
+                                             or "",
+                                             keep_existing_classes=True, tiling=self.tileOptions(parameters, context))
+            dtm = workflow.DTMOptions(
+                cell_size_m=self.parameterAsDouble(parameters, self.DTM_CELL, context),
+                cell_set=dtm_cell_set(self, parameters, context, self.DTM_CELL),
+                fill_outside_hull=self.parameterAsBoolean(parameters, self.DTM_FILL, context),
+                max_distance_m=self.parameterAsDouble(parameters, self.DTM_MAX_DISTANCE, context))
+            run = workflow.run_ground_filter(input_path, None, ground, options=options, dtm_path=dtm_path, dtm=dtm,
+                                             **feedback_callables(feedback))
+        except errors.GroundSieveError as err:
+            raise QgsProcessingException(str(err)) from err
+        tiled = run.cloud is None
+        styles.style_when_loaded(context, dtm_path, styles.DTM_STYLE)
+        return {self.OUTPUT: dtm_path, self.GROUND_COUNT: run.ground_count,
+                self.POINT_COUNT: run.point_count if tiled else len(run.cloud)}
+
+    def checkParameterValues(self, parameters, context):  # noqa: N802
+        """The ground classes' form in the dialog's words, then the ground filters' checks (the input, a
+        cell of -1 or text)."""
+        from ..core.errors import GroundSieveError
+        from ..core.io.clouds import parse_classes
+        label = self.parameterDefinition(self.CLASSES).description().split(":")[0]
+        try:
+            if not parse_classes(self.parameterAsString(parameters, self.CLASSES, context) or "", what=label):
+                return False, f"{label}: name at least one class (2 is ground)"
+        except GroundSieveError as err:
+            return False, str(err)
+        return super().checkParameterValues(parameters, context)

@@ -1,0 +1,96 @@
+"""groundsieve:dtm (DTM from classified points) as a QGIS user runs it: a classified delivery's ground
+class as a DTM from the toolbox (processing.run), from a folder of tiles, and from qgis_process; a
+cloud without ground and bad ground classes refused in the dialog's words, with nothing written."""
+import json
+import os
+import subprocess
+
+import numpy as np
+import pytest
+
+from .test_qgis_process import WRAPPER
+from .test_survey_inputs import _split
+
+
+def _dtm(path):
+    from osgeo import gdal
+    ds = gdal.Open(str(path))
+    band = ds.GetRasterBand(1)
+    values = band.ReadAsArray().astype(float)
+    values[values == band.GetNoDataValue()] = np.nan
+    return values, ds.GetGeoTransform(), ds.GetProjection()
+
+
+def test_the_ground_class_becomes_a_dtm_and_the_input_is_only_read(groundsieve_provider, scene_laz, tmp_path):
+    import processing
+    src, scene = scene_laz
+    before = src.read_bytes()
+    out = tmp_path / "dtm.tif"
+    result = processing.run("groundsieve:dtm", {"INPUT": str(src), "OUTPUT": str(out), "DTM_CELL": 2.0})
+    assert src.read_bytes() == before
+    assert result["OUTPUT"] == str(out)
+    assert result["GROUND_COUNT"] == int(np.sum(scene.classification == 2))
+    assert result["POINT_COUNT"] == len(scene.x)
+    values, transform, projection = _dtm(out)
+    assert transform[1] == 2.0 and ("32632" in projection or "UTM zone 32N" in projection)
+    # the ground's heights, not the roofs' or the canopy's: every cell within the ground points' range
+    ground_z = scene.z[scene.classification == 2]
+    assert np.isfinite(values).mean() > 0.9
+    assert np.nanmin(values) >= ground_z.min() - 0.01 and np.nanmax(values) <= ground_z.max() + 0.01
+    assert sorted(os.listdir(tmp_path)) == ["dtm.tif"]
+
+
+def test_a_folder_of_tiles_gives_the_dtm_of_the_whole_file(groundsieve_provider, scene_laz, tmp_path):
+    import processing
+    src, scene = scene_laz
+    _split(src, tmp_path / "in")
+    whole, survey = tmp_path / "whole.tif", tmp_path / "survey.tif"
+    processing.run("groundsieve:dtm", {"INPUT": str(src), "OUTPUT": str(whole)})
+    result = processing.run("groundsieve:dtm", {"INPUT": str(tmp_path / "in"), "OUTPUT": str(survey),
+                                                "TILE_SIZE": 50.0})
+    a, b = _dtm(whole)[0], _dtm(survey)[0]
+    assert a.shape == b.shape
+    np.testing.assert_allclose(a, b, atol=1e-3)
+    assert result["POINT_COUNT"] == len(scene.x)
+    assert sorted(os.listdir(tmp_path)) == ["in", "survey.tif", "whole.tif"]
+
+
+def test_qgis_process_makes_the_dtm_and_names_its_counts(scene_laz, tmp_path):
+    src, scene = scene_laz
+    out = tmp_path / "dtm.tif"
+    proc = subprocess.run([str(WRAPPER), "--json", "run", "groundsieve:dtm", f"--INPUT={src}", f"--OUTPUT={out}",
+                           "--CLASSES=2,6"], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    results = json.loads(proc.stdout)["results"]
+    assert results["GROUND_COUNT"] == int(np.sum(np.isin(scene.classification, (2, 6))))
+    # with the buildings' class 6 among the ground classes, the roofs are in the DTM
+    values = _dtm(out)[0]
+    assert np.nanmax(values) > scene.z[scene.classification == 2].max() + 2.0
+
+
+def test_a_cloud_without_ground_is_refused_with_its_classes(groundsieve_provider, tmp_path):
+    import processing
+    from qgis.core import QgsProcessingException
+    from groundsieve.core.io import new_las, write_las
+    rng = np.random.default_rng(0)
+    src = tmp_path / "unclassified.laz"
+    n = 5_000
+    write_las(new_las(rng.uniform(0, 100, n), rng.uniform(0, 100, n), rng.uniform(0, 1, n),
+                      classification=np.ones(n, np.uint8)), str(src))
+    with pytest.raises(QgsProcessingException) as err:
+        processing.run("groundsieve:dtm", {"INPUT": str(src), "OUTPUT": str(tmp_path / "dtm.tif")})
+    text = str(err.value)
+    assert "unclassified.laz" in text and "no point of class 2" in text and "1 (unclassified): 5,000" in text
+    assert os.listdir(tmp_path) == ["unclassified.laz"]
+
+
+@pytest.mark.parametrize("classes, words", [("", "name at least one class"), ("2,ground", "'ground' is not a class"),
+                                            ("999", "0-255")])
+def test_bad_ground_classes_are_refused_in_the_dialogs_words(groundsieve_provider, scene_laz, tmp_path, classes,
+                                                               words):
+    from qgis.core import QgsApplication, QgsProcessingContext
+    alg = QgsApplication.processingRegistry().algorithmById("groundsieve:dtm")
+    src, _scene = scene_laz
+    ok, message = alg.checkParameterValues({"INPUT": str(src), "OUTPUT": str(tmp_path / "d.tif"), "CLASSES": classes},
+                                           QgsProcessingContext())
+    assert not ok and "Ground classes" in message and words in message
