@@ -23,7 +23,7 @@ sys.path.insert(0, os.path.join(HERE, "..", "..", ".build", "plugins"))
 sys.path.insert(0, "/usr/share/qgis/python/plugins")
 
 #: what the log says as each stage starts (core/engine/workflow.py), and how long into it to click
-STAGES = {"reading": ("Reading ", 0.8), "filtering": ("Filtering (", 0.4),
+STAGES = {"reading": ("Reading ", 0.3), "filtering": ("Filtering (", 0.4),
           "dtm": ("DTM: triangulating", 0.3), "writing": ("Writing ", 0.5)}
 ORDER = ["reading", "filtering", "dtm", "writing"]
 
