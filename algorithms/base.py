@@ -101,8 +101,27 @@ def _int_field(name):
 def dialog_help(html):
     """``html`` as the algorithm dialog wants it: QGIS's dialog makes each line of
     shortHelpString a paragraph of its own (QgsProcessingAlgorithmDialogBase::formatHelp), so
-    the source's wrapped lines are joined; the paragraphs come from the HTML tags."""
-    return re.sub(r"\s*\n\s*", " ", html).strip()
+    the source's wrapped lines are joined; the paragraphs come from the HTML tags. Under
+    ``qgis_process`` (``qgis_process help``, which prints it as it is, and R's qgisprocess), the same
+    help as plain text (:func:`plain_help`): it was one line of HTML thousands of characters long."""
+    text = re.sub(r"\s*\n\s*", " ", html).strip()
+    from qgis.core import QgsApplication
+    return plain_help(text) if QgsApplication.platform() == "qgis_process" else text
+
+
+def plain_help(text, width=100):
+    """The dialog's HTML help ``text`` as plain text for a terminal: each paragraph, heading and list
+    item on lines of its own, wrapped at ``width``, a blank line between them, the tags dropped and the
+    entities decoded."""
+    import html
+    import textwrap
+    text = re.sub(r"\s+", " ", text)
+    text = re.sub(r"(?i)</?h\d[^>]*>|</?p[^>]*>|<br\s*/?>|</?[uo]l[^>]*>", "\n\n", text)
+    text = re.sub(r"(?i)<li[^>]*>", "\n\n- ", text)
+    text = html.unescape(re.sub(r"<[^>]+>", "", text))
+    paragraphs = [p.strip() for p in re.split(r"\n\s*\n", text) if p.strip()]
+    return "\n\n".join(textwrap.fill(p, width=width, break_long_words=False, break_on_hyphens=False,
+                                     subsequent_indent="  " if p.startswith("- ") else "") for p in paragraphs)
 
 
 def core_modules(extra=None, feedback=None, kernels_of=None):

@@ -62,3 +62,17 @@ def test_bad_input_fails_with_message_and_no_output(tmp_path):
     assert "Traceback" not in text
     assert not out.exists()
     assert os.listdir(tmp_path) == ["truncated.laz"]
+
+
+def test_help_is_plain_text_in_paragraphs():
+    """`qgis_process help` printed each algorithm's help as one line of HTML thousands of characters long
+    (a power user reading it in a terminal, or through R's qgisprocess): it is now plain text, each
+    paragraph and heading on lines of their own, wrapped at 100 characters; the dialog keeps its HTML."""
+    for alg in ("groundsieve:smrf", "groundsieve:dtm", "groundsieve:accuracy", "groundsieve:tune"):
+        proc = _wrapper("help", alg)
+        assert proc.returncode == 0, proc.stderr
+        text = proc.stdout.split("Description\n----------------\n", 1)[1].split("\n----------------\nArguments", 1)[0]
+        assert "<p>" not in text and "<b>" not in text and "&amp;" not in text, alg
+        lines = text.strip().splitlines()
+        assert len(lines) > 10 and max(len(line) for line in lines[1:]) <= 100, alg  # (line 0: QGIS's summary)
+        assert "\n\n" in text.strip(), alg
