@@ -891,8 +891,6 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     log(f"Binned into {len(keys)} tile(s) in {time.perf_counter() - t_start:.1f} s." if not n_copc else
         f"Planned {len(keys)} tile(s) in {time.perf_counter() - t_start:.1f} s ({n_copc} COPC file(s) read by "
         "bounds by each tile, not binned).")
-    if dtm_grid is not None and not n_copc:
-        _say_stray_tiles(tiles, grid, dtm_grid, log)
     assigned = [0] * len(infos)
     crs_wkt = infos[0].crs_wkt
     # 2. the DTM's block writer, on the grid run_tiled made from the headers
@@ -911,6 +909,9 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                 "buffer.")
     tile_log = []
     ground_total = dtm_points = 0  # the tiles' own ground points; those that entered the DTM
+    # the box of the points that may enter the DTM (neither withheld nor ignored), from the tiles: the
+    # DTM is cut to it, as a whole run's grid spans those points only (None in a result: not known)
+    area_box: List[Optional[list]] = [[math.inf, math.inf, -math.inf, -math.inf]]
     kept_out: Dict[int, int] = {}  # points kept in classes of their own, left out of the DTM
     replaced: Dict[int, int] = {}  # points of the input's other classes given 1 or 2
     structures: Dict[int, int] = {}  # those of its structure classes made ground
@@ -960,6 +961,12 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             structures[int(code)] = structures.get(int(code), 0) + int(count)
         ground_total += result["ground"]
         dtm_points += result["dtm_points"]
+        if "area_bounds" not in result:  # (a tile done by an earlier version, resumed)
+            area_box[0] = None
+        elif result["area_bounds"] is not None and area_box[0] is not None:
+            b = result["area_bounds"]
+            area_box[0] = [min(area_box[0][0], b[0]), min(area_box[0][1], b[1]),
+                           max(area_box[0][2], b[2]), max(area_box[0][3], b[3])]
         tile_log.append(dict(key=tuple(result["key"]), points=result["own"], read=result["read"],
                              ground=result["ground"], copc_read=result.get("copc_read", 0)))
         done_frac = len(tile_log) / len(keys)
@@ -1015,6 +1022,9 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             raise InputError(f"{info.path}: {assigned[k]:,} of {info.count:,} points were classified; "
                              "the file's header and its points disagree")
     log(f"Filtered {len(keys)} tile(s) in {time.perf_counter() - t_tiles:.1f} s.")
+    dtm_out = _dtm_extent(dtm_writer.grid, area_box[0], log) if dtm_writer is not None else None
+    if dtm_out is not None and not n_copc:
+        _say_stray_tiles(tiles, grid, dtm_out, log)
     if dtm_writer is not None and not dtm_points:  # (as a whole run refuses it, not an empty DTM written)
         why = getattr(algorithm, "no_ground_in_survey", "")
         raise InvalidParameterError(f"{inputs[0] if len(inputs) == 1 else f'{len(inputs)} input files'}: the filter "
@@ -1065,11 +1075,11 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                                    dtm_writer.grid, mpu)):
                 if note:
                     log(note)
-            dtm_writer.finish(staging.stage(dtm_path), atomic=False, name=dtm_path)
+            dtm_writer.finish(staging.stage(dtm_path), atomic=False, name=dtm_path, grid=dtm_out)
         steps.check()
         staging.commit()
     if dtm_writer is not None:
-        g = dtm_writer.grid
+        g = dtm_out
         log(f"Wrote the DTM {dtm_path} ({g.ncols:,} x {g.nrows:,} cells of {g.cell:g} {unit}).")
     steps.report(1.0)
     log(f"Done in {time.perf_counter() - t_start:.1f} s.")
@@ -1497,9 +1507,13 @@ def _tile_job(job) -> Optional[dict]:
             # (the write phase reads them there; a killed worker's writes stay too).
             del classes
             assigned[int(k)] = int(sel.sum())
-        block, kept_out, dtm_own = None, {}, 0
+        block, kept_out, dtm_own, area_bounds = None, {}, 0, None
         if job["dtm"] is not None:
             area = workflow.processable(cloud, options)
+            mine = area & own  # (the DTM's extent: the points that may enter it, as a whole run's grid)
+            if mine.any():
+                xs, ys = cloud.x[mine], cloud.y[mine]
+                area_bounds = [float(xs.min()), float(ys.min()), float(xs.max()), float(ys.max())]
             in_dtm = workflow.dtm_points(cloud, ground, area, job["dtm"])
             dtm_own = int(np.count_nonzero(in_dtm & own))
             block = _dtm_block(cloud, in_dtm, job["dtm"], job["dtm_grid"], job["bounds"], job["buffer"])
@@ -1508,7 +1522,7 @@ def _tile_job(job) -> Optional[dict]:
         result = dict(key=list(job["key"]), own=int(own.sum()), read=len(cloud), ground=int(ground[own].sum()),
                       dtm_points=dtm_own, assigned=assigned, block=block, class_parts=class_parts, copc_read=copc_read,
                       kept_out=sorted(kept_out.items()), replaced=sorted(replaced.items()),
-                      structures=sorted(structures.items()))
+                      structures=sorted(structures.items()), area_bounds=area_bounds)
         _save_done(job["done_dir"], result)
         return result
     except Cancelled:
@@ -1524,8 +1538,29 @@ def _tile_job(job) -> Optional[dict]:
         raise GroundSieveError(f"{where} failed: {type(err).__name__}: {err}") from err
 
 
+def _dtm_extent(full, box, log):
+    """The survey DTM's grid: ``full`` (the headers' bounds) cut to ``box``, the bounds of the points that
+    may enter it (neither withheld nor ignored), on the same lattice, as a whole run spans those points
+    only. A stray noise point, ignored, stretched a tiled DTM 2,300 x 300 cells where the whole run's was
+    300 x 300 (a surveyor). ``full`` when the box is not known (a resumed run's older tiles)."""
+    from ..grids.spec import GridSpec
+    if box is None or not math.isfinite(box[0]):
+        return full
+    cut = GridSpec.covering(np.array([box[0], box[2]]), np.array([box[1], box[3]]), full.cell, what="DTM",
+                            bytes_per_cell=0.0, max_cells=MAX_SURVEY_DTM_CELLS, closed=True)
+    c = full.cell
+    col0, row0 = int(round((cut.x0 - full.x0) / c)), int(round((full.top - cut.top) / c))
+    col0, row0 = max(0, col0), max(0, row0)
+    ncols, nrows = min(cut.ncols, full.ncols - col0), min(cut.nrows, full.nrows - row0)
+    if (col0, row0, ncols, nrows) == (0, 0, full.ncols, full.nrows):
+        return full
+    log(f"DTM: cut to the {ncols:,} x {nrows:,} cells of the points it may hold (the files' bounds make "
+        f"{full.ncols:,} x {full.nrows:,}: withheld or ignored points lie beyond them).")
+    return GridSpec(full.x0 + col0 * c, full.top - row0 * c, c, nrows, ncols)
+
+
 def _say_stray_tiles(tiles, grid, dtm_grid, log) -> None:
-    """Say when a survey's DTM, which spans the headers' bounds, is mostly empty because a few points
+    """Say when a survey's DTM (``dtm_grid``, cut to its points) is mostly empty because a few points
     lie far from the others (tiles of fewer than MIN_TILE_POINTS points, which are not filtered): the
     tiled counterpart of workflow._say_stray_points (a stray point 1,000 km away made a 1,000,040 x 40
     cell DTM without a word)."""
@@ -1536,11 +1571,16 @@ def _say_stray_tiles(tiles, grid, dtm_grid, log) -> None:
     x0, y0 = min(b[0] for b in kept), min(b[1] for b in kept)
     x1, y1 = max(b[2] for b in kept), max(b[3] for b in kept)
 
+    dx0, dy1 = dtm_grid.x0, dtm_grid.top
+    dx1, dy0 = dx0 + dtm_grid.ncols * dtm_grid.cell, dy1 - dtm_grid.nrows * dtm_grid.cell
+
     def outside(k):  # a tile beyond the box of the filtered tiles, not touching it: the DTM is stretched
         # to reach it (the points on a survey's edge at a multiple of the tile size make a tile of their
-        # own touching the box: an HPC reviewer's 9 such points were called far from the others)
+        # own touching the box: an HPC reviewer's 9 such points were called far from the others), unless
+        # its points are all ignored or withheld (the DTM, cut to the others, does not reach it)
         bx0, by0, bx1, by1 = grid.bounds(k)
-        return bx1 < x0 or bx0 > x1 or by1 < y0 or by0 > y1
+        reached = bx0 <= dx1 and bx1 >= dx0 and by0 <= dy1 and by1 >= dy0
+        return reached and (bx1 < x0 or bx0 > x1 or by1 < y0 or by0 > y1)
     few = sorted((k for k, n in counts.items() if 0 < n < MIN_TILE_POINTS and outside(k)), key=lambda k: counts[k])
     if not few:
         return

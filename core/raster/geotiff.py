@@ -74,13 +74,14 @@ def write_geotiff(path: str, values: np.ndarray, grid: GridSpec, *, crs_wkt: Opt
         raise OutputError(f"{name}: the GeoTIFF was not written")
 
 
-def _cog(path: str, source, options) -> None:
+def _cog(path: str, source, options, window=None) -> None:
     """Write ``source`` (a dataset or a file) to ``path`` as a COG, then check that the file holds every
     block its header points at: GDAL's COG driver only logged a full disk ("_tiffWriteProc: No space
     left on device", past any error handler) and returned, leaving a truncated DTM after a run that said
     it was done (a reviewer's small disk). Raises RuntimeError."""
     from osgeo import gdal
-    gdal.Translate(path, source, format="COG", creationOptions=options)  # (closed at once)
+    extra = {} if window is None else dict(srcWin=list(window))  # (xoff, yoff, xsize, ysize)
+    gdal.Translate(path, source, format="COG", creationOptions=options, **extra)  # (closed at once)
     size = os.path.getsize(path)
     ds = gdal.Open(path)
     band = ds.GetRasterBand(1)
@@ -189,6 +190,17 @@ class BlockGeoTIFF:
                 self._top[col0 + c] = np.minimum(self._top[col0 + c], row0 + top)
                 self._bottom[col0 + c] = np.maximum(self._bottom[col0 + c], row0 + bottom)
 
+    def _window(self, grid: Optional[GridSpec]):
+        """(xoff, yoff, xsize, ysize) of ``grid`` in this raster's cells; None for the whole raster."""
+        if grid is None or grid == self.grid:
+            return None
+        c = self.grid.cell
+        col0, row0 = int(round((grid.x0 - self.grid.x0) / c)), int(round((self.grid.top - grid.top) / c))
+        if abs(grid.cell - c) > 1e-9 * c or col0 < 0 or row0 < 0 or col0 + grid.ncols > self.grid.ncols \
+                or row0 + grid.nrows > self.grid.nrows:
+            raise ValueError(f"the grid {grid} is not a part of the raster's {self.grid}")
+        return col0, row0, grid.ncols, grid.nrows
+
     @property
     def valued_cells(self) -> int:
         """Cells written with a value so far."""
@@ -256,15 +268,17 @@ class BlockGeoTIFF:
             self._band = None
             self._ds = None
 
-    def finish(self, path: str, *, atomic: bool = True, name: Optional[str] = None) -> None:
+    def finish(self, path: str, *, atomic: bool = True, name: Optional[str] = None,
+               grid: Optional[GridSpec] = None) -> None:
         """Close the work raster and write the COG to ``path`` (atomically; ``atomic=False`` when
         ``path`` is already a staged temporary: a second one inside it, ``..dtm.tif.gs<pid>-<random>.part.tif
-        .gs<pid>-<random>.part.tif``, was not found by the next run's clean-up when a run was killed)."""
+        .gs<pid>-<random>.part.tif``, was not found by the next run's clean-up when a run was killed).
+        ``grid``: only this part of the raster (cells on the same lattice, inside it)."""
         path = check_raster_path(path) if atomic else os.fspath(path)
         name = name or path
         self.close()
         try:
             with (atomic_path(path) if atomic else contextlib.nullcontext(path)) as tmp:
-                _cog(tmp, self.work_path, COG_OPTIONS + ["PREDICTOR=YES"])
+                _cog(tmp, self.work_path, COG_OPTIONS + ["PREDICTOR=YES"], self._window(grid))
         except RuntimeError as err:
             raise OutputError(f"{name}: cannot write the DTM ({_gdal_reason(err, path)})") from err

@@ -214,3 +214,41 @@ def test_the_command_line_makes_the_dtm_and_reports_it_in_json(delivery, tmp_pat
     failed = json.loads(stdout.getvalue())
     assert code == 1 and failed["status"] == "failed" and "no point of class 9" in failed["error"]
     assert "Traceback" not in out.getvalue() and not (tmp_path / "none.tif").exists()
+
+
+@pytest.mark.parametrize("algorithm", [ClassGround(), "smrf"], ids=["classes", "smrf"])
+def test_a_tiled_dtm_spans_the_points_it_may_hold_as_a_whole_run(tmp_path, algorithm):
+    """5 noise points (class 7, ignored) 2 km away stretched a tiled DTM to 2,300 x 300 cells, and the
+    log said to class them as noise, which they were; the whole run's DTM was 300 x 300 (a surveyor).
+    The tiled DTM is now cut to the points that may enter it: the same grid as the whole run's, without
+    the warning; a stray point that is not ignored still stretches both, and is still named."""
+    from groundsieve.core.filters.smrf import SMRF
+    algorithm = SMRF() if algorithm == "smrf" else algorithm
+    rng = np.random.default_rng(6)
+    n = 90_000
+    x, y = rng.uniform(0, 300, n), rng.uniform(0, 300, n)
+    z = terrain(x, y) + rng.normal(0, 0.02, n)
+    cls = np.full(n, 2, np.uint8)
+    x[:5], y[:5], cls[:5] = 2300.0 - rng.uniform(0, 5, 5), 150.0, 7
+    src = tmp_path / "stray.laz"
+    write_las(new_las(x, y, z, classification=cls), str(src))
+    shapes, logs = {}, {}
+    for tiled in (False, True):
+        out, said = tmp_path / f"dtm{int(tiled)}.tif", []
+        run_ground_filter(str(src), None, algorithm, options=FilterOptions(keep_existing_classes=True,
+                                                                           tiling=_tiling(tiled)),
+                          dtm_path=str(out), log=said.append)
+        values, x0, top, cell = _read(out)
+        shapes[tiled], logs[tiled] = (values.shape, x0, top), "\n".join(said)
+    assert shapes[True] == shapes[False] and shapes[False][0] == (300, 300)
+    assert "lie far from the others" not in logs[True] and "cut to the 300 x 300 cells" in logs[True]
+    # not ignored: the stray points stretch the DTM, whole and tiled, and both say so
+    cls[:5] = 1
+    write_las(new_las(x, y, z, classification=cls), str(src))
+    for tiled in (False, True):
+        out, said = tmp_path / f"far{int(tiled)}.tif", []
+        run_ground_filter(str(src), None, algorithm, options=FilterOptions(keep_existing_classes=True,
+                                                                           tiling=_tiling(tiled)),
+                          dtm_path=str(out), log=said.append)
+        assert _read(out)[0].shape[1] > 2000, tiled
+        assert any("lie far from the others" in line for line in said), tiled
