@@ -14,7 +14,7 @@ from qgis.core import (Qgis, QgsCoordinateTransform, QgsCsException, QgsFeature,
 from qgis.PyQt.QtCore import QVariant
 from qgis.PyQt.QtGui import QIcon
 
-from .base import check_parameter_values, core_modules, dialog_help
+from .base import check_parameter_values, core_modules, destination_folder_problem, dialog_help
 from .discovery import TAGS, Discoverable
 
 _ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
@@ -176,11 +176,18 @@ checkpoints.</p>""")
         try:
             mapping = parse_land_cover_mapping(self.parameterAsString(parameters, self.LAND_COVER_MAP, context) or "")
             accuracy.check_accuracy_outputs([dtm_path], report)
+            if parameters.get(self.OUTPUT):  # (its folder, before the work: a failed run leaves no report)
+                why = destination_folder_problem(self.label(self.OUTPUT),
+                                                 self.parameterAsOutputLayer(parameters, self.OUTPUT, context))
+                if why:
+                    raise QgsProcessingException(why)
             x, y, z, ids, covers, geometries = self.readCheckpoints(parameters, context, feedback, source, layer,
                                                                     mapping, land_cover_of, errors)
             result = accuracy.check_accuracy(
                 dtm_path, x, y, z, ids=ids, land_cover=covers, band=self.parameterAsInt(parameters, self.BAND, context),
                 name=f"DTM '{layer.name()}' ({dtm_path})", checkpoints_name=points_name)
+            # the layer first: should QGIS fail to create it, no report is left behind (a surveyor)
+            sink_id = self.writeResiduals(parameters, context, source, result, geometries)
             accuracy.write_report(report, result)
         except errors.GroundSieveError as err:
             raise QgsProcessingException(str(err)) from err
@@ -194,7 +201,6 @@ checkpoints.</p>""")
                    self.VVA95: result.vva.ed1_95 if result.vva else None,
                    self.NVA_RMSEZ: result.nva.rmse if result.nva else None,
                    self.VVA_RMSEZ: result.vva.rmse if result.vva else None}
-        sink_id = self.writeResiduals(parameters, context, source, result, geometries)
         if sink_id is not None:
             results[self.OUTPUT] = sink_id
         return results
@@ -219,7 +225,7 @@ checkpoints.</p>""")
                 raise QgsProcessingException("cancelled by the user")
             feedback.setProgress(90.0 * k / total)
             fid = _text(feature[id_field]) if id_field else str(feature.id())
-            where = f"{label} '{source.sourceName()}', feature {feature.id()}"
+            where = f"{label} '{source.sourceName()}', feature {feature.id()}" + (f" ('{fid}')" if id_field else "")
             geometry = feature.geometry()
             if geometry is None or geometry.isNull() or geometry.isEmpty():
                 empty.append(fid)
@@ -234,8 +240,10 @@ checkpoints.</p>""")
             if z_field:
                 height = _number(feature[z_field])
                 if height is None:
+                    value = _text(feature[z_field])
                     raise QgsProcessingException(f"{where}, {self.label(self.Z_FIELD).split(' (')[0]} '{z_field}': "
-                                                 f"'{_text(feature[z_field])}' is not a number")
+                                                 + (f"'{value}' is not a number" if value else
+                                                    "empty (NULL): give the checkpoint its height, or remove it"))
             vertices = list(geometry.vertices())
             for part, vertex in enumerate(vertices, 1):
                 height_here = height if z_field else vertex.z()

@@ -17,7 +17,8 @@ count, mean error (bias), standard deviation (n - 1), RMSEz, minimum, maximum, a
 
 - Edition 1 (2014): NVA at the 95 % confidence level = 1.96 x RMSEz (errors taken as normal); VVA at
   the 95th percentile of |dz| (vegetated errors are not normal).
-- Edition 2 (2023): the 95 % figures are dropped; NVA and VVA are each reported as their RMSEz.
+- Edition 2 (2023): the 95 % figures are dropped; NVA and VVA are each reported as their RMSEz. Its
+  product accuracy also counts the checkpoints' own survey accuracy: not included here (:data:`ED2_NOTE`).
 
 Checkpoints with |dz| > 3 x their class's RMSEz (the overall RMSEz for unlabelled ones) are named as
 outliers and kept in every figure: removing them is the surveyor's decision. A class with fewer than
@@ -49,6 +50,10 @@ OUTLIER_FACTOR = 3.0
 #: or beyond the edge); skipped: outside the raster, or on nodata
 BILINEAR, CELL, OUTSIDE, NODATA = "bilinear", "cell", "outside", "nodata"
 USED = (BILINEAR, CELL)
+#: what the Edition 2 figures here leave out (a surveyor: a reviewer would not take them as Edition 2's
+#: product accuracy without it)
+ED2_NOTE = "of the DTM against the checkpoints; Edition 2's product accuracy also counts the checkpoints' own survey " \
+           "accuracy, which is not included here"
 SIGN_CONVENTION = "dz = DTM - checkpoint z (positive: the DTM lies above the checkpoint)"
 
 
@@ -311,6 +316,9 @@ def _warnings(n, status, ids, labelled, classes, covers, used, outliers, checkpo
     if not labelled and int(used.sum()) < MIN_CHECKPOINTS:
         warnings.append(f"{int(used.sum())} checkpoint(s) used, fewer than the {MIN_CHECKPOINTS} the ASPRS standards "
                         "ask for: the figures are weakly supported")
+    elif int(used.sum()) < MIN_CHECKPOINTS_ED2:  # (a surveyor: 25 were used without a word)
+        warnings.append(f"{int(used.sum())} checkpoint(s) used, fewer than the {MIN_CHECKPOINTS_ED2} ASPRS Edition 2 "
+                        "(2023) asks for a product's accuracy assessment")
     if outliers:
         warnings.append(f"{len(outliers)} outlier(s), |dz| > {OUTLIER_FACTOR:g} x their class's RMSEz, kept in every "
                         f"figure: {_some(outliers)}")
@@ -388,7 +396,7 @@ def summary_lines(result: AccuracyResult) -> list:
              f"min {o.min:+.4f}{u}, max {o.max:+.4f}{u}."]
     for f in result.by_class():
         lines.append(f"{f.land_cover} ({f.count} checkpoint{'s' if f.count != 1 else ''}): RMSEz {f.rmse:.4f}{u} (ASPRS Edition 2, 2023: "
-                     f"{f.land_cover} = RMSEz); {f.land_cover} at 95 % {f.ed1_95:.4f}{u} (Edition 1, 2014: "
+                     f"{f.land_cover} = RMSEz, {ED2_NOTE}); {f.land_cover} at 95 % {f.ed1_95:.4f}{u} (Edition 1, 2014: "
                      f"{f.ed1_label}); mean {f.mean:+.4f}{u}.")
     return lines
 

@@ -10,7 +10,7 @@ from typing import Optional
 
 import numpy as np
 
-from .accuracy import (MIN_CHECKPOINTS, MIN_CHECKPOINTS_ED2, NVA_FACTOR, OUTLIER_FACTOR, SIGN_CONVENTION, USED,
+from .accuracy import (ED2_NOTE, MIN_CHECKPOINTS, MIN_CHECKPOINTS_ED2, NVA_FACTOR, OUTLIER_FACTOR, SIGN_CONVENTION, USED,
                        AccuracyResult, Figures, residual_rows)
 
 NAMES = {"all": "All checkpoints used", "NVA": "NVA (non-vegetated)", "VVA": "VVA (vegetated)"}
@@ -109,7 +109,7 @@ tr.outlier td {{ background: #fde2e2; }} tr.skipped td {{ color: #888; }}
                  f"non-vegetated vertical accuracy (NVA) at the 95 % confidence level = {NVA_FACTOR} x RMSEz, which "
                  "assumes normally distributed errors; vegetated vertical accuracy (VVA) at the 95th percentile of the "
                  "absolute errors, as vegetated errors need not be normal. Edition 2 (2023) dropped the 95 % figures: "
-                 "NVA and VVA are each reported as their RMSEz. The Edition 1 figure of all checkpoints together is "
+                 "NVA and VVA are each reported as their RMSEz; the RMSEz here is " + html.escape(ED2_NOTE) + ". The Edition 1 figure of all checkpoints together is "
                  "1.96 x RMSEz (the NSSDA's AccuracyZ). Standard deviation with n - 1; percentile by linear "
                  "interpolation between the sorted |dz|.</p>")
     if result.warnings:

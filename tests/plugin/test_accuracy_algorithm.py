@@ -3,6 +3,7 @@ of known heights (written by the core's own write_geotiff, so bilinear interpola
 layers of checkpoints with known offsets (PointZ, or 2D with a height field, or in another CRS), and
 the figures, report and residual layer checked against those offsets."""
 import json
+import os
 import subprocess
 from pathlib import Path
 
@@ -209,3 +210,25 @@ def test_qgis_process_runs_it_on_files(groundsieve_provider, dtm, tmp_path):
     assert results["NVA_RMSEZ"] == pytest.approx(0.05, abs=1e-9)
     assert results["VVA95"] == pytest.approx(np.percentile(dz[20:], 95), abs=1e-9)
     assert report.exists()
+
+
+def test_a_run_that_cannot_write_its_layer_leaves_no_report_and_a_null_height_is_named(groundsieve_provider, dtm,
+                                                                                       tmp_path):
+    """A residual layer in a missing folder failed after the report was written, which stayed behind (a
+    surveyor); it is refused before the work now. An empty (NULL) height is named as such, with the
+    checkpoint's id."""
+    import processing
+    from qgis.core import NULL, QgsProcessingException
+    x, y, z, ids, _cover, _dz = checkpoints()
+    layer = add_points(memory_layer("EPSG:32633", ["name:string"]), [((x[i], y[i], z[i]), [ids[i]]) for i in range(30)])
+    report = tmp_path / "r.html"
+    with pytest.raises(QgsProcessingException, match="does not exist"):
+        processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": layer, "OUTPUT_HTML": str(report),
+                                                "OUTPUT": str(tmp_path / "nowhere" / "dz.gpkg")})
+    assert os.listdir(tmp_path) == []
+    flat = add_points(memory_layer("EPSG:32633", ["name:string", "h:double"], z_geometry=False),
+                      [((x[i], y[i]), [ids[i], NULL if i == 2 else float(z[i])]) for i in range(5)])
+    with pytest.raises(QgsProcessingException, match=r"feature \d+ \('CP3'\), Checkpoint elevation field 'h': empty "
+                                                     r"\(NULL\)"):
+        processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": flat, "Z_FIELD": "h", "ID_FIELD": "name",
+                                                "OUTPUT_HTML": str(report)})
