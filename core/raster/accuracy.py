@@ -43,6 +43,10 @@ NVA_FACTOR = 1.96
 MIN_CHECKPOINTS = 20
 #: ASPRS Edition 2 (2023)'s minimum for a product's accuracy assessment
 MIN_CHECKPOINTS_ED2 = 30
+#: in a DTM that declares no nodata value, a cell at or below this is nodata all the same (the usual -9999,
+#: -32767, -3.4e38: no DTM of a lidar or photogrammetric survey lies 9,999 m or ft below its datum); a
+#: surveyor's DTM without its nodata tag gave an RMSEz of 10,164 m, the -9999 cells blended into the samples
+UNDECLARED_NODATA = -9999.0
 #: |dz| above this many times its class's RMSEz names a checkpoint an outlier
 OUTLIER_FACTOR = 3.0
 
@@ -177,6 +181,9 @@ class _Raster:
         self.ncols, self.nrows = self.ds.RasterXSize, self.ds.RasterYSize
         self.crs_wkt = self.ds.GetProjection() or None
         self.unit = self.band.GetUnitType() or ""
+        #: without a declared nodata value, cells at or below UNDECLARED_NODATA are taken as nodata; counted
+        self.declared = self.band.GetNoDataValue() is not None
+        self.undeclared = 0
 
     def extent(self) -> Tuple[float, float, float, float]:
         xs = (self.x0, self.x0 + self.ncols * self.dx)
@@ -186,8 +193,13 @@ class _Raster:
     def window(self, row: int, col: int, rows: int, cols: int) -> np.ndarray:
         """The values of the window (NaN where nodata or masked)."""
         values = self.band.ReadAsArray(col, row, cols, rows).astype(np.float64)
-        valid = self.mask.ReadAsArray(col, row, cols, rows) != 0
-        return np.where(valid & np.isfinite(values), values, np.nan)
+        valid = (self.mask.ReadAsArray(col, row, cols, rows) != 0) & np.isfinite(values)
+        if not self.declared:
+            sentinel = valid & (values <= UNDECLARED_NODATA)
+            if sentinel.any():
+                self.undeclared += 1
+                valid &= ~sentinel
+        return np.where(valid, values, np.nan)
 
     def sample(self, x: float, y: float) -> Tuple[float, str]:
         """(the DTM's height at x, y, how it was sampled)."""
@@ -250,7 +262,7 @@ def check_accuracy(dtm_path: str, x, y, z, *, ids: Optional[Sequence[str]] = Non
     raster = _Raster(dtm_path, int(band), name)
     try:
         sampled = [raster.sample(float(a), float(b)) for a, b in zip(x, y)]
-        extent, unit = raster.extent(), raster.unit
+        extent, unit, undeclared = raster.extent(), raster.unit, raster.undeclared
         if not unit and raster.crs_wkt:
             from .crs import elevation_unit
             unit = elevation_unit(raster.crs_wkt)
@@ -283,6 +295,18 @@ def check_accuracy(dtm_path: str, x, y, z, *, ids: Optional[Sequence[str]] = Non
                 if abs(dz[i]) > OUTLIER_FACTOR * classes.get(covers[i], overall).rmse]
     warnings = _warnings(n, status, ids, labelled, classes, covers_arr, used, [ids[i] for i in outliers],
                          checkpoints_name, unit)
+    if undeclared:
+        warnings.append(f"{name} declares no nodata value, but holds cells of {UNDECLARED_NODATA:g} or less next to "
+                        f"{undeclared} checkpoint(s): taken as nodata (an undeclared nodata value such as -9999?); "
+                        "declare it, e.g. gdal_edit.py -a_nodata -9999")
+    places = {}
+    for i in range(n):
+        places.setdefault((x[i], y[i]), []).append(ids[i])
+    twins = [names for names in places.values() if len(names) > 1]
+    if twins:  # (a surveyor's CSV with two checkpoints listed twice counted them twice)
+        warnings.append(f"{sum(len(t) for t in twins)} checkpoints share their x and y with another "
+                        f"({'; '.join(' = '.join(t) for t in twins[:6])}{'; ...' if len(twins) > 6 else ''}): each is "
+                        "counted in every figure; remove the repeats if they are the same shot")
     return AccuracyResult(dtm=name, checkpoints=checkpoints_name, x=x, y=y, z=z, dtm_z=np.where(used, dtm_z, np.nan),
                           dz=dz, ids=ids, land_cover=covers, status=status, unit=unit, labelled=labelled,
                           overall=overall, nva=classes.get(NVA), vva=classes.get(VVA), outlier_indices=tuple(outliers),
