@@ -1518,7 +1518,7 @@ def _tile_job(job) -> Optional[dict]:
             dtm_own = int(np.count_nonzero(in_dtm & own))
             block = _dtm_block(cloud, in_dtm, job["dtm"], job["dtm_grid"], job["bounds"], job["buffer"])
             if options.keep_existing_classes:
-                kept_out = workflow.kept_out_of_dtm(cloud, cls, area & own & ~in_dtm, job["dtm"])
+                kept_out = workflow.kept_out_of_dtm(cloud, cls, area & own & ~in_dtm, job["dtm"], job["algorithm"])
         result = dict(key=list(job["key"]), own=int(own.sum()), read=len(cloud), ground=int(ground[own].sum()),
                       dtm_points=dtm_own, assigned=assigned, block=block, class_parts=class_parts, copc_read=copc_read,
                       kept_out=sorted(kept_out.items()), replaced=sorted(replaced.items()),

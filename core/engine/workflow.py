@@ -326,10 +326,17 @@ def dtm_points(cloud: PointCloud, ground: np.ndarray, processable_mask: np.ndarr
 
 
 def kept_out_of_dtm(cloud: PointCloud, classification: np.ndarray, processable_mask: np.ndarray,
-                    options: DTMOptions) -> dict:
+                    options: DTMOptions, algorithm=None) -> dict:
     """{class: points} of the processable points that kept a class of their own (kept classes:
-    neither 0, 1 nor 2) and stay out of the DTM (not one of ``options.classes``)."""
-    out = ~np.isin(classification, REWRITTEN_CLASSES) & processable_mask
+    neither 0, 1 nor 2) and stay out of the DTM (not one of ``options.classes``). For an algorithm whose
+    ground is the input's classes (``ground_of_any_class``), every class of the input left out, 0, 1 and 2
+    too (the DTM from classes said nothing of the class 2 it left out when given other classes: a surveyor):
+    give it ``processable_mask`` without the ground."""
+    if getattr(algorithm, "ground_of_any_class", False):
+        classification = cloud.classification
+        out = processable_mask.copy()
+    else:
+        out = ~np.isin(classification, REWRITTEN_CLASSES) & processable_mask
     if options.classes:
         out &= ~np.isin(cloud.classification, options.classes)
     codes, counts = np.unique(classification[out], return_counts=True)
@@ -337,17 +344,31 @@ def kept_out_of_dtm(cloud: PointCloud, classification: np.ndarray, processable_m
 
 
 def kept_out_note(counts: dict, algorithm=None) -> str:
-    """The log's line on points kept in classes of their own and left out of the DTM ("" if none);
-    ``algorithm`` may name where a class is added to the DTM (``dtm_classes_words``: the DTM from
-    classes takes its ground classes, not the DTM classes)."""
+    """The log's line on points kept in classes of their own and left out of the DTM ("" if none); for an
+    ``algorithm`` whose ground is the input's classes (the DTM from classes), on every class left out."""
     if not counts:
         return ""
     from ..io.clouds import ASPRS_NAMES
-    where = getattr(algorithm, "dtm_classes_words", "the DTM classes")
     parts = ", ".join(f"{c} ({ASPRS_NAMES.get(c, 'class ' + str(c))}): {n:,}" for c, n in sorted(counts.items()))
+    if getattr(algorithm, "ground_of_any_class", False):
+        return f"DTM: {sum(counts.values()):,} points of other classes stay out of it ({parts})."
     return (f"DTM: {sum(counts.values()):,} points kept in classes of their own are not ground and stay out of "
             f"it ({parts}); the DTM is interpolated across them. To make it hold a class (e.g. 9, the water "
-            f"surface, for a flood model), name it in {where}.")
+            "surface, for a flood model), name it in the DTM classes.")
+
+
+def check_classes_wanted(input_path: str, algorithm, options: FilterOptions) -> None:
+    """Refuse, before any work, a run whose ground is the input's classes (``ground_of_any_class``) on a
+    text file, which has none, or with a ground class that is also ignored (a surveyor's ``--classes 2
+    --ignore-classes 2`` ran, and said the file had no point of class 2)."""
+    if not getattr(algorithm, "ground_of_any_class", False):
+        return
+    if _ext(input_path) in TEXT_EXTENSIONS:
+        raise InputError(f"{input_path}: a text file carries no classes; give a classified LAS/LAZ file")
+    both = sorted(set(getattr(algorithm, "classes", ())) & set(options.ignored))
+    if both:
+        raise InvalidParameterError(f"the ground classes and the ignored classes both name {_codes(both)}: a class "
+                                    "cannot make the DTM and be left out of it")
 
 
 def check_model_units(algorithm, input_path: str, crs_wkt, log) -> None:
@@ -441,7 +462,7 @@ def check_dtm_memory(x, y, options: DTMOptions) -> GridSpec:
                                  closed=True)
 
 
-def _say_stray_points(x, y, grid: GridSpec, log) -> None:
+def _say_stray_points(x, y, grid: GridSpec, log, unit: str = "m") -> None:
     """Say when a few points far from the others stretch the DTM (one stray point 20 km away made a
     reviewer's DTM 80,120 x 240 cells, 0.3 % of them with a value)."""
     from ..grids.spec import isolated_points
@@ -452,7 +473,7 @@ def _say_stray_points(x, y, grid: GridSpec, log) -> None:
     if grid.nrows * grid.ncols < 2 * core_cells:
         return
     k = int(np.argmax(distance))
-    log(f"{WARNING_PREFIX}DTM: {far.size:,} point(s) lie far from the others (the farthest {distance[k]:,.0f} m away, at x "
+    log(f"{WARNING_PREFIX}DTM: {far.size:,} point(s) lie far from the others (the farthest {distance[k]:,.0f} {unit} away, at x "
         f"{x[far[k]]:,.2f}, y {y[far[k]]:,.2f}): the DTM spans them, {grid.ncols:,} x {grid.nrows:,} cells, mostly "
         "empty. Class them as noise (7) to leave them out, or crop the cloud.")
 
@@ -467,8 +488,9 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions, why_none: str = "
     with memory_budget(options.memory_budget_bytes):
         grid = GridSpec.covering(x, y, options.cell_size_m, what="DTM", bytes_per_cell=DTM_BYTES_PER_CELL,
                                  closed=True)
+    unit = length_label(options.metres_per_unit)  # (a cloud in feet: its lengths in feet)
     if log is not None:
-        _say_stray_points(x, y, grid, log)
+        _say_stray_points(x, y, grid, log, unit)
         if grid.ncols * grid.nrows < 16:  # (a corridor, 400 x 2 cells, is a DTM of its own)
             log(f"{WARNING_PREFIX}DTM: a cell of {options.cell_size_m:g} makes {grid.ncols:,} x {grid.nrows:,} cells over "
                 f"points spanning {float(np.ptp(x)):,.1f} x {float(np.ptp(y)):,.1f}: a DTM of a few cells. The cell "
@@ -481,14 +503,13 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions, why_none: str = "
     # engine, runs on one core: its workers run the tiles in parallel)
     dtm = tin_dtm(x[ground], y[ground], z[ground], grid, fill_outside=options.fill_outside_hull,
                   points_per_cell=options.points_per_cell, threads=None, steps=steps, log=log,
-                  max_distance=options.max_distance_m)
+                  max_distance=options.max_distance_m, unit=unit)
     if log is not None and not options.fill_outside_hull:
-        note = dtm_spacing_note(int(ground.sum()), int(np.count_nonzero(np.isfinite(dtm))), grid.cell,
-                                length_label(options.metres_per_unit))
+        note = dtm_spacing_note(int(ground.sum()), int(np.count_nonzero(np.isfinite(dtm))), grid.cell, unit)
         if note:
             log(note)
         if not options.max_distance_m:
-            note = data_gaps_note(x, y, dtm, grid, length_label(options.metres_per_unit))
+            note = data_gaps_note(x, y, dtm, grid, unit)
             if note:
                 log(note)
     if log is not None:
@@ -679,6 +700,7 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     steps = Steps(progress, is_cancelled)
     log = log or (lambda _msg: None)
     rasters = {path: fn for path, fn in (rasters or {}).items() if path}
+    check_classes_wanted(input_path, algorithm, options)
     describe = getattr(algorithm, "describe", None)
     if callable(describe):  # a filter whose parameters are not a table's (the hybrid: its model)
         log(describe())
@@ -730,15 +752,16 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     if dtm_path and area.any():  # a DTM too large for the memory is refused before the filter's work
         check_dtm_memory(*_where(area, cloud.x, cloud.y), dtm)
     steps.report(at_filter)
-    log(f"Filtering ({type(algorithm).__name__}) ...")
+    log(getattr(algorithm, "stage_line", "") or f"Filtering ({type(algorithm).__name__}) ...")
     done = classify_cloud(cloud, algorithm, options, steps.sub(at_filter, at_dtm), log)
     cls, ground = done.classification, done.ground
-    log(f"Ground: {int(ground.sum()):,} of {int(done.filtered.sum()):,} filtered points.")
+    log(f"Ground: {int(ground.sum()):,} of {int(done.filtered.sum()):,} "
+        + ("points, of the ground classes." if getattr(algorithm, "ground_of_any_class", False) else "filtered points."))
     run = FilterRun(cloud, cls, ground, done.filtered, detail=done.detail, algorithm=algorithm)
     if dtm_path:
         # The DTM spans only the points that may enter it: not withheld, not ignored (noise may lie far away).
         area = done.processable
-        note = kept_out_note(kept_out_of_dtm(cloud, cls, area & ~ground, dtm), algorithm) if options.keep_existing_classes else ""
+        note = kept_out_note(kept_out_of_dtm(cloud, cls, area & ~ground, dtm, algorithm), algorithm) if options.keep_existing_classes else ""
         if note:
             log(note)
         run.dtm_grid, run.dtm = make_dtm(*_where(area, cloud.x, cloud.y, cloud.z, dtm_points(cloud, ground, area, dtm)),

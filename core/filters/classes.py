@@ -51,8 +51,6 @@ class ClassGround:
     #: its ground is of any class (water 9 as well as ground 2): with the input's classes kept, it stays
     #: ground and keeps its class (workflow.classify_cloud)
     ground_of_any_class = True
-    #: the engine's note on the classes left out of the DTM says where to add one
-    dtm_classes_words = "the ground classes"
     #: A tiled run's buffer (m): a tile's DTM cells are triangulated from the ground of the tile and
     #: of this much around it, so a gap in the ground up to this wide (a building, a pond without
     #: returns) is bridged as one triangulation of the whole survey bridges it; wider gaps may show the
@@ -60,6 +58,11 @@ class ClassGround:
     reach_m = 40.0
     #: a tile or a whole run costs no memory beyond its points and the DTM's (tiles.whole_run_bytes)
     extra_bytes_per_point = 0
+
+    @property
+    def stage_line(self) -> str:
+        """What the engine's log says as the stage starts (it filters nothing)."""
+        return f"Taking the points of the classes {', '.join(str(c) for c in self.classes)} as the ground ..."
 
     @property
     def no_ground_in_survey(self) -> str:

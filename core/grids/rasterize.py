@@ -263,7 +263,7 @@ def _strips_tin(xs, ys, zs, grid: GridSpec, threads: int, out: np.ndarray) -> tu
 
 def tin_dtm(x, y, z, grid: GridSpec, *, fill_outside: bool = False, points_per_cell: int = 4,
             triangulator: str = "sweep", threads: Optional[int] = 1, steps: Optional[Steps] = None,
-            log: Optional[Callable[[str], None]] = None, max_distance: float = 0.0) -> np.ndarray:
+            log: Optional[Callable[[str], None]] = None, max_distance: float = 0.0, unit: str = "m") -> np.ndarray:
     """DTM of ``grid`` by linear interpolation on the Delaunay triangulation of the
     points (normally the ground points). Cells whose centre is outside the convex
     hull are NaN, or with ``fill_outside`` take the value of the nearest filled cell.
@@ -322,9 +322,9 @@ def tin_dtm(x, y, z, grid: GridSpec, *, fill_outside: bool = False, points_per_c
     steps.report(0.1)
     if log is not None:
         log(f"DTM: triangulating {xs.size:,} ground points ({x.size:,} before thinning to at most "
-            f"{points_per_cell} per cell), {grid.ncols:,} x {grid.nrows:,} cells of {grid.cell:g} m ..."
+            f"{points_per_cell} per cell), {grid.ncols:,} x {grid.nrows:,} cells of {grid.cell:g} {unit} ..."
             if points_per_cell else f"DTM: triangulating {xs.size:,} ground points, {grid.ncols:,} x "
-            f"{grid.nrows:,} cells of {grid.cell:g} m ...")
+            f"{grid.nrows:,} cells of {grid.cell:g} {unit} ...")
     rate = SWEEP_S_PER_POINT if triangulator == "sweep" else QHULL_S_PER_POINT
     if threads is None:
         import numba

@@ -88,7 +88,7 @@ def test_the_dtm_is_the_ground_class_under_roofs_and_trees(delivery, tmp_path, t
     ground = run.ground_count
     assert ground == int(np.sum(_classes(delivery) == 2))
     text = "\n".join(logs)
-    assert "5 (high vegetation)" in text and "6 (building)" in text and "name it in the ground classes" in text
+    assert "points of other classes stay out of it" in text and "5 (high vegetation)" in text and "6 (building)" in text
 
 
 def _classes(path):
@@ -157,10 +157,13 @@ def test_the_dtm_cell_default_follows_a_cloud_in_feet(tmp_path):
     src = tmp_path / "feet.laz"
     write_las(las, str(src))
     for dtm, cell in ((DTMOptions(), 3937.0 / 1200.0), (DTMOptions(cell_size_m=2.0, cell_set=True), 2.0)):
-        out = tmp_path / "dtm.tif"
+        out, logs = tmp_path / "dtm.tif", []
         run_ground_filter(str(src), None, ClassGround(), options=FilterOptions(keep_existing_classes=True),
-                          dtm_path=str(out), dtm=dtm)
+                          dtm_path=str(out), dtm=dtm, log=logs.append)
         assert _read(out)[3] == pytest.approx(cell, rel=1e-4)
+        # the log's lengths in feet too (the triangulation's line said "cells of 3.28083 m": a surveyor)
+        (line,) = [text for text in logs if text.startswith("DTM: triangulating")]
+        assert line.endswith(f"cells of {cell:g} ft ..."), line
 
 
 @pytest.mark.parametrize("given, message", [("", "name at least one class"), ("2,x", "'x' is not a class code"),
@@ -252,3 +255,30 @@ def test_a_tiled_dtm_spans_the_points_it_may_hold_as_a_whole_run(tmp_path, algor
                           dtm_path=str(out), log=said.append)
         assert _read(out)[0].shape[1] > 2000, tiled
         assert any("lie far from the others" in line for line in said), tiled
+
+
+@pytest.mark.parametrize("tiled", [False, True], ids=["whole", "tiled"])
+def test_every_class_left_out_is_counted_and_a_contradiction_is_refused(delivery, tmp_path, tiled):
+    """With --classes 9 the log named the classes 3-17 left out but not the 2 (nor 1 and 0), and
+    --classes 2 --ignore-classes 2 ran and said the file had no class 2 (a surveyor); a text file, which
+    has no classes, was read as points of class 0. The counts now name every class of the input left out;
+    the other two are refused before any work."""
+    logs = []
+    out = tmp_path / "dtm.tif"
+    run_ground_filter(str(delivery), None, ClassGround("5"), options=FilterOptions(keep_existing_classes=True,
+                                                                                 tiling=_tiling(tiled)),
+                      dtm_path=str(out), log=logs.append)
+    classes = _classes(delivery)
+    (line,) = [text for text in logs if "points of other classes stay out of it" in text]
+    assert f"2 (ground): {int(np.sum(classes == 2)):,}" in line and f"6 (building): {int(np.sum(classes == 6)):,}" in line
+    assert "5 (high vegetation)" not in line and "7 (" not in line  # the ground class; the ignored noise
+    assert any(text.startswith("Taking the points of the classes 5 as the ground") for text in logs) or tiled
+    with pytest.raises(InvalidParameterError, match=r"the ground classes and the ignored classes both name \(2\)"):
+        run_ground_filter(str(delivery), None, ClassGround("2"),
+                          options=FilterOptions(keep_existing_classes=True, ignore_classes="2,7",
+                                                tiling=_tiling(tiled)), dtm_path=str(tmp_path / "no.tif"))
+    text = tmp_path / "isprs.txt"
+    text.write_text("0 0 1 0\n1 0 1 0\n0 1 1 1\n")
+    with pytest.raises(InputError, match="a text file carries no classes"):
+        run_ground_filter(str(text), None, ClassGround(), dtm_path=str(tmp_path / "t.tif"))
+    assert not (tmp_path / "no.tif").exists() and not (tmp_path / "t.tif").exists()
