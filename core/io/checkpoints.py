@@ -51,8 +51,9 @@ class UnknownLandCover(InputError):
 
 
 def _key(text: str) -> str:
-    """``text`` lower case without spaces, ``_``, ``-`` and dots: "Land_Cover" and "land cover" alike."""
-    return re.sub(r"[\s_\-.]", "", str(text)).lower()
+    """``text`` lower case without spaces, ``_``, ``-``, dots and a unit in brackets: "Land_Cover" and "land
+    cover" alike, "Easting (m)" and "Elevation [ft]" as "easting" and "elevation" (a surveyor's export)."""
+    return re.sub(r"[\s_\-.]", "", re.sub(r"\s*[(\[][^)\]]*[)\]]\s*$", "", str(text))).lower()
 
 
 @dataclass(frozen=True)

@@ -277,10 +277,15 @@ def check_accuracy(dtm_path: str, x, y, z, *, ids: Optional[Sequence[str]] = Non
     if not used.any():
         outside = sum(1 for s in status if s == OUTSIDE)
         if outside == n:
+            # x and y swapped (a PNEZD file read without its header: northing first) fall on it swapped back
+            swapped = np.count_nonzero((y >= extent[0]) & (y <= extent[2]) & (x >= extent[1]) & (x <= extent[3]))
             raise InputError(
                 f"none of the {n} checkpoints of {checkpoints_name} falls on {name} (the DTM covers x "
                 f"{extent[0]:,.2f}-{extent[2]:,.2f}, y {extent[1]:,.2f}-{extent[3]:,.2f}; the checkpoints x {_range(x)}, "
-                f"y {_range(y)}): are they in another CRS than the DTM?")
+                f"y {_range(y)}): " + (
+                    f"their x and y look swapped ({swapped} of them fall on it as y, x): a file with the northing "
+                    "first (PNEZD) needs a header naming its columns, e.g. Point,Northing,Easting,Elevation"
+                    if swapped else "are they in another CRS than the DTM?"))
         raise InputError(f"none of the {n} checkpoints of {checkpoints_name} falls on a value of {name} "
                          f"({n - outside} on nodata, {outside} outside it)")
     dz = np.where(used, dtm_z - z, np.nan)

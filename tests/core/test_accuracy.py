@@ -376,3 +376,21 @@ def test_an_undeclared_nodata_value_and_repeated_checkpoints_are_said(tmp_path):
     said = " ".join(r.warnings)
     assert "declares no nodata value" in said and "-9999 or less" in said
     assert "4 checkpoints share their x and y with another (P0 = P40; P1 = P41)" in said
+
+
+def test_headers_with_units_and_a_pnezd_file_without_header(dtm, tmp_path):
+    """'Easting (m)' and 'Elevation [m]' were refused as headers, and a PNEZD file without its header read
+    its northings as x: 'none falls on the DTM: another CRS?' (a surveyor). Units in brackets are read past,
+    and swapped coordinates are named as such."""
+    from groundsieve.core.io.checkpoints import read_checkpoints
+    x, y = points(30, seed=7)
+    z = plane(x, y) + 0.03
+    with_units = tmp_path / "units.csv"
+    with_units.write_text("Point,Northing (m),Easting (m),Elevation [m]\n"
+                          + "".join(f"P{i},{y[i]:.3f},{x[i]:.3f},{z[i]:.3f}\n" for i in range(30)))
+    r = A.check_accuracy_of(dtm, read_checkpoints(str(with_units)))
+    assert r.count == 30 and r.overall.rmse == pytest.approx(0.03, abs=2e-3)
+    bare = tmp_path / "pnezd.csv"
+    bare.write_text("".join(f"P{i},{y[i]:.3f},{x[i]:.3f},{z[i]:.3f},road\n" for i in range(30)))
+    with pytest.raises(InputError, match=r"x and y look swapped \(30 of them fall on it as y, x\)"):
+        A.check_accuracy_of(dtm, read_checkpoints(str(bare), mapping={"road": "NVA"}))
