@@ -266,7 +266,11 @@ checkpoints.</p>""")
         if empty:
             feedback.pushWarning(f"{len(empty)} checkpoint(s) without a geometry left out: {', '.join(empty[:12])}")
         if not x:
-            raise QgsProcessingException(f"{label} '{source.sourceName()}': holds no points")
+            raise QgsProcessingException(
+                f"{label} '{source.sourceName()}': holds no points" + (
+                    f" ({len(empty)} feature(s), none with a geometry: a table such as a CSV opened without its "
+                    "coordinates? Add it as a delimited text layer with its X and Y fields, or give the file to "
+                    "'python -m groundsieve accuracy')" if empty else ""))
         return x, y, z, ids, (covers if cover_field else None), geometries
 
     def transformTo(self, source, layer, context, feedback):  # noqa: N802

@@ -232,3 +232,18 @@ def test_a_run_that_cannot_write_its_layer_leaves_no_report_and_a_null_height_is
                                                      r"\(NULL\)"):
         processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": flat, "Z_FIELD": "h", "ID_FIELD": "name",
                                                 "OUTPUT_HTML": str(report)})
+
+
+def test_a_table_without_geometries_is_named_as_such(groundsieve_provider, dtm, tmp_path):
+    """A CSV given as it is (a table, no geometry) said '60 checkpoint(s) without a geometry left out' and
+    'holds no points' (a surveyor): it now says what to do."""
+    import processing
+    from qgis.core import QgsProcessingException, QgsVectorLayer
+    table = tmp_path / "cp.csv"
+    table.write_text("id,x,y,z\nA,500050,5000150,82\nB,500060,5000140,83\n")
+    layer = QgsVectorLayer(str(table), "cp", "ogr")
+    assert layer.isValid() and not layer.isSpatial()
+    with pytest.raises(QgsProcessingException, match=r"holds no points \(2 feature\(s\), none with a geometry: .*"
+                                                     r"delimited text layer with its X and Y fields"):
+        processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": layer, "Z_FIELD": "z",
+                                                "OUTPUT_HTML": str(tmp_path / "r.html")})
