@@ -1,11 +1,15 @@
 """`make demo`: generate a synthetic scene with known truth, run groundsieve:smrf on it through
-qgis_process (scripts/qgis-process), and print the accuracy against the truth.
+qgis_process (scripts/qgis-process), and print the accuracy against the truth; then check the DTM as a
+surveyor does, against 60 checkpoints surveyed on the true terrain (groundsieve:accuracy), beside the DTM
+of the scene's own classes (groundsieve:dtm, as from a vendor's classified delivery).
 
 Leaves in the output folder: scene.laz (the generated cloud, truth in its classification),
-scene_smrf.laz (classified), scene_dtm.tif (DTM), and prints Type I/II/total error, kappa and
-the DTM's error against the true terrain.
+scene_smrf.laz (classified), scene_dtm.tif (DTM), checkpoints.gpkg, accuracy.html (the report),
+scene_dtm_classes.tif, and prints Type I/II/total error, kappa, the DTM's error against the true
+terrain and the checkpoints' RMSEz, NVA and VVA.
 """
 import argparse
+import json
 import subprocess
 import sys
 import time
@@ -68,6 +72,82 @@ def main():
     print(f"  against the true terrain: RMSE {np.sqrt(np.mean(err ** 2)):.3f} m, "
           f"|error| 95th percentile {np.percentile(np.abs(err), 95):.3f} m, "
           f"{100 * valid.mean():.1f} % of cells filled")
+    ds = None
+
+    # A surveyor's check: checkpoints on the true terrain (1.5 cm of survey noise), open (NVA) or under
+    # vegetation (VVA), never on a roof; the SMRF DTM, and the DTM of the scene's own classes (a vendor's
+    # delivery made into a DTM without filtering again), checked against them through qgis_process.
+    points = out / "checkpoints.gpkg"
+    write_checkpoints(scene, points, args.seed)
+    classes_dtm = out / "scene_dtm_classes.tif"
+    run([str(REPO / "scripts" / "qgis-process"), "run", "groundsieve:dtm", f"--INPUT={scene_path}",
+         f"--OUTPUT={classes_dtm}", "--DTM_CELL=1.0"])
+    for name, raster, report in (("SMRF's DTM", dtm, out / "accuracy.html"),
+                                 ("the DTM of the scene's classes (groundsieve:dtm)", classes_dtm,
+                                  out / "accuracy_classes.html")):
+        results = json.loads(run([str(REPO / "scripts" / "qgis-process"), "--json", "run", "groundsieve:accuracy",
+                                  f"--DTM={raster}", f"--CHECKPOINTS={points}", "--ID_FIELD=name",
+                                  "--LAND_COVER_FIELD=cover", f"--OUTPUT_HTML={report}"]))["results"]
+        print(f"{name} against {int(results['COUNT'])} checkpoints (groundsieve:accuracy -> {report}):")
+        print(f"  RMSEz {results['RMSEZ']:.3f} m, mean {results['MEAN']:+.3f} m; NVA: RMSEz {results['NVA_RMSEZ']:.3f} m "
+              f"(ASPRS Ed. 2), {results['NVA95']:.3f} m at 95 % (Ed. 1); VVA: RMSEz {results['VVA_RMSEZ']:.3f} m, "
+              f"95th percentile {results['VVA95']:.3f} m")
+
+
+def run(cmd):
+    """Run a command (qgis_process), exit with its output on failure; its stdout."""
+    print("Running:", " ".join(cmd).replace(str(REPO) + "/", ""))
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        sys.stderr.write(proc.stdout + proc.stderr)
+        sys.exit("qgis_process failed")
+    return proc.stdout
+
+
+def write_checkpoints(scene, path, seed, per_cover=30):
+    """``per_cover`` checkpoints in the open (no object point within 2 m: NVA) and as many under
+    vegetation (a vegetation point within 1 m, no building within 3 m: VVA), at least 10 m inside the
+    scene, their heights the true terrain's with 1.5 cm of survey noise, as a PointZ GeoPackage."""
+    from osgeo import ogr, osr
+    from scipy.spatial import cKDTree
+    rng = np.random.default_rng(seed + 1000)
+    objects = scene.classification != 2
+    trees = {name: cKDTree(np.column_stack([scene.x[mask], scene.y[mask]])) for name, mask in
+             (("object", objects), ("vegetation", np.isin(scene.classification, (3, 4, 5))),
+              ("building", scene.classification == 6))}
+    x0, x1, y0, y1 = scene.x.min() + 10, scene.x.max() - 10, scene.y.min() + 10, scene.y.max() - 10
+    chosen = {"NVA": [], "VVA": []}
+    while min(len(v) for v in chosen.values()) < per_cover:
+        x, y = rng.uniform(x0, x1), rng.uniform(y0, y1)
+        if not trees["object"].query_ball_point((x, y), 2.0):
+            cover = "NVA"
+        elif trees["vegetation"].query_ball_point((x, y), 1.0) and not trees["building"].query_ball_point((x, y), 3.0):
+            cover = "VVA"
+        else:
+            continue
+        if len(chosen[cover]) < per_cover:
+            chosen[cover].append((x, y))
+    if path.exists():
+        path.unlink()
+    ds = ogr.GetDriverByName("GPKG").CreateDataSource(str(path))
+    srs = osr.SpatialReference()
+    srs.ImportFromWkt(scene_crs_wkt())
+    layer = ds.CreateLayer("checkpoints", srs, ogr.wkbPoint25D)
+    layer.CreateField(ogr.FieldDefn("name", ogr.OFTString))
+    layer.CreateField(ogr.FieldDefn("cover", ogr.OFTString))
+    k = 0
+    for cover, places in chosen.items():
+        for x, y in places:
+            k += 1
+            feature = ogr.Feature(layer.GetLayerDefn())
+            feature.SetField("name", f"CP{k:02d}")
+            feature.SetField("cover", cover)
+            z = float(scene.ground_z(np.array([x]), np.array([y]))[0]) + rng.normal(0.0, 0.015)
+            point = ogr.Geometry(ogr.wkbPoint25D)
+            point.AddPoint(float(x), float(y), z)
+            feature.SetGeometry(point)
+            layer.CreateFeature(feature)
+    ds = None
 
 
 if __name__ == "__main__":
