@@ -912,6 +912,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     # the box of the points that may enter the DTM (neither withheld nor ignored), from the tiles: the
     # DTM is cut to it, as a whole run's grid spans those points only (None in a result: not known)
     area_box: List[Optional[list]] = [[math.inf, math.inf, -math.inf, -math.inf]]
+    data_gaps: list = []  # the gaps in the data the DTM spans (workflow.data_gaps), from the tiles
+    gap_sizes: list = []  # the smallest gap each tile names
     kept_out: Dict[int, int] = {}  # points kept in classes of their own, left out of the DTM
     replaced: Dict[int, int] = {}  # points of the input's other classes given 1 or 2
     structures: Dict[int, int] = {}  # those of its structure classes made ground
@@ -961,6 +963,9 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             structures[int(code)] = structures.get(int(code), 0) + int(count)
         ground_total += result["ground"]
         dtm_points += result["dtm_points"]
+        if result.get("gaps"):
+            gap_sizes.append(result["gaps"][0])
+            data_gaps.extend(tuple(g) for g in result["gaps"][1:])
         if "area_bounds" not in result:  # (a tile done by an earlier version, resumed)
             area_box[0] = None
         elif result["area_bounds"] is not None and area_box[0] is not None:
@@ -1066,6 +1071,9 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             if note:
                 log(note)
             _say_enclosed_nodata(dtm_writer, dtm, grid.buffer, log)
+            note = workflow_gaps_note(data_gaps, gap_sizes, unit)
+            if note:
+                log(note)
             from ..grids.rasterize import PIT_DEPTH
             from .workflow import dtm_spacing_note, pits_note
             mpu = dtm.metres_per_unit
@@ -1507,7 +1515,7 @@ def _tile_job(job) -> Optional[dict]:
             # (the write phase reads them there; a killed worker's writes stay too).
             del classes
             assigned[int(k)] = int(sel.sum())
-        block, kept_out, dtm_own, area_bounds = None, {}, 0, None
+        block, kept_out, dtm_own, area_bounds, gaps = None, {}, 0, None, []
         if job["dtm"] is not None:
             area = workflow.processable(cloud, options)
             mine = area & own  # (the DTM's extent: the points that may enter it, as a whole run's grid)
@@ -1516,13 +1524,14 @@ def _tile_job(job) -> Optional[dict]:
                 area_bounds = [float(xs.min()), float(ys.min()), float(xs.max()), float(ys.max())]
             in_dtm = workflow.dtm_points(cloud, ground, area, job["dtm"])
             dtm_own = int(np.count_nonzero(in_dtm & own))
-            block = _dtm_block(cloud, in_dtm, job["dtm"], job["dtm_grid"], job["bounds"], job["buffer"])
+            gaps = []  # [the smallest gap named, then each gap (area, x, y)]
+            block = _dtm_block(cloud, in_dtm, job["dtm"], job["dtm_grid"], job["bounds"], job["buffer"], area, gaps)
             if options.keep_existing_classes:
                 kept_out = workflow.kept_out_of_dtm(cloud, cls, area & own & ~in_dtm, job["dtm"], job["algorithm"])
         result = dict(key=list(job["key"]), own=int(own.sum()), read=len(cloud), ground=int(ground[own].sum()),
                       dtm_points=dtm_own, assigned=assigned, block=block, class_parts=class_parts, copc_read=copc_read,
                       kept_out=sorted(kept_out.items()), replaced=sorted(replaced.items()),
-                      structures=sorted(structures.items()), area_bounds=area_bounds)
+                      structures=sorted(structures.items()), area_bounds=area_bounds, gaps=gaps)
         _save_done(job["done_dir"], result)
         return result
     except Cancelled:
@@ -1536,6 +1545,13 @@ def _tile_job(job) -> Optional[dict]:
         raise GroundSieveError(f"{where} failed: {type(err).__name__}: {err}") from err
     except Exception as err:  # an unexpected failure still names the tile
         raise GroundSieveError(f"{where} failed: {type(err).__name__}: {err}") from err
+
+
+def workflow_gaps_note(gaps, sizes, unit) -> str:
+    """The whole run's note on gaps in the data (workflow.gaps_note), from the tiles' gaps: the smallest
+    named is the largest of the tiles' (their point spacings differ a little)."""
+    from .workflow import gaps_note
+    return gaps_note(gaps, max(sizes), unit) if gaps else ""
 
 
 def _dtm_extent(full, box, log):
@@ -1681,9 +1697,11 @@ def _python_executable() -> Optional[str]:
     return None
 
 
-def _dtm_block(cloud, ground, dtm, full, bounds, buffer_m):
+def _dtm_block(cloud, ground, dtm, full, bounds, buffer_m, area=None, gaps=None):
     """Interpolate the DTM cells whose centres lie in the tile from the ground of the tile and its
-    buffer, on a grid aligned with the whole DTM's (so the thinning picks the same points)."""
+    buffer, on a grid aligned with the whole DTM's (so the thinning picks the same points). ``gaps``, a
+    list, gets the gaps in the data (workflow.data_gaps, of the points ``area``: neither withheld nor
+    ignored) that the block's surface spans and whose centre lies in the tile (each gap said once)."""
     from ..grids.rasterize import tin_dtm
     from ..grids.spec import GridSpec
     c = full.cell
@@ -1699,4 +1717,9 @@ def _dtm_block(cloud, ground, dtm, full, bounds, buffer_m):
     g = ground
     values = tin_dtm(cloud.x[g], cloud.y[g], cloud.z[g], ext, fill_outside=dtm.fill_outside_hull,
                      points_per_cell=dtm.points_per_cell, max_distance=dtm.max_distance_m)
+    if gaps is not None and area is not None and not dtm.fill_outside_hull and not dtm.max_distance_m:
+        from .workflow import data_gaps
+        found, smallest = data_gaps(cloud.x[area], cloud.y[area], values, ext)
+        x0, y0, x1, y1 = bounds
+        gaps.extend([smallest] + [list(gap) for gap in found if x0 <= gap[1] < x1 and y0 <= gap[2] < y1])
     return row0, col0, np.ascontiguousarray(values[pad:pad + row1 - row0, pad:pad + col1 - col0])

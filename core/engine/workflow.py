@@ -509,7 +509,7 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions, why_none: str = "
         if note:
             log(note)
         if not options.max_distance_m:
-            note = data_gaps_note(x, y, dtm, grid, unit)
+            note = gaps_note(*data_gaps(x, y, dtm, grid), unit)
             if note:
                 log(note)
     if log is not None:
@@ -577,21 +577,21 @@ GAP_BLOCK_SPACINGS = 5
 GAP_MIN_BLOCKS = 4
 
 
-def data_gaps_note(x, y, dtm: np.ndarray, grid: GridSpec, unit: str = "m") -> str:
-    """What to say when the DTM has values over gaps in the data: blocks of GAP_BLOCK_SPACINGS point
-    spacings with no point at all (``x, y``: every point that may enter a DTM), GAP_MIN_BLOCKS or more
-    together, whose cells the triangulation filled (water without returns, a missing strip, a shadow of
-    image matching). A tiled run leaves gaps wider than its buffer empty and warns; a whole run
-    interpolated across them without a word (a UAV photogrammetry practitioner). "" when there are none."""
+def data_gaps(x, y, dtm: np.ndarray, grid: GridSpec) -> tuple:
+    """The gaps in the data the DTM has values over: blocks of GAP_BLOCK_SPACINGS point spacings with no
+    point at all (``x, y``: every point that may enter a DTM), GAP_MIN_BLOCKS or more together, whose cells
+    the triangulation filled (water without returns, a missing strip, a shadow of image matching). Returns
+    ([(area, x, y) of each gap's blocks and their centre], the smallest area named)."""
     valued = np.isfinite(dtm)
     if x.size == 0 or not valued.any():
-        return ""
+        return [], 0.0
     cell = grid.cell
     spacing = cell * math.sqrt(np.count_nonzero(valued) / x.size)
     k = max(1, int(math.ceil(GAP_BLOCK_SPACINGS * spacing / cell)))  # the block's side in cells
+    side = k * cell
     rows, cols = -(-grid.nrows // k), -(-grid.ncols // k)
     if rows * cols < GAP_MIN_BLOCKS:
-        return ""
+        return [], GAP_MIN_BLOCKS * side * side
     col = np.clip(((np.asarray(x) - grid.x0) / cell).astype(np.int64) // k, 0, cols - 1)
     row = np.clip(((grid.top - np.asarray(y)) / cell).astype(np.int64) // k, 0, rows - 1)
     points = np.bincount(row * cols + col, minlength=rows * cols).reshape(rows, cols)
@@ -601,21 +601,27 @@ def data_gaps_note(x, y, dtm: np.ndarray, grid: GridSpec, unit: str = "m") -> st
     from scipy import ndimage
     labels, found = ndimage.label((points == 0) & filled)
     if not found:
-        return ""
+        return [], GAP_MIN_BLOCKS * side * side
     sizes = np.bincount(labels.ravel())[1:]
     big = np.flatnonzero(sizes >= GAP_MIN_BLOCKS)
-    if big.size == 0:
+    centres = ndimage.center_of_mass(np.ones_like(labels), labels, big + 1) if big.size else []
+    gaps = [(float(sizes[b] * side * side), grid.x0 + (c + 0.5) * side, grid.top - (r + 0.5) * side)
+            for b, (r, c) in zip(big, centres)]
+    return gaps, GAP_MIN_BLOCKS * side * side
+
+
+def gaps_note(gaps, smallest: float, unit: str = "m") -> str:
+    """The log's line on the gaps :func:`data_gaps` found ("" when none). A tiled run leaves gaps wider than
+    its buffer empty and warns; a whole run interpolated across them without a word (a UAV photogrammetry
+    practitioner)."""
+    if not gaps:
         return ""
-    largest = int(big[np.argmax(sizes[big])])
-    r, c = ndimage.center_of_mass(labels == largest + 1)
-    side = k * cell
-    cx, cy = grid.x0 + (c + 0.5) * side, grid.top - (r + 0.5) * side
-    return (f"DTM: the data have {big.size:,} gap(s) of {GAP_MIN_BLOCKS * side * side:,.0f} {unit}² or more without "
-            f"any point (the largest about {sizes[largest] * side * side:,.0f} {unit}² around x {cx:,.0f}, y {cy:,.0f}), "
-            "which the triangulation interpolates across: the DTM's values there are not measured (water without "
-            "returns, a missing strip, a shadow of the image matching). To leave such gaps empty, set 'DTM: leave "
-            "cells farther than this from any ground point empty' to more than half the widest building (the cells "
-            "under a roof are that far from the ground).")
+    area, cx, cy = max(gaps)
+    return (f"DTM: the data have {len(gaps):,} gap(s) of {smallest:,.0f} {unit}² or more without any point (the largest "
+            f"about {area:,.0f} {unit}² around x {cx:,.0f}, y {cy:,.0f}), which the triangulation interpolates across: "
+            "the DTM's values there are not measured (water without returns, a missing strip, a shadow of the image "
+            "matching). To leave such gaps empty, set 'DTM: leave cells farther than this from any ground point "
+            "empty' to more than half the widest building (the cells under a roof are that far from the ground).")
 
 
 def check_outputs(input_path: str, output_path: Optional[str], raster_paths=()) -> None:

@@ -282,3 +282,26 @@ def test_every_class_left_out_is_counted_and_a_contradiction_is_refused(delivery
     with pytest.raises(InputError, match="a text file carries no classes"):
         run_ground_filter(str(text), None, ClassGround(), dtm_path=str(tmp_path / "t.tif"))
     assert not (tmp_path / "no.tif").exists() and not (tmp_path / "t.tif").exists()
+
+
+def test_a_gap_in_the_data_is_named_whole_and_tiled(tmp_path):
+    """A 60 m hole without points was named by a whole run, and not by a tiled one whose buffer (40 m)
+    bridged it all the same (a surveyor): both name it now, once (it lies across two tiles), with its size."""
+    rng = np.random.default_rng(9)
+    n = 150_000
+    x, y = rng.uniform(0, 300, n), rng.uniform(0, 300, n)
+    keep = ~((np.abs(x - 103) < 30) & (np.abs(y - 160) < 30))  # across the tile edge at x = 100 m
+    src = tmp_path / "hole.laz"
+    write_las(new_las(x[keep], y[keep], terrain(x[keep], y[keep]), classification=np.full(int(keep.sum()), 2,
+                                                                                           np.uint8)), str(src))
+    said = {}
+    for tiled in (False, True):
+        logs = []
+        run_ground_filter(str(src), None, ClassGround(), options=FilterOptions(keep_existing_classes=True,
+                                                                               tiling=_tiling(tiled)),
+                          dtm_path=str(tmp_path / f"d{int(tiled)}.tif"), log=logs.append)
+        (said[tiled],) = [line for line in logs if "gap(s)" in line]
+    for line in said.values():
+        assert "the data have 1 gap(s)" in line, line
+        area = float(line.split("the largest about ")[1].split(" m²")[0].replace(",", ""))
+        assert 0.8 * 3600 <= area <= 3600, line
