@@ -1079,8 +1079,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             mpu = dtm.metres_per_unit
             for note in ("" if dtm.fill_outside_hull else
                          dtm_spacing_note(dtm_points, dtm_writer.valued_cells, dtm_writer.grid.cell, unit),
-                         pits_note(*dtm_writer.isolated_pits(check=steps.check, depth=PIT_DEPTH / mpu),
-                                   dtm_writer.grid, mpu)):
+                         *(pits_note(*dtm_writer.isolated_pits(check=steps.check, depth=PIT_DEPTH / mpu, spikes=spikes),
+                                     dtm_writer.grid, mpu, spikes=spikes) for spikes in (False, True))):
                 if note:
                     log(note)
             dtm_writer.finish(staging.stage(dtm_path), atomic=False, name=dtm_path, grid=dtm_out)

@@ -514,11 +514,12 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions, why_none: str = "
                 log(note)
     if log is not None:
         from ..grids.rasterize import PIT_DEPTH, isolated_pits
-        note = pits_note(*isolated_pits(dtm, depth=PIT_DEPTH / options.metres_per_unit,
-                                        check=steps.check if steps is not None else None), grid,
-                         options.metres_per_unit)
-        if note:
-            log(note)
+        check = steps.check if steps is not None else None
+        for spikes in (False, True):
+            note = pits_note(*isolated_pits(-dtm if spikes else dtm, depth=PIT_DEPTH / options.metres_per_unit,
+                                            check=check), grid, options.metres_per_unit, spikes=spikes)
+            if note:
+                log(note)
     return grid, dtm
 
 
@@ -532,7 +533,8 @@ def length_label(metres_per_unit: float) -> str:
     return f"units of {metres_per_unit:g} m"
 
 
-def pits_note(count: int, depth: float, row: int, col: int, grid, metres_per_unit: float = 1.0) -> str:
+def pits_note(count: int, depth: float, row: int, col: int, grid, metres_per_unit: float = 1.0,
+              spikes: bool = False) -> str:
     """What to say of a DTM's isolated pits (:func:`~groundsieve.core.grids.rasterize.isolated_pits`: the
     deepest at ``row``, ``col`` of ``grid``), "" without one. An archaeologist's hillshade showed 1-2 m pits that looked like post-holes: low
     points (multipath or noise echoes) that SMRF's low-outlier test lets through when less than 5 cells
@@ -540,12 +542,19 @@ def pits_note(count: int, depth: float, row: int, col: int, grid, metres_per_uni
     into such pits too (a code reviewer: 1 m wide and 2 m deep, 0.5 m between points), so the note says
     both and asks for a look before any change. A warning (``--json``'s ``warnings``, QGIS's log in
     orange): a batch QA pipeline reads those only (a surveyor), and the pits were all a UAV reviewer's
-    log said of blunders that had taken 96 % of the ground."""
+    log said of blunders that had taken 96 % of the ground. ``spikes``: the same of the isolated spikes
+    (the pits of the negated DTM)."""
     from ..grids.rasterize import PIT_DEPTH
     if not count:
         return ""
     x, y = grid.x0 + (col + 0.5) * grid.cell, grid.top - (row + 0.5) * grid.cell
     unit = length_label(metres_per_unit)  # (a cloud in feet: 0.5 m is 1.64 ft, and said so)
+    if spikes:  # (``isolated_pits`` of the negated DTM: a surveyor's class 2 held points 20 m up, not a word)
+        return (f"{WARNING_PREFIX}DTM: {count:,} isolated spike(s), cells more than {PIT_DEPTH / metres_per_unit:.3g} "
+                f"{unit} above every other cell within 2 cells, the highest {depth:.2f} {unit} at x {x:,.2f}, y {y:,.2f}. "
+                "Objects or high points made ground make them (a pole, a bird, a wire, a boulder's top, a point "
+                "misclassified as ground): look at them before mapping them, and class such points as objects or "
+                "noise (18) beforehand.")
     return (f"{WARNING_PREFIX}DTM: {count:,} isolated pit(s), cells more than {PIT_DEPTH / metres_per_unit:.3g} {unit} "
             f"below every other cell within 2 cells, the deepest {depth:.2f} {unit} at x {x:,.2f}, y {y:,.2f}. Low points made ground (multipath "
             "or noise echoes, image-matching blunders) make them, and so does a narrow, deep ditch sampled by few "

@@ -217,12 +217,14 @@ class BlockGeoTIFF:
             above, below = min(halo, row0), min(halo, g.nrows - row0 - n)
             yield row0, n, above, self._band.ReadAsArray(0, row0 - above, g.ncols, n + above + below)
 
-    def isolated_pits(self, strip_rows: int = 1024, check=None, depth: Optional[float] = None) -> tuple:
+    def isolated_pits(self, strip_rows: int = 1024, check=None, depth: Optional[float] = None,
+                      spikes: bool = False) -> tuple:
         """The isolated pits of the raster written (:func:`~groundsieve.core.grids.rasterize.isolated_pits`:
         count, the deepest's depth, its row and column), read back in strips with the two rows around
         each. Counted on the mosaic, not tile by tile: a tile's own interpolation has no values beyond
         its buffer, so with a small buffer it missed pits near its edges, and with a fill it counted
-        cells on the survey's edge a run of the whole cloud never counts (a code reviewer)."""
+        cells on the survey's edge a run of the whole cloud never counts (a code reviewer). ``spikes``:
+        the isolated spikes instead (the pits of the negated raster)."""
         from ..grids.rasterize import PIT_DEPTH, isolated_pits
         depth = PIT_DEPTH if depth is None else depth
         count, deepest, where = 0, 0.0, (-1, -1)
@@ -230,6 +232,8 @@ class BlockGeoTIFF:
             for row0, n, above, values in self._strips(strip_rows, halo=2):
                 values = values.astype(np.float64)
                 values[values == self.nodata] = np.nan
+                if spikes:
+                    np.negative(values, out=values)
                 found, drop, r, k = isolated_pits(values, depth=depth, inner=(above, above + n, 0, self.grid.ncols),
                                                   check=check)
                 count += found
