@@ -1486,7 +1486,7 @@ def _tile_job(job) -> Optional[dict]:
         cloud = tile_cloud(clouds, path=where)
         del clouds
         replaced, structures = {}, {}
-        if len(cloud) < MIN_TILE_POINTS:
+        if len(cloud) < getattr(job["algorithm"], "min_tile_points", MIN_TILE_POINTS):
             # Isolated points (a stray point far from the survey): too few for any filter's grid;
             # they keep their classes and are not ground.
             cls, ground = cloud.classification, np.zeros(len(cloud), dtype=bool)
@@ -1566,8 +1566,10 @@ def _dtm_extent(full, box, log):
                             bytes_per_cell=0.0, max_cells=MAX_SURVEY_DTM_CELLS, closed=True)
     c = full.cell
     col0, row0 = int(round((cut.x0 - full.x0) / c)), int(round((full.top - cut.top) / c))
+    # (points beyond the headers' bounds: the cut ends where it would, inside the full grid; a code reviewer)
+    col1, row1 = min(col0 + cut.ncols, full.ncols), min(row0 + cut.nrows, full.nrows)
     col0, row0 = max(0, col0), max(0, row0)
-    ncols, nrows = min(cut.ncols, full.ncols - col0), min(cut.nrows, full.nrows - row0)
+    ncols, nrows = col1 - col0, row1 - row0
     if (col0, row0, ncols, nrows) == (0, 0, full.ncols, full.nrows):
         return full
     log(f"DTM: cut to the {ncols:,} x {nrows:,} cells of the points it may hold (the files' bounds make "

@@ -416,6 +416,10 @@ def defaults_in_crs_unit(algorithm, dtm: Optional["DTMOptions"], crs_wkt: Option
     from . import parameters as P
     fields = length_fields(algorithm)
     changed = {}
+    if not fields and getattr(algorithm, "metres_per_unit", None) == 1.0 and dataclasses.is_dataclass(algorithm):
+        # (an algorithm without lengths of the table, whose built-in lengths follow the unit: the DTM from
+        # classes' tile buffer)
+        algorithm = dataclasses.replace(algorithm, metres_per_unit=factor)
     if fields:
         chosen = P.user_set(algorithm)
         if chosen is None:  # (built by the Python API: a field equal to its default is the default)

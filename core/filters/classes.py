@@ -45,6 +45,9 @@ class ClassGround:
     """The points whose class in the input is one of ``classes`` are the ground."""
     #: ASPRS codes: (2,), "2", "2, 8, 9", "2-3" (as the ignored classes are written)
     classes: object = (2,)
+    #: metres per unit of the cloud's coordinates, set by the run (workflow.defaults_in_crs_unit): the
+    #: tile buffer is 40 m in any unit (it was 40 ft on a cloud in feet: a code reviewer)
+    metres_per_unit: float = 1.0
 
     name = "classes"
     point_fields = ("classification",)
@@ -55,7 +58,10 @@ class ClassGround:
     #: of this much around it, so a gap in the ground up to this wide (a building, a pond without
     #: returns) is bridged as one triangulation of the whole survey bridges it; wider gaps may show the
     #: tile lines (the run's "Tile buffer" sets another). SMRF's own reach at its defaults is 38 m.
-    reach_m = 40.0
+    REACH_M = 40.0
+    #: a tile of a few points is still ground (the filters' grids need more: tiles.MIN_TILE_POINTS); a
+    #: sparse delivery of key points lost every tile's ground (a code reviewer)
+    min_tile_points = 1
     #: a tile or a whole run costs no memory beyond its points and the DTM's (tiles.whole_run_bytes)
     extra_bytes_per_point = 0
 
@@ -70,7 +76,14 @@ class ClassGround:
         return (f"no point of class {', '.join(str(c) for c in self.classes)} in it: classify the ground first with "
                 "a ground filter, or name the classes that hold it")
 
+    @property
+    def reach_m(self) -> float:
+        """The tile buffer, :data:`REACH_M` metres in the cloud's unit."""
+        return self.REACH_M / self.metres_per_unit
+
     def __post_init__(self):
+        if not (isinstance(self.metres_per_unit, (int, float)) and self.metres_per_unit > 0):
+            raise InvalidParameterError(f"metres_per_unit must be > 0 (got {self.metres_per_unit!r})")
         codes = parse_classes(self.classes, what="ground classes")
         if not codes:
             raise InvalidParameterError("ground classes: name at least one class (2 is ground)")
