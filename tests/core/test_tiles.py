@@ -1379,3 +1379,14 @@ def test_a_narrow_ditch_across_the_grid_is_not_a_pit():
     assert len(calls) == 5  # once a strip of rows: a cancel is seen between them
     rough = np.random.default_rng(1).normal(0, 1.0, (300, 300))
     assert isolated_pits(rough, batch=97) == isolated_pits(rough)
+
+
+def test_the_dtm_cut_of_points_beyond_the_headers_bounds_ends_where_they_do():
+    """Points at x 95-150 in a survey whose headers say 100-200: the cut kept 55 columns from 100, 5 empty
+    ones too many (a code reviewer); it ends at 150."""
+    from groundsieve.core.engine.tiles import _dtm_extent
+    from groundsieve.core.grids.spec import GridSpec
+    full = GridSpec(100.0, 300.0, 1.0, 200, 100)  # x 100-200, y 100-300
+    cut = _dtm_extent(full, [95.0, 150.0, 150.0, 320.0], lambda _line: None)
+    assert (cut.x0, cut.top, cut.ncols, cut.nrows) == (100.0, 300.0, 50, 150)
+    assert _dtm_extent(full, [100.0, 100.0, 200.0, 300.0], lambda _line: None) == full
