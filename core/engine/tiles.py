@@ -416,8 +416,14 @@ def survey_dtm_grid(infos: Sequence[LasInfo], cell: float):
     from ..grids.spec import GridSpec
     xs = np.array([v for i in infos if i.count for v in (i.mins[0], i.maxs[0])])
     ys = np.array([v for i in infos if i.count for v in (i.mins[1], i.maxs[1])])
-    return GridSpec.covering(xs, ys, cell, what="DTM", bytes_per_cell=0.0, max_cells=MAX_SURVEY_DTM_CELLS,
-                             closed=True)
+    try:
+        return GridSpec.covering(xs, ys, cell, what="DTM", bytes_per_cell=0.0, max_cells=MAX_SURVEY_DTM_CELLS,
+                                 closed=True)
+    except InvalidParameterError as err:  # (the headers count every point: a code reviewer's (0, 0, 0) noise point)
+        raise InvalidParameterError(f"{err}. The files' headers span x {xs.min():,.2f}-{xs.max():,.2f}, y "
+                                    f"{ys.min():,.2f}-{ys.max():,.2f}, every point counted, withheld and noise "
+                                    "too: a point far from the others (e.g. at 0, 0) widens them; remove it from "
+                                    "the file (e.g. PDAL's filters.range, LAStools' las2las -drop_class 7)") from None
 
 
 def fit_dtm_blocks(size: float, buffer_m: float, cell: float, tiling: "TileOptions",
