@@ -150,9 +150,26 @@ checkpoints.</p>""")
             self.addOutput(QgsProcessingOutputNumber(name, label))
 
     def checkParameterValues(self, parameters, context):  # noqa: N802
-        """QGIS's checks, said in the dialog's words (a band of 0 named by its label)."""
+        """QGIS's checks, said in the dialog's words (a band of 0 named by its label), and the fields named
+        checked against the checkpoints' layer (a batch row or a model reused with another layer)."""
         ok, message = super().checkParameterValues(parameters, context)
+        if ok:
+            source = self.parameterAsSource(parameters, self.CHECKPOINTS, context)
+            missing = self.missingField(parameters, context, source) if source is not None else None
+            if missing:
+                return False, missing
         return check_parameter_values(self, parameters, context, ok, message)
+
+    def missingField(self, parameters, context, source):  # noqa: N802
+        """What is wrong when a field parameter names no field of ``source`` (None when all are there): a
+        field named in a batch table, a script or a model that another layer lacks ran into a KeyError."""
+        names = source.fields().names()
+        for name in (self.Z_FIELD, self.ID_FIELD, self.LAND_COVER_FIELD):
+            field = self.parameterAsString(parameters, name, context) or ""
+            if field and source.fields().lookupField(field) < 0:
+                return (f"{self.label(name).split(' (')[0]}: the layer '{source.sourceName()}' has no field '{field}' "
+                        f"(its fields: {', '.join(names) or 'none'})")
+        return None
 
     def label(self, name):
         return self.parameterDefinition(name).description()
@@ -163,7 +180,9 @@ checkpoints.</p>""")
         from ..core.raster import accuracy
         layer = self.parameterAsRasterLayer(parameters, self.DTM, context)
         if layer is None:
-            raise QgsProcessingException(f"{self.label(self.DTM)}: no raster layer given")
+            value = parameters.get(self.DTM)
+            raise QgsProcessingException(f"{self.label(self.DTM)}: " + (
+                f"'{value}' is not a raster GDAL reads" if isinstance(value, str) and value else "no raster layer given"))
         if layer.providerType() != "gdal":
             raise QgsProcessingException(f"{self.label(self.DTM)}: '{layer.name()}' is a {layer.providerType()} layer; "
                                          "give a raster file GDAL reads (e.g. a GeoTIFF)")
@@ -171,6 +190,9 @@ checkpoints.</p>""")
         source = self.parameterAsSource(parameters, self.CHECKPOINTS, context)
         if source is None:
             raise QgsProcessingException(f"{self.label(self.CHECKPOINTS)}: no point layer given")
+        missing = self.missingField(parameters, context, source)
+        if missing:
+            raise QgsProcessingException(missing)
         points_name = f"the layer '{source.sourceName()}'"
         report = self.parameterAsFileOutput(parameters, self.OUTPUT_HTML, context)
         try:

@@ -80,6 +80,10 @@ def parse_land_cover_mapping(text: str) -> Dict[str, str]:
         if not item:
             continue
         if "=" not in item:
+            head, sep, tail = item.rpartition(":")  # (road:NVA, a power user: meant road=NVA)
+            if sep and head.strip() and KNOWN_LAND_COVERS.get(_key(tail)):
+                raise InvalidParameterError(f"land cover mapping: '{item}' has no '=': write it as "
+                                            f"{head.strip()}={tail.strip()}")
             raise InvalidParameterError(f"land cover mapping: '{item}' has no '=': write it as {item}=NVA or {item}=VVA")
         value, target = (part.strip() for part in item.rsplit("=", 1))
         known = KNOWN_LAND_COVERS.get(_key(target))

@@ -20,7 +20,7 @@ count, mean error (bias), standard deviation (n - 1), RMSEz, minimum, maximum, a
 - Edition 2 (2023): the 95 % figures are dropped; NVA and VVA are each reported as their RMSEz. Its
   product accuracy also counts the checkpoints' own survey accuracy: not included here (:data:`ED2_NOTE`).
 
-Checkpoints with |dz| > 3 x their class's RMSEz (the overall RMSEz for unlabelled ones) are named as
+Checkpoints with |dz| > 3 x their land cover's RMSEz (the overall RMSEz for unlabelled ones) are named as
 outliers and kept in every figure: removing them is the surveyor's decision. A class with fewer than
 :data:`MIN_CHECKPOINTS` checkpoints is warned about. With 9 checkpoints or fewer, no residual can exceed
 3 x RMSEz (the largest |dz| is at most sqrt(n) x RMSEz), so none can be named."""
@@ -356,7 +356,7 @@ def _warnings(n, status, ids, labelled, classes, covers, used, outliers, checkpo
         warnings.append(f"{int(used.sum())} checkpoint(s) used, fewer than the {MIN_CHECKPOINTS_ED2} ASPRS Edition 2 "
                         "(2023) asks for a product's accuracy assessment")
     if outliers:
-        warnings.append(f"{len(outliers)} outlier(s), |dz| > {OUTLIER_FACTOR:g} x their class's RMSEz, kept in every "
+        warnings.append(f"{len(outliers)} outlier(s), |dz| > {OUTLIER_FACTOR:g} x their land cover's RMSEz, kept in every "
                         f"figure: {_some(outliers)}")
     if not unit:
         warnings.append("the DTM's height unit is not recorded (no unit and no projected CRS): figures are in "

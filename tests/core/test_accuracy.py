@@ -397,3 +397,11 @@ def test_headers_with_units_and_a_pnezd_file_without_header(dtm, tmp_path):
     bare.write_text("".join(f"P{i},{y[i]:.3f},{x[i]:.3f},{z[i]:.3f},road\n" for i in range(30)))
     with pytest.raises(InputError, match=r"x and y look swapped \(30 of them fall on it as y, x\)"):
         A.check_accuracy_of(dtm, read_checkpoints(str(bare), mapping={"road": "NVA"}))
+
+
+def test_a_mapping_written_with_a_colon_is_answered_with_what_was_meant():
+    from groundsieve.core.io.checkpoints import parse_land_cover_mapping
+    with pytest.raises(InvalidParameterError, match="'road:NVA' has no '=': write it as road=NVA$"):
+        parse_land_cover_mapping("road:NVA")
+    with pytest.raises(InvalidParameterError, match="write it as meadow=NVA or meadow=VVA"):
+        parse_land_cover_mapping("meadow")

@@ -247,3 +247,20 @@ def test_a_table_without_geometries_is_named_as_such(groundsieve_provider, dtm, 
                                                      r"delimited text layer with its X and Y fields"):
         processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": layer, "Z_FIELD": "z",
                                                 "OUTPUT_HTML": str(tmp_path / "r.html")})
+
+
+def test_a_field_the_layer_lacks_is_named(groundsieve_provider, dtm, tmp_path):
+    """A Z field the layer lacks (a batch row, a model reused with another layer) ran into a KeyError
+    traceback (a QGIS power user): it is named, with the layer's fields, before the run and in it."""
+    import processing
+    from qgis.core import QgsApplication, QgsProcessingContext, QgsProcessingException
+    x, y, z, ids, _cover, _dz = checkpoints()
+    layer = add_points(memory_layer("EPSG:32633", ["name:string"]), [((x[i], y[i], z[i]), [ids[i]]) for i in range(5)])
+    alg = QgsApplication.processingRegistry().algorithmById("groundsieve:accuracy")
+    for name in ("Z_FIELD", "ID_FIELD", "LAND_COVER_FIELD"):
+        ok, message = alg.checkParameterValues({"DTM": dtm, "CHECKPOINTS": layer, name: "nope",
+                                                "OUTPUT_HTML": str(tmp_path / "r.html")}, QgsProcessingContext())
+        assert not ok and "has no field 'nope' (its fields: name)" in message, (name, message)
+        with pytest.raises(QgsProcessingException, match="has no field 'nope'"):
+            processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": layer, name: "nope",
+                                                    "OUTPUT_HTML": str(tmp_path / "r.html")})
