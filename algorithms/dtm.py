@@ -70,6 +70,8 @@ with one of the ground filters.</p>""")
             self.IGNORE_CLASSES, "Ignored classes: out of the DTM and of its extent (e.g. 7,18)",
             defaultValue="7,18", optional=True))
         self.addTileParameters()
+        buffer = self.parameterDefinition(self.TILE_BUFFER)  # (its reach is a fixed 40 m)
+        buffer.setDescription("Tile buffer (m; -1 = 40 m, gaps in the ground up to this wide are bridged)")
         self.addParameter(QgsProcessingParameterNumber(
             self.DTM_CELL, "DTM cell size (m)", type=QgsProcessingParameterNumber.Type.Double,
             defaultValue=1.0, minValue=0.0))
@@ -115,14 +117,23 @@ with one of the ground filters.</p>""")
                 self.POINT_COUNT: run.point_count if tiled else len(run.cloud)}
 
     def checkParameterValues(self, parameters, context):  # noqa: N802
-        """The ground classes' form in the dialog's words, then the ground filters' checks (the input, a
-        cell of -1 or text)."""
+        """The ground and ignored classes' form, and that no class is both, in the dialog's words (a batch
+        row found them wrong only at its run: a QGIS power user); then the ground filters' checks (the
+        input, a cell of -1 or text)."""
         from ..core.errors import GroundSieveError
         from ..core.io.clouds import parse_classes
-        label = self.parameterDefinition(self.CLASSES).description().split(":")[0]
+        label, ignored_label = (self.parameterDefinition(name).description().split(":")[0]
+                                for name in (self.CLASSES, self.IGNORE_CLASSES))
         try:
-            if not parse_classes(self.parameterAsString(parameters, self.CLASSES, context) or "", what=label):
+            ground = parse_classes(self.parameterAsString(parameters, self.CLASSES, context) or "", what=label)
+            if not ground:
                 return False, f"{label}: name at least one class (2 is ground)"
+            ignored = parse_classes(self.parameterAsString(parameters, self.IGNORE_CLASSES, context) or "",
+                                    what=ignored_label)
         except GroundSieveError as err:
             return False, str(err)
+        both = sorted(set(ground) & set(ignored))
+        if both:
+            return False, (f"{label} and {ignored_label} both name {', '.join(map(str, both))}: a class cannot make "
+                           "the DTM and be left out of it")
         return super().checkParameterValues(parameters, context)

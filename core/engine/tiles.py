@@ -576,7 +576,8 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
     from .workflow import length_label
     unit = length_label(metres_per_unit(infos[0].crs_wkt) or 1.0)  # (a survey in feet: feet)
     log(f"{len(inputs)} file(s), {total:,} points; tiles of {size:g} {unit} with a buffer of {buffer_m:g} {unit} "
-        f"({'set' if tiling.buffer_m is not None else 'the filter reach'}); {tiling.worker_count} worker(s).")
+        f"({'set' if tiling.buffer_m is not None else getattr(algorithm, 'reach_words', 'the filter reach')}); "
+        f"{tiling.worker_count} worker(s).")
     steps.check()
     parent = tiling.work_dir or os.path.dirname(os.path.abspath(output_path or dtm_path or inputs[0]))
     if os.path.exists(parent) and not os.path.isdir(parent):
@@ -1032,7 +1033,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         if assigned[k] != info.count:
             raise InputError(f"{info.path}: {assigned[k]:,} of {info.count:,} points were classified; "
                              "the file's header and its points disagree")
-    log(f"Filtered {len(keys)} tile(s) in {time.perf_counter() - t_tiles:.1f} s.")
+    log(f"{getattr(algorithm, 'tiles_done_words', 'Filtered')} {len(keys)} tile(s) in "
+        f"{time.perf_counter() - t_tiles:.1f} s.")
     dtm_out = _dtm_extent(dtm_writer.grid, area_box[0], log) if dtm_writer is not None else None
     if dtm_out is not None and not n_copc:
         _say_stray_tiles(tiles, grid, dtm_out, log)

@@ -62,6 +62,9 @@ class ClassGround:
     #: a tile of a few points is still ground (the filters' grids need more: tiles.MIN_TILE_POINTS); a
     #: sparse delivery of key points lost every tile's ground (a code reviewer)
     min_tile_points = 1
+    #: how a tiled run's log names the buffer and the tiles' work (it filters nothing)
+    reach_words = "the default of a DTM from classes"
+    tiles_done_words = "Made the DTM blocks of"
     #: a tile or a whole run costs no memory beyond its points and the DTM's (tiles.whole_run_bytes)
     extra_bytes_per_point = 0
 

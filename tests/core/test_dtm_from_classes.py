@@ -370,4 +370,4 @@ def test_the_tile_buffer_is_40_m_in_a_cloud_in_feet(tmp_path):
         keep_existing_classes=True, tiling=TileOptions(tile_size_m=400.0, workers=1, parallel="threads")),
         dtm_path=str(tmp_path / "d.tif"), log=logs.append)
     (line,) = [text for text in logs if "with a buffer of" in text]
-    assert "with a buffer of 132 ft (the filter reach)" in line, line  # 40 m = 131.23 ft, rounded up
+    assert "with a buffer of 132 ft (the default of a DTM from classes)" in line, line  # 40 m = 131.23 ft, rounded up

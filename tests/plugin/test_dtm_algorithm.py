@@ -94,3 +94,18 @@ def test_bad_ground_classes_are_refused_in_the_dialogs_words(groundsieve_provide
     ok, message = alg.checkParameterValues({"INPUT": str(src), "OUTPUT": str(tmp_path / "d.tif"), "CLASSES": classes},
                                            QgsProcessingContext())
     assert not ok and "Ground classes" in message and words in message
+
+
+@pytest.mark.parametrize("params, words", [({"IGNORE_CLASSES": "7,x"}, "Ignored classes: 'x' is not a class"),
+                                           ({"IGNORE_CLASSES": "2,7"}, "Ground classes and Ignored classes both "
+                                                                       "name 2"),
+                                           ({"CLASSES": "2-9"}, "both name 7")])
+def test_ignored_classes_are_checked_before_the_run(groundsieve_provider, scene_laz, tmp_path, params, words):
+    """A batch row with IGNORE_CLASSES 7,x or 2,7 passed the dialog's check and failed at its run (a QGIS
+    power user)."""
+    from qgis.core import QgsApplication, QgsProcessingContext
+    alg = QgsApplication.processingRegistry().algorithmById("groundsieve:dtm")
+    src, _scene = scene_laz
+    ok, message = alg.checkParameterValues({"INPUT": str(src), "OUTPUT": str(tmp_path / "d.tif"), **params},
+                                           QgsProcessingContext())
+    assert not ok and words in message, message
