@@ -12,7 +12,8 @@ class DTMFromClassesAlgorithm(GroundFilterAlgorithm):
     """A ground filter's input, tiles and DTM options, with the input's classes as the ground: the
     engine makes the DTM (whole, or in buffered tiles for a survey) as it makes any filter's."""
     CLASSES = "CLASSES"
-    OUTPUT = "OUTPUT"
+    #: the DTM output is DTM, as in every ground filter and rfclassify: a model swaps a filter for this
+    #: algorithm without rewiring (a QGIS power user)
     GROUND_COUNT = "GROUND_COUNT"
     POINT_COUNT = "POINT_COUNT"
 
@@ -78,7 +79,7 @@ with one of the ground filters.</p>""")
         self.addParameter(QgsProcessingParameterBoolean(
             self.DTM_FILL, "DTM: fill cells outside the ground hull (nearest value)", defaultValue=False))
         self.addParameter(dtm_max_distance_parameter(self.DTM_MAX_DISTANCE))
-        self.addParameter(QgsProcessingParameterRasterDestination(self.OUTPUT, "DTM (ground surface)"))
+        self.addParameter(QgsProcessingParameterRasterDestination(self.DTM, "DTM (ground surface)"))
         self.addOutput(QgsProcessingOutputNumber(self.GROUND_COUNT, "Ground points"))
         self.addOutput(QgsProcessingOutputNumber(self.POINT_COUNT, "Points read"))
 
@@ -94,7 +95,7 @@ with one of the ground filters.</p>""")
         errors, workflow = core_modules(feedback=feedback, kernels_of=self.name())
         from . import pointclouds, styles
         input_path = pointclouds.input_path(self, parameters, context, self.INPUT, self.INPUT_LAYER)
-        dtm_path = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
+        dtm_path = self.parameterAsOutputLayer(parameters, self.DTM, context)
         try:
             ground = self.buildFilter(parameters, context, feedback.pushInfo)
             # the input's classes are kept as they are (no classified copy is written): no point's class
@@ -113,7 +114,7 @@ with one of the ground filters.</p>""")
             raise QgsProcessingException(str(err)) from err
         tiled = run.cloud is None
         styles.style_when_loaded(context, dtm_path, styles.DTM_STYLE)
-        return {self.OUTPUT: dtm_path, self.GROUND_COUNT: run.ground_count,
+        return {self.DTM: dtm_path, self.GROUND_COUNT: run.ground_count,
                 self.POINT_COUNT: run.point_count if tiled else len(run.cloud)}
 
     def checkParameterValues(self, parameters, context):  # noqa: N802

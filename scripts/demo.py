@@ -81,7 +81,7 @@ def main():
     write_checkpoints(scene, points, args.seed)
     classes_dtm = out / "scene_dtm_classes.tif"
     run([str(REPO / "scripts" / "qgis-process"), "run", "groundsieve:dtm", f"--INPUT={scene_path}",
-         f"--OUTPUT={classes_dtm}", "--DTM_CELL=1.0"])
+         f"--DTM={classes_dtm}", "--DTM_CELL=1.0"])
     for name, raster, report in (("SMRF's DTM", dtm, out / "accuracy.html"),
                                  ("the DTM of the scene's classes (groundsieve:dtm)", classes_dtm,
                                   out / "accuracy_classes.html")):

@@ -26,9 +26,9 @@ def test_the_ground_class_becomes_a_dtm_and_the_input_is_only_read(groundsieve_p
     src, scene = scene_laz
     before = src.read_bytes()
     out = tmp_path / "dtm.tif"
-    result = processing.run("groundsieve:dtm", {"INPUT": str(src), "OUTPUT": str(out), "DTM_CELL": 2.0})
+    result = processing.run("groundsieve:dtm", {"INPUT": str(src), "DTM": str(out), "DTM_CELL": 2.0})
     assert src.read_bytes() == before
-    assert result["OUTPUT"] == str(out)
+    assert result["DTM"] == str(out)
     assert result["GROUND_COUNT"] == int(np.sum(scene.classification == 2))
     assert result["POINT_COUNT"] == len(scene.x)
     values, transform, projection = _dtm(out)
@@ -45,8 +45,8 @@ def test_a_folder_of_tiles_gives_the_dtm_of_the_whole_file(groundsieve_provider,
     src, scene = scene_laz
     _split(src, tmp_path / "in")
     whole, survey = tmp_path / "whole.tif", tmp_path / "survey.tif"
-    processing.run("groundsieve:dtm", {"INPUT": str(src), "OUTPUT": str(whole)})
-    result = processing.run("groundsieve:dtm", {"INPUT": str(tmp_path / "in"), "OUTPUT": str(survey),
+    processing.run("groundsieve:dtm", {"INPUT": str(src), "DTM": str(whole)})
+    result = processing.run("groundsieve:dtm", {"INPUT": str(tmp_path / "in"), "DTM": str(survey),
                                                 "TILE_SIZE": 50.0})
     a, b = _dtm(whole)[0], _dtm(survey)[0]
     assert a.shape == b.shape
@@ -58,7 +58,7 @@ def test_a_folder_of_tiles_gives_the_dtm_of_the_whole_file(groundsieve_provider,
 def test_qgis_process_makes_the_dtm_and_names_its_counts(scene_laz, tmp_path):
     src, scene = scene_laz
     out = tmp_path / "dtm.tif"
-    proc = subprocess.run([str(WRAPPER), "--json", "run", "groundsieve:dtm", f"--INPUT={src}", f"--OUTPUT={out}",
+    proc = subprocess.run([str(WRAPPER), "--json", "run", "groundsieve:dtm", f"--INPUT={src}", f"--DTM={out}",
                            "--CLASSES=2,6"], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     results = json.loads(proc.stdout)["results"]
@@ -78,7 +78,7 @@ def test_a_cloud_without_ground_is_refused_with_its_classes(groundsieve_provider
     write_las(new_las(rng.uniform(0, 100, n), rng.uniform(0, 100, n), rng.uniform(0, 1, n),
                       classification=np.ones(n, np.uint8)), str(src))
     with pytest.raises(QgsProcessingException) as err:
-        processing.run("groundsieve:dtm", {"INPUT": str(src), "OUTPUT": str(tmp_path / "dtm.tif")})
+        processing.run("groundsieve:dtm", {"INPUT": str(src), "DTM": str(tmp_path / "dtm.tif")})
     text = str(err.value)
     assert "unclassified.laz" in text and "no point of class 2" in text and "1 (unclassified): 5,000" in text
     assert os.listdir(tmp_path) == ["unclassified.laz"]
@@ -91,7 +91,7 @@ def test_bad_ground_classes_are_refused_in_the_dialogs_words(groundsieve_provide
     from qgis.core import QgsApplication, QgsProcessingContext
     alg = QgsApplication.processingRegistry().algorithmById("groundsieve:dtm")
     src, _scene = scene_laz
-    ok, message = alg.checkParameterValues({"INPUT": str(src), "OUTPUT": str(tmp_path / "d.tif"), "CLASSES": classes},
+    ok, message = alg.checkParameterValues({"INPUT": str(src), "DTM": str(tmp_path / "d.tif"), "CLASSES": classes},
                                            QgsProcessingContext())
     assert not ok and "Ground classes" in message and words in message
 
@@ -106,6 +106,6 @@ def test_ignored_classes_are_checked_before_the_run(groundsieve_provider, scene_
     from qgis.core import QgsApplication, QgsProcessingContext
     alg = QgsApplication.processingRegistry().algorithmById("groundsieve:dtm")
     src, _scene = scene_laz
-    ok, message = alg.checkParameterValues({"INPUT": str(src), "OUTPUT": str(tmp_path / "d.tif"), **params},
+    ok, message = alg.checkParameterValues({"INPUT": str(src), "DTM": str(tmp_path / "d.tif"), **params},
                                            QgsProcessingContext())
     assert not ok and words in message, message
