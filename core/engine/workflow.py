@@ -337,6 +337,9 @@ def kept_out_of_dtm(cloud: PointCloud, classification: np.ndarray, processable_m
         out = processable_mask.copy()
     else:
         out = ~np.isin(classification, REWRITTEN_CLASSES) & processable_mask
+    if classification.dtype == np.uint8 and not options.classes:  # (np.unique sorts: 0.9 s on 50 M, 0.2 s so)
+        counts = np.bincount(classification[out], minlength=256)
+        return {int(c): int(counts[c]) for c in np.flatnonzero(counts)}
     if options.classes:
         out &= ~np.isin(cloud.classification, options.classes)
     codes, counts = np.unique(classification[out], return_counts=True)
@@ -588,6 +591,8 @@ def dtm_spacing_note(points: int, valued_cells: int, cell: float, unit: str = "m
 GAP_BLOCK_SPACINGS = 5
 #: ... and the blocks a gap holds at least, to be named
 GAP_MIN_BLOCKS = 4
+#: points binned at a time (the memory of data_gaps stays a few dozen MB)
+GAP_CHUNK = 2_000_000
 
 
 def data_gaps(x, y, dtm: np.ndarray, grid: GridSpec) -> tuple:
@@ -605,9 +610,19 @@ def data_gaps(x, y, dtm: np.ndarray, grid: GridSpec) -> tuple:
     rows, cols = -(-grid.nrows // k), -(-grid.ncols // k)
     if rows * cols < GAP_MIN_BLOCKS:
         return [], GAP_MIN_BLOCKS * side * side
-    col = np.clip(((np.asarray(x) - grid.x0) / cell).astype(np.int64) // k, 0, cols - 1)
-    row = np.clip(((grid.top - np.asarray(y)) / cell).astype(np.int64) // k, 0, rows - 1)
-    points = np.bincount(row * cols + col, minlength=rows * cols).reshape(rows, cols)
+    points = np.zeros(rows * cols, dtype=np.int64)
+    x, y = np.asarray(x), np.asarray(y)
+    for start in range(0, x.size, GAP_CHUNK):  # (in chunks: 50 M points took 1.2 GB more at once; a code reviewer)
+        col = ((x[start:start + GAP_CHUNK] - grid.x0) / cell).astype(np.int64)
+        col //= k
+        np.clip(col, 0, cols - 1, out=col)
+        row = ((grid.top - y[start:start + GAP_CHUNK]) / cell).astype(np.int64)
+        row //= k
+        np.clip(row, 0, rows - 1, out=row)
+        row *= cols
+        row += col
+        points += np.bincount(row, minlength=rows * cols)
+    points = points.reshape(rows, cols)
     padded = np.zeros((rows * k, cols * k), dtype=bool)
     padded[:grid.nrows, :grid.ncols] = valued
     filled = padded.reshape(rows, k, cols, k).mean(axis=(1, 3)) > 0.5
