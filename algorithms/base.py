@@ -110,13 +110,17 @@ def dialog_help(html):
 
 
 def plain_help(text, width=100):
-    """The dialog's HTML help ``text`` as plain text for a terminal: each paragraph, heading and list
-    item on lines of its own, wrapped at ``width``, a blank line between them, the tags dropped and the
-    entities decoded."""
+    """The dialog's HTML help ``text`` as plain text for a terminal: each paragraph, heading, list item
+    and parameter (a bold label after a sentence) on lines of their own, wrapped at ``width``, a blank
+    line between them, links as "text (address)", the other tags dropped and the entities decoded."""
     import html
     import textwrap
     text = re.sub(r"\s+", " ", text)
-    text = re.sub(r"(?i)</?h\d[^>]*>|</?p[^>]*>|<br\s*/?>|</?[uo]l[^>]*>", "\n\n", text)
+    # a link keeps its address (a code reviewer: "the benchmarks" without where); a parameter's bold label
+    # after a sentence starts a paragraph of its own (a power user: they ran together without the bold)
+    text = re.sub(r'(?i)<a\s[^>]*href="([^"]+)"[^>]*>(.*?)</a>', r"\2 (\1)", text)
+    text = re.sub(r"(?i)(?<=[.)]) (<b>)", r"\n\n\1", text)
+    text = re.sub(r"(?i)</?h\d\b[^>]*>|</?p\b[^>]*>|<br\s*/?>|</?[uo]l\b[^>]*>", "\n\n", text)
     text = re.sub(r"(?i)<li[^>]*>", "\n\n- ", text)
     text = html.unescape(re.sub(r"<[^>]+>", "", text))
     paragraphs = [p.strip() for p in re.split(r"\n\s*\n", text) if p.strip()]

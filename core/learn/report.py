@@ -17,9 +17,6 @@ from ..io import atomic_path
 from ..io.clouds import ASPRS_NAMES
 from ..metrics import ClassReport
 
-#: ASPRS class names for the report.
-
-
 
 def class_name(code: int) -> str:
     return f"{code} {ASPRS_NAMES.get(int(code), '')}".strip()

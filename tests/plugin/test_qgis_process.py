@@ -76,3 +76,6 @@ def test_help_is_plain_text_in_paragraphs():
         lines = text.strip().splitlines()
         assert len(lines) > 10 and max(len(line) for line in lines[1:]) <= 100, alg  # (line 0: QGIS's summary)
         assert "\n\n" in text.strip(), alg
+    # links keep their address; each parameter's label starts a paragraph
+    proc = _wrapper("help", "groundsieve:hybrid")
+    assert "the benchmarks (https://" in " ".join(proc.stdout.split()) and "\n\nModel file (optional):" in proc.stdout
