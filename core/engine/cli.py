@@ -330,10 +330,7 @@ def run_accuracy(args, out) -> dict:
         raise UnknownLandCover(f"{err} with --land-cover-map") from None
     A.check_accuracy_outputs([args.dtm, args.checkpoints], args.report, args.residuals_csv)
     result = A.check_accuracy_of(args.dtm, checkpoints, band=args.band)
-    if args.report:
-        A.write_report(args.report, result)
-    if args.residuals_csv:
-        A.write_residuals_csv(args.residuals_csv, result)
+    A.write_outputs(result, args.report, args.residuals_csv)
     for line in A.summary_lines(result):
         print(line, file=out)
     for text in result.warnings:

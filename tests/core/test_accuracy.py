@@ -7,6 +7,7 @@ from __future__ import annotations
 import io
 import json
 import math
+import os
 
 import numpy as np
 import pytest
@@ -405,3 +406,22 @@ def test_a_mapping_written_with_a_colon_is_answered_with_what_was_meant():
         parse_land_cover_mapping("road:NVA")
     with pytest.raises(InvalidParameterError, match="write it as meadow=NVA or meadow=VVA"):
         parse_land_cover_mapping("meadow")
+
+
+def test_the_command_puts_the_report_and_the_csv_in_place_together(dtm, tmp_path, monkeypatch):
+    """A CSV that could not be written left the report behind (a code reviewer): both or neither."""
+    import io
+
+    from groundsieve.core.engine.cli import main
+    points_file = tmp_path / "cp.csv"
+    write_checkpoint_file(points_file)
+    report, csv = tmp_path / "r.html", tmp_path / "res.csv"
+
+    def broken(path, result, atomic=True):
+        raise OSError(28, "No space left on device")
+    monkeypatch.setattr(A, "write_residuals_csv", broken)
+    out = io.StringIO()
+    assert main(["accuracy", dtm, str(points_file), "--land-cover-map", "paved=NVA,forest=VVA", "--report", str(report),
+                 "--csv", str(csv)], out=out) == 1
+    assert "res.csv: cannot be written" in out.getvalue() and "Traceback" not in out.getvalue()
+    assert sorted(os.listdir(tmp_path)) == ["cp.csv"]
