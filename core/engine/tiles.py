@@ -410,6 +410,11 @@ def _check_disk(work_dir: str, infos: Sequence[LasInfo], buffer_m: float, size: 
 MAX_SURVEY_DTM_CELLS = 20_000_000_000
 
 
+#: fewer points a m² over the files' header bounds than this: some far point stretches them (a survey holds
+#: 1-1000 a m²)
+SPARSE_SURVEY_PER_M2 = 0.01
+
+
 def survey_dtm_grid(infos: Sequence[LasInfo], cell: float):
     """The survey DTM's grid over every file's header bounds, refused (naming the cell size) when it
     would have more than :data:`MAX_SURVEY_DTM_CELLS` cells: the headers alone tell, before any work."""
@@ -420,6 +425,9 @@ def survey_dtm_grid(infos: Sequence[LasInfo], cell: float):
         return GridSpec.covering(xs, ys, cell, what="DTM", bytes_per_cell=0.0, max_cells=MAX_SURVEY_DTM_CELLS,
                                  closed=True)
     except InvalidParameterError as err:  # (the headers count every point: a code reviewer's (0, 0, 0) noise point)
+        area = max(float(np.ptp(xs)), cell) * max(float(np.ptp(ys)), cell)
+        if sum(i.count for i in infos) / area >= SPARSE_SURVEY_PER_M2:  # (points over all of it: the cell, not a point)
+            raise
         raise InvalidParameterError(f"{err}. The files' headers span x {xs.min():,.2f}-{xs.max():,.2f}, y "
                                     f"{ys.min():,.2f}-{ys.max():,.2f}, every point counted, withheld and noise "
                                     "too: a point far from the others (e.g. at 0, 0) widens them; remove it from "

@@ -371,3 +371,22 @@ def test_the_tile_buffer_is_40_m_in_a_cloud_in_feet(tmp_path):
         dtm_path=str(tmp_path / "d.tif"), log=logs.append)
     (line,) = [text for text in logs if "with a buffer of" in text]
     assert "with a buffer of 132 ft (the default of a DTM from classes)" in line, line  # 40 m = 131.23 ft, rounded up
+
+
+def test_a_survey_grid_stretched_by_one_far_noise_point_names_it(tmp_path):
+    """One ignored noise point at (0, 0, 0) beside a survey at UTM 500,000 / 4,000,000: the headers' bounds
+    make the DTM's grid, which is refused; the refusal said only 'use a larger cell size' (a code reviewer).
+    It now names the headers' span and the likely far point."""
+    rng = np.random.default_rng(12)
+    n = 20_000
+    x, y = 500_000 + rng.uniform(0, 300, n), 4_000_000 + rng.uniform(0, 300, n)
+    z, cls = 100 + rng.normal(0, 0.1, n), np.full(n, 2, np.uint8)
+    x[0] = y[0] = z[0] = 0.0
+    cls[0] = 7
+    src = tmp_path / "zero.laz"
+    write_las(new_las(x, y, z, classification=cls), str(src))
+    with pytest.raises(InvalidParameterError, match=r"use a larger cell size\. The files' headers span x 0\.00-500,3.*"
+                                                     r"a point far from the others"):
+        run_ground_filter(str(src), None, ClassGround(), options=FilterOptions(keep_existing_classes=True,
+                                                                               tiling=_tiling(True)),
+                          dtm_path=str(tmp_path / "d.tif"))
