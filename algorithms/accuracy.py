@@ -236,6 +236,11 @@ checkpoints.</p>""")
         id_field = self.parameterAsString(parameters, self.ID_FIELD, context) or ""
         cover_field = self.parameterAsString(parameters, self.LAND_COVER_FIELD, context) or ""
         label = self.label(self.CHECKPOINTS).split(" (")[0]
+        if source.wkbType() == QgsWkbTypes.Type.NoGeometry:
+            raise QgsProcessingException(  # (a CSV given as it is was first said to have no Z: a flood modeller)
+                f"{label} '{source.sourceName()}': a table without geometries (a CSV opened without its coordinates?): "
+                "add it as a delimited text layer with its X and Y fields, or give the file to "
+                "'python -m groundsieve accuracy'")
         if not z_field and not QgsWkbTypes.hasZ(source.wkbType()):
             raise QgsProcessingException(f"{label} '{source.sourceName()}': the points have no Z; choose the field "
                                          f"holding their heights in '{self.label(self.Z_FIELD)}'")

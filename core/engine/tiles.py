@@ -1083,7 +1083,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             log(warning)
         if dtm_writer is not None:
             from .workflow import kept_out_note
-            note = kept_out_note(kept_out, algorithm)
+            note = kept_out_note(kept_out, algorithm, dtm)
             if note:
                 log(note)
             _say_enclosed_nodata(dtm_writer, dtm, grid.buffer, log)

@@ -223,7 +223,8 @@ def classify_cloud(cloud: PointCloud, algorithm, options: FilterOptions = Filter
             f"class {_codes(options.ignored)}, {int(may.sum()):,} others"
             + (", none of them a last return)" if options.last_returns_only else ")"))
     if n_sel < len(cloud):
-        log(f"Filtering {n_sel:,} of {len(cloud):,} points ({n_withheld:,} withheld and {n_ignored:,} of an "
+        log(f"{'Taking' if getattr(algorithm, 'ground_of_any_class', False) else 'Filtering'} {n_sel:,} of "
+            f"{len(cloud):,} points ({n_withheld:,} withheld and {n_ignored:,} of an "
             f"ignored class {_codes(options.ignored)} left out, keeping their class"
             + (", non-last returns left out" if options.last_returns_only else "") + ").")
     idx = np.flatnonzero(filtered)
@@ -346,18 +347,24 @@ def kept_out_of_dtm(cloud: PointCloud, classification: np.ndarray, processable_m
     return {int(c): int(n) for c, n in zip(codes, counts)}
 
 
-def kept_out_note(counts: dict, algorithm=None) -> str:
+def kept_out_note(counts: dict, algorithm=None, dtm: Optional["DTMOptions"] = None) -> str:
     """The log's line on points kept in classes of their own and left out of the DTM ("" if none); for an
-    ``algorithm`` whose ground is the input's classes (the DTM from classes), on every class left out."""
+    ``algorithm`` whose ground is the input's classes (the DTM from classes), on every class left out. With
+    ``dtm``: what the DTM does where they are (interpolated across them, or empty farther than its maximum
+    distance), and the advice to name a class only where none is named (a flood modeller read it with 9
+    named)."""
     if not counts:
         return ""
     from ..io.clouds import ASPRS_NAMES
     parts = ", ".join(f"{c} ({ASPRS_NAMES.get(c, 'class ' + str(c))}): {n:,}" for c, n in sorted(counts.items()))
+    across = ("the DTM is interpolated across them" if dtm is None or not dtm.max_distance_m else
+              f"the DTM is interpolated across them up to {dtm.max_distance_m:g} from the ground, and empty farther")
     if getattr(algorithm, "ground_of_any_class", False):
-        return f"DTM: {sum(counts.values()):,} points of other classes stay out of it ({parts})."
+        return f"DTM: {sum(counts.values()):,} points of other classes stay out of it ({parts}); {across}."
+    advice = ("" if dtm is not None and dtm.classes else " To make it hold a class (e.g. 9, the water surface, for a "
+              "flood model), name it in the DTM classes.")
     return (f"DTM: {sum(counts.values()):,} points kept in classes of their own are not ground and stay out of "
-            f"it ({parts}); the DTM is interpolated across them. To make it hold a class (e.g. 9, the water "
-            "surface, for a flood model), name it in the DTM classes.")
+            f"it ({parts}); {across}.{advice}")
 
 
 def check_classes_wanted(input_path: str, algorithm, options: FilterOptions) -> None:
@@ -372,6 +379,21 @@ def check_classes_wanted(input_path: str, algorithm, options: FilterOptions) -> 
     if both:
         raise InvalidParameterError(f"the ground classes and the ignored classes both name {_codes(both)}: a class "
                                     "cannot make the DTM and be left out of it")
+
+
+#: classes that are no terrain: a DTM from classes that holds them is said to (a flood modeller's 2,17 put the
+#: bridge deck in the terrain without a word)
+NOT_TERRAIN = {6: "building", 17: "bridge deck", 19: "overhead structure", 13: "wire guard", 14: "wire conductor",
+               15: "transmission tower", 5: "high vegetation", 18: "high noise", 7: "low noise"}
+
+
+def not_terrain_warning(algorithm) -> str:
+    """A warning when the ground classes of a DTM from classes hold classes that are no terrain ("" if not)."""
+    named = [c for c in getattr(algorithm, "classes", ()) if c in NOT_TERRAIN]
+    if not getattr(algorithm, "ground_of_any_class", False) or not named:
+        return ""
+    return (f"{WARNING_PREFIX}the ground classes hold {', '.join(f'{c} ({NOT_TERRAIN[c]})' for c in named)}: the DTM "
+            "takes their points as terrain (a bridge deck, a roof). Leave them out unless you mean it.")
 
 
 def check_model_units(algorithm, input_path: str, crs_wkt, log) -> None:
@@ -735,6 +757,9 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     log = log or (lambda _msg: None)
     rasters = {path: fn for path, fn in (rasters or {}).items() if path}
     check_classes_wanted(input_path, algorithm, options)
+    warning = not_terrain_warning(algorithm)
+    if warning:
+        log(warning)
     describe = getattr(algorithm, "describe", None)
     if callable(describe):  # a filter whose parameters are not a table's (the hybrid: its model)
         log(describe())
@@ -795,7 +820,7 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     if dtm_path:
         # The DTM spans only the points that may enter it: not withheld, not ignored (noise may lie far away).
         area = done.processable
-        note = kept_out_note(kept_out_of_dtm(cloud, cls, area & ~ground, dtm, algorithm), algorithm) if options.keep_existing_classes else ""
+        note = kept_out_note(kept_out_of_dtm(cloud, cls, area & ~ground, dtm, algorithm), algorithm, dtm) if options.keep_existing_classes else ""
         if note:
             log(note)
         run.dtm_grid, run.dtm = make_dtm(*_where(area, cloud.x, cloud.y, cloud.z, dtm_points(cloud, ground, area, dtm)),

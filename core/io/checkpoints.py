@@ -38,7 +38,7 @@ COLUMN_NAMES = {
     "x": ("x", "e", "east", "easting"),
     "y": ("y", "n", "north", "northing"),
     "z": ("z", "h", "elev", "elevation", "height"),
-    "id": ("id", "name", "point", "pt", "pointid", "pointname"),
+    "id": ("id", "name", "point", "pt", "p", "pointid", "pointname", "pointnumber", "pnt"),
     "land_cover": ("class", "landcover", "cover", "lc"),
 }
 #: land-cover words known without a mapping (compared after :func:`_key`)

@@ -47,6 +47,9 @@ MIN_CHECKPOINTS_ED2 = 30
 #: -32767, -3.4e38: no DTM of a lidar or photogrammetric survey lies 9,999 m or ft below its datum); a
 #: surveyor's DTM without its nodata tag gave an RMSEz of 10,164 m, the -9999 cells blended into the samples
 UNDECLARED_NODATA = -9999.0
+#: a mean error above this many times the standard deviation is said as a systematic offset (a flood
+#: modeller's checkpoints in metres against a DTM in feet: a mean of +47.2 ft, a deviation of 3.3 ft, no word)
+OFFSET_FACTOR = 3.0
 #: |dz| above this many times its class's RMSEz names a checkpoint an outlier
 OUTLIER_FACTOR = 3.0
 
@@ -307,6 +310,11 @@ def check_accuracy(dtm_path: str, x, y, z, *, ids: Optional[Sequence[str]] = Non
                 if abs(dz[i]) > OUTLIER_FACTOR * classes.get(covers[i], overall).rmse]
     warnings = _warnings(n, status, ids, labelled, classes, covers_arr, used, [ids[i] for i in outliers],
                          checkpoints_name, unit)
+    if overall.count >= 5 and abs(overall.mean) > OFFSET_FACTOR * overall.std:
+        warnings.append(f"the mean error ({overall.mean:+.4f}{' ' + unit if unit else ''}) is more than "
+                        f"{OFFSET_FACTOR:g} times the spread (standard deviation {overall.std:.4f}): a systematic "
+                        "offset, most often a vertical datum (geoid) or unit difference between the checkpoints and "
+                        "the DTM; check both before reading the figures")
     if undeclared:
         warnings.append(f"{name} declares no nodata value, but holds cells of {UNDECLARED_NODATA:g} or less next to "
                         f"{undeclared} checkpoint(s): taken as nodata (an undeclared nodata value such as -9999?); "

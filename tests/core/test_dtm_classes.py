@@ -74,6 +74,7 @@ def test_water_enters_the_dtm_when_named_and_the_run_says_what_stays_out(river, 
     # with 9 named only the trees stay out
     note = [line for line in logs["with"] if line.startswith("DTM: ") and "stay out" in line]
     assert len(note) == 1 and "9 (water)" not in note[0] and "5 (high vegetation)" in note[0]
+    assert "name it in the DTM classes" not in note[0]  # (9 is named: no advice to name one; a flood modeller)
     # the classified cloud keeps the vendor's water either way
     import laspy
     las = laspy.read(str(tmp_path / "with.laz"))

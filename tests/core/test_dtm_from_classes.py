@@ -390,3 +390,19 @@ def test_a_survey_grid_stretched_by_one_far_noise_point_names_it(tmp_path):
         run_ground_filter(str(src), None, ClassGround(), options=FilterOptions(keep_existing_classes=True,
                                                                                tiling=_tiling(True)),
                           dtm_path=str(tmp_path / "d.tif"))
+
+
+def test_a_bridge_deck_among_the_ground_classes_is_warned_about(delivery, tmp_path):
+    """--classes 2,17 put a bridge deck in the terrain without a word (a flood modeller); 6 (building)
+    here: the run warns, and still runs as asked."""
+    logs = []
+    run_ground_filter(str(delivery), None, ClassGround("2,6"), options=FilterOptions(keep_existing_classes=True),
+                      dtm_path=str(tmp_path / "d.tif"), log=logs.append)
+    said = [line for line in logs if "the ground classes hold" in line]
+    assert len(said) == 1 and said[0].startswith(WARNING_PREFIX) and "6 (building)" in said[0]
+    # the ignored noise left out: the run says it takes the others, not that it filters them
+    assert any(line.startswith("Taking ") and "of an ignored class" in line for line in logs), logs
+    logs = []
+    run_ground_filter(str(delivery), None, ClassGround("2"), options=FilterOptions(keep_existing_classes=True),
+                      dtm_path=str(tmp_path / "e.tif"), log=logs.append)
+    assert not any("the ground classes hold" in line for line in logs)
