@@ -41,7 +41,10 @@ many points of each other class it left out.</p>
 <h3>Parameters</h3>
 <p><b>Input point cloud</b>: LAS 1.2-1.4 or LAZ, a folder of them or a .vpc (a survey, run in buffered
 tiles). Only read, never changed. <b>Ground classes</b>: the classes of the DTM's points: 2 (ground);
-add 8 (model key points) or 9 (water) for a flood model's water surface, e.g. <code>2,9</code>.
+add 9 (water) for a flood model's water surface, e.g. <code>2,9</code>, and the classes the vendor kept apart
+from the ground that are terrain too: 8 (model key points), 10 (rail), 11 (road surface), e.g.
+<code>2,9,11</code> (an embankment's crest classed 11 is otherwise bridged, lower). A class that is no terrain
+(6 building, 17 bridge deck, ...) is warned about.
 <b>Ignored classes</b> (default <code>7,18</code>, noise): left out of the DTM's extent too, so that a
 stray noise point far away does not stretch the grid; withheld points always are.
 <b>DTM cell size (m)</b>: in the unit of the cloud's CRS when you set it; the default 1 m is converted

@@ -251,8 +251,8 @@ def _add_dtm(sub) -> None:
     io.add_argument("--dtm", required=True, metavar="PATH", help="the DTM GeoTIFF")
     _add_json(io)
     io.add_argument("--classes", default="2", metavar="LIST",
-                    help="the classes of the DTM's points: 2 (ground), e.g. 2,9 with water; a list or ranges as "
-                         "--ignore-classes (default %(default)s)")
+                    help="the classes of the DTM's points: 2 (ground), e.g. 2,9 with water, 2,9,11 with the road "
+                         "surface the vendor classed apart; a list or ranges as --ignore-classes (default %(default)s)")
     io.add_argument("--ignore-classes", default="7,18", metavar="LIST",
                     help="classes left out of the DTM and of its extent, e.g. noise; '' = none (default %(default)s)")
     io.add_argument("--dtm-cell", type=float, default=dt["cell_size_m"], metavar="M", action=_TYPED_CELL,
