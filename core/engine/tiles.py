@@ -928,6 +928,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     # DTM is cut to it, as a whole run's grid spans those points only (None in a result: not known)
     area_box: List[Optional[list]] = [[math.inf, math.inf, -math.inf, -math.inf]]
     data_gaps: list = []  # the gaps in the data the DTM spans (workflow.data_gaps), from the tiles
+    hull_points: List[Optional[list]] = [[]]  # the vertices of the tiles' own ground's convex hulls
     gap_sizes: list = []  # the smallest gap each tile names
     kept_out: Dict[int, int] = {}  # points kept in classes of their own, left out of the DTM
     replaced: Dict[int, int] = {}  # points of the input's other classes given 1 or 2
@@ -978,6 +979,10 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             structures[int(code)] = structures.get(int(code), 0) + int(count)
         ground_total += result["ground"]
         dtm_points += result["dtm_points"]
+        if "hull" not in result:  # (a tile done by an earlier version, resumed)
+            hull_points[0] = None
+        elif hull_points[0] is not None:
+            hull_points[0].extend(result["hull"])
         if result.get("gaps"):
             gap_sizes.append(result["gaps"][0])
             data_gaps.extend(tuple(g) for g in result["gaps"][1:])
@@ -1086,7 +1091,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             note = kept_out_note(kept_out, algorithm, dtm)
             if note:
                 log(note)
-            _say_enclosed_nodata(dtm_writer, dtm, grid.buffer, log)
+            _say_enclosed_nodata(dtm_writer, dtm, grid.buffer, log, hull_points[0], unit)
             note = workflow_gaps_note(data_gaps, gap_sizes, unit)
             if note:
                 log(note)
@@ -1132,22 +1137,61 @@ def _output_folders(outs):
         raise
 
 
-def _say_enclosed_nodata(writer, dtm, buffer_m: float, log) -> None:
-    """Warn when the tiled DTM left cells empty that a run of the whole cloud fills: a tile sees
-    ground only as far as its buffer, so in a gap (a lake, a missing flight line) or a bay of the
-    data wider than that its block has no value there, where one triangulation of the whole cloud
-    spans the gap (a flood modeller's 120 m lake: 32 empty cells and a 0.97 m step at a tile edge,
-    not a word in the log). With a maximum distance or a fill the empty cells are the rule's."""
+def _hull_points(x, y) -> list:
+    """The vertices of the convex hull of the points ``x, y`` as [[x, y], ...] (the points themselves when
+    they are fewer than 3 or on a line): a tile's share of the survey ground's hull, few numbers to return."""
+    if x.size < 3:
+        return [[float(a), float(b)] for a, b in zip(x, y)]
+    from scipy.spatial import ConvexHull, QhullError
+    xy = np.column_stack([x, y])
+    try:
+        return xy[ConvexHull(xy).vertices].tolist()
+    except QhullError:  # (on a line: its two ends)
+        k = np.lexsort((y, x))
+        return xy[[k[0], k[-1]]].tolist()
+
+
+def _survey_hull(points) -> Optional[np.ndarray]:
+    """The convex hull (its vertices in order) of the tiles' hull points; None when it has no area."""
+    if points is None or len(points) < 3:
+        return None
+    from scipy.spatial import ConvexHull, QhullError
+    xy = np.asarray(points, dtype=np.float64)
+    try:
+        return xy[ConvexHull(xy).vertices]
+    except QhullError:
+        return None
+
+
+def _say_enclosed_nodata(writer, dtm, buffer_m: float, log, hull_points=None, unit: str = "m") -> None:
+    """Say when the tiled DTM left cells empty that a run of the whole cloud fills: a tile sees ground
+    only as far as its buffer, so in a gap (a lake, a missing flight line) wider than that its block has
+    no value there, where one triangulation of the whole cloud spans the gap (a flood modeller's 120 m
+    lake: 32 empty cells and a 0.97 m step at a tile edge, not a word in the log). Cells with values
+    around them in their row and their column are warned about, with the advice of a wider buffer. The
+    whole run fills the convex hull of the ground, bays open to the data's edge too (a coastline, a river
+    running off the survey: a flood modeller's 40,002 such cells went unsaid): with the tiles' hulls
+    (``hull_points``) those are said too, as a note, since the whole run's triangles across them are no
+    measured terrain either (a code reviewer's bay, which a warning told to fill with a buffer as wide).
+    With a maximum distance or a fill the empty cells are the rule's."""
     if dtm.max_distance_m > 0 or dtm.fill_outside_hull:
         return
     empty = writer.enclosed_nodata()
     if empty:
         log(f"{WARNING_PREFIX}DTM: {empty:,} cell(s) with values around them in their row and their column stayed "
             f"nodata: a gap in the data there (a lake, a missing strip) is wider than the tiles' buffer ({buffer_m:g} "
-            "m), which a tile cannot see across, while a run of the whole cloud interpolates across it (near such "
-            "gaps the tiled DTM may also step at tile edges). A tile buffer of at least the gap's width gives the "
-            "whole run's DTM; to leave such gaps empty on purpose (water without returns), set a DTM maximum "
+            f"{unit}), which a tile cannot see across, while a run of the whole cloud interpolates across it (near "
+            "such gaps the tiled DTM may also step at tile edges). A tile buffer of at least the gap's width gives "
+            "the whole run's DTM; to leave such gaps empty on purpose (water without returns), set a DTM maximum "
             "distance (tiled or whole, without this warning).")
+    hull = _survey_hull(hull_points)
+    open_cells = (writer.nodata_inside(hull) - empty) if hull is not None else 0
+    if open_cells > 0:
+        log(f"DTM: {open_cells:,} cell(s) inside the outline of the ground (its convex hull) stayed nodata in bays or "
+            f"channels of the data open to its edge (a coastline, a river without returns) wider than the tiles' "
+            f"buffer ({buffer_m:g} {unit}): a run of the whole cloud draws triangles across them, which are not "
+            "measured terrain either. A tile buffer as wide gives the whole run's DTM; a DTM maximum distance leaves "
+            "them empty in both.")
 
 
 def _existing_folder(path: str) -> str:
@@ -1531,7 +1575,7 @@ def _tile_job(job) -> Optional[dict]:
             # (the write phase reads them there; a killed worker's writes stay too).
             del classes
             assigned[int(k)] = int(sel.sum())
-        block, kept_out, dtm_own, area_bounds, gaps = None, {}, 0, None, []
+        block, kept_out, dtm_own, area_bounds, gaps, hull = None, {}, 0, None, [], []
         if job["dtm"] is not None:
             area = workflow.processable(cloud, options)
             mine = area & own  # (the DTM's extent: the points that may enter it, as a whole run's grid)
@@ -1540,6 +1584,7 @@ def _tile_job(job) -> Optional[dict]:
                 area_bounds = [float(xs.min()), float(ys.min()), float(xs.max()), float(ys.max())]
             in_dtm = workflow.dtm_points(cloud, ground, area, job["dtm"])
             dtm_own = int(np.count_nonzero(in_dtm & own))
+            hull = _hull_points(cloud.x[in_dtm & own], cloud.y[in_dtm & own])  # (the whole run fills the hull)
             gaps = []  # [the smallest gap named, then each gap (area, x, y)]
             block = _dtm_block(cloud, in_dtm, job["dtm"], job["dtm_grid"], job["bounds"], job["buffer"], area, gaps)
             if options.keep_existing_classes:
@@ -1547,7 +1592,7 @@ def _tile_job(job) -> Optional[dict]:
         result = dict(key=list(job["key"]), own=int(own.sum()), read=len(cloud), ground=int(ground[own].sum()),
                       dtm_points=dtm_own, assigned=assigned, block=block, class_parts=class_parts, copc_read=copc_read,
                       kept_out=sorted(kept_out.items()), replaced=sorted(replaced.items()),
-                      structures=sorted(structures.items()), area_bounds=area_bounds, gaps=gaps)
+                      structures=sorted(structures.items()), area_bounds=area_bounds, gaps=gaps, hull=hull)
         _save_done(job["done_dir"], result)
         return result
     except Cancelled:

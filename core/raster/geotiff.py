@@ -263,6 +263,36 @@ class BlockGeoTIFF:
                 count += int(np.sum(empty & inside))
             return count
 
+    def nodata_inside(self, polygon: np.ndarray, margin_cells: float = 1.0, strip_rows: int = 512) -> int:
+        """Cells without a value whose centres lie inside the convex ``polygon`` ((k, 2) x, y vertices) by
+        ``margin_cells`` or more: what one triangulation of the whole cloud fills when ``polygon`` is the
+        convex hull of its ground (a flood modeller's river running off the survey: no cell of it had values
+        on both sides in its column, and :meth:`enclosed_nodata` counted none of 40,002)."""
+        g = self.grid
+        poly = np.asarray(polygon, dtype=np.float64)
+        if poly.shape[0] < 3:
+            return 0
+        a, b = poly, np.roll(poly, -1, axis=0)
+        slanted = a[:, 1] != b[:, 1]
+        a, b = a[slanted], b[slanted]
+        lo, hi = np.minimum(a[:, 1], b[:, 1]), np.maximum(a[:, 1], b[:, 1])
+        margin = margin_cells * g.cell
+        count = 0
+        with self._lock:
+            for row0, n, _above, values in self._strips(strip_rows):
+                yc = g.top - (np.arange(row0, row0 + n) + 0.5) * g.cell
+                cross = (yc[:, None] >= lo[None, :]) & (yc[:, None] <= hi[None, :])
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    xs = a[None, :, 0] + (yc[:, None] - a[None, :, 1]) * (b[None, :, 0] - a[None, :, 0]) \
+                        / (b[None, :, 1] - a[None, :, 1])
+                left = np.where(cross, xs, np.inf).min(axis=1) + margin
+                right = np.where(cross, xs, -np.inf).max(axis=1) - margin
+                inside_y = (yc >= poly[:, 1].min() + margin) & (yc <= poly[:, 1].max() - margin)
+                cx = g.x0 + (np.arange(g.ncols) + 0.5) * g.cell
+                inside = inside_y[:, None] & (cx[None, :] >= left[:, None]) & (cx[None, :] <= right[:, None])
+                count += int(np.sum((values == self.nodata) & inside))
+        return count
+
     def close(self) -> None:
         """Close the work raster, band before dataset (left to the garbage collector, e.g. kept
         alive by a traceback, GDAL may free them in the wrong order and crash). Idempotent."""

@@ -406,3 +406,28 @@ def test_a_bridge_deck_among_the_ground_classes_is_warned_about(delivery, tmp_pa
     run_ground_filter(str(delivery), None, ClassGround("2"), options=FilterOptions(keep_existing_classes=True),
                       dtm_path=str(tmp_path / "e.tif"), log=logs.append)
     assert not any("the ground classes hold" in line for line in logs)
+
+
+def test_a_river_without_returns_across_the_survey_is_said_when_tiles_leave_it_empty(tmp_path):
+    """A 100 m river without returns running through the survey, along a tile line: the whole run fills it,
+    the tiles (40 m buffer) left 40,002 cells empty without a word, no cell of it having a value on both
+    sides in its column (a flood modeller). The run says so now, with the count."""
+    rng = np.random.default_rng(14)
+    n = 120_000
+    x, y = rng.uniform(0, 400, n), rng.uniform(0, 300, n)
+    keep = np.abs(x - 200) > 50
+    src = tmp_path / "river.laz"
+    write_las(new_las(x[keep], y[keep], terrain(x[keep], y[keep]),
+                      classification=np.full(int(keep.sum()), 2, np.uint8)), str(src))
+    made, logs = [], []
+    for tiled in (False, True):
+        out = tmp_path / f"d{int(tiled)}.tif"
+        run_ground_filter(str(src), None, ClassGround(), options=FilterOptions(keep_existing_classes=True,
+                                                                               tiling=_tiling(tiled)),
+                          dtm_path=str(out), log=logs.append)
+        made.append(_read(out)[0])
+    empty = int(np.isnan(made[1]).sum() - np.isnan(made[0]).sum())
+    assert empty > 5000  # the river's middle, empty in tiles only
+    (note,) = [line for line in logs if "stayed nodata in bays or channels" in line]
+    said = int(note.split("DTM: ")[1].split(" cell(s)")[0].replace(",", ""))
+    assert 0.9 * empty <= said <= empty, (said, empty)
