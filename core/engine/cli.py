@@ -125,6 +125,8 @@ JSON_HELP = ("write one JSON document to stdout at the end, nothing else (the lo
 FILTER_JSON = ("\"input\", \"output\", \"outputs\" (the classified files), \"dtm\" (or null), \"points\", "
                "\"ground\", \"seconds\", \"tiles\" (null without tiles), \"algorithm\", \"parameters\" (the "
                "filter's, as run), \"warnings\"")
+DTM_JSON = ("\"input\", \"dtm\", \"points\", \"ground\" (the points of the ground classes), \"seconds\", \"tiles\" "
+            "(null without tiles), \"algorithm\" (dtm), \"parameters\" (the ground classes), \"warnings\"")
 ACCURACY_JSON = ("\"dtm\", \"checkpoints\", \"unit\", \"sign\", \"count\", \"skipped\" ([{id, reason}]), "
                  "\"all\", \"nva\", \"vva\" (each null or {count, mean, std, rmse, min, max, p95_abs, ed1_95, "
                  "ed1_95_method, ed2_rmse}), \"outliers\", \"report\", \"csv\", \"warnings\"")
@@ -249,7 +251,7 @@ def _add_dtm(sub) -> None:
     io = parser.add_argument_group("input and output")
     io.add_argument("--input", required=True, metavar="PATH", help="LAS/LAZ (1.2-1.4), a folder of them, or a .vpc")
     io.add_argument("--dtm", required=True, metavar="PATH", help="the DTM GeoTIFF")
-    _add_json(io)
+    _add_json(io, DTM_JSON)
     io.add_argument("--classes", default="2", metavar="LIST",
                     help="the classes of the DTM's points: 2 (ground), e.g. 2,9 with water, 2,9,11 with the road "
                          "surface the vendor classed apart; a list or ranges as --ignore-classes (default %(default)s)")
