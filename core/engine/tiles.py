@@ -902,6 +902,9 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     from ..io.copc import plan_tiles
     copc_tiles = plan_tiles(infos, grid.size, grid.buffer)  # the tiles COPC inputs may have points in
     keys = sorted(set(keys) | set(copc_tiles))
+    if copc_tiles:  # ... and those whose buffer reaches into them
+        from ..io.copc import add_buffer_sources
+        add_buffer_sources(copc_tiles, infos, keys, grid.size, grid.buffer)
     n_copc = sum(1 for i in infos if i.copc)
     log(f"Binned into {len(keys)} tile(s) in {time.perf_counter() - t_start:.1f} s." if not n_copc else
         f"Planned {len(keys)} tile(s) in {time.perf_counter() - t_start:.1f} s ({n_copc} COPC file(s) read by "

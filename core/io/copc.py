@@ -407,6 +407,27 @@ def plan_tiles(infos: Sequence, size: float, buffer: float) -> Dict[Tuple[int, i
     return tiles
 
 
+def add_buffer_sources(tiles: Dict[Tuple[int, int], List[CopcSource]], infos: Sequence, keys, size: float,
+                       buffer: float) -> None:
+    """Give each of the survey's tiles ``keys`` a source in every COPC input its buffer reaches, beside
+    those in which it has points of its own (:func:`plan_tiles`): where the tiles lie on the files' edges
+    (a delivery of 500 m files in 500 m tiles), a tile had none of its neighbours' points for its buffer,
+    and its seams were wrong by up to 0.34 m (1.23 m with SMRF) where binned LAZ gave the whole run's DTM
+    (an HPC reviewer). From the files' header boxes; a source that holds no point is read for nothing."""
+    keys = set(keys)
+    for k, info in enumerate(infos):
+        if not getattr(info, "copc", False) or not info.count:
+            continue
+        (bx0, by0, _), (bx1, by1, _) = info.mins, info.maxs
+        for i in range(math.floor((bx0 - buffer) / size), math.floor((bx1 + buffer) / size) + 1):
+            for j in range(math.floor((by0 - buffer) / size), math.floor((by1 + buffer) / size) + 1):
+                if (i, j) not in keys:
+                    continue
+                sources = tiles.setdefault((i, j), [])
+                if not any(src.file_index == k for src in sources):
+                    sources.append(CopcSource(k, info.path, (i, j), float(size), float(buffer)))
+
+
 def tile_sources(parts: Sequence, copc: Sequence[CopcSource], read_part) -> Tuple[list, int]:
     """A tile's points, source by source in input-file order (a tile part of ``bin_file`` read by
     ``read_part``, or a COPC source read by bounds): [(file index, cloud, indices)], and how many
