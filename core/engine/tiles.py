@@ -1055,9 +1055,11 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     if dtm_out is not None and not n_copc:
         _say_stray_tiles(tiles, grid, dtm_out, log)
     if dtm_writer is not None and not dtm_points:  # (as a whole run refuses it, not an empty DTM written)
+        where = inputs[0] if len(inputs) == 1 else f"{len(inputs)} input files"
         why = getattr(algorithm, "no_ground_in_survey", "")
-        raise InvalidParameterError(f"{inputs[0] if len(inputs) == 1 else f'{len(inputs)} input files'}: the filter "
-                                    "found no ground point in any tile: no DTM can be made" + (f". Why: {why}" if why else ""))
+        if why:  # (the DTM from classes filters nothing: its input lacks the classes; an HPC reviewer)
+            raise InputError(f"{where}: no DTM can be made: {why}")
+        raise InvalidParameterError(f"{where}: the filter found no ground point in any tile: no DTM can be made")
     # every tile is done (and marked so for a resumed run): its parts make room for the write's pieces
     for parts in tiles.values():
         for part in parts:

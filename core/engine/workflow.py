@@ -663,11 +663,12 @@ def data_gaps(x, y, dtm: np.ndarray, grid: GridSpec) -> tuple:
 def gaps_note(gaps, smallest: float, unit: str = "m") -> str:
     """The log's line on the gaps :func:`data_gaps` found ("" when none). A tiled run leaves gaps wider than
     its buffer empty and warns; a whole run interpolated across them without a word (a UAV photogrammetry
-    practitioner)."""
+    practitioner). A warning: the DTM's values there are not measured, and a QA pipeline reads the
+    warnings (``--json``) alone (an HPC reviewer)."""
     if not gaps:
         return ""
     area, cx, cy = max(gaps)
-    return (f"DTM: the data have {len(gaps):,} gap(s) of {smallest:,.0f} {unit}² or more without any point (the largest "
+    return (f"{WARNING_PREFIX}DTM: the data have {len(gaps):,} gap(s) of {smallest:,.0f} {unit}² or more without any point (the largest "
             f"about {area:,.0f} {unit}² around x {cx:,.0f}, y {cy:,.0f}), which the triangulation interpolates across: "
             "the DTM's values there are not measured (water without returns, a missing strip, a shadow of the image "
             "matching). To leave such gaps empty, set 'DTM: leave cells farther than this from any ground point "
