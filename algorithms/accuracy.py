@@ -1,6 +1,7 @@
 """groundsieve:accuracy — Check DTM accuracy against checkpoints (core/raster/accuracy.py): a
 surveyor's vertical accuracy figures (RMSEz, bias, NVA and VVA under ASPRS Editions 1 and 2) of any
 DTM raster, from a point layer of surveyed checkpoints."""
+import dataclasses
 import math
 import os
 
@@ -171,11 +172,18 @@ checkpoints.</p>""")
                         f"(its fields: {', '.join(names) or 'none'})")
         return None
 
+    def warn(self, feedback, text):
+        """A warning of the run, in the log and in the report (a flood modeller's reprojection was in the log
+        alone, which is not what goes into a model build report)."""
+        feedback.pushWarning(text)
+        self._warnings = getattr(self, "_warnings", []) + [text]
+
     def label(self, name):
         return self.parameterDefinition(name).description()
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         errors, _workflow = core_modules()
+        self._warnings = []
         from ..core.io.checkpoints import land_cover_of, parse_land_cover_mapping
         from ..core.raster import accuracy
         layer = self.parameterAsRasterLayer(parameters, self.DTM, context)
@@ -208,6 +216,8 @@ checkpoints.</p>""")
             result = accuracy.check_accuracy(
                 dtm_path, x, y, z, ids=ids, land_cover=covers, band=self.parameterAsInt(parameters, self.BAND, context),
                 name=f"DTM '{layer.name()}' ({dtm_path})", checkpoints_name=points_name)
+            # the warnings of reading the layer (its reprojection, ...) in the report too
+            result = dataclasses.replace(result, warnings=tuple(getattr(self, "_warnings", [])) + result.warnings)
             # the layer first: should QGIS fail to create it, no report is left behind (a surveyor)
             sink_id = self.writeResiduals(parameters, context, source, result, geometries)
             accuracy.write_report(report, result)
@@ -215,7 +225,7 @@ checkpoints.</p>""")
             raise QgsProcessingException(str(err)) from err
         for line in accuracy.summary_lines(result):
             feedback.pushInfo(line)
-        for text in result.warnings:
+        for text in result.warnings[len(getattr(self, "_warnings", [])):]:  # (the layer's, said already)
             feedback.pushWarning(text)
         results = {self.OUTPUT_HTML: report, self.RMSEZ: result.overall.rmse, self.MEAN: result.overall.mean,
                    self.COUNT: result.count, self.SKIPPED: len(result.skipped),
@@ -291,7 +301,7 @@ checkpoints.</p>""")
                 covers.append(cover)
                 geometries.append((vertex.x(), vertex.y()))
         if empty:
-            feedback.pushWarning(f"{len(empty)} checkpoint(s) without a geometry left out: {', '.join(empty[:12])}")
+            self.warn(feedback, f"{len(empty)} checkpoint(s) without a geometry left out: {', '.join(empty[:12])}")
         if not x:
             raise QgsProcessingException(
                 f"{label} '{source.sourceName()}': holds no points" + (
@@ -307,13 +317,13 @@ checkpoints.</p>""")
         datum = ("their heights are taken as they are: they must be in the DTM's vertical datum (geoid) "
                  "and unit")
         if not source_crs.isValid() or not dtm_crs.isValid():
-            feedback.pushWarning(f"{'the checkpoints' if not source_crs.isValid() else 'the DTM'} have no CRS: the "
+            self.warn(feedback, f"{'the checkpoints' if not source_crs.isValid() else 'the DTM'} have no CRS: the "
                                  f"checkpoints' x and y are taken as in the DTM's CRS; {datum}")
             return None
         if source_crs == dtm_crs:
             feedback.pushInfo(f"Checkpoints and DTM in {dtm_crs.authid() or dtm_crs.description()}; {datum}.")
             return None
-        feedback.pushWarning(f"the checkpoints' x and y are reprojected from {source_crs.authid() or source_crs.description()} "
+        self.warn(feedback, f"the checkpoints' x and y are reprojected from {source_crs.authid() or source_crs.description()} "
                              f"to the DTM's {dtm_crs.authid() or dtm_crs.description()}; {datum}")
         return QgsCoordinateTransform(source_crs, dtm_crs, context.transformContext())
 

@@ -127,7 +127,7 @@ FILTER_JSON = ("\"input\", \"output\", \"outputs\" (the classified files), \"dtm
                "filter's, as run), \"warnings\"")
 DTM_JSON = ("\"input\", \"dtm\", \"points\", \"ground\" (the points of the ground classes), \"seconds\", \"tiles\" "
             "(null without tiles), \"algorithm\" (dtm), \"parameters\" (the ground classes), \"warnings\"")
-ACCURACY_JSON = ("\"dtm\", \"checkpoints\", \"unit\", \"sign\", \"count\", \"skipped\" ([{id, reason}]), "
+ACCURACY_JSON = ("\"dtm\", \"checkpoints\", \"unit\", \"crs\", \"sign\", \"count\", \"skipped\" ([{id, reason}]), "
                  "\"all\", \"nva\", \"vva\" (each null or {count, mean, std, rmse, min, max, p95_abs, ed1_95, "
                  "ed1_95_method, ed2_rmse}), \"outliers\", \"report\", \"csv\", \"warnings\"")
 TUNE_JSON = ("\"input\", \"filter\", \"metric\", \"parameters\" (chosen), \"searched\", \"cv\" (cross-validated "

@@ -119,6 +119,8 @@ class AccuracyResult:
     vva: Optional[Figures] = None
     outlier_indices: Tuple[int, ...] = ()
     warnings: Tuple[str, ...] = field(default=())
+    #: the DTM's CRS by name (its vertical part too, where it has one); "" without one
+    crs: str = ""
 
     @property
     def outliers(self) -> Tuple[str, ...]:
@@ -273,6 +275,7 @@ def check_accuracy(dtm_path: str, x, y, z, *, ids: Optional[Sequence[str]] = Non
     try:
         sampled = [raster.sample(float(a), float(b)) for a, b in zip(x, y)]
         extent, unit, undeclared = raster.extent(), raster.unit, raster.undeclared
+        crs_name = _crs_name(raster.crs_wkt)
         if not unit and raster.crs_wkt:
             from .crs import elevation_unit
             unit = elevation_unit(raster.crs_wkt)
@@ -330,7 +333,14 @@ def check_accuracy(dtm_path: str, x, y, z, *, ids: Optional[Sequence[str]] = Non
     return AccuracyResult(dtm=name, checkpoints=checkpoints_name, x=x, y=y, z=z, dtm_z=np.where(used, dtm_z, np.nan),
                           dz=dz, ids=ids, land_cover=covers, status=status, unit=unit, labelled=labelled,
                           overall=overall, nva=classes.get(NVA), vva=classes.get(VVA), outlier_indices=tuple(outliers),
-                          warnings=tuple(warnings))
+                          warnings=tuple(warnings), crs=crs_name)
+
+
+def _crs_name(crs_wkt: Optional[str]) -> str:
+    """The CRS's name (a compound CRS's names both parts: "NAD83 / ... + NAVD88 height"); "" without one."""
+    from .crs import _spatial_reference
+    ref = _spatial_reference(crs_wkt)
+    return (ref.GetName() or "") if ref is not None else ""
 
 
 def _some(names: Sequence[str], most: int = 12) -> str:
@@ -471,7 +481,7 @@ def document(result: AccuracyResult) -> dict:
             return None
         return {"count": f.count, "mean": f.mean, "std": f.std, "rmse": f.rmse, "min": f.min, "max": f.max,
                 "p95_abs": f.p95_abs, "ed1_95": f.ed1_95, "ed1_95_method": f.ed1_label, "ed2_rmse": f.rmse}
-    return {"dtm": result.dtm, "checkpoints": result.checkpoints, "unit": result.unit,
+    return {"dtm": result.dtm, "checkpoints": result.checkpoints, "unit": result.unit, "crs": result.crs,
             "sign": SIGN_CONVENTION, "count": result.count, "skipped": [{"id": i, "reason": s} for i, s in result.skipped],
             "all": figs(result.overall), "nva": figs(result.nva), "vva": figs(result.vva),
             "outliers": list(result.outliers), "warnings": list(result.warnings)}

@@ -6,10 +6,12 @@ from __future__ import annotations
 
 import html
 import math
+from datetime import datetime, timezone
 from typing import Optional
 
 import numpy as np
 
+from ..io.provenance import software
 from .accuracy import (ED2_NOTE, MIN_CHECKPOINTS, MIN_CHECKPOINTS_ED2, NVA_FACTOR, OUTLIER_FACTOR, SIGN_CONVENTION, USED,
                        AccuracyResult, Figures, residual_rows)
 
@@ -93,6 +95,8 @@ td {{ text-align: right; }} th {{ background: #f0f0f0; }} td.l {{ text-align: le
 tr.outlier td {{ background: #fde2e2; }} tr.skipped td {{ color: #888; }}
 </style></head><body>
 <h1>Vertical accuracy of {html.escape(result.dtm)}</h1>
+<p class="small">{html.escape(software())}, {datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")}. The DTM's
+CRS: {html.escape(result.crs) if result.crs else "none recorded in the file"}.</p>
 <p>Checkpoints: {html.escape(result.checkpoints)}. <b>{result.count}</b> of {len(result.ids)} used,
 {len(result.skipped)} skipped (outside the DTM or on its nodata). Heights in {unit_text}.
 <b>Sign: {html.escape(SIGN_CONVENTION)}</b>; a positive mean error is a DTM too high.</p>

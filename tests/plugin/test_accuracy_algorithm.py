@@ -144,6 +144,10 @@ def test_checkpoints_in_another_crs_are_reprojected_to_the_dtm(groundsieve_provi
     assert result["COUNT"] == 40
     assert result["RMSEZ"] == pytest.approx(np.sqrt(np.mean(dz ** 2)), abs=1e-6)
     assert result["MEAN"] == pytest.approx(dz.mean(), abs=1e-6)
+    # the report says the reprojection, the DTM's CRS and what made it (a flood modeller: in the log alone)
+    text = (tmp_path / "r.html").read_text(encoding="utf-8")
+    assert "reprojected from EPSG:4326" in text
+    assert "UTM zone 33N" in text and "GroundSieve " in text
     # taken as they are, without reprojection, degrees miss the DTM by 500 km: said so
     from qgis.core import QgsProcessingException
     wrong = add_points(memory_layer("EPSG:32633", ["n:integer"]),
