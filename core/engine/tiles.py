@@ -935,6 +935,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     gap_sizes: list = []  # the smallest gap each tile names
     kept_out: Dict[int, int] = {}  # points kept in classes of their own, left out of the DTM
     replaced: Dict[int, int] = {}  # points of the input's other classes given 1 or 2
+    demoted = [0, 0]  # points the input had as ground (2), and of them not ground now
     structures: Dict[int, int] = {}  # those of its structure classes made ground
     filter_steps = steps.sub(0.3, 0.85)
     t_tiles = time.perf_counter()
@@ -976,6 +977,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             dtm_writer.write_block(*result["block"])
         for code, count in result.get("kept_out", ()):
             kept_out[int(code)] = kept_out.get(int(code), 0) + int(count)
+        for k, count in enumerate(result.get("demoted", (0, 0))):
+            demoted[k] += int(count)
         for code, count in result.get("replaced", ()):
             replaced[int(code)] = replaced.get(int(code), 0) + int(count)
         for code, count in result.get("structures", ()):
@@ -1083,7 +1086,10 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         if output_path and _ext(output_path) == VPC_EXTENSION:
             from ..raster.crs import lonlat_box
             write_vpc(staging.stage(output_path), [scan_header(o) for o in staged], outs, lonlat=lonlat_box)
-        from .workflow import replaced_note, structures_warning
+        from .workflow import demoted_note, replaced_note, structures_warning
+        note = demoted_note(*demoted, algorithm)
+        if note:
+            log(note)
         note = replaced_note(replaced, algorithm)
         if note:
             log(note)
@@ -1550,7 +1556,7 @@ def _tile_job(job) -> Optional[dict]:
             return None
         cloud = tile_cloud(clouds, path=where)
         del clouds
-        replaced, structures = {}, {}
+        replaced, structures, demoted = {}, {}, (0, 0)
         if len(cloud) < getattr(job["algorithm"], "min_tile_points", MIN_TILE_POINTS):
             # Isolated points (a stray point far from the survey): too few for any filter's grid;
             # they keep their classes and are not ground.
@@ -1558,6 +1564,9 @@ def _tile_job(job) -> Optional[dict]:
         elif workflow.select_points(cloud, options).any():
             done = workflow.classify_cloud(cloud, job["algorithm"], options, Steps(is_cancelled=job["is_cancelled"]))
             cls, ground = done.classification, done.ground
+            demoted = workflow.demoted_ground(cloud.classification, ground, own & done.processable &
+                                              (np.isin(cloud.classification, workflow.REWRITTEN_CLASSES)
+                                               if options.keep_existing_classes else True))
             if not options.keep_existing_classes:  # said once for the run (the tile's log goes nowhere)
                 replaced = workflow.replaced_classes(cloud.classification, own & done.processable)
                 structures = workflow.structures_made_ground(cloud.classification, own & ground)
@@ -1597,7 +1606,8 @@ def _tile_job(job) -> Optional[dict]:
         result = dict(key=list(job["key"]), own=int(own.sum()), read=len(cloud), ground=int(ground[own].sum()),
                       dtm_points=dtm_own, assigned=assigned, block=block, class_parts=class_parts, copc_read=copc_read,
                       kept_out=sorted(kept_out.items()), replaced=sorted(replaced.items()),
-                      structures=sorted(structures.items()), area_bounds=area_bounds, gaps=gaps, hull=hull)
+                      structures=sorted(structures.items()), area_bounds=area_bounds, gaps=gaps, hull=hull,
+                      demoted=list(demoted))
         _save_done(job["done_dir"], result)
         return result
     except Cancelled:

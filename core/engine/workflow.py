@@ -250,9 +250,29 @@ def classify_cloud(cloud: PointCloud, algorithm, options: FilterOptions = Filter
         warning = structures_warning(structures_made_ground(cls, ground), replaced, cloud.path, algorithm)
         if warning:
             log(warning)
+    note = demoted_note(*demoted_ground(cloud.classification, ground, touched), algorithm)
+    if note:
+        log(note)
     cls[touched] = CLASS_UNCLASSIFIED
     cls[ground & touched] = CLASS_GROUND  # (the ground of a kept class keeps it: ground_of_any_class)
     return Classified(cls.astype(np.uint8), ground, filtered, detail, may)
+
+
+def demoted_ground(classification: np.ndarray, ground: np.ndarray, touched: np.ndarray) -> tuple:
+    """(points the input had as ground (2) among those given a class, those of them not ground now)."""
+    had = touched & (classification == CLASS_GROUND)
+    return int(np.count_nonzero(had)), int(np.count_nonzero(had & ~ground))
+
+
+def demoted_note(had: int, demoted: int, algorithm=None) -> str:
+    """The log's line when a filter made points the input had as ground (2) non-ground: a vendor's ground
+    filtered again (a flood modeller's 35 embankment points went from 2 to 1 and the DTM there 1.9 m
+    lower, without a word). "" when the input had none, or for the DTM from classes (its ground is theirs)."""
+    if not had or not demoted or getattr(algorithm, "ground_of_any_class", False):
+        return ""
+    return (f"{demoted:,} of the {had:,} points the input had as ground (2) are not ground now: the filter decided "
+            "again. To make a DTM from the input's ground as it is, use 'DTM from classified points' "
+            "(groundsieve:dtm).")
 
 
 def replaced_classes(classification: np.ndarray, touched: np.ndarray) -> dict:
