@@ -936,6 +936,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     kept_out: Dict[int, int] = {}  # points kept in classes of their own, left out of the DTM
     replaced: Dict[int, int] = {}  # points of the input's other classes given 1 or 2
     demoted = [0, 0]  # points the input had as ground (2), and of them not ground now
+    ground_by_class: Dict[int, int] = {}  # the DTM from classes: the tiles' own ground, by class
     structures: Dict[int, int] = {}  # those of its structure classes made ground
     filter_steps = steps.sub(0.3, 0.85)
     t_tiles = time.perf_counter()
@@ -977,6 +978,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             dtm_writer.write_block(*result["block"])
         for code, count in result.get("kept_out", ()):
             kept_out[int(code)] = kept_out.get(int(code), 0) + int(count)
+        for code, count in result.get("ground_classes", ()):
+            ground_by_class[int(code)] = ground_by_class.get(int(code), 0) + int(count)
         for k, count in enumerate(result.get("demoted", (0, 0))):
             demoted[k] += int(count)
         for code, count in result.get("replaced", ()):
@@ -1054,6 +1057,11 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                              "the file's header and its points disagree")
     log(f"{getattr(algorithm, 'tiles_done_words', 'Filtered')} {len(keys)} tile(s) in "
         f"{time.perf_counter() - t_tiles:.1f} s.")
+    if getattr(algorithm, "ground_of_any_class", False):
+        from .workflow import ground_classes_counts
+        chosen = {c: ground_by_class.get(c, 0) for c in getattr(algorithm, "classes", ())}
+        log(f"Ground: {ground_total:,} of {sum(i.count for i in infos):,} points, of the ground classes "
+            f"({ground_classes_counts(None, chosen)}).")
     dtm_out = _dtm_extent(dtm_writer.grid, area_box[0], log) if dtm_writer is not None else None
     if dtm_out is not None and not n_copc:
         _say_stray_tiles(tiles, grid, dtm_out, log)
@@ -1556,7 +1564,7 @@ def _tile_job(job) -> Optional[dict]:
             return None
         cloud = tile_cloud(clouds, path=where)
         del clouds
-        replaced, structures, demoted = {}, {}, (0, 0)
+        replaced, structures, demoted, ground_classes = {}, {}, (0, 0), []
         if len(cloud) < getattr(job["algorithm"], "min_tile_points", MIN_TILE_POINTS):
             # Isolated points (a stray point far from the survey): too few for any filter's grid;
             # they keep their classes and are not ground.
@@ -1564,6 +1572,9 @@ def _tile_job(job) -> Optional[dict]:
         elif workflow.select_points(cloud, options).any():
             done = workflow.classify_cloud(cloud, job["algorithm"], options, Steps(is_cancelled=job["is_cancelled"]))
             cls, ground = done.classification, done.ground
+            if getattr(job["algorithm"], "ground_of_any_class", False):
+                found = np.bincount(cloud.classification[ground & own].astype(np.intp), minlength=256)
+                ground_classes = [[int(c), int(found[c])] for c in np.flatnonzero(found)]
             demoted = workflow.demoted_ground(cloud.classification, ground, own & done.processable &
                                               (np.isin(cloud.classification, workflow.REWRITTEN_CLASSES)
                                                if options.keep_existing_classes else True))
@@ -1607,7 +1618,7 @@ def _tile_job(job) -> Optional[dict]:
                       dtm_points=dtm_own, assigned=assigned, block=block, class_parts=class_parts, copc_read=copc_read,
                       kept_out=sorted(kept_out.items()), replaced=sorted(replaced.items()),
                       structures=sorted(structures.items()), area_bounds=area_bounds, gaps=gaps, hull=hull,
-                      demoted=list(demoted))
+                      demoted=list(demoted), ground_classes=ground_classes)
         _save_done(job["done_dir"], result)
         return result
     except Cancelled:

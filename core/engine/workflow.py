@@ -258,6 +258,17 @@ def classify_cloud(cloud: PointCloud, algorithm, options: FilterOptions = Filter
     return Classified(cls.astype(np.uint8), ground, filtered, detail, may)
 
 
+def ground_classes_counts(points, counts=None, classes=()) -> str:
+    """ "2 (ground): 584,948, 9 (water): 9,560" of the classes of the points ``points`` (or of {class: points}
+    ``counts``), every one of ``classes`` named, 0 too: what each ground class of a DTM from classes gave (a
+    flood modeller asked; a class that gave none was not said)."""
+    from ..io.clouds import ASPRS_NAMES
+    if counts is None:
+        found = np.bincount(np.asarray(points, dtype=np.intp), minlength=256)
+        counts = {int(c): int(found[c]) for c in set(np.flatnonzero(found).tolist()) | set(classes)}
+    return ", ".join(f"{c} ({ASPRS_NAMES.get(c, 'class ' + str(c))}): {n:,}" for c, n in sorted(counts.items()))
+
+
 def demoted_ground(classification: np.ndarray, ground: np.ndarray, touched: np.ndarray) -> tuple:
     """(points the input had as ground (2) among those given a class, those of them not ground now)."""
     had = touched & (classification == CLASS_GROUND)
@@ -836,7 +847,8 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     done = classify_cloud(cloud, algorithm, options, steps.sub(at_filter, at_dtm), log)
     cls, ground = done.classification, done.ground
     log(f"Ground: {int(ground.sum()):,} of {int(done.filtered.sum()):,} "
-        + ("points, of the ground classes." if getattr(algorithm, "ground_of_any_class", False) else "filtered points."))
+        + (f"points, of the ground classes ({ground_classes_counts(cloud.classification[ground], classes=algorithm.classes)})."
+           if getattr(algorithm, "ground_of_any_class", False) else "filtered points."))
     run = FilterRun(cloud, cls, ground, done.filtered, detail=done.detail, algorithm=algorithm)
     if dtm_path:
         # The DTM spans only the points that may enter it: not withheld, not ignored (noise may lie far away).

@@ -432,3 +432,15 @@ def test_a_river_without_returns_across_the_survey_is_said_when_tiles_leave_it_e
     (note,) = [line for line in logs if "stayed nodata in bays or channels" in line]
     said = int(note.split("DTM: ")[1].split(" cell(s)")[0].replace(",", ""))
     assert 0.9 * empty <= said <= empty, (said, empty)
+
+
+@pytest.mark.parametrize("tiled", [False, True], ids=["whole", "tiled"])
+def test_each_ground_class_is_counted_and_one_without_points_said(delivery, tmp_path, tiled):
+    """--classes 2,9 said neither how many points each gave nor that the cloud had no 9 (a flood modeller)."""
+    logs = []
+    run_ground_filter(str(delivery), None, ClassGround("2,9"), options=FilterOptions(keep_existing_classes=True,
+                                                                                    tiling=_tiling(tiled)),
+                      dtm_path=str(tmp_path / "d.tif"), log=logs.append)
+    classes = _classes(delivery)
+    (line,) = [text for text in logs if text.startswith("Ground: ") and "of the ground classes" in text]
+    assert line.endswith(f"(2 (ground): {int(np.sum(classes == 2)):,}, 9 (water): 0)."), line
