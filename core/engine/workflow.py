@@ -576,8 +576,14 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions, why_none: str = "
         from ..grids.rasterize import PIT_DEPTH, isolated_pits
         check = steps.check if steps is not None else None
         for spikes in (False, True):
-            note = pits_note(*isolated_pits(-dtm if spikes else dtm, depth=PIT_DEPTH / options.metres_per_unit,
-                                            check=check), grid, options.metres_per_unit, spikes=spikes)
+            if spikes:  # (the spikes are the pits of the negated DTM: negated in place, no copy of the grid)
+                np.negative(dtm, out=dtm)
+            try:
+                found = isolated_pits(dtm, depth=PIT_DEPTH / options.metres_per_unit, check=check)
+            finally:
+                if spikes:
+                    np.negative(dtm, out=dtm)
+            note = pits_note(*found, grid, options.metres_per_unit, spikes=spikes)
             if note:
                 log(note)
     return grid, dtm

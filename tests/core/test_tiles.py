@@ -1396,3 +1396,19 @@ def test_the_dtm_cut_of_points_beyond_the_headers_bounds_ends_where_they_do():
     cut = _dtm_extent(full, [95.0, 150.0, 150.0, 320.0], lambda _line: None)
     assert (cut.x0, cut.top, cut.ncols, cut.nrows) == (100.0, 300.0, 50, 150)
     assert _dtm_extent(full, [100.0, 100.0, 200.0, 300.0], lambda _line: None) == full
+
+
+def test_an_empty_file_in_a_survey_is_named(tmp_path):
+    """A survey file of 0 points was taken without a word (an HPC reviewer): it is named, and its
+    classified copy is written, empty."""
+    rng = np.random.default_rng(15)
+    n = 20_000
+    x, y = rng.uniform(0, 200, n), rng.uniform(0, 200, n)
+    (tmp_path / "in").mkdir()
+    (tmp_path / "out").mkdir()
+    write_las(new_las(x, y, 100 + rng.normal(0, 0.02, n)), str(tmp_path / "in" / "a.laz"))
+    write_las(new_las(np.array([]), np.array([]), np.array([])), str(tmp_path / "in" / "empty.laz"))
+    logs = []
+    run_ground_filter(str(tmp_path / "in"), str(tmp_path / "out" / "c.vpc"), SMRF(), log=logs.append)
+    assert any(line.startswith("1 of the 2 input files hold no points (empty.laz)") for line in logs), logs
+    assert len(laspy.read(tmp_path / "out" / "c" / "empty.laz").points) == 0
