@@ -1160,18 +1160,22 @@ def _output_folders(outs):
         raise
 
 
-def _hull_points(x, y) -> list:
-    """The vertices of the convex hull of the points ``x, y`` as [[x, y], ...] (the points themselves when
-    they are fewer than 3 or on a line): a tile's share of the survey ground's hull, few numbers to return."""
-    if x.size < 3:
-        return [[float(a), float(b)] for a, b in zip(x, y)]
-    from scipy.spatial import ConvexHull, QhullError
-    xy = np.column_stack([x, y])
-    try:
-        return xy[ConvexHull(xy).vertices].tolist()
-    except QhullError:  # (on a line: its two ends)
-        k = np.lexsort((y, x))
-        return xy[[k[0], k[-1]]].tolist()
+def _block_hull(block, grid) -> list:
+    """A tile's share of the survey's ground hull, few numbers to return: the centres of the first and last
+    cell with a value of each row of its DTM block, [[x, y], ...] (their hull is the hull of the block's
+    values; the hull of the tile's ground points cost 0.1-0.5 s a tile, as much as 12 % of a run)."""
+    if block is None:
+        return []
+    row0, col0, values = block
+    valued = ~np.isnan(values)
+    rows = np.flatnonzero(valued.any(axis=1))
+    if rows.size == 0:
+        return []
+    first = valued[rows].argmax(axis=1)
+    last = values.shape[1] - 1 - valued[rows][:, ::-1].argmax(axis=1)
+    y = grid.top - (row0 + rows + 0.5) * grid.cell
+    xs = [grid.x0 + (col0 + first + 0.5) * grid.cell, grid.x0 + (col0 + last + 0.5) * grid.cell]
+    return np.column_stack([np.concatenate(xs), np.concatenate([y, y])]).tolist()
 
 
 def _survey_hull(points) -> Optional[np.ndarray]:
@@ -1613,9 +1617,9 @@ def _tile_job(job) -> Optional[dict]:
                 area_bounds = [float(xs.min()), float(ys.min()), float(xs.max()), float(ys.max())]
             in_dtm = workflow.dtm_points(cloud, ground, area, job["dtm"])
             dtm_own = int(np.count_nonzero(in_dtm & own))
-            hull = _hull_points(cloud.x[in_dtm & own], cloud.y[in_dtm & own])  # (the whole run fills the hull)
             gaps = []  # [the smallest gap named, then each gap (area, x, y)]
             block = _dtm_block(cloud, in_dtm, job["dtm"], job["dtm_grid"], job["bounds"], job["buffer"], area, gaps)
+            hull = _block_hull(block, job["dtm_grid"])  # (the whole run fills the ground's hull)
             if options.keep_existing_classes:
                 kept_out = workflow.kept_out_of_dtm(cloud, cls, area & own & ~in_dtm, job["dtm"], job["algorithm"])
         result = dict(key=list(job["key"]), own=int(own.sum()), read=len(cloud), ground=int(ground[own].sum()),
