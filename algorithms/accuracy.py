@@ -299,7 +299,7 @@ checkpoints.</p>""")
                 z.append(height_here)
                 ids.append(fid if len(vertices) == 1 else f"{fid}.{part}")
                 covers.append(cover)
-                geometries.append((vertex.x(), vertex.y()))
+                geometries.append((vertex.x(), vertex.y(), _text(feature[cover_field]) if cover_field else ""))
         if empty:
             self.warn(feedback, f"{len(empty)} checkpoint(s) without a geometry left out: {', '.join(empty[:12])}")
         if not x:
@@ -331,19 +331,21 @@ checkpoints.</p>""")
         """The checkpoints with their residuals as a PointZ layer in the checkpoints' CRS (z the
         checkpoint's height), skipped ones too (empty DTM height and dz); None when not asked for."""
         fields = QgsFields()
-        for name, kind in (("id", "String"), ("land_cover", "String"), ("z_check", "Double"), ("z_dtm", "Double"),
-                           ("dz", "Double"), ("abs_dz", "Double"), ("sampling", "String"), ("outlier", "Int")):
+        # (the layer's own land-cover words beside NVA/VVA: a flood modeller's road/forest were lost)
+        for name, kind in (("id", "String"), ("land_cover", "String"), ("cover_given", "String"), ("z_check", "Double"),
+                           ("z_dtm", "Double"), ("dz", "Double"), ("abs_dz", "Double"), ("sampling", "String"),
+                           ("outlier", "Int")):
             fields.append(_field(name, kind))
         sink, sink_id = self.parameterAsSink(parameters, self.OUTPUT, context, fields, QgsWkbTypes.Type.PointZ,
                                              source.sourceCrs())
         if sink is None:
             return None
         outliers, used_all = result.outlier_mask(), result.used
-        for i, (px, py) in enumerate(geometries):
+        for i, (px, py, given) in enumerate(geometries):
             feature = QgsFeature(fields)
             feature.setGeometry(QgsGeometry(QgsPoint(px, py, float(result.z[i]))))
             used = bool(used_all[i])
-            feature.setAttributes([result.ids[i], result.land_cover[i], float(result.z[i]),
+            feature.setAttributes([result.ids[i], result.land_cover[i], given, float(result.z[i]),
                                    float(result.dtm_z[i]) if used else None, float(result.dz[i]) if used else None,
                                    abs(float(result.dz[i])) if used else None, result.status[i],
                                    int(bool(outliers[i]))])

@@ -109,6 +109,7 @@ def test_figures_report_and_layer_of_a_pointz_layer_with_land_cover(groundsieve_
     features, written = read_layer(out)
     assert written.crs().authid() == "EPSG:32633" and len(features) == 43
     assert features["CP1"]["dz"] == pytest.approx(dz[0], abs=1e-9) and features["CP1"]["sampling"] == "bilinear"
+    assert features["CP1"]["land_cover"] == "NVA" and features["CP1"]["cover_given"] == cover[0]
     assert features["CP43"]["sampling"] == "cell" and features["CP43"]["dz"] == pytest.approx(0.05, abs=1e-9)
     assert features["CP41"]["sampling"] == "outside" and features["CP42"]["sampling"] == "nodata"
     assert features["CP42"]["z_dtm"] in (None, NULL) and features["CP42"]["dz"] in (None, NULL)
@@ -175,8 +176,13 @@ def test_bad_input_is_refused_in_the_dialog_s_words(groundsieve_provider, dtm, t
                                                 "OUTPUT_HTML": report})
     # ... and mapped, it runs
     result = processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": meadow, "LAND_COVER_FIELD": "lc",
-                                                     "LAND_COVER_MAP": "meadow=VVA", "OUTPUT_HTML": report})
+                                                     "LAND_COVER_MAP": "meadow=VVA", "OUTPUT_HTML": report,
+                                                     "OUTPUT": str(tmp_path / "dz.gpkg")})
     assert result["COUNT"] == 5 and result["VVA_RMSEZ"] is not None
+    # the residuals keep the layer's own word beside the land cover it maps to
+    features = read_layer(tmp_path / "dz.gpkg")[0]  # (the layer not kept: alive at QGIS's exit, it crashes it)
+    assert sorted((f["land_cover"], f["cover_given"]) for f in features.values()) == \
+        [("NVA", "NVA")] * 4 + [("VVA", "meadow")]
     with pytest.raises(QgsProcessingException, match=r"land cover mapping: 'meadow' has no '='"):
         processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": meadow, "LAND_COVER_FIELD": "lc",
                                                 "LAND_COVER_MAP": "meadow", "OUTPUT_HTML": report})
