@@ -271,27 +271,12 @@ def _add_dtm(sub) -> None:
 def run_dtm(args, out) -> dict:
     """Run ``dtm``; return its JSON document, as a filter's (``filter_document``)."""
     from ..filters.classes import ClassGround
-    from .workflow import run_ground_filter
-    warnings = []
-
-    def log(msg):
-        warning = warning_of(msg)
-        if warning is not None:
-            warnings.append(warning)
-        print(msg, file=out, flush=True)
+    warnings, log = _collecting_log(out)
     ground = ClassGround(args.classes)
     options = FilterOptions(ignore_classes=args.ignore_classes, keep_existing_classes=True, tiling=_tiling(args))
     dtm = DTMOptions(cell_size_m=args.dtm_cell, cell_set=bool(getattr(args, "dtm_cell_typed", False)),
                      fill_outside_hull=args.dtm_fill, max_distance_m=args.dtm_max_distance)
-    from .kernels import COMPILING, about_to_compile
-    if about_to_compile("dtm"):
-        print(COMPILING, file=out, flush=True)
-    start = time.monotonic()
-    run = run_ground_filter(args.input, None, ground, options=options, dtm_path=args.dtm, dtm=dtm,
-                            progress=_progress_printer(out), is_cancelled=_interrupt_seen, log=log)
-    document = filter_document(args, ground, run, time.monotonic() - start, warnings)
-    print(f"{document['points']:,} points, {document['ground']:,} of the ground classes.", file=out)
-    return document
+    return _run_documented(args, out, ground, options, dtm, warnings, log, "of the ground classes")
 
 
 def _add_accuracy(sub) -> None:
@@ -417,30 +402,42 @@ def tune_document(args, result) -> dict:
 
 def run_filter(args, out) -> dict:
     """Run a filter (or the hybrid); return its JSON document (the summary is also logged to ``out``)."""
-    from .workflow import run_ground_filter
     if not args.output and not args.dtm:
         raise _Usage("give --output and/or --dtm")
     for flag, unset in (("--dtm-cell", not getattr(args, "dtm_cell_typed", False)),
                         ("--dtm-classes", not args.dtm_classes), ("--dtm-max-distance", not args.dtm_max_distance)):
         if not args.dtm and not unset:
             print(f"groundsieve: {flag} is set but no --dtm is named: no DTM is made", file=out)
-    warnings = []  # the run's warnings (the CRS's unit, said before the work), for --json too
+    warnings, log = _collecting_log(out)
+    algorithm, options, dtm = options_from(args, log)
+    return _run_documented(args, out, algorithm, options, dtm, warnings, log, "ground")
+
+
+def _collecting_log(out):
+    """(the run's warnings, a log that prints each line to ``out`` and collects the warnings): the CRS's unit,
+    said before the work, and the rest, for --json too."""
+    warnings = []
 
     def log(msg):
         warning = warning_of(msg)
         if warning is not None:
             warnings.append(warning)
         print(msg, file=out, flush=True)
-    algorithm, options, dtm = options_from(args, log)
+    return warnings, log
+
+
+def _run_documented(args, out, algorithm, options, dtm, warnings, log, ground_words: str) -> dict:
+    """Run ``algorithm`` on ``args.input`` as the filters and the DTM from classes run (the compile note,
+    progress, interrupts); its JSON document, its summary logged to ``out``."""
     from .kernels import COMPILING, about_to_compile
+    from .workflow import run_ground_filter
     if about_to_compile(args.filter):  # (the progress then waits 20-60 s: a release engineer saw 8 s at 21.5 %)
         print(COMPILING, file=out, flush=True)
     start = time.monotonic()
     run = run_ground_filter(args.input, args.output, algorithm, options=options, dtm_path=args.dtm, dtm=dtm,
                             progress=_progress_printer(out), is_cancelled=_interrupt_seen, log=log)
-    seconds = time.monotonic() - start
-    document = filter_document(args, algorithm, run, seconds, warnings)
-    print(f"{document['points']:,} points, {document['ground']:,} ground.", file=out)
+    document = filter_document(args, algorithm, run, time.monotonic() - start, warnings)
+    print(f"{document['points']:,} points, {document['ground']:,} {ground_words}.", file=out)
     return document
 
 

@@ -1581,11 +1581,9 @@ def _tile_job(job) -> Optional[dict]:
             done = workflow.classify_cloud(cloud, job["algorithm"], options, Steps(is_cancelled=job["is_cancelled"]))
             cls, ground = done.classification, done.ground
             if getattr(job["algorithm"], "ground_of_any_class", False):
-                found = np.bincount(cloud.classification[ground & own].astype(np.intp), minlength=256)
-                ground_classes = [[int(c), int(found[c])] for c in np.flatnonzero(found)]
-            demoted = workflow.demoted_ground(cloud.classification, ground, own & done.processable &
-                                              (np.isin(cloud.classification, workflow.REWRITTEN_CLASSES)
-                                               if options.keep_existing_classes else True))
+                from ..io.clouds import count_classes
+                ground_classes = sorted(count_classes(cloud.classification[ground & own]).items())
+            demoted = workflow.demoted_ground(cloud.classification, ground, own & done.touched)
             if not options.keep_existing_classes:  # said once for the run (the tile's log goes nowhere)
                 replaced = workflow.replaced_classes(cloud.classification, own & done.processable)
                 structures = workflow.structures_made_ground(cloud.classification, own & ground)

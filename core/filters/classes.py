@@ -19,18 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError, InvalidParameterError
-from ..io.clouds import ASPRS_NAMES, parse_classes
+from ..io.clouds import class_counts_text, count_classes, parse_classes
 from ..progress import Steps
 from ..validate import validate_xyz
-
-
-def class_list(counts: dict, most: int = 6) -> str:
-    """ "1 (unclassified): 1,234, 6 (building): 56" for {class: points}, the largest first."""
-    items = sorted(counts.items(), key=lambda kv: -kv[1])
-    parts = [f"{c} ({ASPRS_NAMES.get(c, 'class ' + str(c))}): {n:,}" for c, n in items[:most]]
-    if len(items) > most:
-        parts.append(f"{len(items) - most} more")
-    return ", ".join(parts)
 
 
 @dataclass(frozen=True)
@@ -71,13 +62,20 @@ class ClassGround:
     @property
     def stage_line(self) -> str:
         """What the engine's log says as the stage starts (it filters nothing)."""
-        return f"Taking the points of the classes {', '.join(str(c) for c in self.classes)} as the ground ..."
+        return f"Taking the points of the classes {self._codes()} as the ground ..."
 
     @property
     def no_ground_in_survey(self) -> str:
         """Why a survey's tiles found no ground (a tiled run's refusal quotes it)."""
-        return (f"no point of class {', '.join(str(c) for c in self.classes)} in it: classify the ground first with "
-                "a ground filter, or name the classes that hold it")
+        return self._no_ground("in it")
+
+    def _codes(self) -> str:
+        return ", ".join(str(c) for c in self.classes)
+
+    def _no_ground(self, where: str) -> str:
+        """Why no point is ground, the points named by ``where``, and what to do."""
+        return (f"no point of class {self._codes()} {where}: classify the ground first with a ground filter, or "
+                "name the classes that hold it")
 
     @property
     def reach_m(self) -> float:
@@ -108,11 +106,7 @@ class ClassGround:
         ground = np.isin(classification, self.classes)
         steps.report(1.0)
         if not ground.any():
-            found = np.bincount(classification.astype(np.intp, copy=False), minlength=256)
-            counts = {int(c): int(found[c]) for c in np.flatnonzero(found)}
-            wanted = ", ".join(str(c) for c in self.classes)
-            reason = (f"no point of class {wanted} among the {xyz.shape[0]:,} points (their classes: "
-                      f"{class_list(counts)}): classify the ground first with a ground filter, or name the "
-                      "classes that hold it")
-            return ClassGroundResult(ground, reason)
+            found = class_counts_text(count_classes(classification), most=6, largest_first=True)
+            where = f"among the {xyz.shape[0]:,} points (their classes: {found})"
+            return ClassGroundResult(ground, self._no_ground(where))
         return ClassGroundResult(ground)

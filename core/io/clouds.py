@@ -41,6 +41,22 @@ ASPRS_NAMES = {0: "never classified", 1: "unclassified", 2: "ground", 3: "low ve
                19: "overhead structure"}
 
 
+def count_classes(classes) -> dict:
+    """{class: points} of the ASPRS codes ``classes`` (one per point), the classes present only."""
+    found = np.bincount(np.asarray(classes, dtype=np.intp), minlength=256)
+    return {int(c): int(found[c]) for c in np.flatnonzero(found)}
+
+
+def class_counts_text(counts: dict, most: Optional[int] = None, largest_first: bool = False) -> str:
+    """ "1 (unclassified): 1,234, 6 (building): 56" of {class: points}, by class (or the largest first), at
+    most ``most`` of them and how many more: how every log line names classes and their points."""
+    items = sorted(counts.items(), key=(lambda kv: -kv[1]) if largest_first else None)
+    parts = [f"{c} ({ASPRS_NAMES.get(c, 'class ' + str(c))}): {n:,}" for c, n in items[:most]]
+    if most is not None and len(items) > most:
+        parts.append(f"{len(items) - most} more")
+    return ", ".join(parts)
+
+
 def parse_classes(text, *, what: str = "classes") -> tuple:
     """ASPRS class codes from ``"7, 18"``, ``"7 18"``, ``"2-5,9"`` or ``"[7:18]"`` (PDAL's
     ``ignore`` range form) or from a sequence of ints; an empty text or ``None`` gives ``()``.
