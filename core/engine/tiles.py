@@ -1121,10 +1121,10 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             from ..grids.rasterize import PIT_DEPTH
             from .workflow import dtm_spacing_note, pits_note
             mpu = dtm.metres_per_unit
+            pits, spikes = dtm_writer.isolated_pits_and_spikes(check=steps.check, depth=PIT_DEPTH / mpu)
             for note in ("" if dtm.fill_outside_hull else
                          dtm_spacing_note(dtm_points, dtm_writer.valued_cells, dtm_writer.grid.cell, unit),
-                         *(pits_note(*dtm_writer.isolated_pits(check=steps.check, depth=PIT_DEPTH / mpu, spikes=spikes),
-                                     dtm_writer.grid, mpu, spikes=spikes) for spikes in (False, True))):
+                         pits_note(*pits, dtm_writer.grid, mpu), pits_note(*spikes, dtm_writer.grid, mpu, spikes=True)):
                 if note:
                     log(note)
             dtm_writer.finish(staging.stage(dtm_path), atomic=False, name=dtm_path, grid=dtm_out)
@@ -1203,7 +1203,8 @@ def _say_enclosed_nodata(writer, dtm, buffer_m: float, log, hull_points=None, un
     With a maximum distance or a fill the empty cells are the rule's."""
     if dtm.max_distance_m > 0 or dtm.fill_outside_hull:
         return
-    empty = writer.enclosed_nodata()
+    hull = _survey_hull(hull_points)
+    empty, inside = writer.empty_cells(hull)
     if empty:
         log(f"{WARNING_PREFIX}DTM: {empty:,} cell(s) with values around them in their row and their column stayed "
             f"nodata: a gap in the data there (a lake, a missing strip) is wider than the tiles' buffer ({buffer_m:g} "
@@ -1211,8 +1212,7 @@ def _say_enclosed_nodata(writer, dtm, buffer_m: float, log, hull_points=None, un
             "such gaps the tiled DTM may also step at tile edges). A tile buffer of at least the gap's width gives "
             "the whole run's DTM; to leave such gaps empty on purpose (water without returns), set a DTM maximum "
             "distance (tiled or whole, without this warning).")
-    hull = _survey_hull(hull_points)
-    open_cells = (writer.nodata_inside(hull) - empty) if hull is not None else 0
+    open_cells = inside - empty
     if open_cells > 0:
         log(f"DTM: {open_cells:,} cell(s) inside the outline of the ground (its convex hull) stayed nodata in bays or "
             f"channels of the data open to its edge (a coastline, a river without returns) wider than the tiles' "

@@ -573,15 +573,15 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions, why_none: str = "
     if log is not None:
         from ..grids.rasterize import PIT_DEPTH, isolated_pits
         check = steps.check if steps is not None else None
-        for spikes in (False, True):
-            if spikes:  # (the spikes are the pits of the negated DTM: negated in place, no copy of the grid)
-                np.negative(dtm, out=dtm)
-            try:
-                found = isolated_pits(dtm, depth=PIT_DEPTH / options.metres_per_unit, check=check)
-            finally:
-                if spikes:
-                    np.negative(dtm, out=dtm)
-            note = pits_note(*found, grid, options.metres_per_unit, spikes=spikes)
+        depth = PIT_DEPTH / options.metres_per_unit
+        pits = isolated_pits(dtm, depth=depth, check=check)
+        np.negative(dtm, out=dtm)  # (the spikes are the pits of the negated DTM: in place, no copy of the grid)
+        try:
+            spikes = isolated_pits(dtm, depth=depth, check=check)
+        finally:
+            np.negative(dtm, out=dtm)
+        for note in (pits_note(*pits, grid, options.metres_per_unit),
+                     pits_note(*spikes, grid, options.metres_per_unit, spikes=True)):
             if note:
                 log(note)
     return grid, dtm

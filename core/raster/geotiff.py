@@ -152,11 +152,11 @@ class BlockGeoTIFF:
         self.grid, self.nodata, self.work_path = grid, nodata, work_path
         self._lock = threading.Lock()
         # each row's first and last cell with a value and its count of such cells (blocks never
-        # overlap): the cells between a row's first and last value that have none (enclosed_nodata)
+        # overlap): the cells between a row's first and last value that have none (empty_cells)
         self._first = np.full(grid.nrows, np.iinfo(np.int64).max, dtype=np.int64)
         self._last = np.full(grid.nrows, -1, dtype=np.int64)
         self._valued = np.zeros(grid.nrows, dtype=np.int64)
-        # and each column's first and last row with a value (enclosed_nodata's second test)
+        # and each column's first and last row with a value (empty_cells' second test)
         self._top = np.full(grid.ncols, np.iinfo(np.int64).max, dtype=np.int64)
         self._bottom = np.full(grid.ncols, -1, dtype=np.int64)
         try:
@@ -217,81 +217,83 @@ class BlockGeoTIFF:
             above, below = min(halo, row0), min(halo, g.nrows - row0 - n)
             yield row0, n, above, self._band.ReadAsArray(0, row0 - above, g.ncols, n + above + below)
 
-    def isolated_pits(self, strip_rows: int = 1024, check=None, depth: Optional[float] = None,
-                      spikes: bool = False) -> tuple:
-        """The isolated pits of the raster written (:func:`~groundsieve.core.grids.rasterize.isolated_pits`:
-        count, the deepest's depth, its row and column), read back in strips with the two rows around
-        each. Counted on the mosaic, not tile by tile: a tile's own interpolation has no values beyond
-        its buffer, so with a small buffer it missed pits near its edges, and with a fill it counted
-        cells on the survey's edge a run of the whole cloud never counts (a code reviewer). ``spikes``:
-        the isolated spikes instead (the pits of the negated raster)."""
+    def isolated_pits_and_spikes(self, strip_rows: int = 1024, check=None, depth: Optional[float] = None) -> tuple:
+        """(pits, spikes) of the raster written, each :func:`~groundsieve.core.grids.rasterize.isolated_pits`'
+        (count, the deepest's depth, its row and column; the spikes are the pits of the negated raster),
+        read back once in strips with the two rows around each. Counted on the mosaic, not tile by tile: a
+        tile's own interpolation has no values beyond its buffer, so with a small buffer it missed pits near
+        its edges, and with a fill it counted cells on the survey's edge a run of the whole cloud never counts
+        (a code reviewer)."""
         from ..grids.rasterize import PIT_DEPTH, isolated_pits
         depth = PIT_DEPTH if depth is None else depth
-        count, deepest, where = 0, 0.0, (-1, -1)
+        found = [[0, 0.0, (-1, -1)], [0, 0.0, (-1, -1)]]  # pits, spikes: count, deepest, where
         with self._lock:
             for row0, n, above, values in self._strips(strip_rows, halo=2):
                 values = values.astype(np.float64)
                 values[values == self.nodata] = np.nan
-                if spikes:
-                    np.negative(values, out=values)
-                found, drop, r, k = isolated_pits(values, depth=depth, inner=(above, above + n, 0, self.grid.ncols),
-                                                  check=check)
-                count += found
-                if found and drop > deepest:
-                    deepest, where = drop, (row0 - above + r, k)
-        return count, deepest, where[0], where[1]
+                for kind in found:
+                    count, drop, r, k = isolated_pits(values, depth=depth, inner=(above, above + n, 0, self.grid.ncols),
+                                                      check=check)
+                    kind[0] += count
+                    if count and drop > kind[1]:
+                        kind[1], kind[2] = drop, (row0 - above + r, k)
+                    np.negative(values, out=values)  # (the spikes next)
+        return tuple((count, deepest, where[0], where[1]) for count, deepest, where in found)
 
-    def enclosed_nodata(self, strip_rows: int = 512) -> int:
-        """Cells without a value between cells with one both in their row and in their column, over
-        the blocks written so far. A linear TIN of one cloud fills its ground's convex hull, which
-        holds the segment between any two of its cells: such a cell has a value in a run of the whole
-        cloud (without a maximum distance), and stays empty in blocks only where a tile saw no ground
-        across it, as in a lake wider than the buffer; a bay of the data open on one side is not
-        counted (a code reviewer's coastline was). The rows' spans count first; only when some cells
-        lie inside them is the raster read back, ``strip_rows`` rows at a time."""
+    def empty_cells(self, polygon: Optional[np.ndarray] = None, margin_cells: float = 1.0,
+                    strip_rows: int = 512) -> Tuple[int, int]:
+        """(enclosed, inside) cells without a value, over the blocks written so far, the raster read back once.
+
+        *Enclosed*: between cells with one both in their row and in their column. A linear TIN of one
+        cloud fills its ground's convex hull, which holds the segment between any two of its cells: such a
+        cell has a value in a run of the whole cloud (without a maximum distance), and stays empty in
+        blocks only where a tile saw no ground across it, as in a lake wider than the buffer; a bay of the
+        data open on one side is not counted (a code reviewer's coastline was).
+
+        *Inside*: those whose centres lie inside the convex ``polygon`` ((k, 2) x, y vertices) by
+        ``margin_cells`` or more, what one triangulation of the whole cloud fills when ``polygon`` is the
+        convex hull of its ground (a flood modeller's river running off the survey: no cell of it had values
+        on both sides in its column, and none of its 40,002 was enclosed); 0 without a polygon.
+
+        Without a polygon the rows' spans count first, and the raster is read back only when some cells lie
+        inside them, ``strip_rows`` rows at a time."""
+        g = self.grid
+        poly = None if polygon is None else np.asarray(polygon, dtype=np.float64)
+        if poly is not None and poly.shape[0] < 3:
+            poly = None
+        if poly is not None:
+            a, b = poly, np.roll(poly, -1, axis=0)
+            slanted = a[:, 1] != b[:, 1]
+            a, b = a[slanted], b[slanted]
+            lo, hi = np.minimum(a[:, 1], b[:, 1]), np.maximum(a[:, 1], b[:, 1])
+            margin = margin_cells * g.cell
+            cx = g.x0 + (np.arange(g.ncols) + 0.5) * g.cell
+        cols = np.arange(g.ncols)
+        enclosed = inside_count = 0
         with self._lock:
             has = self._last >= 0
-            if not np.any(self._last[has] - self._first[has] + 1 - self._valued[has]):
-                return 0
-            cols = np.arange(self.grid.ncols)
-            count = 0
+            holes = bool(np.any(self._last[has] - self._first[has] + 1 - self._valued[has]))
+            if not holes and poly is None:
+                return 0, 0
             for row0, n, _above, values in self._strips(strip_rows):
                 empty = values == self.nodata
                 rows = np.arange(row0, row0 + n)[:, None]
-                inside = ((cols[None, :] >= self._first[rows]) & (cols[None, :] <= self._last[rows])
-                          & (rows >= self._top[None, :]) & (rows <= self._bottom[None, :]))
-                count += int(np.sum(empty & inside))
-            return count
-
-    def nodata_inside(self, polygon: np.ndarray, margin_cells: float = 1.0, strip_rows: int = 512) -> int:
-        """Cells without a value whose centres lie inside the convex ``polygon`` ((k, 2) x, y vertices) by
-        ``margin_cells`` or more: what one triangulation of the whole cloud fills when ``polygon`` is the
-        convex hull of its ground (a flood modeller's river running off the survey: no cell of it had values
-        on both sides in its column, and :meth:`enclosed_nodata` counted none of 40,002)."""
-        g = self.grid
-        poly = np.asarray(polygon, dtype=np.float64)
-        if poly.shape[0] < 3:
-            return 0
-        a, b = poly, np.roll(poly, -1, axis=0)
-        slanted = a[:, 1] != b[:, 1]
-        a, b = a[slanted], b[slanted]
-        lo, hi = np.minimum(a[:, 1], b[:, 1]), np.maximum(a[:, 1], b[:, 1])
-        margin = margin_cells * g.cell
-        count = 0
-        with self._lock:
-            for row0, n, _above, values in self._strips(strip_rows):
-                yc = g.top - (np.arange(row0, row0 + n) + 0.5) * g.cell
-                cross = (yc[:, None] >= lo[None, :]) & (yc[:, None] <= hi[None, :])
-                with np.errstate(invalid="ignore", divide="ignore"):
-                    xs = a[None, :, 0] + (yc[:, None] - a[None, :, 1]) * (b[None, :, 0] - a[None, :, 0]) \
-                        / (b[None, :, 1] - a[None, :, 1])
-                left = np.where(cross, xs, np.inf).min(axis=1) + margin
-                right = np.where(cross, xs, -np.inf).max(axis=1) - margin
-                inside_y = (yc >= poly[:, 1].min() + margin) & (yc <= poly[:, 1].max() - margin)
-                cx = g.x0 + (np.arange(g.ncols) + 0.5) * g.cell
-                inside = inside_y[:, None] & (cx[None, :] >= left[:, None]) & (cx[None, :] <= right[:, None])
-                count += int(np.sum((values == self.nodata) & inside))
-        return count
+                if holes:
+                    between = ((cols[None, :] >= self._first[rows]) & (cols[None, :] <= self._last[rows])
+                               & (rows >= self._top[None, :]) & (rows <= self._bottom[None, :]))
+                    enclosed += int(np.sum(empty & between))
+                if poly is not None:
+                    yc = g.top - (rows[:, 0] + 0.5) * g.cell
+                    cross = (yc[:, None] >= lo[None, :]) & (yc[:, None] <= hi[None, :])
+                    with np.errstate(invalid="ignore", divide="ignore"):
+                        xs = a[None, :, 0] + (yc[:, None] - a[None, :, 1]) * (b[None, :, 0] - a[None, :, 0]) \
+                            / (b[None, :, 1] - a[None, :, 1])
+                    left = np.where(cross, xs, np.inf).min(axis=1) + margin
+                    right = np.where(cross, xs, -np.inf).max(axis=1) - margin
+                    inside_y = (yc >= poly[:, 1].min() + margin) & (yc <= poly[:, 1].max() - margin)
+                    inside = inside_y[:, None] & (cx[None, :] >= left[:, None]) & (cx[None, :] <= right[:, None])
+                    inside_count += int(np.sum(empty & inside))
+        return enclosed, inside_count
 
     def close(self) -> None:
         """Close the work raster, band before dataset (left to the garbage collector, e.g. kept
