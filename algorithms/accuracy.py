@@ -220,7 +220,7 @@ checkpoints.</p>""")
             result = dataclasses.replace(result, warnings=tuple(getattr(self, "_warnings", [])) + result.warnings)
             # the layer first: should QGIS fail to create it, no report is left behind (a surveyor)
             sink_id = self.writeResiduals(parameters, context, source, result, geometries)
-            accuracy.write_report(report, result)
+            accuracy.write_outputs(result, report)
         except errors.GroundSieveError as err:
             raise QgsProcessingException(str(err)) from err
         for line in accuracy.summary_lines(result):

@@ -35,7 +35,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.checkpoints import NVA, UNLABELLED, VVA, Checkpoints
-from ..io.outputs import atomic_path, check_output_path
+from ..io.outputs import check_output_path
 
 #: ASPRS Edition 1 (2014): NVA at 95 % confidence = this x RMSEz
 NVA_FACTOR = 1.96
@@ -421,40 +421,35 @@ def residual_rows(result: AccuracyResult):
     return header, rows
 
 
-def write_residuals_csv(path: str, result: AccuracyResult, atomic: bool = True) -> None:
-    """The residuals as CSV (comma, UTF-8), atomically unless ``path`` is already a staged temporary; the
-    dz column's name says the sign convention."""
-    import contextlib
+def write_residuals_csv(path: str, result: AccuracyResult) -> None:
+    """The residuals as CSV (comma, UTF-8) at ``path`` as it is (:func:`write_outputs` stages it); the dz
+    column's name says the sign convention."""
     import csv
     header, rows = residual_rows(result)
-    with atomic_path(path) if atomic else contextlib.nullcontext(path) as tmp:  # (OSError: the core's OutputError)
-        with open(tmp, "w", encoding="utf-8", newline="") as f:
-            writer = csv.writer(f)
-            writer.writerow(header)
-            writer.writerows(rows)
+    with open(path, "w", encoding="utf-8", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(header)
+        writer.writerows(rows)
 
 
-def write_report(path: str, result: AccuracyResult, atomic: bool = True) -> None:
-    """The HTML report (core/raster/accuracy_report.py), atomically unless ``path`` is already a staged
-    temporary."""
-    import contextlib
+def write_report(path: str, result: AccuracyResult) -> None:
+    """The HTML report (core/raster/accuracy_report.py) at ``path`` as it is (:func:`write_outputs` stages it)."""
     from .accuracy_report import report_html
     text = report_html(result)
-    with atomic_path(path) if atomic else contextlib.nullcontext(path) as tmp:
-        with open(tmp, "w", encoding="utf-8") as f:
-            f.write(text)
+    with open(path, "w", encoding="utf-8") as f:
+        f.write(text)
 
 
 def write_outputs(result: AccuracyResult, report: Optional[str] = None, csv: Optional[str] = None) -> None:
-    """The report and the residuals' CSV, put in place together or not at all (a code reviewer: a CSV that
-    failed left the report behind)."""
+    """The report and the residuals' CSV, each written under a temporary name and put in place together or
+    not at all (a code reviewer: a CSV that failed left the report behind)."""
     from ..errors import OutputError
     from ..io.outputs import StagedOutputs, _reason
     with StagedOutputs() as staging:
         for path, write in ((report, write_report), (csv, write_residuals_csv)):
             if path:
                 try:
-                    write(staging.stage(path), result, atomic=False)
+                    write(staging.stage(path), result)
                 except OSError as err:
                     raise OutputError(f"{path}: cannot be written ({_reason(err)})") from err
         staging.commit()

@@ -194,8 +194,7 @@ def test_outputs_are_written_atomically_and_checked_before(dtm, tmp_path):
     x, y = points(20)
     r = A.check_accuracy(dtm, x, y, plane(x, y) - 0.1, land_cover=["NVA"] * 20)
     report, csv = tmp_path / "r.html", tmp_path / "res.csv"
-    A.write_report(str(report), r)
-    A.write_residuals_csv(str(csv), r)
+    A.write_outputs(r, str(report), str(csv))
     text = report.read_text(encoding="utf-8")
     assert "<svg" in text and "Edition 1 (2014)" in text and "Edition 2 (2023)" in text
     assert "NVA</b>, ASPRS Edition 2 (2023): RMSEz = <b>0.1000 m" in text
@@ -417,7 +416,7 @@ def test_the_command_puts_the_report_and_the_csv_in_place_together(dtm, tmp_path
     write_checkpoint_file(points_file)
     report, csv = tmp_path / "r.html", tmp_path / "res.csv"
 
-    def broken(path, result, atomic=True):
+    def broken(path, result):
         raise OSError(28, "No space left on device")
     monkeypatch.setattr(A, "write_residuals_csv", broken)
     out = io.StringIO()
