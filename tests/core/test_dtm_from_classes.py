@@ -18,6 +18,7 @@ from groundsieve.core.io import new_las, write_las
 from groundsieve.core.progress import WARNING_PREFIX, Steps
 
 from groundsieve.tests.core.test_dtm_classes import BANK_Z, RIVER, WATER_Z, _channel_values, river_points
+from groundsieve.tests.core.test_tiles import _dtm_values
 
 #: the building's footprint (x, y) and how far its roof is above the terrain
 HOUSE = (100.0, 130.0, 100.0, 140.0)
@@ -52,13 +53,9 @@ def delivery(tmp_path_factory):
 
 
 def _read(path):
-    from osgeo import gdal
-    ds = gdal.Open(str(path))
-    band = ds.GetRasterBand(1)
-    values = band.ReadAsArray().astype(float)
-    values[values == band.GetNoDataValue()] = np.nan
-    x0, cell, _, top, _, _ = ds.GetGeoTransform()
-    return values, x0, top, cell
+    """The DTM's values (NaN = nodata), its west edge, top and cell (test_tiles reads it)."""
+    values, transform = _dtm_values(path)
+    return values, transform[0], transform[3], transform[1]
 
 
 def _tiling(tiled):

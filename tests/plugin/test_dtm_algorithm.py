@@ -8,17 +8,17 @@ import subprocess
 import numpy as np
 import pytest
 
+from groundsieve.tests.core.test_tiles import _dtm_values
+
 from .test_qgis_process import WRAPPER
 from .test_survey_inputs import _split
 
 
 def _dtm(path):
+    """The DTM's values (NaN = nodata), its geotransform and its CRS's WKT."""
     from osgeo import gdal
-    ds = gdal.Open(str(path))
-    band = ds.GetRasterBand(1)
-    values = band.ReadAsArray().astype(float)
-    values[values == band.GetNoDataValue()] = np.nan
-    return values, ds.GetGeoTransform(), ds.GetProjection()
+    values, transform = _dtm_values(path)
+    return values, transform, gdal.Open(str(path)).GetProjection()
 
 
 def test_the_ground_class_becomes_a_dtm_and_the_input_is_only_read(groundsieve_provider, scene_laz, tmp_path):
