@@ -933,9 +933,9 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     ground_total = dtm_points = 0  # the tiles' own ground points; those that entered the DTM
     # the box of the points that may enter the DTM (neither withheld nor ignored), from the tiles: the
     # DTM is cut to it, as a whole run's grid spans those points only (None in a result: not known)
-    area_box: List[Optional[list]] = [[math.inf, math.inf, -math.inf, -math.inf]]
+    area_box: Optional[list] = [math.inf, math.inf, -math.inf, -math.inf]
     data_gaps: list = []  # the gaps in the data the DTM spans (workflow.data_gaps), from the tiles
-    hull_points: List[Optional[list]] = [[]]  # the vertices of the tiles' own ground's convex hulls
+    hull_points: Optional[list] = []  # the first and last valued cells of the tiles' DTM rows (_block_hull)
     gap_sizes: list = []  # the smallest gap each tile names
     kept_out: Dict[int, int] = {}  # points kept in classes of their own, left out of the DTM
     replaced: Dict[int, int] = {}  # points of the input's other classes given 1 or 2
@@ -970,7 +970,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         log(f"{len(keys)} tile(s) on {workers} worker(s) ({'processes' if use_processes else 'threads'}).")
 
     def record(result, resumed=False):
-        nonlocal ground_total, dtm_points
+        nonlocal ground_total, dtm_points, area_box, hull_points
         if result is None:
             return
         steps.check()
@@ -993,18 +993,17 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         ground_total += result["ground"]
         dtm_points += result["dtm_points"]
         if "hull" not in result:  # (a tile done by an earlier version, resumed)
-            hull_points[0] = None
-        elif hull_points[0] is not None:
-            hull_points[0].extend(result["hull"])
+            hull_points = None
+        elif hull_points is not None:
+            hull_points.extend(result["hull"])
         if result.get("gaps"):
             gap_sizes.append(result["gaps"][0])
             data_gaps.extend(tuple(g) for g in result["gaps"][1:])
         if "area_bounds" not in result:  # (a tile done by an earlier version, resumed)
-            area_box[0] = None
-        elif result["area_bounds"] is not None and area_box[0] is not None:
+            area_box = None
+        elif result["area_bounds"] is not None and area_box is not None:
             b = result["area_bounds"]
-            area_box[0] = [min(area_box[0][0], b[0]), min(area_box[0][1], b[1]),
-                           max(area_box[0][2], b[2]), max(area_box[0][3], b[3])]
+            area_box = [min(area_box[0], b[0]), min(area_box[1], b[1]), max(area_box[2], b[2]), max(area_box[3], b[3])]
         tile_log.append(dict(key=tuple(result["key"]), points=result["own"], read=result["read"],
                              ground=result["ground"], copc_read=result.get("copc_read", 0)))
         done_frac = len(tile_log) / len(keys)
@@ -1066,7 +1065,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         chosen = {c: ground_by_class.get(c, 0) for c in getattr(algorithm, "classes", ())}
         log(f"Ground: {ground_total:,} of {sum(i.count for i in infos):,} points, of the ground classes "
             f"({ground_classes_counts(None, chosen)}).")
-    dtm_out = _dtm_extent(dtm_writer.grid, area_box[0], log) if dtm_writer is not None else None
+    dtm_out = _dtm_extent(dtm_writer.grid, area_box, log) if dtm_writer is not None else None
     if dtm_out is not None and not n_copc:
         _say_stray_tiles(tiles, grid, dtm_out, log)
     if dtm_writer is not None and not dtm_points:  # (as a whole run refuses it, not an empty DTM written)
@@ -1114,7 +1113,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             note = kept_out_note(kept_out, algorithm, dtm)
             if note:
                 log(note)
-            _say_enclosed_nodata(dtm_writer, dtm, grid.buffer, log, hull_points[0], unit)
+            _say_enclosed_nodata(dtm_writer, dtm, grid.buffer, log, hull_points, unit)
             note = workflow_gaps_note(data_gaps, gap_sizes, unit)
             if note:
                 log(note)
