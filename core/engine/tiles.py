@@ -1114,11 +1114,12 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             if note:
                 log(note)
             _say_enclosed_nodata(dtm_writer, dtm, grid.buffer, log, hull_points, unit)
-            note = workflow_gaps_note(data_gaps, gap_sizes, unit)
+            from ..grids.rasterize import PIT_DEPTH
+            from .workflow import dtm_spacing_note, gaps_note, pits_note
+            # (the smallest gap named: the largest of the tiles', whose point spacings differ a little)
+            note = gaps_note(data_gaps, max(gap_sizes), unit) if data_gaps else ""
             if note:
                 log(note)
-            from ..grids.rasterize import PIT_DEPTH
-            from .workflow import dtm_spacing_note, pits_note
             mpu = dtm.metres_per_unit
             pits, spikes = dtm_writer.isolated_pits_and_spikes(check=steps.check, depth=PIT_DEPTH / mpu)
             for note in ("" if dtm.fill_outside_hull else
@@ -1637,13 +1638,6 @@ def _tile_job(job) -> Optional[dict]:
         raise GroundSieveError(f"{where} failed: {type(err).__name__}: {err}") from err
     except Exception as err:  # an unexpected failure still names the tile
         raise GroundSieveError(f"{where} failed: {type(err).__name__}: {err}") from err
-
-
-def workflow_gaps_note(gaps, sizes, unit) -> str:
-    """The whole run's note on gaps in the data (workflow.gaps_note), from the tiles' gaps: the smallest
-    named is the largest of the tiles' (their point spacings differ a little)."""
-    from .workflow import gaps_note
-    return gaps_note(gaps, max(sizes), unit) if gaps else ""
 
 
 def _dtm_extent(full, box, log):
