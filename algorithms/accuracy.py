@@ -5,29 +5,18 @@ import dataclasses
 import math
 import os
 
-from qgis.core import (Qgis, QgsCoordinateTransform, QgsCsException, QgsFeature, QgsFeatureSink, QgsField,
-                       QgsFields, QgsGeometry, QgsPoint, QgsPointXY, QgsProcessing, QgsProcessingAlgorithm,
+from qgis.core import (QgsCoordinateTransform, QgsCsException, QgsFeature, QgsFeatureSink, QgsFields, QgsGeometry, QgsPoint, QgsPointXY, QgsProcessing, QgsProcessingAlgorithm,
                        QgsProcessingException, QgsProcessingOutputNumber, QgsProcessingParameterNumber,
                        QgsProcessingParameterDefinition, QgsProcessingParameterFeatureSink,
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterField,
                        QgsProcessingParameterFileDestination, QgsProcessingParameterRasterLayer,
                        QgsProcessingParameterString, QgsWkbTypes)
-from qgis.PyQt.QtCore import QVariant
 from qgis.PyQt.QtGui import QIcon
 
-from .base import check_parameter_values, core_modules, destination_folder_problem, dialog_help
+from .base import attribute_field, check_parameter_values, core_modules, destination_folder_problem, dialog_help
 from .discovery import TAGS, Discoverable
 
 _ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
-
-
-def _field(name, kind):
-    """An attribute field of ``kind`` "Int", "Double" or "String": QgsField takes a QMetaType from QGIS
-    3.38 on (the QVariant form warns there), a QVariant type before (as base._int_field)."""
-    if Qgis.QGIS_VERSION_INT >= 33800:
-        from qgis.PyQt.QtCore import QMetaType
-        return QgsField(name, getattr(QMetaType.Type, "QString" if kind == "String" else kind))
-    return QgsField(name, getattr(QVariant, kind))
 
 
 def _number(value):
@@ -335,7 +324,7 @@ checkpoints.</p>""")
         for name, kind in (("id", "String"), ("land_cover", "String"), ("cover_given", "String"), ("z_check", "Double"),
                            ("z_dtm", "Double"), ("dz", "Double"), ("abs_dz", "Double"), ("sampling", "String"),
                            ("outlier", "Int")):
-            fields.append(_field(name, kind))
+            fields.append(attribute_field(name, kind))
         sink, sink_id = self.parameterAsSink(parameters, self.OUTPUT, context, fields, QgsWkbTypes.Type.PointZ,
                                              source.sourceCrs())
         if sink is None:

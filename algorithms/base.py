@@ -89,13 +89,13 @@ INPUT_FILTER = ("Point clouds (*.las *.laz *.vpc *.LAS *.LAZ *.VPC);;ISPRS text 
                 "All files and folders (*)")
 
 
-def _int_field(name):
-    """An integer attribute field: QgsField takes a QMetaType from QGIS 3.38 on (the QVariant form is
-    deprecated there and warns on every run), a QVariant type before."""
+def attribute_field(name, kind="Int"):
+    """An attribute field of ``kind`` "Int", "Double" or "String": QgsField takes a QMetaType from QGIS
+    3.38 on (the QVariant form is deprecated there and warns on every run), a QVariant type before."""
     if Qgis.QGIS_VERSION_INT >= 33800:
         from qgis.PyQt.QtCore import QMetaType
-        return QgsField(name, QMetaType.Type.Int)
-    return QgsField(name, QVariant.Int)
+        return QgsField(name, getattr(QMetaType.Type, "QString" if kind == "String" else kind))
+    return QgsField(name, getattr(QVariant, kind))
 
 
 def dialog_help(html):
@@ -631,8 +631,8 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
 
     def _write_ground_points(self, parameters, context, feedback, run):
         fields = QgsFields()
-        fields.append(_int_field("return_number"))
-        fields.append(_int_field("intensity"))
+        fields.append(attribute_field("return_number"))
+        fields.append(attribute_field("intensity"))
         # A cloud without a CRS: an undefined *Cartesian* CRS (a GeoPackage's srs_id -1), not QGIS's invalid
         # CRS, which OGR writes as "Undefined geographic SRS" (srs_id 0): metres taken for degrees
         crs = QgsCoordinateReferenceSystem.fromWkt(run.cloud.crs_wkt or UNDEFINED_CARTESIAN_WKT)
