@@ -88,7 +88,11 @@ or beyond the raster's edge, the value of the cell the checkpoint lies in is tak
 nodata too, or the checkpoint lies outside the DTM, the checkpoint is skipped, counted and named.</p>
 <p><b>Checkpoints</b>: a point layer; z from the points' Z, or from the <i>Checkpoint elevation field</i>.
 Their x and y are reprojected to the DTM's CRS when the layer's CRS differs; <b>their heights are taken
-as they are</b>: they must be in the DTM's vertical datum (geoid) and unit.</p>
+as they are</b>: they must be in the DTM's vertical datum (geoid) and unit. A survey's <b>text or CSV
+file</b> may be given as it is: its columns are found by their header (x/easting/e, y/northing/n,
+z/elevation/height/h, id/name/point, class/landcover/cover; other names are given in the field
+parameters), or are x y z, x y z class, id x y z [class] without one; its x and y are taken in the DTM's
+CRS.</p>
 <p><b>Land cover</b> (optional field): NVA (non-vegetated) or VVA (vegetated); the values NVA, VVA,
 non-vegetated and vegetated are known, any other is mapped in <i>Land cover values</i>, e.g.
 <code>road=NVA,grass=NVA,forest=VVA</code>. An empty value leaves a checkpoint in the overall figures only.</p>
@@ -142,10 +146,20 @@ checkpoints.</p>""")
     def checkParameterValues(self, parameters, context):  # noqa: N802
         """QGIS's checks, said in the dialog's words (a band of 0 named by its label), and the fields named
         checked against the checkpoints' layer (a batch row or a model reused with another layer)."""
-        ok, message = super().checkParameterValues(parameters, context)
-        if ok:
-            source = self.parameterAsSource(parameters, self.CHECKPOINTS, context)
-            missing = self.missingField(parameters, context, source) if source is not None else None
+        source = self.parameterAsSource(parameters, self.CHECKPOINTS, context)
+        if source is None and self.checkpointFile(parameters, context, source):
+            # (a survey's text file QGIS opens as no layer, read by the core in the run: QGIS's own check
+            # refused it as "not found")
+            ok, message = True, ""
+            for param in self.parameterDefinitions():
+                if param.name() != self.CHECKPOINTS and not param.isDestination() and \
+                        not param.checkValueIsAcceptable(parameters.get(param.name()), context):
+                    ok, message = False, f"Incorrect parameter value for {param.description()}"
+                    break
+        else:
+            ok, message = super().checkParameterValues(parameters, context)
+        if ok and source is not None:
+            missing = self.missingField(parameters, context, source)
             if missing:
                 return False, missing
         return check_parameter_values(self, parameters, context, ok, message)
@@ -185,12 +199,16 @@ checkpoints.</p>""")
                                          "give a raster file GDAL reads (e.g. a GeoTIFF)")
         dtm_path = layer.source()
         source = self.parameterAsSource(parameters, self.CHECKPOINTS, context)
-        if source is None:
-            raise QgsProcessingException(f"{self.label(self.CHECKPOINTS)}: no point layer given")
-        missing = self.missingField(parameters, context, source)
-        if missing:
-            raise QgsProcessingException(missing)
-        points_name = f"the layer '{source.sourceName()}'"
+        table = self.checkpointFile(parameters, context, source)
+        if source is None and table is None:
+            value = parameters.get(self.CHECKPOINTS)
+            raise QgsProcessingException(f"{self.label(self.CHECKPOINTS)}: " + (
+                f"'{value}' is no point layer QGIS opens" if isinstance(value, str) and value else "no point layer given"))
+        if source is not None:
+            missing = self.missingField(parameters, context, source)
+            if missing:
+                raise QgsProcessingException(missing)
+        points_name = f"the file '{table}'" if table else f"the layer '{source.sourceName()}'"
         report = self.parameterAsFileOutput(parameters, self.OUTPUT_HTML, context)
         try:
             mapping = parse_land_cover_mapping(self.parameterAsString(parameters, self.LAND_COVER_MAP, context) or "")
@@ -200,15 +218,20 @@ checkpoints.</p>""")
                                                  self.parameterAsOutputLayer(parameters, self.OUTPUT, context))
                 if why:
                     raise QgsProcessingException(why)
-            x, y, z, ids, covers, geometries = self.readCheckpoints(parameters, context, feedback, source, layer,
-                                                                    mapping, land_cover_of, errors)
+            if table:
+                x, y, z, ids, covers, geometries = self.readCheckpointFile(parameters, context, feedback, table,
+                                                                           mapping)
+            else:
+                x, y, z, ids, covers, geometries = self.readCheckpoints(parameters, context, feedback, source, layer,
+                                                                        mapping, land_cover_of, errors)
             result = accuracy.check_accuracy(
                 dtm_path, x, y, z, ids=ids, land_cover=covers, band=self.parameterAsInt(parameters, self.BAND, context),
                 name=f"DTM '{layer.name()}' ({dtm_path})", checkpoints_name=points_name)
             # the warnings of reading the layer (its reprojection, ...) in the report too
             result = dataclasses.replace(result, warnings=tuple(getattr(self, "_warnings", [])) + result.warnings)
             # the layer first: should QGIS fail to create it, no report is left behind (a surveyor)
-            sink_id = self.writeResiduals(parameters, context, source, result, geometries)
+            sink_id = self.writeResiduals(parameters, context, layer.crs() if table else source.sourceCrs(), result,
+                                          geometries)
             accuracy.write_outputs(result, report)
         except errors.GroundSieveError as err:
             raise QgsProcessingException(str(err)) from err
@@ -238,8 +261,7 @@ checkpoints.</p>""")
         if source.wkbType() == QgsWkbTypes.Type.NoGeometry:
             raise QgsProcessingException(  # (a CSV given as it is was first said to have no Z: a flood modeller)
                 f"{label} '{source.sourceName()}': a table without geometries (a CSV opened without its coordinates?): "
-                "add it as a delimited text layer with its X and Y fields, or give the file to "
-                "'python -m groundsieve accuracy'")
+                "add it as a delimited text layer with its X and Y fields, or give its text or CSV file")
         if not z_field and not QgsWkbTypes.hasZ(source.wkbType()):
             raise QgsProcessingException(f"{label} '{source.sourceName()}': the points have no Z; choose the field "
                                          f"holding their heights in '{self.label(self.Z_FIELD)}'")
@@ -295,9 +317,47 @@ checkpoints.</p>""")
             raise QgsProcessingException(
                 f"{label} '{source.sourceName()}': holds no points" + (
                     f" ({len(empty)} feature(s), none with a geometry: a table such as a CSV opened without its "
-                    "coordinates? Add it as a delimited text layer with its X and Y fields, or give the file to "
-                    "'python -m groundsieve accuracy')" if empty else ""))
+                    "coordinates? Add it as a delimited text layer with its X and Y fields, or give its text or "
+                    "CSV file)" if empty else ""))
         return x, y, z, ids, (covers if cover_field else None), geometries
+
+    def checkpointFile(self, parameters, context, source):  # noqa: N802
+        """The path of the checkpoints when they are a text or CSV file that is no point layer (a table
+        without geometries, given as a path or added to the project as it is, or a file QGIS does not
+        open), else None: a surveyor's export is read as the command line reads it (core/io/checkpoints.py),
+        in the DTM's CRS."""
+        if source is not None and source.wkbType() != QgsWkbTypes.Type.NoGeometry:
+            return None
+        value = parameters.get(self.CHECKPOINTS)
+        path = value if isinstance(value, str) else ""
+        if source is not None:
+            table = self.parameterAsVectorLayer(parameters, self.CHECKPOINTS, context)
+            if table is not None and table.providerType() == "ogr":
+                path = table.source()
+        path = path.split("|")[0]
+        if not path or not os.path.isfile(path):
+            return None
+        try:
+            with open(path, "rb") as f:
+                return None if b"\0" in f.read(4096) else path  # (a GeoPackage's table is no text file)
+        except OSError:
+            return path  # (the reader names what is wrong)
+
+    def readCheckpointFile(self, parameters, context, feedback, path, mapping):  # noqa: N802
+        """readCheckpoints' values from a text or CSV file: its columns found by their header words, or
+        named by the field parameters; x and y taken in the DTM's CRS."""
+        from ..core.io.checkpoints import read_checkpoints
+        named = {column: self.parameterAsString(parameters, name, context) or ""
+                 for column, name in (("z", self.Z_FIELD), ("id", self.ID_FIELD), ("land_cover", self.LAND_COVER_FIELD))}
+        checkpoints = read_checkpoints(path, mapping=mapping, columns=named)
+        self.warn(feedback, f"{self.label(self.CHECKPOINTS).split(' (')[0]} '{path}': a text file without a CRS, read "
+                            f"as x (easting), y (northing), z in the DTM's CRS, {len(checkpoints)} checkpoint(s); their "
+                            "heights are taken as they are: they must be in the DTM's vertical datum (geoid) and unit")
+        covers = checkpoints.land_cover
+        return (checkpoints.x.tolist(), checkpoints.y.tolist(), checkpoints.z.tolist(), list(checkpoints.ids),
+                list(covers) if covers is not None else None,
+                [(float(px), float(py), covers[i] if covers is not None else "")
+                 for i, (px, py) in enumerate(zip(checkpoints.x, checkpoints.y))])
 
     def transformTo(self, source, layer, context, feedback):  # noqa: N802
         """The transform of the checkpoints' x and y to the DTM's CRS (None when they share it, or when
@@ -316,8 +376,8 @@ checkpoints.</p>""")
                              f"to the DTM's {dtm_crs.authid() or dtm_crs.description()}; {datum}")
         return QgsCoordinateTransform(source_crs, dtm_crs, context.transformContext())
 
-    def writeResiduals(self, parameters, context, source, result, geometries):  # noqa: N802
-        """The checkpoints with their residuals as a PointZ layer in the checkpoints' CRS (z the
+    def writeResiduals(self, parameters, context, crs, result, geometries):  # noqa: N802
+        """The checkpoints with their residuals as a PointZ layer in the checkpoints' CRS ``crs`` (z the
         checkpoint's height), skipped ones too (empty DTM height and dz); None when not asked for."""
         fields = QgsFields()
         # (the layer's own land-cover words beside NVA/VVA: a flood modeller's road/forest were lost)
@@ -325,8 +385,7 @@ checkpoints.</p>""")
                            ("z_dtm", "Double"), ("dz", "Double"), ("abs_dz", "Double"), ("sampling", "String"),
                            ("outlier", "Int")):
             fields.append(attribute_field(name, kind))
-        sink, sink_id = self.parameterAsSink(parameters, self.OUTPUT, context, fields, QgsWkbTypes.Type.PointZ,
-                                             source.sourceCrs())
+        sink, sink_id = self.parameterAsSink(parameters, self.OUTPUT, context, fields, QgsWkbTypes.Type.PointZ, crs)
         if sink is None:
             return None
         outliers, used_all = result.outlier_mask(), result.used

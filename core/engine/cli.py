@@ -294,12 +294,16 @@ def _add_accuracy(sub) -> None:
                "spaces; a decimal comma with semicolons or tabs). An optional header names the columns: x/easting/e, "
                "y/northing/n, z/elevation/height/h, id/name/point, class/landcover/cover; without one the columns "
                "are x y z, x y z class, or id x y z [class]. Land cover: NVA, VVA, non-vegetated, vegetated, or "
-               "any value mapped with --land-cover-map.")
+               "any value mapped with --land-cover-map. Other header words: name the column with --z-column, "
+               "--id-column or --land-cover-column.")
     parser.add_argument("dtm", metavar="DTM", help="the DTM: a GeoTIFF or any raster GDAL reads")
     parser.add_argument("checkpoints", metavar="CHECKPOINTS", help="the checkpoints: a text or CSV file")
     parser.add_argument("--band", type=int, default=1, metavar="N", help="the DTM's band (default %(default)s)")
     parser.add_argument("--land-cover-map", default="", metavar="MAP",
                         help="land-cover values of the file as NVA or VVA, e.g. 'road=NVA,grass=NVA,forest=VVA'")
+    for column, what in (("z", "the checkpoints' heights"), ("id", "their ids"), ("land-cover", "their land cover")):
+        parser.add_argument(f"--{column}-column", default="", metavar="NAME",
+                            help=f"the header's column of {what}, when its name is not one of the known words")
     parser.add_argument("--report", metavar="PATH", help="the HTML report to write")
     parser.add_argument("--csv", metavar="PATH", dest="residuals_csv",
                         help="the residuals to write as CSV (every checkpoint, skipped ones with empty dz)")
@@ -312,7 +316,9 @@ def run_accuracy(args, out) -> dict:
     from ..io.checkpoints import UnknownLandCover, parse_land_cover_mapping, read_checkpoints
     from ..raster import accuracy as A
     try:
-        checkpoints = read_checkpoints(args.checkpoints, mapping=parse_land_cover_mapping(args.land_cover_map))
+        checkpoints = read_checkpoints(args.checkpoints, mapping=parse_land_cover_mapping(args.land_cover_map),
+                                       columns={"z": args.z_column, "id": args.id_column,
+                                                "land_cover": args.land_cover_column})
     except UnknownLandCover as err:
         raise UnknownLandCover(f"{err} with --land-cover-map") from None
     A.check_accuracy_outputs([args.dtm, args.checkpoints], args.report, args.residuals_csv)

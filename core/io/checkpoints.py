@@ -159,9 +159,16 @@ def _number(text: str, decimal_comma: bool) -> Optional[float]:
     return value if np.isfinite(value) else None
 
 
-def _header_columns(fields, path: str) -> Dict[str, int]:
-    """{column: index} from a header row; raises InputError when x, y or z is not named."""
+def _header_columns(fields, path: str, named: Optional[Dict[str, str]] = None) -> Dict[str, int]:
+    """{column: index} from a header row, the columns ``named`` ({"z": "Elev_ortho", ...}) by their names
+    (compared as :func:`_key` makes them); raises InputError when x, y or z is not found, or a named column."""
     columns = {}
+    keys = [_key(name) for name in fields]
+    for column, name in (named or {}).items():
+        if _key(name) not in keys:
+            raise InputError(f"{path}, line 1: the header ({', '.join(repr(f) for f in fields)}) has no column "
+                             f"'{name}' (given for {column.replace('_', ' ')})")
+        columns[column] = keys.index(_key(name))
     for i, name in enumerate(fields):
         key = _key(name)
         for column, names in COLUMN_NAMES.items():
@@ -174,9 +181,12 @@ def _header_columns(fields, path: str) -> Dict[str, int]:
     return columns
 
 
-def read_checkpoints(path: str, *, mapping: Optional[Dict[str, str]] = None) -> Checkpoints:
+def read_checkpoints(path: str, *, mapping: Optional[Dict[str, str]] = None,
+                     columns: Optional[Dict[str, str]] = None) -> Checkpoints:
     """The checkpoints of a text/CSV file (see the module's notes on the format). Checkpoints without
-    an id column are named by their line ("line 14"). Raises InputError naming the file and line."""
+    an id column are named by their line ("line 14"). ``columns`` names header columns the file's
+    header words do not give away ({"z": "Elev_ortho", "id": "Name", "land_cover": "Surface"}; keys among
+    x, y, z, id, land_cover); it needs a header. Raises InputError naming the file and line."""
     path = os.fspath(path)
     lines = [(n, line) for n, line in enumerate(_read_lines(path), 1)
              if line.strip() and not line.lstrip().startswith("#")]
@@ -191,8 +201,16 @@ def read_checkpoints(path: str, *, mapping: Optional[Dict[str, str]] = None) -> 
     header = any(_number(f, decimal_comma) is None for f in first[:3]) and \
         not (len(first) >= 4 and _number(first[0], decimal_comma) is None
              and all(_number(f, decimal_comma) is not None for f in first[1:4]))
+    named = {k: v for k, v in (columns or {}).items() if v}
+    unknown = sorted(set(named) - set(COLUMN_NAMES))
+    if unknown:
+        raise InvalidParameterError(f"checkpoint columns: {', '.join(unknown)} is not one of {', '.join(COLUMN_NAMES)}")
+    if named and not header:
+        raise InputError(f"{path}: has no header line, so it has no column "
+                         f"{' or '.join(repr(v) for v in named.values())} (without a header the columns are x y z, "
+                         "x y z class or id x y z [class])")
     if header:
-        columns = _header_columns(first, path)
+        columns = _header_columns(first, path, named)
         lines = lines[1:]
     elif len(first) >= 4 and _number(first[3], decimal_comma) is not None:
         columns = {"id": 0, "x": 1, "y": 2, "z": 3}

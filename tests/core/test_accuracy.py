@@ -441,3 +441,34 @@ def test_a_systematic_offset_is_said_and_a_p_column_names_the_points(dtm, tmp_pa
     assert any("a systematic offset" in w and "vertical datum (geoid) or unit" in w for w in r.warnings)
     fine = A.check_accuracy(dtm, x, y, plane(x, y) + rng.normal(0, 0.05, 30))
     assert not any("systematic offset" in w for w in fine.warnings)
+
+
+def test_columns_the_header_words_do_not_give_away_are_named(dtm, tmp_path):
+    """A survey's 'Elev_ortho' and 'Surface' columns were refused ("names no z column") with no way to name
+    them (a surveyor, in QGIS's field parameters and on the command line): the columns are named now; a
+    name the header lacks, or a file without a header, is refused naming the file."""
+    x, y = points(30, seed=11)
+    z = plane(x, y) - 0.02
+    cp = tmp_path / "cp.csv"
+    cp.write_text("Name;Easting;Northing;Elev_ortho;Elev_ellipsoid;Surface\n" + "".join(
+        f"S{i};{x[i]:.3f};{y[i]:.3f};{z[i]:.3f};{z[i] + 45:.3f};{'asphalt' if i % 2 else 'forest'}\n"
+        for i in range(30)))
+    with pytest.raises(InputError, match=r"cp\.csv, line 1: the header .* names no z column"):
+        read_checkpoints(str(cp))
+    out, stdout = io.StringIO(), io.StringIO()
+    code = main(["accuracy", dtm, str(cp), "--z-column", "elev ortho", "--land-cover-column", "Surface",
+                 "--land-cover-map", "asphalt=NVA,forest=VVA", "--json"], out=out, stdout=stdout)
+    assert code == 0, out.getvalue()
+    doc = json.loads(stdout.getvalue())
+    assert doc["count"] == 30 and doc["all"]["mean"] == pytest.approx(0.02, abs=2e-3)
+    assert doc["nva"]["count"] == 15 and doc["vva"]["count"] == 15
+    ellipsoid = read_checkpoints(str(cp), columns={"z": "Elev_ellipsoid", "id": "", "land_cover": ""})
+    assert np.allclose(ellipsoid.z, z + 45, atol=1e-3) and ellipsoid.ids[0] == "S0" and ellipsoid.land_cover is None
+    with pytest.raises(InputError, match=r"cp\.csv, line 1: the header .* has no column 'Ortho' \(given for z\)"):
+        read_checkpoints(str(cp), columns={"z": "Ortho"})
+    bare = tmp_path / "bare.txt"
+    bare.write_text("".join(f"{x[i]:.3f} {y[i]:.3f} {z[i]:.3f}\n" for i in range(30)))
+    with pytest.raises(InputError, match=r"bare\.txt: has no header line, so it has no column 'h'"):
+        read_checkpoints(str(bare), columns={"z": "h"})
+    with pytest.raises(InvalidParameterError, match="checkpoint columns: height is not one of"):
+        read_checkpoints(str(cp), columns={"height": "Elev_ortho"})

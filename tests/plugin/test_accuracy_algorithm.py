@@ -2,6 +2,7 @@
 of known heights (written by the core's own write_geotiff, so bilinear interpolation is exact), point
 layers of checkpoints with known offsets (PointZ, or 2D with a height field, or in another CRS), and
 the figures, report and residual layer checked against those offsets."""
+import html
 import json
 import os
 import subprocess
@@ -244,20 +245,49 @@ def test_a_run_that_cannot_write_its_layer_leaves_no_report_and_a_null_height_is
                                                 "OUTPUT_HTML": str(report)})
 
 
-def test_a_table_without_geometries_is_named_as_such(groundsieve_provider, dtm, tmp_path):
-    """A CSV given as it is (a table, no geometry) said '60 checkpoint(s) without a geometry left out' and
-    'holds no points' (a surveyor): it now says what to do."""
+def test_a_survey_s_text_or_csv_file_is_read_as_the_command_line_reads_it(groundsieve_provider, dtm, tmp_path):
+    """A CSV given as it is (a table, no geometry) was refused with 'a table without geometries' (a surveyor),
+    and a space-delimited text file QGIS does not open was 'no point layer': both are read as the command line
+    reads them, in the DTM's CRS, with the figures of the same checkpoints as a point layer. A header word the
+    reader does not know is named in the field parameters; a column the file lacks is named with the file."""
     import processing
-    from qgis.core import QgsProcessingException
-    table = tmp_path / "cp.csv"
-    table.write_text("id,x,y,z\nA,500050,5000150,82\nB,500060,5000140,83\n")
-    # (the path, as qgis_process gives it: the run's context owns the layer; an OGR layer made here and
-    # alive when QGIS exits crashed the interpreter there, exit status 139)
-    for extra in ({"Z_FIELD": "z"}, {}):  # (without a Z field it was first said to have no Z: a flood modeller)
-        with pytest.raises(QgsProcessingException, match=r"a table without geometries .*delimited text layer with "
-                                                         r"its X and Y fields"):
-            processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": str(table), **extra,
-                                                    "OUTPUT_HTML": str(tmp_path / "r.html")})
+    from qgis.core import QgsProcessingException, QgsVectorLayer
+    x, y, z, ids, cover, dz = checkpoints()
+    csv = tmp_path / "cp.csv"
+    csv.write_text("Name,East,North,Elev_ortho,Surface\n" + "".join(
+        f"{ids[i]},{x[i]!r},{y[i]!r},{z[i]!r},{'road' if cover[i] == 'NVA' else 'forest'}\n" for i in range(40)))
+    txt = tmp_path / "cp.txt"
+    txt.write_text("".join(f"{x[i]!r} {y[i]!r} {z[i]!r} {cover[i]}\n" for i in range(43)))
+    layer_out = tmp_path / "dz.gpkg"
+    result = processing.run("groundsieve:accuracy", {
+        "DTM": dtm, "CHECKPOINTS": str(csv), "Z_FIELD": "Elev_ortho", "LAND_COVER_FIELD": "Surface",
+        "LAND_COVER_MAP": "road=NVA,forest=VVA", "OUTPUT_HTML": str(tmp_path / "r.html"), "OUTPUT": str(layer_out)})
+    assert result["COUNT"] == 40 and result["SKIPPED"] == 0
+    assert result["NVA_RMSEZ"] == pytest.approx(0.05, abs=1e-9)
+    assert result["VVA95"] == pytest.approx(np.percentile(dz[20:], 95), abs=1e-9)
+    rows, written = read_layer(layer_out)
+    assert written.crs().authid() == "EPSG:32633"  # (the DTM's)
+    assert rows["CP7"]["dz"] == pytest.approx(dz[6], abs=1e-9) and rows["CP7"]["land_cover"] == "NVA"
+    assert "in the DTM's CRS" in html.unescape((tmp_path / "r.html").read_text())
+    del rows, written
+    result = processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": str(txt),
+                                                     "OUTPUT_HTML": str(tmp_path / "r2.html")})
+    assert result["COUNT"] == 41 and result["SKIPPED"] == 2  # (the one outside the DTM, the one on nodata)
+    assert result["NVA95"] is not None and result["VVA_RMSEZ"] == pytest.approx(np.sqrt(np.mean(dz[20:] ** 2)))
+    with pytest.raises(QgsProcessingException, match=r"Checkpoint elevation field: the layer 'cp' has no field 'Elev' "
+                                                     r"\(its fields: Name, East, North, Elev_ortho, Surface\)"):
+        processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": str(csv), "Z_FIELD": "Elev",
+                                                "OUTPUT_HTML": str(tmp_path / "r3.html")})
+    with pytest.raises(QgsProcessingException, match=r"cp\.txt: has no header line, so it has no column 'h'"):
+        processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": str(txt), "Z_FIELD": "h",
+                                                "OUTPUT_HTML": str(tmp_path / "r3.html")})
+    assert not (tmp_path / "r3.html").exists()
+    # a table that is no file (a memory table without geometries) is still named as such
+    table = QgsVectorLayer("None?field=x:double&field=y:double&field=z:double", "cp", "memory")
+    with pytest.raises(QgsProcessingException, match=r"a table without geometries .*delimited text layer with "
+                                                     r"its X and Y fields"):
+        processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": table, "Z_FIELD": "z",
+                                                "OUTPUT_HTML": str(tmp_path / "r4.html")})
 
 
 def test_a_field_the_layer_lacks_is_named(groundsieve_provider, dtm, tmp_path):
