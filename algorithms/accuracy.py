@@ -266,7 +266,7 @@ checkpoints.</p>""")
             raise QgsProcessingException(f"{label} '{source.sourceName()}': the points have no Z; choose the field "
                                          f"holding their heights in '{self.label(self.Z_FIELD)}'")
         transform = self.transformTo(source, layer, context, feedback)
-        x, y, z, ids, covers, geometries, empty = [], [], [], [], [], [], []
+        x, y, z, ids, covers, geometries, empty, no_height = [], [], [], [], [], [], [], []
         total = max(source.featureCount(), 1)
         for k, feature in enumerate(source.getFeatures()):
             if feedback.isCanceled():
@@ -289,9 +289,11 @@ checkpoints.</p>""")
                 height = _number(feature[z_field])
                 if height is None:
                     value = _text(feature[z_field])
+                    if not value:  # (a mark not observed: left out and named, as a point without a geometry)
+                        no_height.append(fid)
+                        continue
                     raise QgsProcessingException(f"{where}, {self.label(self.Z_FIELD).split(' (')[0]} '{z_field}': "
-                                                 + (f"'{value}' is not a number" if value else
-                                                    "empty (NULL): give the checkpoint its height, or remove it"))
+                                                 f"'{value}' is not a number")
             vertices = list(geometry.vertices())
             for part, vertex in enumerate(vertices, 1):
                 height_here = height if z_field else vertex.z()
@@ -313,6 +315,13 @@ checkpoints.</p>""")
                 geometries.append((vertex.x(), vertex.y(), _text(feature[cover_field]) if cover_field else ""))
         if empty:
             self.warn(feedback, f"{len(empty)} checkpoint(s) without a geometry left out: {', '.join(empty[:12])}")
+        if no_height:
+            self.warn(feedback, f"{len(no_height)} checkpoint(s) with an empty (NULL) '{z_field}' left out: "
+                                f"{', '.join(no_height[:12])}" + (" ..." if len(no_height) > 12 else ""))
+        if not x and no_height:
+            raise QgsProcessingException(f"{label} '{source.sourceName()}': every checkpoint's "
+                                         f"{self.label(self.Z_FIELD).split(' (')[0]} '{z_field}' is empty (NULL): "
+                                         "is it the field of their heights?")
         if not x:
             raise QgsProcessingException(
                 f"{label} '{source.sourceName()}': holds no points" + (

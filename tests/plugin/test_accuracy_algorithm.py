@@ -226,8 +226,9 @@ def test_qgis_process_runs_it_on_files(groundsieve_provider, dtm, tmp_path):
 def test_a_run_that_cannot_write_its_layer_leaves_no_report_and_a_null_height_is_named(groundsieve_provider, dtm,
                                                                                        tmp_path):
     """A residual layer in a missing folder failed after the report was written, which stayed behind (a
-    surveyor); it is refused before the work now. An empty (NULL) height is named as such, with the
-    checkpoint's id."""
+    surveyor); it is refused before the work now. An empty (NULL) height stopped the run: the checkpoint (a
+    mark not observed) is left out and named with its id, in the log and the report; when every height is
+    empty the field is asked about."""
     import processing
     from qgis.core import NULL, QgsProcessingException
     x, y, z, ids, _cover, _dz = checkpoints()
@@ -239,10 +240,23 @@ def test_a_run_that_cannot_write_its_layer_leaves_no_report_and_a_null_height_is
     assert os.listdir(tmp_path) == []
     flat = add_points(memory_layer("EPSG:32633", ["name:string", "h:double"], z_geometry=False),
                       [((x[i], y[i]), [ids[i], NULL if i == 2 else float(z[i])]) for i in range(5)])
-    with pytest.raises(QgsProcessingException, match=r"feature \d+ \('CP3'\), Checkpoint elevation field 'h': empty "
-                                                     r"\(NULL\)"):
-        processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": flat, "Z_FIELD": "h", "ID_FIELD": "name",
-                                                "OUTPUT_HTML": str(report)})
+    result = processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": flat, "Z_FIELD": "h",
+                                                     "ID_FIELD": "name", "OUTPUT_HTML": str(report)})
+    assert result["COUNT"] == 4
+    assert "1 checkpoint(s) with an empty (NULL) 'h' left out: CP3" in html.unescape(report.read_text())
+    empty = add_points(memory_layer("EPSG:32633", ["name:string", "h:double"], z_geometry=False),
+                       [((x[i], y[i]), [ids[i], NULL]) for i in range(3)])
+    with pytest.raises(QgsProcessingException, match=r"every checkpoint's Checkpoint elevation field 'h' is empty "
+                                                     r"\(NULL\): is it the field of their heights\?"):
+        processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": empty, "Z_FIELD": "h",
+                                                "OUTPUT_HTML": str(tmp_path / "r5.html")})
+    text = add_points(memory_layer("EPSG:32633", ["name:string", "h:string"], z_geometry=False),
+                      [((x[i], y[i]), [ids[i], "n/a" if i == 1 else str(z[i])]) for i in range(3)])
+    with pytest.raises(QgsProcessingException, match=r"feature \d+ \('CP2'\), Checkpoint elevation field 'h': 'n/a' "
+                                                     r"is not a number"):
+        processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": text, "Z_FIELD": "h", "ID_FIELD": "name",
+                                                "OUTPUT_HTML": str(tmp_path / "r5.html")})
+    assert not (tmp_path / "r5.html").exists()
 
 
 def test_a_survey_s_text_or_csv_file_is_read_as_the_command_line_reads_it(groundsieve_provider, dtm, tmp_path):
