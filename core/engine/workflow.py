@@ -492,12 +492,22 @@ def defaults_in_crs_unit(algorithm, dtm: Optional["DTMOptions"], crs_wkt: Option
     if dtm is not None and dtm.metres_per_unit == 1.0:
         dtm = dataclasses.replace(dtm, metres_per_unit=factor)
     if dtm is not None and not dtm.cell_set and dtm.cell_size_m == DTMOptions.cell_size_m:
-        dtm = dataclasses.replace(dtm, cell_size_m=DTMOptions.cell_size_m / factor)
-        said.append(f"DTM cell {dtm.cell_size_m:.4g}")
+        dtm = dataclasses.replace(dtm, cell_size_m=dtm_cell_in_unit(factor))
+        said.append(f"DTM cell {dtm.cell_size_m:.4g} (the whole number nearest 1 m, so that the cells fall on "
+                    f"whole {length_label(factor)})" if dtm.cell_size_m != DTMOptions.cell_size_m / factor
+                    else f"DTM cell {dtm.cell_size_m:.4g}")
     if said:
         log(f"{path}: the CRS's unit is {unit}: lengths in metres (the defaults, a preset's) are converted to it: "
             + ", ".join(said) + f" ({unit}; 1 m = {1 / factor:.5g}). Values you set are read in {unit}.")
     return algorithm, dtm
+
+
+def dtm_cell_in_unit(metres_per_unit: float) -> float:
+    """The default DTM cell (1 m) in a CRS's unit: the whole number of units nearest it when a unit is
+    shorter than a metre (3 ft, not 3.2808: a DTM in feet whose cells fell on a lattice of 3.2808 ft
+    (1999999.28 ...) snapped onto no other DTM of the county, a surveyor), else the exact conversion."""
+    cell = DTMOptions.cell_size_m / metres_per_unit
+    return float(round(cell)) if cell >= 1.5 else cell
 
 
 def warn_about_units(path: str, infos, log) -> None:

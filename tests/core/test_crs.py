@@ -219,9 +219,9 @@ def test_a_cloud_in_us_survey_feet_runs_the_defaults_in_metres_converted(tmp_pat
         runs[name + " log"] = lines
         runs[name + " cell"] = gdal.Open(str(tmp_path / f"{name}.tif")).GetGeoTransform()[1]
     said = [line for line in runs["ft log"] if "lengths in metres (the defaults, a preset's) are converted" in line]
-    assert len(said) == 1 and "WINDOW 59.05" in said[0] and "THRESHOLD 1.64" in said[0] and "DTM cell 3.281" in said[0]
+    assert len(said) == 1 and "WINDOW 59.05" in said[0] and "THRESHOLD 1.64" in said[0] and "DTM cell 3 (the whole number nearest 1 m, so that the cells fall on whole ft)" in said[0]
     assert not any("are converted" in line for line in runs["m log"])
-    assert runs["ft cell"] == pytest.approx(1 / ft) and runs["m cell"] == 1.0
+    assert runs["ft cell"] == 3.0 and runs["m cell"] == 1.0  # (whole feet: a surveyor's 3.2808 ft lattice)
     truth = scene.classification == 2
     errors = {k: np.mean(runs[k] != truth) for k in ("m", "ft")}
     assert errors["ft"] < errors["m"] + 0.003, errors  # as good as the metric run
@@ -313,18 +313,18 @@ def test_a_filter_in_feet_classifies_as_in_metres(tmp_path, name):
 
 
 def test_a_typed_dtm_cell_is_in_feet_and_the_default_is_converted(tmp_path):
-    """--dtm-cell 1 on a cloud in feet made 3.28 ft cells where --dtm-cell 2 made 2 ft (a code reviewer)."""
+    """--dtm-cell 1 on a cloud in feet made 3.28 ft cells where --dtm-cell 2 made 2 ft (a code reviewer). The
+    default 1 m is 3 ft, whole feet (its 3.2808 ft cells fell on a lattice no other DTM in feet shares)."""
     import pyproj
 
     from groundsieve.core.engine.cli import build_parser, options_from
     from groundsieve.core.engine.workflow import defaults_in_crs_unit
     feet = pyproj.CRS.from_epsg(2264).to_wkt()
-    for argv, cell in (([], 1200.0 / 3937.0), (["--dtm-cell", "1"], 1.0), (["--dtm-cell", "2"], 2.0)):
+    for argv, cell in (([], 3.0), (["--dtm-cell", "1"], 1.0), (["--dtm-cell", "2"], 2.0)):
         args = build_parser().parse_args(["smrf", "--input", "ft.laz", "--output", "o.laz", *argv])
         _algorithm, _options, dtm = options_from(args)
         _same, converted = defaults_in_crs_unit(None, dtm, feet, "ft.laz", lambda _l: None)
-        expected = 1.0 / cell if not argv else cell
-        assert converted.cell_size_m == pytest.approx(expected), argv
+        assert converted.cell_size_m == cell, argv
 
 
 @pytest.mark.parametrize("tiled", [False, True])

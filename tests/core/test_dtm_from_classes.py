@@ -144,7 +144,7 @@ def test_a_cloud_without_the_ground_classes_is_refused_and_nothing_is_written(tm
 
 
 def test_the_dtm_cell_default_follows_a_cloud_in_feet(tmp_path):
-    """The default 1 m cell becomes 3.28 ft on a cloud in feet (workflow.defaults_in_crs_unit), as for
+    """The default 1 m cell becomes 3 ft (whole feet) on a cloud in feet (workflow.defaults_in_crs_unit), as for
     the filters; a cell set by the user is read in feet."""
     import pyproj
     feet = pyproj.CRS.from_epsg(2264).to_wkt()  # NAD83 / North Carolina (ftUS)
@@ -154,7 +154,7 @@ def test_the_dtm_cell_default_follows_a_cloud_in_feet(tmp_path):
     las = new_las(x, y, 300 + rng.normal(0, 0.05, n), classification=np.full(n, 2, np.uint8), crs_wkt=feet)
     src = tmp_path / "feet.laz"
     write_las(las, str(src))
-    for dtm, cell in ((DTMOptions(), 3937.0 / 1200.0), (DTMOptions(cell_size_m=2.0, cell_set=True), 2.0)):
+    for dtm, cell in ((DTMOptions(), 3.0), (DTMOptions(cell_size_m=2.0, cell_set=True), 2.0)):
         out, logs = tmp_path / "dtm.tif", []
         run_ground_filter(str(src), None, ClassGround(), options=FilterOptions(keep_existing_classes=True),
                           dtm_path=str(out), dtm=dtm, log=logs.append)
