@@ -71,7 +71,9 @@ likely cause (e.g. one point kilometres away from the others: class it as noise 
 square tiles, each read with a buffer around it (the filter's own reach unless <i>Tile buffer</i> is set)
 so that no seam shows at tile or file edges: only the tile's own points keep their class. Tiles exist
 only where points are; they run <i>Tiles at the same time</i> at once (worker processes under
-qgis_process for 10 million points or more, threads below that and in the desktop); their temporary files (the tiles, and each input's points uncompressed, about
+qgis_process for 10 million points or more, threads below that and in the desktop), sharing the
+<i>Memory budget</i> for their points and grids (a worker process also holds Python and its libraries,
+about 130 MB, outside it); their temporary files (the tiles, and each input's points uncompressed, about
 75 bytes a point at most) go to the <i>Working folder</i> and are removed at the end. A COPC input is not
 copied there: each tile reads its points from it by bounds. A run killed or failed midway resumes when started again with the same inputs and
 parameters, skipping the tiles done (after a failure only when you chose the working folder). With several input files the output names a .vpc and

@@ -105,7 +105,9 @@ def _add_tiles(parser: argparse.ArgumentParser) -> None:
     tiles.add_argument("--tile-buffer", type=float, default=-1.0, metavar="M",
                        help="tile buffer (m; -1 = the filter's own reach; default %(default)s)")
     tiles.add_argument("--memory-budget", type=float, default=to["memory_budget_mb"], metavar="MB",
-                       help="memory budget (MB; 0 = a quarter of the RAM, at most 2048; default %(default)s)")
+                       help="memory budget (MB; 0 = a quarter of the RAM, at most 2048; default %(default)s): the tiles' "
+                            "points and grids; each worker process also holds Python and its libraries (about "
+                            "130 MB), outside it")
     tiles.add_argument("--workers", type=int, default=to["workers"], metavar="N",
                        help="tiles at the same time on this machine (0 = every core; default %(default)s)")
     tiles.add_argument("--work-folder", metavar="PATH",
