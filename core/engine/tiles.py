@@ -1217,8 +1217,8 @@ def _say_enclosed_nodata(writer, dtm, buffer_m: float, log, hull_points=None, un
         log(f"DTM: {open_cells:,} cell(s) inside the outline of the ground (its convex hull) stayed nodata in bays or "
             f"channels of the data open to its edge (a coastline, a river without returns) wider than the tiles' "
             f"buffer ({buffer_m:g} {unit}): a run of the whole cloud draws triangles across them, which are not "
-            "measured terrain either. A tile buffer as wide gives the whole run's DTM; a DTM maximum distance leaves "
-            "them empty in both.")
+            "measured terrain either. A tile buffer as wide gives the whole run's DTM; to compare two runs (epochs), "
+            "run both in tiles of the same size.")
 
 
 def _existing_folder(path: str) -> str:

@@ -177,6 +177,18 @@ def _lattice_index(value: float, rounding) -> int:
     return int(rounding(value))
 
 
+def _lattice_value(k: int, cell: float) -> float:
+    """``k * cell`` as the decimal it stands for when ``cell`` is a short decimal: 1666679 * 0.3 is
+    500003.69999999995 in floating point, which a DTM's geotransform showed (a geomorphologist: two
+    epochs' origins then shared fewer exact cell centres); rounded to the cell's decimals it is 500003.7."""
+    value = k * cell
+    text = repr(float(cell))
+    if "e" in text or "E" in text:
+        return value
+    decimals = len(text.split(".")[1].rstrip("0")) if "." in text else 0
+    return round(value, decimals) if decimals <= 9 else value
+
+
 @dataclass(frozen=True)
 class GridSpec:
     x0: float
@@ -218,7 +230,7 @@ class GridSpec:
             # so that it adds no column or row on any side.
             k0, k1 = _lattice_index(xmin / cell, math.floor), _lattice_index(xmax / cell, math.ceil)
             t0, t1 = _lattice_index(ymin / cell, math.floor), _lattice_index(ymax / cell, math.ceil)
-            x0, top = k0 * cell, t1 * cell
+            x0, top = _lattice_value(k0, cell), _lattice_value(t1, cell)
             ncols, nrows = max(1, k1 - k0), max(1, t1 - t0)
         else:
             ncols = int(math.floor((xmax - x0) / cell)) + 1

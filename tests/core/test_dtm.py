@@ -1,6 +1,8 @@
 """TIN DTM rasterization (core.grids.rasterize.tin_dtm) and the grid convention (core.grids.spec)."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from scipy.spatial import Delaunay
@@ -367,3 +369,19 @@ def test_a_whole_run_names_the_gaps_in_the_data_it_interpolates_across():
     area = float(line.split("the largest about ")[1].split(" m²")[0].replace(",", ""))
     assert 0.85 * np.pi * 40 ** 2 < area <= np.pi * 40 ** 2  # the blocks wholly inside the pond
     assert "around x 150, y 120" in line and "1 gap(s)" in line
+
+
+def test_a_closed_grid_s_origin_is_the_decimal_its_cell_stands_for():
+    """With 0.3 m cells a DTM's origin was 500003.69999999995 (1666679 x 0.3 in floating point), and two
+    epochs' cell centres matched exactly in 236 of 590 columns (a geomorphologist): the origin is the
+    decimal on the cell's lattice now, the points' cells unchanged."""
+    x = np.array([500003.75, 500010.0, 500003.7])
+    y = np.array([4000001.25, 4000004.9, 4000005.1])
+    g = GridSpec.covering(x, y, 0.3, closed=True)
+    assert repr(g.x0) == "500003.7" and repr(g.top) == "4000005.3"
+    assert g.shape == (14, 21)  # (500010.0 on the eastern edge of column 20)
+    np.testing.assert_array_equal(g.col_of(x), [0, 20, 0])
+    np.testing.assert_array_equal(g.row_of(y), [13, 1, 0])
+    assert GridSpec.covering(x, y, 0.25, closed=True).x0 == 500003.5
+    third = 1.0 / 3.0  # (a cell of no short decimal keeps its product)
+    assert GridSpec.covering(x, y, third, closed=True).x0 == math.floor(500003.7 / third) * third
