@@ -717,7 +717,8 @@ def gaps_note(gaps, smallest: float, unit: str = "m") -> str:
             f"about {area:,.0f} {unit}² around x {cx:,.0f}, y {cy:,.0f}), which the triangulation interpolates across: "
             "the DTM's values there are not measured (water without returns, a missing strip, a shadow of the image "
             "matching). To leave such gaps empty, set 'DTM: leave cells farther than this from any ground point "
-            "empty' to more than half the widest building (the cells under a roof are that far from the ground).")
+            "empty' below the gaps' half-width but above half the widest building, if any (the cells under a roof are that "
+            "far from the ground).")
 
 
 def check_outputs(input_path: str, output_path: Optional[str], raster_paths=()) -> None:
