@@ -492,6 +492,10 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
             note = waveform_note(info.path)
             if note:
                 log(note)
+        if info.bounds_from_points:  # (planned on its header's zeros, the run failed after every tile)
+            log(f"{WARNING_PREFIX}{info.path}: its header's bounds are empty (every minimum and maximum the same "
+                "value): the tiles are planned on its points' bounds, read from them. Other programs may not read "
+                "it right; rewrite it with a tool that recomputes the header (e.g. las2las, PDAL's translate).")
         if info.copc_damaged:  # read as the whole run reads it (it was refused here)
             log(f"{WARNING_PREFIX}{info.path}: {info.copc_damaged}: its points are read as a plain LAZ file's, "
                 "binned instead of read by bounds")

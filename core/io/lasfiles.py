@@ -46,6 +46,9 @@ class LasInfo:
     #: why a file with the COPC records is not read as COPC (its index is damaged): it is read as a
     #: plain LAZ, as a run of the whole file reads it ("" when it is no COPC file or a sound one)
     copc_damaged: str = ""
+    #: the header's bounds were empty (every min and max one value: a writer that never filled them in)
+    #: and are the points' own, read from them (a tiled run planned on them failed at its end)
+    bounds_from_points: bool = False
 
     @property
     def area_m2(self) -> float:
@@ -77,15 +80,33 @@ def scan_header(path: str) -> LasInfo:
                 raise InputError(f"{path}: the header's bounds are not numbers ({list(h.mins)} to {list(h.maxs)}): "
                                  "the header is damaged; rewrite it with a tool that recomputes it (e.g. "
                                  "las2las, PDAL's translate)")
-            return LasInfo(path, int(h.point_count), tuple(float(v) for v in h.mins),
-                           tuple(float(v) for v in h.maxs), int(h.point_format.id), str(h.version),
+            mins, maxs = tuple(float(v) for v in h.mins), tuple(float(v) for v in h.maxs)
+            empty_bounds = int(h.point_count) > 1 and mins[:2] == maxs[:2] and not is_copc_header(h)
+            if empty_bounds:
+                mins, maxs = _bounds_of_points(reader)
+            return LasInfo(path, int(h.point_count), mins, maxs, int(h.point_format.id), str(h.version),
                            header_crs_wkt(h),
                            copc=is_copc_header(h) and not damaged, record_size=int(h.point_format.size),
-                           later_returns=_later_returns(h), held=held, copc_damaged=damaged)
+                           later_returns=_later_returns(h), held=held, copc_damaged=damaged,
+                           bounds_from_points=empty_bounds)
     except (InputError, UnsupportedFormatError):
         raise
     except Exception as err:  # laspy raises many types for damaged files
         raise InputError(f"{path}: cannot read its LAS header ({laspy_reason(err)})") from err
+
+
+def _bounds_of_points(reader, chunk: int = 2_000_000):
+    """The (x, y, z) minima and maxima of the points ``reader`` (a laspy reader at its first point) holds,
+    read chunk by chunk (a header whose bounds were never filled in: a photogrammetry export's zeros)."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for points in reader.chunk_iterator(chunk):
+        for axis, values in enumerate((points.x, points.y, points.z)):
+            values = np.asarray(values)
+            if values.size:
+                lo[axis], hi[axis] = min(lo[axis], float(values.min())), max(hi[axis], float(values.max()))
+    if not np.all(np.isfinite(lo)):
+        return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+    return tuple(map(float, lo)), tuple(map(float, hi))
 
 
 #: what a complete LAZ without points holds after its header at most (the chunk table's offset and table)

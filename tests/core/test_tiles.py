@@ -1412,3 +1412,31 @@ def test_an_empty_file_in_a_survey_is_named(tmp_path):
     run_ground_filter(str(tmp_path / "in"), str(tmp_path / "out" / "c.vpc"), SMRF(), log=logs.append)
     assert any(line.startswith("1 of the 2 input files hold no points (empty.laz)") for line in logs), logs
     assert len(laspy.read(tmp_path / "out" / "c" / "empty.laz").points) == 0
+
+
+def test_a_header_whose_bounds_were_never_filled_in_is_planned_on_its_points(scene_laz, tmp_path):
+    """A photogrammetry export whose header's minima and maxima are all 0: a tiled run planned its tiles on
+    them, filtered every tile and failed at the end with GDAL's "-srcwin ... negative width" (a UAV
+    photogrammetry user). The bounds are read from the points, said, and the run is the whole run's."""
+    import struct
+    src = tmp_path / "zeros.las"
+    write_las(read_cloud(scene_laz).las, str(src))  # (uncompressed: the header patched in place)
+    with open(src, "r+b") as f:
+        f.seek(179)  # max x, min x, max y, min y, max z, min z (LAS 1.2-1.4)
+        f.write(struct.pack("<6d", *([0.0] * 6)))
+    info = scan_header(str(src))
+    truth = laspy.read(scene_laz).header
+    assert info.bounds_from_points
+    assert info.mins == pytest.approx(tuple(truth.mins)) and info.maxs == pytest.approx(tuple(truth.maxs))
+    assert not scan_header(scene_laz).bounds_from_points
+    lines = []
+    out, dtm = tmp_path / "tiled.las", tmp_path / "dtm.tif"
+    run_ground_filter(str(src), str(out), SMRF(), options=tiled(), dtm_path=str(dtm), dtm=DTMOptions(cell_size_m=2.0),
+                      log=lines.append)
+    said = [line for line in lines if "header's bounds are empty" in line]
+    assert len(said) == 1 and said[0].startswith(WARNING_PREFIX)
+    assert not any("degrees" in line for line in lines)
+    assert agreement(laspy.read(out).classification, whole_classes(scene_laz, SMRF())) >= 0.999
+    from osgeo import gdal
+    ds = gdal.Open(str(dtm))
+    assert ds.RasterXSize == ds.RasterYSize == 120  # (the 240 m scene in 2 m cells)
