@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 from typing import Optional, Sequence, Tuple
 
@@ -27,6 +28,17 @@ def check_raster_path(path: str, *, inputs=()) -> str:
     return check_output_path(path, inputs=inputs, extensions=RASTER_EXTENSIONS, what="raster output")
 
 
+#: heights from this magnitude on are written as Float64: Float32 keeps them to 1/256 of a unit (4 mm) at
+#: most; a cloud with z in the millions (a geocentric export, a huge offset) gave a DTM in 0.5 m steps
+#: (a UAV photogrammetry user). The Earth's heights stay below it in metres and in feet.
+FLOAT32_LARGEST_HEIGHT = 32768.0
+
+
+def float_type_for(largest_abs: float) -> str:
+    """"float32", or "float64" for values of magnitude ``largest_abs`` that Float32 would round coarsely."""
+    return "float64" if math.isfinite(largest_abs) and largest_abs >= FLOAT32_LARGEST_HEIGHT else "float32"
+
+
 def write_geotiff(path: str, values: np.ndarray, grid: GridSpec, *, crs_wkt: Optional[str] = None,
                   nodata: float = NODATA, dtype: str = "float32", atomic: bool = True,
                   categories: Sequence[Tuple[int, str, str]] = (), elevation: bool = False,
@@ -45,6 +57,8 @@ def write_geotiff(path: str, values: np.ndarray, grid: GridSpec, *, crs_wkt: Opt
         raise OutputError(f"{path}: raster of shape {values.shape} does not match its grid {grid.shape}")
     if dtype not in ("float32", "float64", "uint8", "int16"):
         raise OutputError(f"{path}: cannot write a raster of type {dtype}")
+    if dtype == "float32" and values.dtype.kind == "f" and values.size and np.isfinite(values).any():
+        dtype = float_type_for(float(np.nanmax(np.abs(values))))
     data = np.where(np.isnan(values), nodata, values).astype(dtype) if values.dtype.kind == "f" else values.astype(dtype)
     try:
         # the array as an in-memory dataset (no copy), written as a cloud-optimised GeoTIFF: tiles,
@@ -144,12 +158,16 @@ class BlockGeoTIFF:
     (internal tiles, DEFLATE, overviews) at the output path, atomically. Blocks never written stay
     nodata. ``write_block`` may be called from several threads."""
 
-    def __init__(self, work_path: str, grid: GridSpec, *, crs_wkt: Optional[str] = None, nodata: float = NODATA):
+    def __init__(self, work_path: str, grid: GridSpec, *, crs_wkt: Optional[str] = None, nodata: float = NODATA,
+                 largest_abs: float = 0.0):
+        """``largest_abs``: the largest magnitude of the values to come (the headers' heights), which
+        decides Float32 or Float64 (:func:`float_type_for`)."""
         import threading
 
         from osgeo import gdal
         gdal.UseExceptions()
         self.grid, self.nodata, self.work_path = grid, nodata, work_path
+        self.dtype = np.dtype(float_type_for(largest_abs))
         self._lock = threading.Lock()
         # each row's first and last cell with a value and its count of such cells (blocks never
         # overlap): the cells between a row's first and last value that have none (empty_cells)
@@ -161,7 +179,7 @@ class BlockGeoTIFF:
         self._bottom = np.full(grid.ncols, -1, dtype=np.int64)
         try:
             self._ds = gdal.GetDriverByName("GTiff").Create(
-                work_path, grid.ncols, grid.nrows, 1, gdal.GDT_Float32,
+                work_path, grid.ncols, grid.nrows, 1, gdal.GDT_Float64 if self.dtype == np.float64 else gdal.GDT_Float32,
                 options=["COMPRESS=DEFLATE", "TILED=YES", "BIGTIFF=IF_SAFER", "SPARSE_OK=TRUE", "PREDICTOR=3"])
             self._ds.SetGeoTransform(grid.geotransform)
             self._ds.SetMetadataItem("TIFFTAG_SOFTWARE", software())
@@ -178,7 +196,7 @@ class BlockGeoTIFF:
         """Write ``values`` (row 0 north, NaN = no data) with its north-west cell at (row0, col0)."""
         row0, col0 = int(row0), int(col0)
         valued = ~np.isnan(values)
-        data = np.where(valued, values, self.nodata).astype(np.float32)
+        data = np.where(valued, values, self.nodata).astype(self.dtype)
         r, first, last = _ends(valued, 1)
         c, top, bottom = _ends(valued, 0)
         with self._lock:

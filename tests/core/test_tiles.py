@@ -1440,3 +1440,24 @@ def test_a_header_whose_bounds_were_never_filled_in_is_planned_on_its_points(sce
     from osgeo import gdal
     ds = gdal.Open(str(dtm))
     assert ds.RasterXSize == ds.RasterYSize == 120  # (the 240 m scene in 2 m cells)
+
+
+@pytest.mark.parametrize("tile", [0.0, TILE], ids=["whole", "tiled"])
+def test_heights_in_the_millions_are_written_as_float64(tmp_path, tile):
+    """A cloud with z about 4.7 million (a geocentric export, a huge offset) had its DTM in Float32, in steps of
+    0.5 m: 8 distinct values (a UAV photogrammetry user). Heights from 32,768 on are written as Float64, the
+    Earth's heights in metres and feet stay Float32."""
+    from osgeo import gdal
+    s = make_scene(SceneSpec(size_m=160.0, density_per_m2=2.0, seed=3))
+    for name, dz, kind in (("high", 4_700_000.0, gdal.GDT_Float64), ("plain", 0.0, gdal.GDT_Float32)):
+        src = tmp_path / f"{name}.laz"
+        write_las(new_las(s.x, s.y, s.z + dz, scale=0.001), str(src))
+        dtm = tmp_path / f"{name}_{int(tile)}.tif"
+        options = tiled(tile) if tile else FilterOptions()
+        run_ground_filter(str(src), None, SMRF(), options=options, dtm_path=str(dtm), dtm=DTMOptions(cell_size_m=2.0))
+        ds = gdal.Open(str(dtm))  # (kept: a band outlives no dataset)
+        band = ds.GetRasterBand(1)
+        assert band.DataType == kind, name
+        values = band.ReadAsArray()
+        values = values[values != band.GetNoDataValue()] - dz
+        assert len(np.unique(np.round(values, 3))) > 1000, name  # (not steps of 0.5 m)
