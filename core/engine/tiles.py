@@ -238,8 +238,11 @@ def needs_tiling(input_path: str, tiling: TileOptions, algorithm=None, dtm=None,
     need = whole_run_bytes(info, algorithm, dtm)
     if need > tiling.budget_bytes:
         if log:
+            dx, dy = info.maxs[0] - info.mins[0], info.maxs[1] - info.mins[1]
             log(f"{input_path}: run whole it would take about {need / 2**20:,.0f} MB, more than the memory budget "
-                f"({tiling.budget_bytes / 2**20:,.0f} MB): run in buffered tiles (a larger memory budget runs it whole).")
+                f"({tiling.budget_bytes / 2**20:,.0f} MB), for {info.count:,} points over its header's "
+                f"{dx:,.0f} x {dy:,.0f} extent (which a few points far from the others may enlarge: a DTM's run names "
+                "them): run in buffered tiles, which exist only where there are points.")
         return True
     return False
 

@@ -1146,6 +1146,9 @@ def test_one_file_runs_whole_when_its_estimated_memory_fits_the_budget(scene_laz
     assert needs_tiling(scene_laz, TileOptions(memory_budget_mb=below), SMRF(), DTMOptions(), lines.append)
     assert len(lines) == 1 and lines[0].startswith(f"{scene_laz}: run whole it would take about ") \
         and "more than the memory budget" in lines[0], lines
+    # the extent it is for, not the advice of a larger budget (a UAV user's 5 points 40 km away)
+    assert f"for {info.count:,} points over its header's 240 x 240 extent" in lines[0], lines
+    assert "larger memory budget" not in lines[0]
     # through the run: the same file is whole at the budget above, tiled with the reason below
     for budget, tiled_run in ((above, False), (below, True)):
         lines = []
