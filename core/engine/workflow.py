@@ -145,6 +145,14 @@ def processable(cloud: PointCloud, options: FilterOptions) -> np.ndarray:
     return keep
 
 
+#: what a run with only last returns says of a cloud without return information (a UAV photogrammetry user:
+#: the option was taken without a word)
+LAST_RETURNS_WITHOUT_RETURNS = (
+    f"{WARNING_PREFIX}{{what}}: 'only last returns' is set, but the cloud has no return information (every point "
+    "1 of 1, or 0 of 0 as image-matching software writes it, or a text file): every point is its pulse's last, so "
+    "the option leaves none out.")
+
+
 def select_points(cloud: PointCloud, options: FilterOptions) -> np.ndarray:
     """Boolean mask of the points the filter sees: the processable ones (optionally only the last
     returns)."""
@@ -229,6 +237,8 @@ def classify_cloud(cloud: PointCloud, algorithm, options: FilterOptions = Filter
             f"{len(cloud):,} points ({n_withheld:,} withheld and {n_ignored:,} of an "
             f"ignored class {_codes(options.ignored)} left out, keeping their class"
             + (", non-last returns left out" if options.last_returns_only else "") + ").")
+    if options.last_returns_only and not (cloud.has_return_info and (cloud.number_of_returns > 1).any()):
+        log(LAST_RETURNS_WITHOUT_RETURNS.format(what=cloud.path))
     idx = np.flatnonzero(filtered)
     steps.report(0.01)
     with memory_budget(options.memory_budget_bytes):

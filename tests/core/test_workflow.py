@@ -166,6 +166,20 @@ def test_last_returns_only(scene, tmp_path):
     assert (cls[scene.mask("roof")] == 1).all()
 
 
+def test_last_returns_only_on_a_cloud_without_returns_is_said(scene, tmp_path):
+    """'Only last returns' on a photogrammetric cloud (every point 1 of 1) was taken without a word (a UAV
+    photogrammetry user): it leaves no point out, and the run says so; on a multi-return cloud it says nothing."""
+    cloud = read_cloud(scene.path)
+    flat = tmp_path / "flat.las"
+    write_las(new_las(cloud.x, cloud.y, cloud.z), str(flat))  # (return 1 of 1 everywhere)
+    for path, said in ((str(flat), True), (scene.path, False)):
+        lines = []
+        run_ground_filter(path, str(tmp_path / "out.las"), SMRF(), options=FilterOptions(last_returns_only=True),
+                          log=lines.append)
+        hits = [line for line in lines if "'only last returns' is set, but the cloud has no return information" in line]
+        assert len(hits) == int(said), (path, lines)
+
+
 def test_keep_existing_classes(scene, tmp_path):
     out = str(tmp_path / "out.las")
     run_ground_filter(scene.path, out, SMRF(), options=FilterOptions(keep_existing_classes=True))
