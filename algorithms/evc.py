@@ -92,7 +92,11 @@ the cloud's CRS: the small- and large-scale mean elevations, the elevation diffe
 the class raster (1 ground, 2 vegetation area, 3 vegetation boundary, nodata where the small cell
 is empty; loaded with these names and colours in its legend), to inspect and to reuse in the modeler.
 Each is off by default: tick the ones you want in the dialog, or name them in <code>qgis_process</code>
-(<code>--EVC_RASTER=evc.tif --CLASS_RASTER=classes.tif</code> ...).</p>""" + COMMON_HELP)
+(<code>--EVC_RASTER=evc.tif --CLASS_RASTER=classes.tif</code> ...).</p>
+<p>Reading the class raster: the method compares a fine and a coarse mean surface, so terrain the coarse
+cell does not resolve (terrace edges, ditches, banks, slopes that change within a large cell) shows as
+bands of vegetation area or boundary along it, in steps of the large cell: they are terrain (a UAV
+photogrammetry reviewer's generated scene: most of the ground EVC lost lay along its two breaklines).</p>""" + COMMON_HELP)
 
     def addExtraOutputParameters(self):  # noqa: N802
         for name, (label, _make) in self.RASTERS.items():
