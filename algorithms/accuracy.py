@@ -13,7 +13,7 @@ from qgis.core import (QgsCoordinateTransform, QgsCsException, QgsFeature, QgsFe
                        QgsProcessingParameterString, QgsWkbTypes)
 from qgis.PyQt.QtGui import QIcon
 
-from .base import attribute_field, check_parameter_values, core_modules, destination_folder_problem, dialog_help
+from .base import attribute_field, check_parameter_values, core_modules, dialog_help, sink_folder_problem
 from .discovery import TAGS, Discoverable
 
 _ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
@@ -214,8 +214,7 @@ checkpoints.</p>""")
             mapping = parse_land_cover_mapping(self.parameterAsString(parameters, self.LAND_COVER_MAP, context) or "")
             accuracy.check_accuracy_outputs([dtm_path], report)
             if parameters.get(self.OUTPUT):  # (its folder, before the work: a failed run leaves no report)
-                why = destination_folder_problem(self.label(self.OUTPUT),
-                                                 self.parameterAsOutputLayer(parameters, self.OUTPUT, context))
+                why = sink_folder_problem(self, parameters, self.OUTPUT, context)
                 if why:
                     raise QgsProcessingException(why)
             if table:

@@ -255,6 +255,21 @@ def check_parameter_values(algorithm, parameters, context, ok, message, *, stric
     return ok, message
 
 
+def sink_folder_problem(algorithm, parameters, name, context):
+    """destination_folder_problem of the feature sink ``name``, its destination read from the parameter's
+    value: parameterAsOutputLayer registered a layer to load for a temporary output ("memory:<label>") that
+    no run made, and the dialog ended every successful run in red with "The following layers were not
+    correctly generated" (a QGIS plugin reviewer). Temporary outputs (memory layers) pass."""
+    from qgis.core import QgsProcessingOutputLayerDefinition
+    value = parameters.get(name)
+    if isinstance(value, QgsProcessingOutputLayerDefinition):
+        text = value.sink.valueAsString(context.expressionContext(), "")
+        value = text[0] if isinstance(text, tuple) else text
+    if not isinstance(value, str) or not value or value == QgsProcessing.TEMPORARY_OUTPUT:
+        return None
+    return destination_folder_problem(algorithm.parameterDefinition(name).description(), value)
+
+
 def destination_folder_problem(label, destination):
     """Why the file destination ``destination`` of the output ``label`` cannot be written (missing or
     read-only folder), or None; data sources that are not plain files (memory:, databases) pass."""
@@ -562,8 +577,7 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         work starts, so that a run that cannot write it writes nothing at all."""
         if not parameters.get(self.GROUND_POINTS):
             return
-        why = destination_folder_problem(self.parameterDefinition(self.GROUND_POINTS).description(),
-                                         self.parameterAsOutputLayer(parameters, self.GROUND_POINTS, context))
+        why = sink_folder_problem(self, parameters, self.GROUND_POINTS, context)
         if why:
             raise QgsProcessingException(why)
 

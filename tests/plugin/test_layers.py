@@ -320,3 +320,48 @@ def test_a_loaded_copc_layer_is_an_input_read_by_bounds(groundsieve_provider, sc
     a, b = laspy.read(tmp_path / "a.laz"), laspy.read(tmp_path / "b.laz")
     assert len(a.points) == len(scene.x) and np.array_equal(a.classification, b.classification)
     assert 0.3 < np.mean(a.classification == 2) < 0.95
+
+
+def test_temporary_layer_outputs_load_without_a_false_error(groundsieve_provider, scene_laz, tmp_path):
+    """The dialog's temporary 'Ground points' and accuracy 'Checkpoints with their dz' layers: the check of
+    their folder before the run (parameterAsOutputLayer) registered a second layer to load, 'memory:<label>',
+    which no run made, and every successful run ended in red with "The following layers were not correctly
+    generated" (a QGIS plugin reviewer). What the dialog loads at the end is all there now."""
+    import gc
+
+    from qgis.core import (QgsApplication, QgsProcessing, QgsProcessingOutputLayerDefinition, QgsProcessingUtils,
+                           QgsProject)
+    src, _scene = scene_laz
+    dtm = tmp_path / "dtm.tif"
+    try:
+        for alg_id, params, sink in (
+                ("groundsieve:smrf", {"INPUT": str(src), "OUTPUT": str(tmp_path / "c.laz"), "DTM": str(dtm)},
+                 "GROUND_POINTS"),
+                ("groundsieve:accuracy", {"DTM": str(dtm), "CHECKPOINTS": None, "OUTPUT_HTML": str(tmp_path / "r.html")},
+                 "OUTPUT")):
+            if params.get("CHECKPOINTS", 1) is None:
+                from osgeo import gdal
+                ds = gdal.Open(str(dtm))
+                x0, cell, _r, top, _r2, _c = ds.GetGeoTransform()
+                values = ds.GetRasterBand(1).ReadAsArray()
+                del ds
+                rows = [(x0 + (c + 0.5) * cell, top - (r + 0.5) * cell, values[r, c] + 0.02)
+                        for r in range(5, 50, 9) for c in range(5, 50, 9)]
+                checkpoints = tmp_path / "cp.txt"
+                checkpoints.write_text("".join(f"{x!r} {y!r} {z!r}\n" for x, y, z in rows))
+                params["CHECKPOINTS"] = str(checkpoints)
+            context, feedback = _context(), _Feedback()
+            params[sink] = QgsProcessingOutputLayerDefinition(QgsProcessing.TEMPORARY_OUTPUT, context.project())
+            # (as the dialog runs it: processing.run takes the result layers out of the context)
+            alg = QgsApplication.processingRegistry().createAlgorithmById(alg_id)
+            result, ok = alg.run(params, context, feedback)
+            assert ok, alg_id
+            keys = list(context.layersToLoadOnCompletion().keys())
+            assert keys, alg_id
+            missing = [k for k in keys if QgsProcessingUtils.mapLayerFromString(k, context) is None]
+            assert missing == [], (alg_id, missing, result)
+            _load_results(alg_id, context, feedback)
+            del context
+            gc.collect()
+    finally:
+        QgsProject.instance().removeAllMapLayers()
