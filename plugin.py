@@ -51,20 +51,26 @@ class GroundSievePlugin:
         timeout) and the full text, with the exact pip command, in the log."""
         from qgis.core import Qgis, QgsMessageLog
 
-        from .dependencies import MENU_ENTRY, NOT_PIP, command_text, install_command
+        from .dependencies import MENU_ENTRY, NOT_PIP, command_text, install_command, missing_dependencies
         missing = self.missing()
         if not missing:
             return []
         pip_names = [m for m in missing if m not in NOT_PIP]
-        text = f"needs the Python packages {', '.join(missing)}."
+        level = Qgis.Warning
+        if missing_dependencies():
+            text = f"needs the Python packages {', '.join(missing)}."
+        else:  # (a warning on every start while 13 of 14 algorithms ran: a QGIS plugin reviewer)
+            text = (f"needs {', '.join(missing)} only to train Random Forest models; every other algorithm "
+                    "works without it.")
+            level = Qgis.Info
         detail = ("The GroundSieve algorithms that need them stop with a message until they are installed "
                   f"into QGIS's Python (the Install… button, or {MENU_ENTRY}).")
         try:
             command = command_text(install_command(pip_names))
         except RuntimeError as err:
             command = str(err)
-        QgsMessageLog.logMessage(f"GroundSieve {text} {detail} Install command: {command}", LOG_TAG, Qgis.Warning)
-        self.show_message(text, Qgis.Warning, pip_names)
+        QgsMessageLog.logMessage(f"GroundSieve {text} {detail} Install command: {command}", LOG_TAG, level)
+        self.show_message(text, level, pip_names)
         return missing
 
     def show_message(self, text, level, packages=None):

@@ -316,3 +316,27 @@ def test_installer_puts_the_packages_into_a_bare_qgis_python_and_the_algorithms_
     site_packages = list(userbase.glob("lib/python3*/site-packages"))
     assert site_packages and (site_packages[0] / "laspy").is_dir()
     assert not (site_packages[0] / "numpy").exists()
+
+
+def test_scikit_learn_alone_missing_is_said_as_what_it_is_needed_for(qgis_app, monkeypatch):
+    """Without scikit-learn alone the bar warned on every start that GroundSieve 'needs the Python packages
+    scikit-learn', while 13 of the 14 algorithms ran (a QGIS plugin reviewer): it says what needs it, as
+    information, and still offers the install."""
+    from qgis.core import Qgis
+
+    import groundsieve
+    monkeypatch.setattr(deps, "missing_dependencies", lambda extra=None: ["scikit-learn"] if extra else [])
+    iface = _Iface()
+    plugin = groundsieve.classFactory(iface)
+    try:
+        assert plugin.check_dependencies() == ["scikit-learn"]
+        item = iface.bar.currentItem()
+        assert "needs scikit-learn only to train Random Forest models" in item.text()
+        assert item.level() == Qgis.Info and len(_buttons(item)) == 1
+        monkeypatch.setattr(deps, "missing_dependencies", lambda extra=None: ["numba", "scikit-learn"] if extra
+                            else ["numba"])
+        plugin.check_dependencies()
+        item = iface.bar.currentItem()
+        assert "needs the Python packages numba, scikit-learn" in item.text() and item.level() == Qgis.Warning
+    finally:
+        plugin.unload()
