@@ -2,6 +2,7 @@
 surveyor's vertical accuracy figures (RMSEz, bias, NVA and VVA under ASPRS Editions 1 and 2) of any
 DTM raster, from a point layer of surveyed checkpoints."""
 import dataclasses
+import functools
 import math
 import os
 
@@ -246,6 +247,9 @@ checkpoints.</p>""")
                    self.VVA_RMSEZ: result.vva.rmse if result.vva else None}
         if sink_id is not None:
             results[self.OUTPUT] = sink_id
+            from . import styles
+            styles.style_when_loaded(context, sink_id, functools.partial(
+                styles.style_residuals, rmse=result.overall.rmse if result.overall else None, unit=result.unit))
         return results
 
     def readCheckpoints(self, parameters, context, feedback, source, layer, mapping, land_cover_of,  # noqa: N802

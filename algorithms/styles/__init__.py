@@ -1,13 +1,14 @@
-"""Styles given to GroundSieve's rasters when QGIS loads them at the end of a run: the EVC class
+"""Styles given to GroundSieve's layers when QGIS loads them at the end of a run: the EVC class
 raster as a paletted layer with a legend (its classes named and coloured), the DTM as an
-elevation ramp. Applied by layer post-processors (QgsProcessingLayerPostProcessorInterface), which
+elevation ramp, the accuracy check's checkpoints by their dz. Applied by layer post-processors (QgsProcessingLayerPostProcessorInterface), which
 run in the main thread once the layer is loaded; qgis_process loads nothing, so styles nothing."""
 import collections
 import functools
 
+import numpy as np
 from qgis.core import (Qgis, QgsColorRampShader, QgsPalettedRasterRenderer, QgsProcessingLayerPostProcessorInterface,
                        QgsRasterBandStats, QgsRasterLayer, QgsRasterShader, QgsSingleBandPseudoColorRenderer,
-                       QgsStyle)
+                       QgsStyle, QgsVectorLayer)
 from qgis.PyQt.QtGui import QColor
 
 #: the EVC filter's classes (Fan et al. 2023, Table 2): value, legend label, colour
@@ -67,13 +68,42 @@ def style_dtm(layer):
     layer.triggerRepaint()
 
 
+#: the residual layer's classes of dz in units of the RMSEz, blue (the DTM too low) to red (too high)
+DZ_CLASSES = ((-np.inf, -2.0, "#2166ac"), (-2.0, -1.0, "#67a9cf"), (-1.0, 0.0, "#d1e5f0"),
+              (0.0, 1.0, "#fddbc7"), (1.0, 2.0, "#ef8a62"), (2.0, np.inf, "#b2182b"))
+
+
+def style_residuals(layer, rmse, unit="m"):
+    """The accuracy check's checkpoints coloured by dz (DTM - checkpoint) in six classes of +-1 and +-2
+    RMSEz around 0, blue where the DTM lies too low, red where too high; a layer with a plain symbol
+    of a random colour told nothing (a QGIS plugin reviewer). Skipped checkpoints (no dz) stay grey."""
+    from qgis.core import QgsGraduatedSymbolRenderer, QgsRendererRange, QgsSymbol
+    if not (rmse and np.isfinite(rmse)):
+        return
+    unit = f" {unit}" if unit else ""
+    ranges = []
+    for low, high, colour in DZ_CLASSES:
+        symbol = QgsSymbol.defaultSymbol(layer.geometryType())
+        symbol.setColor(QColor(colour))
+        lo, hi = max(low * rmse, -1e12), min(high * rmse, 1e12)
+        label = (f"dz < {hi:+.3f}{unit}" if not np.isfinite(low) else f"dz > {lo:+.3f}{unit}" if not np.isfinite(high)
+                 else f"{lo:+.3f} to {hi:+.3f}{unit}")
+        ranges.append(QgsRendererRange(lo, hi, symbol, label))
+    renderer = QgsGraduatedSymbolRenderer("dz", ranges)
+    skipped = QgsSymbol.defaultSymbol(layer.geometryType())
+    skipped.setColor(QColor("#9a9a9a"))
+    renderer.setSourceSymbol(skipped)
+    layer.setRenderer(renderer)
+    layer.triggerRepaint()
+
+
 class _Styler(QgsProcessingLayerPostProcessorInterface):
     def __init__(self, apply):
         super().__init__()
         self._apply = apply
 
     def postProcessLayer(self, layer, context, feedback):  # noqa: N802
-        if isinstance(layer, QgsRasterLayer) and layer.isValid():
+        if isinstance(layer, (QgsRasterLayer, QgsVectorLayer)) and layer.isValid():
             self._apply(layer)
 
 
@@ -95,7 +125,7 @@ _GIVEN = collections.deque(maxlen=64)
 
 
 def style_when_loaded(context, path, style):
-    """Give the raster ``path`` the ``style`` (a function of the loaded layer) if this run loads it
+    """Give the layer ``path`` (a raster's path, a sink's id) the ``style`` (a function of the loaded layer) if this run loads it
     when it ends (the dialog, the modeler with 'open output file'); nothing otherwise. A new
     post-processor each time: QGIS deletes the one it was given once it has run."""
     if style is not None and path and context.willLoadLayerOnCompletion(path):

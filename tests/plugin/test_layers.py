@@ -361,6 +361,14 @@ def test_temporary_layer_outputs_load_without_a_false_error(groundsieve_provider
             missing = [k for k in keys if QgsProcessingUtils.mapLayerFromString(k, context) is None]
             assert missing == [], (alg_id, missing, result)
             _load_results(alg_id, context, feedback)
+            if alg_id == "groundsieve:accuracy":  # loaded coloured by dz (it had a plain symbol of a random colour)
+                [layer] = QgsProject.instance().mapLayersByName("Checkpoints with their dz")
+                renderer = layer.renderer()
+                assert renderer.type() == "graduatedSymbol" and renderer.classAttribute() == "dz"
+                ranges = renderer.ranges()
+                assert len(ranges) == 6 and ranges[3].lowerValue() == 0.0
+                assert ranges[4].lowerValue() == pytest.approx(result["RMSEZ"])
+                del layer, renderer, ranges
             del context
             gc.collect()
     finally:
