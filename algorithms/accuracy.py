@@ -56,6 +56,20 @@ class AccuracyAlgorithm(Discoverable, QgsProcessingAlgorithm):
     VVA95 = "VVA95"
     NVA_RMSEZ = "NVA_RMSEZ"
     VVA_RMSEZ = "VVA_RMSEZ"
+    PARAMETER_HELP = {
+        "DTM": "The DTM to check: any raster GDAL reads (this plugin's or another's).",
+        "BAND": "The DTM's band holding the heights (1).",
+        "CHECKPOINTS": "Surveyed checkpoints: a point layer, or the survey's text or CSV file as it is (its x and "
+                       "y then in the DTM's CRS). Their heights must be in the DTM's vertical datum and unit.",
+        "Z_FIELD": "The field of the checkpoints' heights; empty = the points' Z (or a text file's z column).",
+        "ID_FIELD": "The field naming each checkpoint in the report; empty = the feature id (or the file's line).",
+        "LAND_COVER_FIELD": "NVA (non-vegetated) or VVA (vegetated) per checkpoint, for the figures per land cover; "
+                            "other words are mapped in Land cover values.",
+        "LAND_COVER_MAP": "The land-cover field's other words as NVA or VVA, e.g. road=NVA,grass=NVA,forest=VVA.",
+        "OUTPUT_HTML": "The report: figures of ASPRS Editions 1 and 2, warnings, a histogram of dz and every "
+                       "checkpoint; it opens in the results viewer.",
+        "OUTPUT": "The checkpoints with their DTM height, dz = DTM - checkpoint, |dz|, sampling and outlier flag.",
+    }
 
     def name(self):
         return "accuracy"

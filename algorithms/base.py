@@ -328,9 +328,50 @@ UNDEFINED_CARTESIAN_WKT = ('LOCAL_CS["Undefined cartesian SRS",LOCAL_DATUM["Unkn
                            'UNIT["metre",1],AXIS["Easting",EAST],AXIS["Northing",NORTH]]')
 
 
+#: the tooltips of the parameters every ground filter shares (Discoverable.PARAMETER_HELP)
+FILTER_PARAMETER_HELP = {
+    "INPUT": "A LAS/LAZ file (1.0-1.4, point formats 0-10), an ISPRS text file (x y z label), a folder of LAS/LAZ "
+             "files or a virtual point cloud (.vpc): a folder or .vpc runs in buffered tiles. Only read, never changed.",
+    "PRESET": "A parameters file of this filter written by Tune, or a shipped preset's name (each is for one "
+              "filter, e.g. forest-smrf for SMRF): its values replace the filter's defaults; a value you change in "
+              "the dialog wins.",
+    "LAST_RETURNS": "Only each pulse's last return is filtered; the other returns become non-ground (class 1): "
+                    "canopy hits stay out of the ground. A cloud without return information (photogrammetry) "
+                    "loses no point by it.",
+    "IGNORE_CLASSES": "Points of these classes are not filtered, keep their class and stay out of the DTM and its "
+                      "extent: 7 and 18 (low and high noise) by default. Codes and ranges, e.g. 7,18,20-25.",
+    "KEEP_CLASSES": "Points already of a class other than 0, 1 and 2 (a building 6, water 9) keep it and are never "
+                    "made ground, so they stay out of the DTM unless named in the DTM classes.",
+    "TILE_SIZE": "The side of the square tiles a survey (a folder, a .vpc, a cloud beyond the memory budget) runs "
+                 "in; 0 = planned from the memory budget. Set, it tiles even a cloud that fits: two epochs run with "
+                 "one tile size share their tiles.",
+    "TILE_BUFFER": "The margin read around each tile so that no seam shows; -1 = the filter's own reach (e.g. "
+                   "SMRF's window).",
+    "MEMORY_BUDGET": "The memory the tiles' points and grids may take, shared by the tiles that run at once; 0 = a "
+                     "quarter of the RAM, at most 2048 MB. Each worker process's Python and libraries (about "
+                     "130 MB) come on top.",
+    "WORKERS": "How many tiles run at once; 0 = one per core.",
+    "WORK_FOLDER": "Where the temporary tiles go (each input's points uncompressed, about 75 bytes a point at "
+                   "most), removed at the end; a run killed midway resumes from them.",
+    "SCHEDULER": "Run the tiles on a Dask cluster (tcp://host:port) or on N local worker processes (local:N); "
+                 "needs the Python package dask[distributed].",
+    "DTM_CELL": "The DTM's cell size in the CRS's unit; its cells lie on multiples of it, so DTMs of one cell size "
+                "share their cells. The default 1 m is 3 ft in a CRS in feet.",
+    "DTM_FILL": "Fill the cells outside the convex hull of the ground points with the nearest value, instead of "
+                "leaving them nodata.",
+    "OUTPUT": "The classified LAS/LAZ (ground 2, other filtered points 1), every dimension, VLR and the CRS of the "
+              "input kept; a .vpc and a folder of files for several input files.",
+    "DTM": "A cloud-optimised GeoTIFF of the ground points' triangulation; skip it to classify only.",
+    "GROUND_POINTS": "The ground points as a point layer, for small clouds (a point layer of millions of points "
+                     "is slow in QGIS).",
+}
+
+
 class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
     """Base class of the ground filters. Subclasses declare their own parameters in
     ``initFilterParameters`` and build the core filter object in ``buildFilter``."""
+
+    PARAMETER_HELP = FILTER_PARAMETER_HELP
 
     INPUT = "INPUT"
     OUTPUT = "OUTPUT"
@@ -371,6 +412,9 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
                                                      minValue=p.minimum, **extra)
             if p.advanced:
                 param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
+            text = f"{p.help[0].upper()}{p.help[1:]}." if p.help else self.panelHelp(param.description())
+            if text:
+                param.setHelp(text)
             self.addParameter(param)
 
     def filterArguments(self, parameters, context):  # noqa: N802

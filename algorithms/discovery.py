@@ -90,7 +90,32 @@ def heading_anchor(heading: str) -> str:
 
 
 class Discoverable:
-    """Mixin of every GroundSieve algorithm: tags, short description and help URL by its name."""
+    """Mixin of every GroundSieve algorithm: tags, short description and help URL by its name, and the
+    tooltips of its parameters."""
+
+    #: a parameter's tooltip by its name (QgsProcessingParameterDefinition.setHelp): the dialog shows it on
+    #: the parameter's label, batch mode on its column, where the side panel's help is not shown (a QGIS
+    #: plugin reviewer: 0-3 parameters of each algorithm had one)
+    PARAMETER_HELP = {}
+
+    def panelHelp(self, description):  # noqa: N802
+        """The paragraph of the help panel on the parameter ``description`` (its label up to a unit in
+        brackets or a colon, at the start of the paragraph: "Cell size (m): grid cell of ..."), without its
+        label; "" when the help has none."""
+        from .base import plain_help
+        head = description.split(" (")[0].split(":")[0].strip().lower()
+        for paragraph in plain_help(self.shortHelpString(), width=10 ** 6).split("\n\n"):
+            label, sep, text = paragraph.replace("\n", " ").partition(": ")
+            if sep and len(label) < 120 and label.lower().startswith(head) and text:
+                return text[0].upper() + text[1:]
+        return ""
+
+    def addParameter(self, definition, createOutput=True):  # noqa: N802
+        if not definition.help():
+            text = self.PARAMETER_HELP.get(definition.name()) or self.panelHelp(definition.description())
+            if text:
+                definition.setHelp(text)
+        return super().addParameter(definition, createOutput)
 
     def tags(self):
         return list(COMMON_TAGS + TAGS.get(self.name(), ()))

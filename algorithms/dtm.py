@@ -4,7 +4,7 @@ from qgis.core import (QgsProcessingException, QgsProcessingOutputNumber, QgsPro
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterDestination,
                        QgsProcessingParameterString)
 
-from .base import (INPUT_FILTER, GroundFilterAlgorithm, core_modules, dialog_help, dtm_cell_set, dtm_max_distance_parameter,
+from .base import (FILTER_PARAMETER_HELP, INPUT_FILTER, GroundFilterAlgorithm, core_modules, dialog_help, dtm_cell_set, dtm_max_distance_parameter,
                    feedback_callables)
 
 
@@ -12,6 +12,14 @@ class DTMFromClassesAlgorithm(GroundFilterAlgorithm):
     """A ground filter's input, tiles and DTM options, with the input's classes as the ground: the
     engine makes the DTM (whole, or in buffered tiles for a survey) as it makes any filter's."""
     CLASSES = "CLASSES"
+    PARAMETER_HELP = dict(
+        FILTER_PARAMETER_HELP,
+        CLASSES="The classes whose points make the DTM, as the cloud has them (2 = ground; e.g. 2,9 with water, "
+                "2,9,11 with a road surface). Nothing is filtered again.",
+        IGNORE_CLASSES="Points of these classes stay out of the DTM and of its extent (7 and 18, noise, by default).",
+        TILE_BUFFER="The margin read around each tile; -1 = 40 m: gaps in the ground up to this wide are bridged "
+                    "as a run of the whole cloud bridges them.",
+        DTM="The DTM: a cloud-optimised GeoTIFF of the triangulation of the ground classes' points.")
     #: the DTM output is DTM, as in every ground filter and rfclassify: a model swaps a filter for this
     #: algorithm without rewiring (a QGIS power user)
     GROUND_COUNT = "GROUND_COUNT"

@@ -2,7 +2,7 @@
 groundsieve:evcrasters — the same with its intermediate rasters."""
 from qgis.core import QgsProcessingParameterRasterDestination
 
-from .base import COMMON_HELP, GroundFilterAlgorithm, dialog_help
+from .base import COMMON_HELP, FILTER_PARAMETER_HELP, GroundFilterAlgorithm, dialog_help
 from .styles import EVC_CLASSES
 
 
@@ -73,6 +73,17 @@ class EVCRastersAlgorithm(EVCAlgorithm):
         CLASS_RASTER: ("EVC classes (1 ground, 2 vegetation area, 3 vegetation boundary)",
                        lambda d: (d.classes, d.small_grid, _CLASS_RASTER_FORMAT)),
     }
+
+    PARAMETER_HELP = dict(
+        FILTER_PARAMETER_HELP,
+        SMALL_MEAN="The mean elevation of each small-scale cell (GeoTIFF, the cloud's CRS).",
+        LARGE_MEAN="The mean elevation of each large-scale cell.",
+        DIFFERENCE_RASTER="Each small cell's elevation against the large cell holding its centre (the paper's sign: "
+                          "large minus small unless Difference says otherwise).",
+        EVC_RASTER="The elevation variation coefficient of each small cell's window (standard deviation / mean of "
+                   "the difference), styled by the three intervals of the classes.",
+        CLASS_RASTER="1 ground, 2 vegetation area, 3 vegetation boundary (nodata where the small cell is empty), "
+                     "loaded with these names and colours.")
 
     def name(self):
         return "evcrasters"

@@ -39,6 +39,20 @@ class FeaturesAlgorithm(Discoverable, QgsProcessingAlgorithm):
     IGNORE_CLASSES = "IGNORE_CLASSES"
     OUTPUT = "OUTPUT"
     FEATURES = "FEATURES"
+    PARAMETER_HELP = {
+        "INPUT": "A LAS/LAZ file or an ISPRS text file; only read, never changed.",
+        "VERTICALITY_RADIUS": "The sphere of verticality, 1 - |nz| of the normal (0.6 m, the paper's); 0 leaves it "
+                              "out. Choose radii that hold at least a dozen points.",
+        "PLANARITY_RADIUS": "The sphere of planarity, (e2 - e3) / e1 (0.6 m, the paper's); 0 leaves it out.",
+        "EIGENENTROPY_RADIUS": "The sphere of eigenentropy, -sum e ln e (0.4 m, the paper's); 0 leaves it out.",
+        "SURFACE_VARIATION_RADIUS": "The sphere of surface variation, e3 (0.6 m, the paper's); 0 leaves it out.",
+        "EXTRA_RADIUS": "The sphere of the other features chosen (one pass over the points for all of them).",
+        "COLUMN_RADIUS": "The horizontal radius of the column whose lowest point the height above the column "
+                         "minimum is measured from.",
+        "IGNORE_CLASSES": "Points of these classes are left out of every neighbourhood and get no value (7 and 18, "
+                          "noise, by default), as Classify with Random Forest model computes them.",
+        "OUTPUT": "A copy of the cloud with each feature as a float32 extra-bytes dimension.",
+    }
 
     #: (parameter, core feature, label, default radius) of the paper's features.
     PAPER = (

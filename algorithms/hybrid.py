@@ -1,7 +1,7 @@
 """groundsieve:hybrid — Ground filter (learned hybrid): morphological features, a Random Forest."""
 from qgis.core import QgsProcessingParameterEnum, QgsProcessingParameterFile, QgsProcessingParameterNumber
 
-from .base import COMMON_HELP, GroundFilterAlgorithm, dialog_help
+from .base import COMMON_HELP, FILTER_PARAMETER_HELP, GroundFilterAlgorithm, dialog_help
 
 Double = QgsProcessingParameterNumber.Type.Double
 
@@ -13,6 +13,14 @@ class HybridAlgorithm(GroundFilterAlgorithm):
     SHIPPED_CHOICES = ("fast", "accurate")
     SHIPPED_LABELS = ("fast (SMRF surfaces)", "accurate (SMRF + PTD surfaces, about 2.4x the filtering time)")
     PROBABILITY = "PROBABILITY"
+    PARAMETER_HELP = dict(
+        FILTER_PARAMETER_HELP,
+        MODEL="A model trained on the hybrid features by Train Random Forest classifier's defaults (.npz); empty = "
+              "the shipped model chosen below. A model on other features is refused.",
+        SHIPPED="fast (the default) or accurate (also the height above PTD's ground: lower error on the ISPRS "
+                "samples, about 2.4x slower). Both learned airborne LiDAR; for UAV photogrammetry train your own.",
+        PROBABILITY="A point is ground at this probability or more (0.5): higher for fewer objects in the ground, "
+                    "lower for fewer ground points lost.")
 
     def name(self):
         return "hybrid"

@@ -10,7 +10,7 @@ from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException, QgsProces
 from qgis.PyQt.QtGui import QIcon
 
 from . import pointclouds
-from .base import (check_parameter_values, core_modules, dialog_help, dtm_classes_parameter, dtm_max_distance_parameter,
+from .base import (FILTER_PARAMETER_HELP, check_parameter_values, core_modules, dialog_help, dtm_classes_parameter, dtm_max_distance_parameter,
                    dtm_cell_set, feedback_callables)
 from .discovery import Discoverable
 
@@ -53,6 +53,27 @@ class _RFBase(Discoverable, QgsProcessingAlgorithm):
 
 
 class RFTrainAlgorithm(_RFBase):
+    PARAMETER_HELP = {
+        "INPUT": "A labelled LAS/LAZ: its classification field is what is learnt.",
+        "CLASSES": "The ASPRS codes to learn, e.g. 2,1 or 2,11,5,6,14; empty = every class present but 0, 7 and 18 "
+                   "(with the hybrid features: ground 2 against all the others).",
+        "CUSTOM_FEATURES": "With 'custom list': features by name, e.g. intensity,return_number,planarity_r0p6.",
+        "CRITERION": "How the trees split: gini or entropy.",
+        "TREES": "How many trees the forest has.",
+        "SCALER": "How the features are scaled before training: none, standard or robust (the paper's grid).",
+        "GRID": "Train the paper's 18 combinations (criterion x trees x scaler) and keep the best on the "
+                "validation set; 18 times as long.",
+        "MAX_DEPTH": "The trees' largest depth; 0 = no limit.",
+        "SAMPLES_PER_TREE": "Each tree's bootstrap sample at most this many points; 0 = all (bounds the time on "
+                            "large clouds).",
+        "BLOCK": "Training, validation and test sets are square blocks of this size drawn at random (60/20/20 %), "
+                 "so neighbouring points do not leak between sets.",
+        "VALIDATION": "A labelled cloud of its own for validation, instead of blocks of the input.",
+        "TEST": "A labelled cloud of its own for the test, instead of blocks of the input.",
+        "MODEL": "The model (.npz: plain arrays with a checksum, never a pickle): for Classify with Random Forest "
+                 "model, and for the learned hybrid filter when trained on its features.",
+        "REPORT": "The HTML report (precision, recall, F1, confusion matrices, feature importances), a CSV beside it.",
+    }
     INPUT = "INPUT"
     CLASSES = "CLASSES"
     PRESET = "PRESET"
@@ -198,6 +219,18 @@ importances, timings) with the same figures in a CSV beside it.</p>""")
 
 
 class RFClassifyAlgorithm(_RFBase):
+    PARAMETER_HELP = {
+        "INPUT": "A LAS/LAZ file, a folder of them or a .vpc survey (a survey runs in buffered tiles with a "
+                 "ground model). Only read, never changed.",
+        "MODEL": "A model written by Train Random Forest classifier (.npz); a changed or foreign file is refused.",
+        "IGNORE_CLASSES": "Points of these classes keep their class, are not predicted and stay out of the DTM "
+                          "(7 and 18, noise, by default).",
+        "OUTPUT": "The classified LAS/LAZ, every dimension and the CRS of the input kept; a .vpc and a folder of "
+                  "files for several input files.",
+        "DTM": "A cloud-optimised GeoTIFF of the predicted ground (class 2) points' triangulation.",
+        "DTM_CELL": FILTER_PARAMETER_HELP["DTM_CELL"],
+        "DTM_FILL": FILTER_PARAMETER_HELP["DTM_FILL"],
+    }
     INPUT = "INPUT"
     MODEL = "MODEL"
     OUTPUT = "OUTPUT"

@@ -32,6 +32,22 @@ class TuneAlgorithm(Discoverable, QgsProcessingAlgorithm):
     START_PRESET = "START_PRESET"
     OUTPUT_PRESET = "OUTPUT_PRESET"
     OUTPUT_HTML = "OUTPUT_HTML"
+    PARAMETER_HELP = {
+        "INPUT": "A small labelled patch of your survey: LAS/LAZ with its ground in class 2 (the rest any other "
+                 "class), or an ISPRS text file. It needs ground and non-ground points.",
+        "FILTER": "The ground filter whose parameters are searched.",
+        "METRIC": "What the search minimises or maximises: the total error, Cohen's kappa or the ground class's F1.",
+        "BUDGET": "How many filter runs the search may take (the grid, then the refinement around the best).",
+        "BLOCKS": "The patch is cut into this many spatial blocks; each is scored with a set chosen on the others "
+                  "only (the cross-validated error).",
+        "SECONDS": "Stop the search after this long and keep the best so far; 0 = no limit.",
+        "SELECTION": "The set with the lowest error, or the one-standard-error rule: of the sets within one standard "
+                     "error of the lowest, the one nearest the starting set (for a small or mixed patch).",
+        "START_PRESET": "Search from this preset (e.g. uav-photogrammetry-smrf); the parameters the search does not "
+                        "cover keep its values.",
+        "OUTPUT_PRESET": "The chosen set as a preset file: give it as the filter's Preset to run the survey with it.",
+        "OUTPUT_HTML": "The report: the error of every set tried, one plot per parameter and the confusion matrices.",
+    }
     CV_TOTAL_ERROR = "CV_TOTAL_ERROR"
     CV_KAPPA = "CV_KAPPA"
     CV_F1 = "CV_F1"

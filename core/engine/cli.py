@@ -153,7 +153,7 @@ def _add_filter(sub, name: str) -> None:
     for p in P.params(name):
         _add_param(group, name, p.field, p.option, p.title() + (
             " (" + " | ".join(f"{v} = {label}" for v, label in zip(p.choices, p.choice_labels)) + ")"
-            if p.choices else ""), p.choices)
+            if p.choices else "") + (f": {p.help}" if p.help else ""), p.choices)
     extra = P.core_only_fields(name)
     if extra:
         group = parser.add_argument_group(f"{name}: finer settings (core only, not in the dialog)")

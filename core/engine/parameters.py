@@ -28,6 +28,9 @@ class Param:
     advanced: bool = False
     minimum: Optional[float] = 0.0
     maximum: Optional[float] = None
+    #: what it does, for the dialog's tooltip and the command line's help, where the algorithm's help
+    #: has no paragraph of its own on it ("" = none)
+    help: str = ""
 
     @property
     def option(self) -> str:
@@ -44,7 +47,9 @@ FILTERS: Dict[str, Tuple[str, str, Sequence[Param]]] = {
         Param("slope", "SLOPE", "Slope", "rise/run"),
         Param("window_m", "WINDOW", "Maximum window radius", "m", minimum=0.01),
         Param("elevation_threshold_m", "THRESHOLD", "Elevation threshold", "m"),
-        Param("elevation_scalar", "SCALAR", "Elevation scalar", "m per unit slope"),
+        Param("elevation_scalar", "SCALAR", "Elevation scalar", "m per unit slope",
+              help="a point is ground within the elevation threshold + this x the provisional surface's local "
+                   "slope of it (1.25)"),
         Param("low_outlier_fill", "LOW_OUTLIER_FILL", "Remove low outliers before the opening"),
         Param("low_outlier_slope", "LOW_OUTLIER_SLOPE",
               "Low-outlier slope: a cell this many cell sizes below the cells around it is a low outlier",
@@ -66,15 +71,22 @@ FILTERS: Dict[str, Tuple[str, str, Sequence[Param]]] = {
         Param("seed_cell_m", "SEED_CELL", "Seed cell size: largest building size", "m", minimum=0.01,
               maximum=1000.0),
         Param("max_angle_deg", "MAX_ANGLE", "Iteration angle", "degrees", maximum=89.9, minimum=0.1),
-        Param("max_distance_m", "MAX_DISTANCE", "Iteration distance", "m", minimum=0.001),
-        Param("max_edge_m", "MAX_EDGE", "Maximum edge length of an accepting triangle", "m, 0 = off"),
-        Param("min_edge_m", "MIN_EDGE", "Minimum edge length: stop densifying below", "m, 0 = off", advanced=True),
+        Param("max_distance_m", "MAX_DISTANCE", "Iteration distance", "m", minimum=0.001,
+              help="a point joins the TIN when it lies at most this far from its triangle's plane and within the "
+                   "iteration angle (Axelsson's two criteria; 1.4 m)"),
+        Param("max_edge_m", "MAX_EDGE", "Maximum edge length of an accepting triangle", "m, 0 = off",
+              help="a triangle with a longer edge accepts no point, so the TIN does not bridge large gaps"),
+        Param("min_edge_m", "MIN_EDGE", "Minimum edge length: stop densifying below", "m, 0 = off", advanced=True,
+              help="a triangle whose edges are all shorter is not densified further; its passing points are "
+                   "ground but not added (Axelsson's edge-length limit)"),
         Param("max_terrain_angle_deg", "TERRAIN_ANGLE", "Maximum terrain angle", "degrees", advanced=True,
               maximum=90.0, minimum=0.1),
         Param("offset_m", "OFFSET", "Offset: points this close to the final TIN are ground", "m, 0 = off",
               advanced=True),
         Param("mirror", "MIRROR", "Mirror points (Axelsson)", advanced=True),
-        Param("low_outlier_check", "LOW_OUTLIERS", "Reject low outliers as seeds", advanced=True),
+        Param("low_outlier_check", "LOW_OUTLIERS", "Reject low outliers as seeds", advanced=True,
+              help="a seed cell's lowest point that the cells around it do not support is no seed, so that a "
+                   "point below the ground does not pull the TIN down"),
         Param("low_outlier_support", "LOW_OUTLIER_SUPPORT",
               "Low-outlier test: share of the cells around that must support a seed", advanced=True,
               minimum=0.01, maximum=1.0),
@@ -83,11 +95,15 @@ FILTERS: Dict[str, Tuple[str, str, Sequence[Param]]] = {
         Param("cloth_resolution_m", "RESOLUTION", "Cloth resolution", "m", minimum=0.01),
         Param("rigidness", "RIGIDNESS", "Rigidness (scene)", choices=(1, 2, 3),
               choice_labels=("1: steep slope", "2: relief", "3: flat")),
-        Param("time_step", "TIME_STEP", "Time step", minimum=0.01),
+        Param("time_step", "TIME_STEP", "Time step", minimum=0.01,
+              help="the simulation's time step (0.65): gravity moves the cloth by 0.2 x its fourth power per "
+                   "iteration, as the reference library 1.1.7 does"),
         Param("class_threshold_m", "CLASS_THRESHOLD", "Class threshold", "m", minimum=0.001),
         Param("iterations", "ITERATIONS", "Maximum iterations", minimum=1),
         Param("slope_smooth", "SLOPE_SMOOTH", "Slope post-processing (for steep slopes)"),
-        Param("low_outlier_m", "LOW_OUTLIER", "Low-outlier threshold", "m, 0 = off", advanced=True),
+        Param("low_outlier_m", "LOW_OUTLIER", "Low-outlier threshold", "m, 0 = off", advanced=True,
+              help="a point this far below the ground around it (the lowest points of the 5 m cells around its "
+                   "own) is not ground and the cloth does not see it (5 m; the reference library has no such step)"),
         Param("intersection_height", "INTERSECTION_HEIGHT", "Particle heights from", choices=("nearest", "cell"),
               choice_labels=("nearest point (paper)",
                              "points of the particle's cell, scan-line fill (reference library)"), advanced=True),
@@ -99,27 +115,44 @@ FILTERS: Dict[str, Tuple[str, str, Sequence[Param]]] = {
                              "authors' 2016 code (the paper's ISPRS figures; orientation-dependent)"), advanced=True),
     )),
     "echogrid": ("echogrid", "EchoGrid", (
-        Param("kernel_m", "KERNEL", "Kernel size", "m", minimum=0.01),
-        Param("dz_m", "DZ", "Height above the kernel's lowest point", "m"),
+        Param("kernel_m", "KERNEL", "Kernel size", "m", minimum=0.01,
+              help="the side of the square kernels that tile the cloud (5 m, the paper's)"),
+        Param("dz_m", "DZ", "Height above the kernel's lowest point", "m",
+              help="points higher than the kernel's lowest point + this are non-ground (2 m, the paper's)"),
         Param("mode", "MODE", "Mode", choices=("faithful", "evidence"),
               choice_labels=("faithful (paper: single-return kernels are ground)",
                              "evidence (echoes as evidence, not as a bypass)")),
         Param("neighbourhood_m", "NEIGHBOURHOOD", "Evidence mode: neighbourhood for raised kernels", "m",
-              advanced=True),
-        Param("slope", "SLOPE", "Evidence mode: terrain slope between kernels", "rise/run", advanced=True),
+              advanced=True, help="a kernel whose lowest point lies more than the height above the lowest points "
+                                  "of the kernels within this distance is raised (a roof): half the largest "
+                                  "building's width finds the middle of wide roofs"),
+        Param("slope", "SLOPE", "Evidence mode: terrain slope between kernels", "rise/run", advanced=True,
+              help="the neighbours' lowest points are raised by this x their distance before the comparison, so "
+                   "that sloping ground is not taken for a raised kernel"),
     )),
     "evc": ("evc", "EVC", (
-        Param("small_scale_m", "SMALL_SCALE", "Small-scale grid", "m", minimum=0.01),
-        Param("large_scale_m", "LARGE_SCALE", "Large-scale grid", "m", minimum=0.01),
-        Param("radius", "RADIUS", "Neighbourhood radius", "cells", minimum=1),
-        Param("threshold", "THRESHOLD", "Threshold (EVC)", minimum=0.001),
-        Param("auto_threshold", "AUTO_THRESHOLD", "Threshold by natural breaks (Jenks)"),
+        Param("small_scale_m", "SMALL_SCALE", "Small-scale grid", "m", minimum=0.01,
+              help="the cell of the fine mean-elevation grid, whose class each point takes (0.2 m)"),
+        Param("large_scale_m", "LARGE_SCALE", "Large-scale grid", "m", minimum=0.01,
+              help="the cell of the coarse mean-elevation grid the fine one is compared with (2 m; 3.2 m was the "
+                   "paper's other optimum)"),
+        Param("radius", "RADIUS", "Neighbourhood radius", "cells", minimum=1,
+              help="the square window of the EVC around each small cell (1 = 3 x 3 cells)"),
+        Param("threshold", "THRESHOLD", "Threshold (EVC)", minimum=0.001,
+              help="ground where 0 < EVC <= this, vegetation area where EVC <= 0, vegetation boundary above it "
+                   "(1.5; the paper's Table 2)"),
+        Param("auto_threshold", "AUTO_THRESHOLD", "Threshold by natural breaks (Jenks)",
+              help="the threshold from the EVC values themselves, as the paper picked it, instead of the one set"),
         Param("difference", "DIFFERENCE", "Difference", choices=("large_minus_small", "small_minus_large"),
               choice_labels=("large minus small (paper's sign)", "small minus large"), advanced=True),
-        Param("ground_offset_m", "GROUND_OFFSET", "Ground offset added to the mean difference", "m", advanced=True),
-        Param("min_cells", "MIN_CELLS", "Minimum non-empty cells in a window", minimum=2, advanced=True),
+        Param("ground_offset_m", "GROUND_OFFSET", "Ground offset added to the mean difference", "m", advanced=True,
+              help="added to the mean difference before the ratio, which is unstable on open ground (0 = the "
+                   "paper; the ground's roughness, e.g. 0.1 m, keeps open ground ground)"),
+        Param("min_cells", "MIN_CELLS", "Minimum non-empty cells in a window", minimum=2, advanced=True,
+              help="a window holding fewer non-empty small cells grows one cell at a time (3)"),
         Param("max_radius", "MAX_RADIUS", "Maximum radius when growing a window", "cells", minimum=1,
-              advanced=True),
+              advanced=True, help="a window grows at most to this radius; equal to the neighbourhood radius, it "
+                                  "keeps the paper's fixed window (5)"),
     )),
 }
 

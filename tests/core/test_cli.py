@@ -517,3 +517,11 @@ def test_json_failures_say_their_kind(scene, tmp_path):
     assert main(["smrf", "--input", scene, "--output", str(tmp_path / "no" / "o.laz"), "--json"],
                 out=io.StringIO(), stdout=stdout) == 1
     assert json.loads(stdout.getvalue())["kind"] == "output"
+
+
+def test_a_filter_parameter_s_help_is_in_the_command_s_help_too():
+    """The parameters' help written for the dialog's tooltips (core/engine/parameters.py) is the command
+    line's too."""
+    text = " ".join(help_of("smrf").split())
+    assert "Elevation scalar (m per unit slope): a point is ground within the elevation threshold" in text
+    assert "Kernel size (m): the side of the square kernels" in " ".join(help_of("echogrid").split())
