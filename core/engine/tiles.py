@@ -487,6 +487,11 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     if empty:  # (a survey's empty file was taken without a word: an HPC reviewer)
         log(f"{len(empty):,} of the {len(infos):,} input files hold no points ({', '.join(empty[:3])}"
             f"{', ...' if len(empty) > 3 else ''}): they add nothing (the classified copy of one is empty too).")
+    from ..io.lasfiles import twin_files
+    for twins in twin_files(infos):  # (read twice, their points count twice)
+        log(f"{WARNING_PREFIX}{', '.join(os.path.basename(p) for p in twins[:4])}{' ...' if len(twins) > 4 else ''}: "
+            "the same point count and bounds in their headers: the same points twice (a copy, or a classified copy "
+            "beside its input)? Every file is read, so such points count twice; leave the copies out of the input.")
     for info in infos:  # as a run of the whole file says (a tiled one dropped 8,554 points without a word)
         if info.held is not None and info.held > info.count:
             log(extra_records_warning(info.path, info.count, info.held))

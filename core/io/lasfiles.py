@@ -216,6 +216,17 @@ def check_survey(infos: Sequence[LasInfo]) -> None:
         raise InputError(f"the input files have different CRS ({listing}); {advice} first")
 
 
+def twin_files(infos: Sequence[LasInfo]) -> List[List[str]]:
+    """The groups of files of a survey with the same point count and bounds (headers): the same points
+    twice, a copy or a classified copy beside its input in one folder, which a run would read twice."""
+    import collections
+    groups = collections.defaultdict(list)
+    for info in infos:
+        if info.count:
+            groups[(info.count, info.mins, info.maxs)].append(info.path)
+    return [paths for paths in groups.values() if len(paths) > 1]
+
+
 def write_vpc(path: str, infos: Sequence[LasInfo], files: Sequence[str], *, lonlat=None) -> None:
     """Write a virtual point cloud (STAC ItemCollection as QGIS's "Build virtual point cloud"
     writes it) referencing ``files`` (relative to the .vpc when below its folder), atomically.

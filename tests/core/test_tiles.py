@@ -1464,3 +1464,23 @@ def test_heights_in_the_millions_are_written_as_float64(tmp_path, tile):
         values = band.ReadAsArray()
         values = values[values != band.GetNoDataValue()] - dz
         assert len(np.unique(np.round(values, 3))) > 1000, name  # (not steps of 0.5 m)
+
+
+def test_a_copy_of_a_file_in_the_survey_s_folder_is_warned_about(scene_laz, tmp_path):
+    """A classified copy left beside its input in the survey's folder (same points, same header bounds) was
+    read as more data: its points counted twice, without a word. The run says which files look the same;
+    files that only touch (a survey's tiles) are not named."""
+    import shutil
+    xs = laspy.read(scene_laz).x
+    west, east = _split_files(scene_laz, tmp_path / "in", float(np.floor(np.median(xs))) + 0.5)
+    lines = []
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    run_ground_filter(str(tmp_path / "in"), str(tmp_path / "a" / "c.vpc"), SMRF(), options=tiled(), log=lines.append)
+    assert not [line for line in lines if "the same points twice" in line]
+    shutil.copy(west, tmp_path / "in" / "west_classified.laz")
+    lines = []
+    run_ground_filter(str(tmp_path / "in"), str(tmp_path / "b" / "c.vpc"), SMRF(), options=tiled(), log=lines.append)
+    said = [line for line in lines if "the same points twice" in line]
+    assert len(said) == 1 and said[0].startswith(WARNING_PREFIX), lines
+    assert "west.laz" in said[0] and "west_classified.laz" in said[0] and "east.laz" not in said[0]
