@@ -507,6 +507,8 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
         if info.copc_damaged:  # read as the whole run reads it (it was refused here)
             log(f"{WARNING_PREFIX}{info.path}: {info.copc_damaged}: its points are read as a plain LAZ file's, "
                 "binned instead of read by bounds")
+    if getattr(algorithm, "ground_of_any_class", False):
+        _say_if_unclassified(infos, algorithm, log)
     workflow.warn_about_units(input_path, infos, log)
     algorithm, dtm = workflow.defaults_in_crs_unit(algorithm, dtm, infos[0].crs_wkt, input_path, log)
     workflow.check_model_units(algorithm, input_path, infos[0].crs_wkt, log)
@@ -1202,6 +1204,30 @@ def _survey_hull(points) -> Optional[np.ndarray]:
         return xy[ConvexHull(xy).vertices]
     except QhullError:
         return None
+
+
+#: files whose first points the DTM from classes samples before its tiles, and points of each
+UNCLASSIFIED_SAMPLE_FILES, UNCLASSIFIED_SAMPLE_POINTS = 16, 65536
+
+
+def _say_if_unclassified(infos, algorithm, log) -> None:
+    """Before the tiles of a DTM from classes: warn when the first points of the survey's first files hold
+    none of the ground classes, as an unclassified survey's do. A survey without them was refused only after
+    every tile had been read (the headers do not count classes); a sample cannot refuse it (a file sorted in
+    space may begin under a roof), so the warning says when to stop the run."""
+    from ..io.lasfiles import first_classes
+    from ..io.clouds import class_counts_text, count_classes
+    sampled = [i for i in infos if i.count and not i.copc][:UNCLASSIFIED_SAMPLE_FILES]
+    if not sampled:
+        return
+    classes = np.concatenate([first_classes(i.path, UNCLASSIFIED_SAMPLE_POINTS) for i in sampled])
+    if classes.size == 0 or np.isin(classes, list(algorithm.classes)).any():
+        return
+    codes = ", ".join(str(c) for c in algorithm.classes)
+    log(f"{WARNING_PREFIX}the first {classes.size:,} points of {len(sampled):,} of the input files hold no point of "
+        f"class {codes} ({class_counts_text(count_classes(classes))}): an unclassified survey? The run refuses it "
+        "only after its last tile: if so, stop it and classify the ground first with a ground filter, or name the "
+        "classes that hold it.")
 
 
 def _say_enclosed_nodata(writer, dtm, buffer_m: float, log, hull_points=None, unit: str = "m") -> None:

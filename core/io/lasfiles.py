@@ -216,6 +216,13 @@ def check_survey(infos: Sequence[LasInfo]) -> None:
         raise InputError(f"the input files have different CRS ({listing}); {advice} first")
 
 
+def first_classes(path: str, count: int = 65536) -> np.ndarray:
+    """The classes of the first ``count`` points of the LAS/LAZ ``path`` (one chunk read, not the file)."""
+    import laspy
+    with laspy.open(path) as reader:
+        return np.asarray(reader.read_points(min(count, int(reader.header.point_count))).classification)
+
+
 def twin_files(infos: Sequence[LasInfo]) -> List[List[str]]:
     """The groups of files of a survey with the same point count and bounds (headers): the same points
     twice, a copy or a classified copy beside its input in one folder, which a run would read twice."""

@@ -94,13 +94,14 @@ def _classes(path):
 
 
 def test_a_whole_run_and_a_tiled_run_give_the_same_dtm(delivery, tmp_path):
-    made = []
+    made, lines = [], []
     for tiled in (False, True):
         path = tmp_path / f"dtm{int(tiled)}.tif"
         run_ground_filter(str(delivery), None, ClassGround(),
                           options=FilterOptions(keep_existing_classes=True, tiling=_tiling(tiled)),
-                          dtm_path=str(path))
+                          dtm_path=str(path), log=lines.append)
         made.append(_read(path)[0])
+    assert not [line for line in lines if "an unclassified survey?" in line]  # (a classified one is not asked)
     assert made[0].shape == made[1].shape
     np.testing.assert_allclose(made[0], made[1], atol=1e-4)
 
@@ -131,10 +132,15 @@ def test_a_cloud_without_the_ground_classes_is_refused_and_nothing_is_written(tm
     src = tmp_path / "unclassified.laz"
     write_las(new_las(x, y, 50 + rng.normal(0, 0.02, n), classification=np.ones(n, np.uint8)), str(src))
     out = tmp_path / "dtm.tif"
+    lines = []
     with pytest.raises(InputError if tiled else InvalidParameterError) as err:
         run_ground_filter(str(src), None, ClassGround(),
                           options=FilterOptions(keep_existing_classes=True, tiling=_tiling(tiled)),
-                          dtm_path=str(out))
+                          dtm_path=str(out), log=lines.append)
+    if tiled:  # said before the tiles, from the files' first points (it was refused after the last tile alone)
+        first_tile = next(k for k, line in enumerate(lines) if line.startswith("Tile 1/"))
+        said = [k for k, line in enumerate(lines) if "hold no point of class 2 (1 (unclassified): 20,000)" in line]
+        assert len(said) == 1 and said[0] < first_tile and "an unclassified survey?" in lines[said[0]], lines
     text = str(err.value)
     assert str(src) in text and "no point of class 2" in text and "ground filter" in text
     assert tiled == ("the filter" not in text)  # (a tiled run of the DTM from classes names no filter)
