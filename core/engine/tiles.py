@@ -1700,7 +1700,7 @@ def _dtm_extent(full, box, log):
         return full
     log(f"DTM: cut to the {ncols:,} x {nrows:,} cells of the points it may hold (the files' bounds make "
         f"{full.ncols:,} x {full.nrows:,}: withheld or ignored points lie beyond them).")
-    return GridSpec(full.x0 + col0 * c, full.top - row0 * c, c, nrows, ncols)
+    return full.window(col0, row0, ncols, nrows)
 
 
 def _say_stray_tiles(tiles, grid, dtm_grid, log) -> None:

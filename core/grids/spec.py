@@ -257,6 +257,16 @@ class GridSpec:
     def geotransform(self) -> tuple:
         return (self.x0, self.cell, 0.0, self.top, 0.0, -self.cell)
 
+    def window(self, col0: int, row0: int, ncols: int, nrows: int) -> "GridSpec":
+        """The ``ncols`` x ``nrows`` cells of this grid from column ``col0``, row ``row0``; an origin on the
+        lattice of multiples of the cell stays the decimal it stands for (as :meth:`covering` makes it), so
+        that a tiled run's DTM cut from its survey grid has a whole run's geotransform."""
+        x0, top = self.x0 + col0 * self.cell, self.top - row0 * self.cell
+        kx, ky = round(x0 / self.cell), round(top / self.cell)
+        if abs(x0 / self.cell - kx) < 1e-6 and abs(top / self.cell - ky) < 1e-6:
+            x0, top = _lattice_value(kx, self.cell), _lattice_value(ky, self.cell)
+        return GridSpec(x0, top, self.cell, nrows, ncols)
+
     def padded(self, cells: int) -> "GridSpec":
         """This grid with ``cells`` more cells on every side (the same cell edges)."""
         return GridSpec(self.x0 - cells * self.cell, self.top + cells * self.cell, self.cell,

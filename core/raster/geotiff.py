@@ -88,14 +88,21 @@ def write_geotiff(path: str, values: np.ndarray, grid: GridSpec, *, crs_wkt: Opt
         raise OutputError(f"{name}: the GeoTIFF was not written")
 
 
-def _cog(path: str, source, options, window=None) -> None:
+def _cog(path: str, source, options, window=None, geotransform=None) -> None:
     """Write ``source`` (a dataset or a file) to ``path`` as a COG, then check that the file holds every
     block its header points at: GDAL's COG driver only logged a full disk ("_tiffWriteProc: No space
     left on device", past any error handler) and returned, leaving a truncated DTM after a run that said
-    it was done (a reviewer's small disk). Raises RuntimeError."""
+    it was done (a reviewer's small disk). ``window`` (xoff, yoff, xsize, ysize): that part of the
+    source, its geotransform ``geotransform`` (GDAL's own, x0 + xoff x cell, is 500001.89999999997 where
+    the grid's is 500001.9: a tiled DTM's origin differed from a whole run's in its last bit). Raises
+    RuntimeError."""
     from osgeo import gdal
-    extra = {} if window is None else dict(srcWin=list(window))  # (xoff, yoff, xsize, ysize)
-    gdal.Translate(path, source, format="COG", creationOptions=options, **extra)  # (closed at once)
+    if window is not None:
+        source = gdal.Translate("", source, format="VRT", srcWin=list(window))
+        if geotransform is not None:
+            source.SetGeoTransform(list(geotransform))
+    gdal.Translate(path, source, format="COG", creationOptions=options)  # (closed at once)
+    source = None
     size = os.path.getsize(path)
     ds = gdal.Open(path)
     band = ds.GetRasterBand(1)
@@ -333,6 +340,8 @@ class BlockGeoTIFF:
         self.close()
         try:
             with (atomic_path(path) if atomic else contextlib.nullcontext(path)) as tmp:
-                _cog(tmp, self.work_path, COG_OPTIONS + ["PREDICTOR=YES"], self._window(grid))
+                window = self._window(grid)
+                _cog(tmp, self.work_path, COG_OPTIONS + ["PREDICTOR=YES"], window,
+                     grid.geotransform if window is not None else None)
         except RuntimeError as err:
             raise OutputError(f"{name}: cannot write the DTM ({_gdal_reason(err, path)})") from err

@@ -447,3 +447,28 @@ def test_each_ground_class_is_counted_and_one_without_points_said(delivery, tmp_
     classes = _classes(delivery)
     (line,) = [text for text in logs if text.startswith("Ground: ") and "of the ground classes" in text]
     assert line.endswith(f"(2 (ground): {int(np.sum(classes == 2)):,}, 9 (water): 0)."), line
+
+
+def test_a_tiled_dtm_cut_to_its_points_has_the_whole_run_s_geotransform_to_the_bit(tmp_path):
+    """With 0.3 m cells a whole run's origin was 500001.89999999997 and a tiled run's cut could differ from it
+    in its last bit (a geomorphologist: two epochs' DTMs, one run whole and one tiled): both are the decimal
+    on the cell's lattice now."""
+    from osgeo import gdal
+    rng = np.random.default_rng(9)
+    n = 40_000
+    x, y = 500001.95 + rng.uniform(0, 150, n), 4000001.25 + rng.uniform(0, 150, n)
+    cls = np.full(n, 2, np.uint8)
+    x[:3], y[:3], cls[:3] = 498765.4, 4000345.6, 7  # (ignored, far away: the tiled survey grid is cut to the others)
+    src = tmp_path / "epoch.laz"
+    write_las(new_las(x, y, terrain(x - 500000, y - 4000000), classification=cls, scale=0.001), str(src))
+    transforms = []
+    for tiled in (False, True):
+        out = tmp_path / f"dtm{int(tiled)}.tif"
+        run_ground_filter(str(src), None, ClassGround(), options=FilterOptions(keep_existing_classes=True,
+                                                                               tiling=_tiling(tiled)),
+                          dtm_path=str(out), dtm=DTMOptions(cell_size_m=0.3, cell_set=True))
+        ds = gdal.Open(str(out))
+        transforms.append(ds.GetGeoTransform())
+        del ds
+    assert transforms[0] == transforms[1], transforms
+    assert repr(transforms[0][0]) == "500001.9"
