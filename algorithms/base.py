@@ -9,7 +9,7 @@ from qgis.core import (Qgis, QgsCoordinateReferenceSystem, QgsFeature, QgsFeatur
                        QgsGeometry, QgsPoint, QgsProcessing, QgsProcessingAlgorithm, QgsProcessingException,
                        QgsProcessingOutputNumber,
                        QgsProcessingParameterBoolean, QgsProcessingParameterDefinition,
-                       QgsProcessingParameterEnum, QgsProcessingParameterFeatureSink,
+                       QgsProcessingParameterEnum, QgsProcessingParameterExtent, QgsProcessingParameterFeatureSink,
                        QgsProcessingParameterFile, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterDestination,
                        QgsProcessingParameterString,
@@ -323,6 +323,38 @@ def dtm_max_distance_parameter(name):
     return param
 
 
+def dtm_extent_parameter(name):
+    """The DTM's extent (ground filters, the DTM from classes, rfclassify), advanced."""
+    param = QgsProcessingParameterExtent(name, "DTM extent (empty = the points')", optional=True)
+    param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
+    param.setHelp("The DTM covers this extent, widened to whole cells on multiples of the cell size: two epochs' "
+                  "DTMs, or a hydraulic model's domain, on one grid of one size; cells without ground are nodata. "
+                  "An extent in another CRS is reprojected to the cloud's.")
+    return param
+
+
+def dtm_extent_value(algorithm, parameters, name, context, input_path):
+    """The DTM extent asked for as (xmin, ymin, xmax, ymax) in the cloud's CRS (the first file's of a
+    survey), reprojected from the extent's own CRS when it has one; None when none is given."""
+    from qgis.core import QgsCoordinateReferenceSystem
+    if not parameters.get(name):
+        return None
+    crs = QgsCoordinateReferenceSystem()
+    try:
+        from ..core.io.lasfiles import expand_inputs, scan_header
+        files = expand_inputs(input_path) if input_path else []
+        wkt = scan_header(files[0]).crs_wkt if files and files[0].lower().endswith((".las", ".laz")) else None
+        if wkt:
+            crs = QgsCoordinateReferenceSystem.fromWkt(wkt)
+    except Exception:  # noqa: BLE001 - an input the run will name; the extent is then taken as it is
+        pass
+    rect = algorithm.parameterAsExtent(parameters, name, context, crs) if crs.isValid() else \
+        algorithm.parameterAsExtent(parameters, name, context)
+    if rect.isNull() or rect.isEmpty():
+        return None
+    return rect.xMinimum(), rect.yMinimum(), rect.xMaximum(), rect.yMaximum()
+
+
 #: the GeoPackage's "Undefined Cartesian SRS" (srs_id -1), for outputs of a cloud without a CRS
 UNDEFINED_CARTESIAN_WKT = ('LOCAL_CS["Undefined cartesian SRS",LOCAL_DATUM["Unknown engineering datum",32767],'
                            'UNIT["metre",1],AXIS["Easting",EAST],AXIS["Northing",NORTH]]')
@@ -384,6 +416,7 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
     DTM_FILL = "DTM_FILL"
     DTM_CLASSES = "DTM_CLASSES"
     DTM_MAX_DISTANCE = "DTM_MAX_DISTANCE"
+    DTM_EXTENT = "DTM_EXTENT"
     GROUND_POINTS = "GROUND_POINTS"
     GROUND_COUNT = "GROUND_COUNT"
     POINT_COUNT = "POINT_COUNT"
@@ -520,6 +553,7 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
             self.DTM_FILL, "DTM: fill cells outside the ground hull (nearest value)", defaultValue=False))
         self.addParameter(dtm_classes_parameter(self.DTM_CLASSES))
         self.addParameter(dtm_max_distance_parameter(self.DTM_MAX_DISTANCE))
+        self.addParameter(dtm_extent_parameter(self.DTM_EXTENT))
         self.addParameter(QgsProcessingParameterFileDestination(
             self.OUTPUT, "Classified point cloud (a .vpc for several input files)",
             fileFilter="LAZ (*.laz);;LAS (*.las);;Virtual point cloud (*.vpc)"))
@@ -562,7 +596,8 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
                 cell_set=dtm_cell_set(self, parameters, context, self.DTM_CELL),
                 fill_outside_hull=self.parameterAsBoolean(parameters, self.DTM_FILL, context),
                 classes=self.parameterAsString(parameters, self.DTM_CLASSES, context) or "",
-                max_distance_m=self.parameterAsDouble(parameters, self.DTM_MAX_DISTANCE, context))
+                max_distance_m=self.parameterAsDouble(parameters, self.DTM_MAX_DISTANCE, context),
+                extent=dtm_extent_value(self, parameters, self.DTM_EXTENT, context, input_path))
             run = workflow.run_ground_filter(
                 input_path, output_path, algorithm, options=options, dtm_path=dtm_path, dtm=dtm,
                 rasters={path: make for path, make in rasters.values()}, **feedback_callables(feedback))

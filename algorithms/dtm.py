@@ -4,7 +4,8 @@ from qgis.core import (QgsProcessingException, QgsProcessingOutputNumber, QgsPro
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterDestination,
                        QgsProcessingParameterString)
 
-from .base import (FILTER_PARAMETER_HELP, INPUT_FILTER, GroundFilterAlgorithm, core_modules, dialog_help, dtm_cell_set, dtm_max_distance_parameter,
+from .base import (FILTER_PARAMETER_HELP, INPUT_FILTER, GroundFilterAlgorithm, core_modules, dialog_help, dtm_cell_set,
+                   dtm_extent_parameter, dtm_extent_value, dtm_max_distance_parameter,
                    feedback_callables)
 
 
@@ -90,6 +91,7 @@ with one of the ground filters.</p>""")
         self.addParameter(QgsProcessingParameterBoolean(
             self.DTM_FILL, "DTM: fill cells outside the ground hull (nearest value)", defaultValue=False))
         self.addParameter(dtm_max_distance_parameter(self.DTM_MAX_DISTANCE))
+        self.addParameter(dtm_extent_parameter(self.DTM_EXTENT))
         self.addParameter(QgsProcessingParameterRasterDestination(self.DTM, "DTM (ground surface)"))
         self.addOutput(QgsProcessingOutputNumber(self.GROUND_COUNT, "Ground points"))
         self.addOutput(QgsProcessingOutputNumber(self.POINT_COUNT, "Points read"))
@@ -118,7 +120,8 @@ with one of the ground filters.</p>""")
                 cell_size_m=self.parameterAsDouble(parameters, self.DTM_CELL, context),
                 cell_set=dtm_cell_set(self, parameters, context, self.DTM_CELL),
                 fill_outside_hull=self.parameterAsBoolean(parameters, self.DTM_FILL, context),
-                max_distance_m=self.parameterAsDouble(parameters, self.DTM_MAX_DISTANCE, context))
+                max_distance_m=self.parameterAsDouble(parameters, self.DTM_MAX_DISTANCE, context),
+                extent=dtm_extent_value(self, parameters, self.DTM_EXTENT, context, input_path))
             run = workflow.run_ground_filter(input_path, None, ground, options=options, dtm_path=dtm_path, dtm=dtm,
                                              **feedback_callables(feedback))
         except errors.GroundSieveError as err:

@@ -10,7 +10,8 @@ from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException, QgsProces
 from qgis.PyQt.QtGui import QIcon
 
 from . import pointclouds
-from .base import (FILTER_PARAMETER_HELP, check_parameter_values, core_modules, dialog_help, dtm_classes_parameter, dtm_max_distance_parameter,
+from .base import (FILTER_PARAMETER_HELP, check_parameter_values, core_modules, dialog_help, dtm_classes_parameter,
+                   dtm_extent_parameter, dtm_extent_value, dtm_max_distance_parameter,
                    dtm_cell_set, feedback_callables)
 from .discovery import Discoverable
 
@@ -239,6 +240,7 @@ class RFClassifyAlgorithm(_RFBase):
     DTM_FILL = "DTM_FILL"
     DTM_CLASSES = "DTM_CLASSES"
     DTM_MAX_DISTANCE = "DTM_MAX_DISTANCE"
+    DTM_EXTENT = "DTM_EXTENT"
     IGNORE_CLASSES = "IGNORE_CLASSES"
     GROUND_COUNT = "GROUND_COUNT"
     POINT_COUNT = "POINT_COUNT"
@@ -288,6 +290,7 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
             self.DTM_FILL, "Fill DTM cells outside the ground hull (nearest value)", defaultValue=False))
         self.addParameter(dtm_classes_parameter(self.DTM_CLASSES))
         self.addParameter(dtm_max_distance_parameter(self.DTM_MAX_DISTANCE))
+        self.addParameter(dtm_extent_parameter(self.DTM_EXTENT))
         # the counts the ground filters return too, for a model's next step (a power user's model could
         # not branch on rfclassify's result)
         self.addOutput(QgsProcessingOutputNumber(self.GROUND_COUNT, "Ground points"))
@@ -304,7 +307,8 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
                              cell_set=dtm_cell_set(self, parameters, context, self.DTM_CELL),
                              fill_outside_hull=self.parameterAsBoolean(parameters, self.DTM_FILL, context),
                              classes=self.parameterAsString(parameters, self.DTM_CLASSES, context) or "",
-                             max_distance_m=self.parameterAsDouble(parameters, self.DTM_MAX_DISTANCE, context))
+                             max_distance_m=self.parameterAsDouble(parameters, self.DTM_MAX_DISTANCE, context),
+                             extent=dtm_extent_value(self, parameters, self.DTM_EXTENT, context, input_path))
             ignored = self.parameterAsString(parameters, self.IGNORE_CLASSES, context) or ""
             run = learning.classify_file(input_path, output, self.parameterAsFile(parameters, self.MODEL, context),
                                          dtm_path=dtm_path, dtm=dtm, ignore_classes=ignored,

@@ -76,6 +76,9 @@ def _add_common(parser: argparse.ArgumentParser) -> None:
                     help="DTM cell size (m; default %(default)s)")
     io.add_argument("--dtm-fill", action=argparse.BooleanOptionalAction, default=dt["fill_outside_hull"],
                     help="fill DTM cells outside the ground hull (nearest value; default %(default)s)")
+    io.add_argument("--dtm-extent", default="", metavar="XMIN,YMIN,XMAX,YMAX",
+                    help="the DTM's extent in the cloud's CRS, widened to whole cells on multiples of the cell "
+                         "size: two epochs' DTMs or a model's domain on one grid of one size (default: the points')")
     io.add_argument("--dtm-classes", default="", metavar="LIST",
                     help="classes of the input whose points enter the DTM with the ground, e.g. 9 (water) for "
                          "a flood model; a list or ranges as --ignore-classes (default none)")
@@ -263,6 +266,9 @@ def _add_dtm(sub) -> None:
                     help="DTM cell size (m; default %(default)s)")
     io.add_argument("--dtm-fill", action=argparse.BooleanOptionalAction, default=dt["fill_outside_hull"],
                     help="fill DTM cells outside the ground hull (nearest value; default %(default)s)")
+    io.add_argument("--dtm-extent", default="", metavar="XMIN,YMIN,XMAX,YMAX",
+                    help="the DTM's extent in the cloud's CRS, widened to whole cells on multiples of the cell "
+                         "size: two epochs' DTMs or a model's domain on one grid of one size (default: the points')")
     io.add_argument("--dtm-max-distance", type=float, default=dt["max_distance_m"], metavar="M",
                     help="leave DTM cells farther than this from any ground point empty, so that data gaps are "
                          "not bridged (m; 0 = no limit; default %(default)s)")
@@ -277,7 +283,8 @@ def run_dtm(args, out) -> dict:
     ground = ClassGround(args.classes)
     options = FilterOptions(ignore_classes=args.ignore_classes, keep_existing_classes=True, tiling=_tiling(args))
     dtm = DTMOptions(cell_size_m=args.dtm_cell, cell_set=bool(getattr(args, "dtm_cell_typed", False)),
-                     fill_outside_hull=args.dtm_fill, max_distance_m=args.dtm_max_distance)
+                     fill_outside_hull=args.dtm_fill, max_distance_m=args.dtm_max_distance,
+                     extent=args.dtm_extent or None)
     return _run_documented(args, out, ground, options, dtm, warnings, log, "of the ground classes")
 
 
@@ -413,7 +420,8 @@ def run_filter(args, out) -> dict:
     if not args.output and not args.dtm:
         raise _Usage("give --output and/or --dtm")
     for flag, unset in (("--dtm-cell", not getattr(args, "dtm_cell_typed", False)),
-                        ("--dtm-classes", not args.dtm_classes), ("--dtm-max-distance", not args.dtm_max_distance)):
+                        ("--dtm-classes", not args.dtm_classes), ("--dtm-max-distance", not args.dtm_max_distance),
+                        ("--dtm-extent", not args.dtm_extent)):
         if not args.dtm and not unset:
             print(f"groundsieve: {flag} is set but no --dtm is named: no DTM is made", file=out)
     warnings, log = _collecting_log(out)
@@ -550,7 +558,8 @@ def options_from(args, log=None):
                             tiling=tiling)
     return algorithm, options, DTMOptions(cell_size_m=args.dtm_cell, cell_set=bool(getattr(args, "dtm_cell_typed", False)),
                                           fill_outside_hull=args.dtm_fill,
-                                          classes=args.dtm_classes, max_distance_m=args.dtm_max_distance)
+                                          classes=args.dtm_classes, max_distance_m=args.dtm_max_distance,
+                                          extent=args.dtm_extent or None)
 
 
 def _tiling(args) -> TileOptions:

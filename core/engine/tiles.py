@@ -418,12 +418,13 @@ MAX_SURVEY_DTM_CELLS = 20_000_000_000
 SPARSE_SURVEY_PER_M2 = 0.01
 
 
-def survey_dtm_grid(infos: Sequence[LasInfo], cell: float):
-    """The survey DTM's grid over every file's header bounds, refused (naming the cell size) when it
-    would have more than :data:`MAX_SURVEY_DTM_CELLS` cells: the headers alone tell, before any work."""
+def survey_dtm_grid(infos: Sequence[LasInfo], cell: float, extent=None):
+    """The survey DTM's grid over every file's header bounds (and the DTM's ``extent``, xmin, ymin, xmax,
+    ymax, if given), refused (naming the cell size) when it would have more than
+    :data:`MAX_SURVEY_DTM_CELLS` cells: the headers alone tell, before any work."""
     from ..grids.spec import GridSpec
-    xs = np.array([v for i in infos if i.count for v in (i.mins[0], i.maxs[0])])
-    ys = np.array([v for i in infos if i.count for v in (i.mins[1], i.maxs[1])])
+    xs = np.array([v for i in infos if i.count for v in (i.mins[0], i.maxs[0])] + ([extent[0], extent[2]] if extent else []))
+    ys = np.array([v for i in infos if i.count for v in (i.mins[1], i.maxs[1])] + ([extent[1], extent[3]] if extent else []))
     try:
         return GridSpec.covering(xs, ys, cell, what="DTM", bytes_per_cell=0.0, max_cells=MAX_SURVEY_DTM_CELLS,
                                  closed=True)
@@ -519,7 +520,7 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
         algorithm = for_survey(infos, log)
     outs = check_tiled_outputs(inputs, output_path, dtm_path, [i.point_format for i in infos], log)
     # the DTM's grid from the headers: a DTM cell far too small for the survey is refused now
-    dtm_grid = survey_dtm_grid(infos, dtm.cell_size_m) if dtm_path else None
+    dtm_grid = survey_dtm_grid(infos, dtm.cell_size_m, dtm.extent) if dtm_path else None
     # The reach rounded up to whole metres: the buffer's edges then sit on whole metres, where the
     # filters' grids (edges on multiples of their cell) put theirs without floating-point doubt.
     reach = filter_reach_m(algorithm)
@@ -1081,7 +1082,13 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         chosen = {c: ground_by_class.get(c, 0) for c in getattr(algorithm, "classes", ())}
         log(f"Ground: {ground_total:,} of {sum(i.count for i in infos):,} points, of the ground classes "
             f"({ground_classes_counts(None, chosen)}).")
-    dtm_out = _dtm_extent(dtm_writer.grid, area_box, log) if dtm_writer is not None else None
+    dtm_out = None
+    if dtm_writer is not None:
+        wanted = workflow.extent_grid(dtm, max_cells=MAX_SURVEY_DTM_CELLS)
+        dtm_out = _dtm_extent(dtm_writer.grid, area_box, log) if wanted is None else \
+            dtm_writer.grid.window(*_window_of(dtm_writer.grid, wanted))
+        if wanted is not None:
+            workflow.say_extent(dtm_out, None, unit, log)
     if dtm_out is not None and not n_copc:
         _say_stray_tiles(tiles, grid, dtm_out, log)
     if dtm_writer is not None and not dtm_points:  # (as a whole run refuses it, not an empty DTM written)
@@ -1678,6 +1685,13 @@ def _tile_job(job) -> Optional[dict]:
         raise GroundSieveError(f"{where} failed: {type(err).__name__}: {err}") from err
     except Exception as err:  # an unexpected failure still names the tile
         raise GroundSieveError(f"{where} failed: {type(err).__name__}: {err}") from err
+
+
+def _window_of(full, wanted):
+    """(col0, row0, ncols, nrows) of the grid ``wanted`` in ``full`` (the same lattice, inside it)."""
+    c = full.cell
+    return (int(round((wanted.x0 - full.x0) / c)), int(round((full.top - wanted.top) / c)), wanted.ncols,
+            wanted.nrows)
 
 
 def _dtm_extent(full, box, log):

@@ -25,7 +25,7 @@ import dataclasses
 import math
 import os
 from dataclasses import dataclass
-from typing import Callable, List, Optional
+from typing import Callable, List, Optional, Tuple
 
 import numpy as np
 
@@ -99,6 +99,10 @@ class DTMOptions:
     #: metres per unit of the cloud's coordinates, set by the run (defaults_in_crs_unit): the DTM's
     #: notes (the isolated pits' 0.5 m depth, the lengths they give) in the CRS's unit
     metres_per_unit: float = 1.0
+    #: the DTM's extent (xmin, ymin, xmax, ymax in the cloud's CRS), widened to whole cells on the lattice of
+    #: multiples of the cell: two epochs' DTMs, or a model's domain, on one grid of one size; cells without
+    #: data are nodata. None: the extent of the points that may enter the DTM
+    extent: Optional[Tuple[float, float, float, float]] = None
 
     def __post_init__(self):
         _check_budget(self.memory_budget_bytes, "memory_budget_bytes")
@@ -113,6 +117,56 @@ class DTMOptions:
                                         f"(at most {MAX_CELL_M:g} m)")
         if int(self.points_per_cell) != self.points_per_cell or self.points_per_cell < 0:
             raise InvalidParameterError(f"points_per_cell must be a whole number >= 0 (got {self.points_per_cell})")
+        if self.extent is not None:
+            extent = parse_extent(self.extent)
+            object.__setattr__(self, "extent", extent)
+
+
+def parse_extent(value) -> Optional[Tuple[float, float, float, float]]:
+    """A DTM extent as (xmin, ymin, xmax, ymax): from four numbers, or the text "xmin,ymin,xmax,ymax";
+    None for an empty text. Raises InvalidParameterError saying what is wrong."""
+    if isinstance(value, str):
+        if not value.strip():
+            return None
+        parts = value.replace(";", ",").split(",")
+        try:
+            numbers = [float(p) for p in parts]
+        except ValueError:
+            numbers = []
+        if len(numbers) != 4:
+            raise InvalidParameterError(f"DTM extent: '{value}' is not xmin,ymin,xmax,ymax (four numbers)")
+        value = numbers
+    try:
+        xmin, ymin, xmax, ymax = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise InvalidParameterError(f"DTM extent: {value!r} is not xmin, ymin, xmax, ymax (four numbers)") from None
+    if not all(math.isfinite(v) for v in (xmin, ymin, xmax, ymax)):
+        raise InvalidParameterError(f"DTM extent: ({xmin:g}, {ymin:g}, {xmax:g}, {ymax:g}) holds a value that is "
+                                    "not a finite number")
+    if not (xmin < xmax and ymin < ymax):
+        raise InvalidParameterError(f"DTM extent: ({xmin:g}, {ymin:g}, {xmax:g}, {ymax:g}) is empty: give xmin, "
+                                    "ymin, xmax, ymax with xmin < xmax and ymin < ymax")
+    return xmin, ymin, xmax, ymax
+
+
+def extent_grid(options: "DTMOptions", max_cells: Optional[int] = None) -> Optional[GridSpec]:
+    """The DTM's grid over ``options.extent`` (cells on multiples of the cell size; None without one)."""
+    if options.extent is None:
+        return None
+    xmin, ymin, xmax, ymax = options.extent
+    extra = {} if max_cells is None else dict(max_cells=max_cells)
+    return GridSpec.covering(np.array([xmin, xmax]), np.array([ymin, ymax]), options.cell_size_m, what="DTM",
+                             bytes_per_cell=DTM_BYTES_PER_CELL, closed=True, **extra)
+
+
+def _with_extent(x, y, options: "DTMOptions"):
+    """``x, y`` with the corners of the DTM's extent, if any: the grid the DTM is computed on covers both,
+    so that the triangulation sees the points beyond the extent and the extent's cells are all there."""
+    if options.extent is None:
+        return x, y
+    xmin, ymin, xmax, ymax = options.extent
+    return np.concatenate([np.asarray(x, dtype=float), [xmin, xmax]]), \
+        np.concatenate([np.asarray(y, dtype=float), [ymin, ymax]])
 
 
 @dataclass
@@ -536,8 +590,8 @@ def check_dtm_memory(x, y, options: DTMOptions) -> GridSpec:
     """The DTM grid over the points ``x, y`` (those that may enter it), its memory checked against
     the budget: called before the filter runs, so that a DTM too large is refused before any work."""
     with memory_budget(options.memory_budget_bytes):
-        return GridSpec.covering(x, y, options.cell_size_m, what="DTM", bytes_per_cell=DTM_BYTES_PER_CELL,
-                                 closed=True)
+        return GridSpec.covering(*_with_extent(x, y, options), options.cell_size_m, what="DTM",
+                                 bytes_per_cell=DTM_BYTES_PER_CELL, closed=True)
 
 
 def _say_stray_points(x, y, grid: GridSpec, log, unit: str = "m") -> None:
@@ -564,10 +618,10 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions, why_none: str = "
     it found no ground point (quoted in the refusal); ``path``: the input, named in it."""
     from ..grids.rasterize import tin_dtm
     with memory_budget(options.memory_budget_bytes):
-        grid = GridSpec.covering(x, y, options.cell_size_m, what="DTM", bytes_per_cell=DTM_BYTES_PER_CELL,
-                                 closed=True)
+        grid = GridSpec.covering(*_with_extent(x, y, options), options.cell_size_m, what="DTM",
+                                 bytes_per_cell=DTM_BYTES_PER_CELL, closed=True)
     unit = length_label(options.metres_per_unit)  # (a cloud in feet: its lengths in feet)
-    if log is not None:
+    if log is not None and options.extent is None:
         _say_stray_points(x, y, grid, log, unit)
         if grid.ncols * grid.nrows < 16:  # (a corridor, 400 x 2 cells, is a DTM of its own)
             log(f"{WARNING_PREFIX}DTM: a cell of {options.cell_size_m:g} makes {grid.ncols:,} x {grid.nrows:,} cells over "
@@ -604,7 +658,29 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions, why_none: str = "
                      pits_note(*spikes, grid, options.metres_per_unit, spikes=True)):
             if note:
                 log(note)
+    wanted = extent_grid(options)
+    if wanted is not None:
+        grid, dtm = wanted, crop_to(dtm, grid, wanted)
+        if log is not None:
+            say_extent(wanted, int(np.count_nonzero(np.isfinite(dtm))), unit, log)
     return grid, dtm
+
+
+def crop_to(values: np.ndarray, grid: GridSpec, wanted: GridSpec) -> np.ndarray:
+    """The cells of ``values`` (on ``grid``) that ``wanted`` (a grid on the same lattice, inside it) covers."""
+    c = grid.cell
+    col0, row0 = int(round((wanted.x0 - grid.x0) / c)), int(round((grid.top - wanted.top) / c))
+    return values[row0:row0 + wanted.nrows, col0:col0 + wanted.ncols].copy()
+
+
+def say_extent(grid: GridSpec, valued: Optional[int], unit: str, log) -> None:
+    """The log's line on a DTM made for the extent given (``valued``: its cells with a value, None when not
+    counted), a warning when none has one."""
+    x1, y0 = grid.x0 + grid.ncols * grid.cell, grid.top - grid.nrows * grid.cell
+    line = (f"DTM: the extent given, x {grid.x0:,.2f} to {x1:,.2f}, y {y0:,.2f} to {grid.top:,.2f} ({unit}, on "
+            f"multiples of the cell): {grid.ncols:,} x {grid.nrows:,} cells"
+            + (f", {valued:,} of them with a value." if valued is not None else "."))
+    log(line if valued != 0 else f"{WARNING_PREFIX}{line} The extent holds no ground: is it in the cloud's CRS?")
 
 
 def length_label(metres_per_unit: float) -> str:

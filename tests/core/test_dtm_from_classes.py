@@ -5,6 +5,7 @@ input is only read, and a cloud without the classes is refused with the classes 
 tiled, leaving nothing behind."""
 from __future__ import annotations
 
+import io
 import os
 
 import numpy as np
@@ -472,3 +473,58 @@ def test_a_tiled_dtm_cut_to_its_points_has_the_whole_run_s_geotransform_to_the_b
         del ds
     assert transforms[0] == transforms[1], transforms
     assert repr(transforms[0][0]) == "500001.9"
+
+
+@pytest.mark.parametrize("algorithm", [ClassGround(), "smrf"], ids=["classes", "smrf"])
+def test_a_dtm_extent_gives_one_grid_whole_and_tiled(tmp_path, algorithm):
+    """Two epochs of different coverage gave DTMs of different sizes, and no parameter made them one grid (a
+    geomorphologist's DEM of difference): an extent gives the DTM its cells, widened to whole cells on the
+    cell's lattice, whole and tiled alike; beyond the data it is nodata, within it the values are the DTM's."""
+    from osgeo import gdal
+
+    from groundsieve.core.engine.cli import main
+    from groundsieve.core.filters.smrf import SMRF
+    algorithm = SMRF() if algorithm == "smrf" else algorithm
+    rng = np.random.default_rng(12)
+    n = 60_000
+    x, y = 1000.0 + rng.uniform(0, 200, n), 2000.0 + rng.uniform(0, 200, n)
+    src = tmp_path / "epoch.laz"
+    write_las(new_las(x, y, terrain(x - 1000, y - 2000), classification=np.full(n, 2, np.uint8)), str(src))
+    extent = (1050.2, 1950.0, 1260.0, 2120.9)  # (beyond the data south and east)
+    results = {}
+    for tiled in (False, True):
+        for name, ext in (("free", None), ("extent", extent)):
+            out, lines = tmp_path / f"{name}{int(tiled)}.tif", []
+            run_ground_filter(str(src), None, algorithm, options=FilterOptions(keep_existing_classes=True,
+                                                                               tiling=_tiling(tiled)),
+                              dtm_path=str(out), dtm=DTMOptions(cell_size_m=0.5, extent=ext), log=lines.append)
+            ds = gdal.Open(str(out))
+            band = ds.GetRasterBand(1)
+            values = band.ReadAsArray().astype(float)
+            values[values == band.GetNoDataValue()] = np.nan
+            results[name, tiled] = (ds.GetGeoTransform(), values, lines)
+            del band, ds
+    for tiled in (False, True):
+        transform, values, lines = results["extent", tiled]
+        assert transform == (1050.0, 0.5, 0.0, 2121.0, 0.0, -0.5)  # (widened to whole cells)
+        assert values.shape == ((2121 - 1950) * 2, (1260 - 1050) * 2)
+        assert np.isnan(values[-1, :]).all() and np.isnan(values[:, -1]).all()  # (beyond the data)
+        assert any(line.startswith("DTM: the extent given, x 1,050.00 to 1,260.00") for line in lines), lines
+        free_transform, free, _ = results["free", tiled]  # (the points' own DTM: x from 1000, y to 2200)
+        col0, row0 = int(round((1050.0 - free_transform[0]) / 0.5)), int(round((free_transform[3] - 2121.0) / 0.5))
+        assert col0 > 0 and row0 > 0
+        rows, cols = min(values.shape[0], free.shape[0] - row0), min(values.shape[1], free.shape[1] - col0)
+        np.testing.assert_allclose(values[:rows, :cols], free[row0:row0 + rows, col0:col0 + cols], atol=1e-6)
+    np.testing.assert_allclose(results["extent", False][1], results["extent", True][1], atol=1e-3)
+    # the command line's --dtm-extent, and an extent that is no extent
+    out = tmp_path / "cli.tif"
+    code = main(["dtm", "--input", str(src), "--dtm", str(out), "--dtm-cell", "0.5",
+                 "--dtm-extent", "1050.2,1950,1260,2120.9"], out=io.StringIO(), stdout=io.StringIO())
+    assert code == 0
+    ds = gdal.Open(str(out))
+    assert ds.GetGeoTransform() == results["extent", False][0]
+    del ds
+    with pytest.raises(InvalidParameterError, match="DTM extent: .* is empty"):
+        DTMOptions(extent=(10, 0, 5, 1))
+    with pytest.raises(InvalidParameterError, match="is not xmin,ymin,xmax,ymax"):
+        DTMOptions(extent="1,2,3")

@@ -109,3 +109,28 @@ def test_ignored_classes_are_checked_before_the_run(groundsieve_provider, scene_
     ok, message = alg.checkParameterValues({"INPUT": str(src), "DTM": str(tmp_path / "d.tif"), **params},
                                            QgsProcessingContext())
     assert not ok and words in message, message
+
+
+def test_a_dtm_extent_from_the_dialog_is_reprojected_to_the_cloud_s_crs(groundsieve_provider, scene_laz, tmp_path):
+    """The DTM extent (an extent parameter: typed, drawn on the canvas or a layer's) in the cloud's CRS gives
+    the DTM that grid; one in another CRS (the canvas in EPSG:4326) is reprojected to the cloud's first."""
+    import processing
+    from qgis.core import QgsCoordinateReferenceSystem, QgsCoordinateTransform, QgsProject, QgsRectangle
+    src, scene = scene_laz
+    x0, y0 = float(np.floor(scene.x.min())) + 10.3, float(np.floor(scene.y.min())) + 20.6
+    out = tmp_path / "dtm.tif"
+    processing.run("groundsieve:dtm", {"INPUT": str(src), "DTM": str(out), "DTM_CELL": 1.0,
+                                       "DTM_EXTENT": f"{x0},{x0 + 50},{y0},{y0 + 40}"})  # (QGIS: xmin,xmax,ymin,ymax)
+    values, transform, _crs = _dtm(out)
+    assert transform == (np.floor(x0), 1.0, 0.0, np.ceil(y0 + 40), 0.0, -1.0)
+    assert values.shape == (41, 51) and np.isfinite(values).all()  # (widened to whole cells)
+    utm, wgs = QgsCoordinateReferenceSystem("EPSG:32632"), QgsCoordinateReferenceSystem("EPSG:4326")
+    box = QgsCoordinateTransform(utm, wgs, QgsProject.instance()).transformBoundingBox(
+        QgsRectangle(x0, y0, x0 + 50, y0 + 40))
+    out = tmp_path / "dtm_wgs.tif"
+    processing.run("groundsieve:dtm", {"INPUT": str(src), "DTM": str(out), "DTM_CELL": 1.0,
+                                       "DTM_EXTENT": f"{box.xMinimum()!r},{box.xMaximum()!r},{box.yMinimum()!r},"
+                                                     f"{box.yMaximum()!r} [EPSG:4326]"})
+    values, transform, _crs = _dtm(out)
+    assert abs(transform[0] - x0) < 3 and abs(transform[3] - (y0 + 40)) < 3  # (the box of the reprojected box)
+    assert 48 <= values.shape[1] <= 54 and 39 <= values.shape[0] <= 45
