@@ -135,7 +135,9 @@ checkpoints.</p>""")
             self.CHECKPOINTS, "Checkpoints (surveyed points)", types=[QgsProcessing.SourceType.TypeVectorPoint]))
         self.addParameter(QgsProcessingParameterField(
             self.Z_FIELD, "Checkpoint elevation field (empty = the points' Z)", parentLayerParameterName=self.CHECKPOINTS,
-            type=QgsProcessingParameterField.DataType.Numeric, optional=True))
+            # (any type: a CSV's columns are all text to QGIS, and a numeric list offered none of them; the
+            # values are read as numbers, a text that is none is refused with the checkpoint's id)
+            type=QgsProcessingParameterField.DataType.Any, optional=True))
         self.addParameter(QgsProcessingParameterField(
             self.ID_FIELD, "Checkpoint id field (empty = the feature id)", parentLayerParameterName=self.CHECKPOINTS,
             optional=True))
@@ -352,17 +354,29 @@ checkpoints.</p>""")
         without geometries, given as a path or added to the project as it is, or a file QGIS does not
         open), else None: a surveyor's export is read as the command line reads it (core/io/checkpoints.py),
         in the DTM's CRS."""
+        from qgis.core import QgsProcessingFeatureSourceDefinition, QgsProcessingUtils
+        from qgis.PyQt.QtCore import QUrl
         if source is not None and source.wkbType() != QgsWkbTypes.Type.NoGeometry:
             return None
-        value = parameters.get(self.CHECKPOINTS)
+        value, subset = parameters.get(self.CHECKPOINTS), False
+        if isinstance(value, QgsProcessingFeatureSourceDefinition):  # (selected features, a feature limit)
+            subset = value.selectedFeaturesOnly or value.featureLimit >= 0
+            value = value.source.staticValue()
         path = value if isinstance(value, str) else ""
-        if source is not None:
-            table = self.parameterAsVectorLayer(parameters, self.CHECKPOINTS, context)
+        if source is not None and path and not os.path.isfile(path.split("|")[0]):
+            table = QgsProcessingUtils.mapLayerFromString(path, context)  # (a layer of the project: its file)
             if table is not None and table.providerType() == "ogr":
                 path = table.source()
+            elif table is not None and table.providerType() == "delimitedtext":
+                path = QUrl(table.source()).toLocalFile()
         path = path.split("|")[0]
         if not path or not os.path.isfile(path):
             return None
+        if subset:  # (the file is read whole: a selection of its table cannot be honoured)
+            raise QgsProcessingException(
+                f"{self.label(self.CHECKPOINTS).split(' (')[0]} '{path}': a table without geometries, of which only "
+                "the selected features (or a number of them) are asked for: its file is read whole. Add it as a "
+                "delimited text layer with its X and Y fields to choose checkpoints, or leave the selection off")
         try:
             with open(path, "rb") as f:
                 return None if b"\0" in f.read(4096) else path  # (a GeoPackage's table is no text file)
@@ -375,7 +389,14 @@ checkpoints.</p>""")
         from ..core.io.checkpoints import read_checkpoints
         named = {column: self.parameterAsString(parameters, name, context) or ""
                  for column, name in (("z", self.Z_FIELD), ("id", self.ID_FIELD), ("land_cover", self.LAND_COVER_FIELD))}
-        checkpoints = read_checkpoints(path, mapping=mapping, columns=named)
+        from ..core.errors import InputError
+        try:
+            checkpoints = read_checkpoints(path, mapping=mapping, columns=named)
+        except InputError as err:  # (x and y of other words, or no header: QGIS's delimited text layer names them)
+            if "header" not in str(err):
+                raise
+            raise InputError(f"{err}; or add the file as a delimited text layer with its X and Y fields and give "
+                             "that layer") from None
         self.warn(feedback, f"{self.label(self.CHECKPOINTS).split(' (')[0]} '{path}': a text file without a CRS, read "
                             f"as x (easting), y (northing), z in the DTM's CRS, {len(checkpoints)} checkpoint(s); their "
                             "heights are taken as they are: they must be in the DTM's vertical datum (geoid) and unit")

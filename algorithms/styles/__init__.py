@@ -77,23 +77,28 @@ def style_residuals(layer, rmse, unit="m"):
     """The accuracy check's checkpoints coloured by dz (DTM - checkpoint) in six classes of +-1 and +-2
     RMSEz around 0, blue where the DTM lies too low, red where too high; a layer with a plain symbol
     of a random colour told nothing (a QGIS plugin reviewer). Skipped checkpoints (no dz) stay grey."""
-    from qgis.core import QgsGraduatedSymbolRenderer, QgsRendererRange, QgsSymbol
+    from qgis.core import QgsRuleBasedRenderer, QgsSymbol
     if not (rmse and np.isfinite(rmse)):
         return
     unit = f" {unit}" if unit else ""
-    ranges = []
-    for low, high, colour in DZ_CLASSES:
+    root = QgsRuleBasedRenderer.Rule(None)
+
+    def add(colour, expression, label):
         symbol = QgsSymbol.defaultSymbol(layer.geometryType())
         symbol.setColor(QColor(colour))
-        lo, hi = max(low * rmse, -1e12), min(high * rmse, 1e12)
-        label = (f"dz < {hi:+.3f}{unit}" if not np.isfinite(low) else f"dz > {lo:+.3f}{unit}" if not np.isfinite(high)
-                 else f"{lo:+.3f} to {hi:+.3f}{unit}")
-        ranges.append(QgsRendererRange(lo, hi, symbol, label))
-    renderer = QgsGraduatedSymbolRenderer("dz", ranges)
-    skipped = QgsSymbol.defaultSymbol(layer.geometryType())
-    skipped.setColor(QColor("#9a9a9a"))
-    renderer.setSourceSymbol(skipped)
-    layer.setRenderer(renderer)
+        root.appendChild(QgsRuleBasedRenderer.Rule(symbol, 0, 0, expression, label))
+
+    for low, high, colour in DZ_CLASSES:
+        lo, hi = low * rmse, high * rmse
+        if not np.isfinite(low):
+            add(colour, f'"dz" < {hi!r}', f"dz < {hi:+.3f}{unit}")
+        elif not np.isfinite(high):
+            add(colour, f'"dz" >= {lo!r}', f"dz > {lo:+.3f}{unit}")
+        else:
+            add(colour, f'"dz" >= {lo!r} AND "dz" < {hi!r}', f"{lo:+.3f} to {hi:+.3f}{unit}")
+    # (a graduated renderer draws no point without a value: the skipped checkpoints vanished from the map)
+    add("#9a9a9a", '"dz" IS NULL', "skipped (outside the DTM or on nodata)")
+    layer.setRenderer(QgsRuleBasedRenderer(root))
     layer.triggerRepaint()
 
 

@@ -319,3 +319,41 @@ def test_a_field_the_layer_lacks_is_named(groundsieve_provider, dtm, tmp_path):
         with pytest.raises(QgsProcessingException, match="has no field 'nope'"):
             processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": layer, name: "nope",
                                                     "OUTPUT_HTML": str(tmp_path / "r.html")})
+
+
+def test_a_csv_s_text_columns_a_selection_and_a_delimited_text_table(groundsieve_provider, dtm, tmp_path):
+    """A code reviewer: the elevation field offered only numeric fields, none of a CSV's (QGIS reads them all
+    as text); a CSV table sent with 'selected features only' was refused as if no file had been given; a
+    table added through the delimited-text provider was not found; x and y under other words were a dead end.
+    The field takes any column, a selection is refused in words (the file is read whole), the delimited-text
+    table's file is read, and unknown x and y point to the delimited text layer."""
+    import processing
+    from qgis.core import (QgsProcessingException, QgsProcessingFeatureSourceDefinition, QgsProcessingParameterField,
+                           QgsProject, QgsVectorLayer)
+    from qgis.PyQt.QtCore import QUrl
+    alg = groundsieve_provider.algorithm("accuracy")
+    assert alg.parameterDefinition("Z_FIELD").dataType() == QgsProcessingParameterField.DataType.Any
+    x, y, z, ids, _cover, _dz = checkpoints()
+    csv = tmp_path / "cp.csv"
+    csv.write_text("Name,East,North,Elev_ortho\n" + "".join(f"{ids[i]},{x[i]!r},{y[i]!r},{z[i]!r}\n"
+                                                            for i in range(40)))
+    url = QUrl.fromLocalFile(str(csv)).toString() + "?type=csv&geomType=none&detectTypes=no"
+    table = QgsVectorLayer(url, "cp", "delimitedtext")
+    assert table.isValid()
+    QgsProject.instance().addMapLayer(table)
+    try:
+        result = processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": table.id(), "Z_FIELD": "Elev_ortho",
+                                                         "OUTPUT_HTML": str(tmp_path / "r.html")})
+        assert result["COUNT"] == 40
+        selected = QgsProcessingFeatureSourceDefinition(table.id(), True)
+        table.selectByIds([1, 2])
+        with pytest.raises(QgsProcessingException, match=r"only the selected features .* its file is read whole"):
+            processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": selected, "Z_FIELD": "Elev_ortho",
+                                                    "OUTPUT_HTML": str(tmp_path / "r2.html")})
+    finally:
+        QgsProject.instance().removeMapLayer(table.id())
+    other = tmp_path / "gk.csv"
+    other.write_text("Rechtswert;Hochwert;Hoehe\n" + "".join(f"{x[i]!r};{y[i]!r};{z[i]!r}\n" for i in range(5)))
+    with pytest.raises(QgsProcessingException, match="names no x and no y and no z column.*delimited text layer with its X "):
+        processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": str(other),
+                                                "OUTPUT_HTML": str(tmp_path / "r3.html")})

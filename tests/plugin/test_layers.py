@@ -346,7 +346,7 @@ def test_temporary_layer_outputs_load_without_a_false_error(groundsieve_provider
                 values = ds.GetRasterBand(1).ReadAsArray()
                 del ds
                 rows = [(x0 + (c + 0.5) * cell, top - (r + 0.5) * cell, values[r, c] + 0.02)
-                        for r in range(5, 50, 9) for c in range(5, 50, 9)]
+                        for r in range(5, 50, 9) for c in range(5, 50, 9)] + [(x0 - 500.0, top + 500.0, 100.0)]
                 checkpoints = tmp_path / "cp.txt"
                 checkpoints.write_text("".join(f"{x!r} {y!r} {z!r}\n" for x, y, z in rows))
                 params["CHECKPOINTS"] = str(checkpoints)
@@ -364,11 +364,19 @@ def test_temporary_layer_outputs_load_without_a_false_error(groundsieve_provider
             if alg_id == "groundsieve:accuracy":  # loaded coloured by dz (it had a plain symbol of a random colour)
                 [layer] = QgsProject.instance().mapLayersByName("Checkpoints with their dz")
                 renderer = layer.renderer()
-                assert renderer.type() == "graduatedSymbol" and renderer.classAttribute() == "dz"
-                ranges = renderer.ranges()
-                assert len(ranges) == 6 and ranges[3].lowerValue() == 0.0
-                assert ranges[4].lowerValue() == pytest.approx(result["RMSEZ"])
-                del layer, renderer, ranges
+                assert renderer.type() == "RuleRenderer"
+                rules = renderer.rootRule().children()
+                assert len(rules) == 7 and rules[-1].filterExpression() == '"dz" IS NULL'
+                assert f'"dz" >= {result["RMSEZ"]!r}' in rules[4].filterExpression()
+                # every checkpoint is drawn, the skipped ones (no dz) too: each falls in exactly one rule
+                from qgis.core import QgsRenderContext
+                context_r = QgsRenderContext()
+                renderer.startRender(context_r, layer.fields())
+                drawn = [len(renderer.symbolsForFeature(f, context_r)) for f in layer.getFeatures()]
+                renderer.stopRender(context_r)
+                assert drawn and set(drawn) == {1}
+                assert [f["sampling"] for f in layer.getFeatures()].count("outside") == 1  # (drawn grey)
+                del layer, renderer, rules
             del context
             gc.collect()
     finally:
