@@ -70,12 +70,14 @@ class GroundSievePlugin:
         except RuntimeError as err:
             command = str(err)
         QgsMessageLog.logMessage(f"GroundSieve {text} {detail} Install command: {command}", LOG_TAG, level)
-        self.show_message(text, level, pip_names)
+        # (information goes away by itself: a code reviewer saw it stay on every start)
+        self.show_message(text, level, pip_names, duration=0 if level == Qgis.Warning else 15)
         return missing
 
-    def show_message(self, text, level, packages=None):
+    def show_message(self, text, level, packages=None, duration=0):
         """Put ``text`` in the message bar (replacing this plugin's previous item), staying until
-        closed, with an Install… button when ``packages`` (pip names) are to be installed."""
+        closed (``duration`` 0; else that many seconds), with an Install… button when ``packages`` (pip
+        names) are to be installed."""
         from qgis.PyQt.QtWidgets import QPushButton
         bar = self.iface.messageBar()
         self.close_message()
@@ -84,7 +86,7 @@ class GroundSievePlugin:
             button = QPushButton("Install…")
             button.clicked.connect(lambda _checked=False: self.ask_and_install(packages))
             item.layout().addWidget(button)
-        self.message = bar.pushWidget(item, level, 0)
+        self.message = bar.pushWidget(item, level, duration)
         return self.message
 
     def close_message(self):

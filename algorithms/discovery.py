@@ -102,13 +102,25 @@ class Discoverable:
         """The paragraph of the help panel on the parameter ``description`` (its label up to a unit in
         brackets or a colon, at the start of the paragraph: "Cell size (m): grid cell of ..."), without its
         label; "" when the help has none."""
-        from .base import plain_help
         head = description.split(" (")[0].split(":")[0].strip().lower()
-        for paragraph in plain_help(self.shortHelpString(), width=10 ** 6).split("\n\n"):
-            label, sep, text = paragraph.replace("\n", " ").partition(": ")
-            if sep and len(label) < 120 and label.lower().startswith(head) and text:
+        for label, text in self._panel_paragraphs():
+            if label.lower().startswith(head):
                 return text[0].upper() + text[1:]
         return ""
+
+    def _panel_paragraphs(self):
+        """(label, text) of the help panel's paragraphs that start with a label, once per class (QGIS makes
+        an algorithm's instance for every dialog, model step and run)."""
+        cache = type(self).__dict__.get("_PANEL_PARAGRAPHS")
+        if cache is None:
+            from .base import plain_help
+            cache = []
+            for paragraph in plain_help(self.shortHelpString(), width=10 ** 6).split("\n\n"):
+                label, sep, text = paragraph.replace("\n", " ").partition(": ")
+                if sep and len(label) < 120 and text:
+                    cache.append((label, text))
+            type(self)._PANEL_PARAGRAPHS = cache
+        return cache
 
     def addParameter(self, definition, createOutput=True):  # noqa: N802
         if not definition.help():

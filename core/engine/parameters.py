@@ -46,7 +46,9 @@ FILTERS: Dict[str, Tuple[str, str, Sequence[Param]]] = {
         Param("cell_size_m", "CELL", "Cell size", "m", minimum=0.01),
         Param("slope", "SLOPE", "Slope", "rise/run"),
         Param("window_m", "WINDOW", "Maximum window radius", "m", minimum=0.01),
-        Param("elevation_threshold_m", "THRESHOLD", "Elevation threshold", "m"),
+        Param("elevation_threshold_m", "THRESHOLD", "Elevation threshold", "m",
+              help="a point is ground within this + the elevation scalar x the local slope of the provisional "
+                   "ground surface above or below it (0.5 m)"),
         Param("elevation_scalar", "SCALAR", "Elevation scalar", "m per unit slope",
               help="a point is ground within the elevation threshold + this x the provisional surface's local "
                    "slope of it (1.25)"),

@@ -57,7 +57,7 @@ def write_geotiff(path: str, values: np.ndarray, grid: GridSpec, *, crs_wkt: Opt
         raise OutputError(f"{path}: raster of shape {values.shape} does not match its grid {grid.shape}")
     if dtype not in ("float32", "float64", "uint8", "int16"):
         raise OutputError(f"{path}: cannot write a raster of type {dtype}")
-    if dtype == "float32" and values.dtype.kind == "f" and values.size and np.isfinite(values).any():
+    if elevation and dtype == "float32" and values.dtype.kind == "f" and values.size and np.isfinite(values).any():
         dtype = float_type_for(float(np.nanmax(np.abs(values))))
     data = np.where(np.isnan(values), nodata, values).astype(dtype) if values.dtype.kind == "f" else values.astype(dtype)
     try:
@@ -88,7 +88,7 @@ def write_geotiff(path: str, values: np.ndarray, grid: GridSpec, *, crs_wkt: Opt
         raise OutputError(f"{name}: the GeoTIFF was not written")
 
 
-def _cog(path: str, source, options, window=None, geotransform=None) -> None:
+def _cog(path: str, source, options, window=None, geotransform=None, output_type: Optional[str] = None) -> None:
     """Write ``source`` (a dataset or a file) to ``path`` as a COG, then check that the file holds every
     block its header points at: GDAL's COG driver only logged a full disk ("_tiffWriteProc: No space
     left on device", past any error handler) and returned, leaving a truncated DTM after a run that said
@@ -101,7 +101,8 @@ def _cog(path: str, source, options, window=None, geotransform=None) -> None:
         source = gdal.Translate("", source, format="VRT", srcWin=list(window))
         if geotransform is not None:
             source.SetGeoTransform(list(geotransform))
-    gdal.Translate(path, source, format="COG", creationOptions=options)  # (closed at once)
+    extra = {} if output_type is None else dict(outputType=gdal.GetDataTypeByName(output_type.title()))
+    gdal.Translate(path, source, format="COG", creationOptions=options, **extra)  # (closed at once)
     source = None
     size = os.path.getsize(path)
     ds = gdal.Open(path)
@@ -165,16 +166,16 @@ class BlockGeoTIFF:
     (internal tiles, DEFLATE, overviews) at the output path, atomically. Blocks never written stay
     nodata. ``write_block`` may be called from several threads."""
 
-    def __init__(self, work_path: str, grid: GridSpec, *, crs_wkt: Optional[str] = None, nodata: float = NODATA,
-                 largest_abs: float = 0.0):
-        """``largest_abs``: the largest magnitude of the values to come (the headers' heights), which
-        decides Float32 or Float64 (:func:`float_type_for`)."""
+    def __init__(self, work_path: str, grid: GridSpec, *, crs_wkt: Optional[str] = None, nodata: float = NODATA):
+        """The work raster is Float64; the COG is Float32 or Float64 by the largest magnitude of the values
+        written (:func:`float_type_for`), as a whole run's DTM decides from its values (deciding from the
+        headers, a noise point's height made a tiled DTM Float64 where the whole run's was Float32)."""
         import threading
 
         from osgeo import gdal
         gdal.UseExceptions()
         self.grid, self.nodata, self.work_path = grid, nodata, work_path
-        self.dtype = np.dtype(float_type_for(largest_abs))
+        self._largest = 0.0  # the largest magnitude written
         self._lock = threading.Lock()
         # each row's first and last cell with a value and its count of such cells (blocks never
         # overlap): the cells between a row's first and last value that have none (empty_cells)
@@ -186,7 +187,7 @@ class BlockGeoTIFF:
         self._bottom = np.full(grid.ncols, -1, dtype=np.int64)
         try:
             self._ds = gdal.GetDriverByName("GTiff").Create(
-                work_path, grid.ncols, grid.nrows, 1, gdal.GDT_Float64 if self.dtype == np.float64 else gdal.GDT_Float32,
+                work_path, grid.ncols, grid.nrows, 1, gdal.GDT_Float64,
                 options=["COMPRESS=DEFLATE", "TILED=YES", "BIGTIFF=IF_SAFER", "SPARSE_OK=TRUE", "PREDICTOR=3"])
             self._ds.SetGeoTransform(grid.geotransform)
             self._ds.SetMetadataItem("TIFFTAG_SOFTWARE", software())
@@ -203,10 +204,12 @@ class BlockGeoTIFF:
         """Write ``values`` (row 0 north, NaN = no data) with its north-west cell at (row0, col0)."""
         row0, col0 = int(row0), int(col0)
         valued = ~np.isnan(values)
-        data = np.where(valued, values, self.nodata).astype(self.dtype)
+        data = np.where(valued, values, self.nodata).astype(np.float64)
+        largest = float(np.nanmax(np.abs(values))) if valued.any() else 0.0
         r, first, last = _ends(valued, 1)
         c, top, bottom = _ends(valued, 0)
         with self._lock:
+            self._largest = max(self._largest, largest)
             self._band.WriteArray(data, xoff=col0, yoff=row0)
             if r.size:
                 self._first[row0 + r] = np.minimum(self._first[row0 + r], col0 + first)
@@ -342,6 +345,6 @@ class BlockGeoTIFF:
             with (atomic_path(path) if atomic else contextlib.nullcontext(path)) as tmp:
                 window = self._window(grid)
                 _cog(tmp, self.work_path, COG_OPTIONS + ["PREDICTOR=YES"], window,
-                     grid.geotransform if window is not None else None)
+                     grid.geotransform if window is not None else None, float_type_for(self._largest))
         except RuntimeError as err:
             raise OutputError(f"{name}: cannot write the DTM ({_gdal_reason(err, path)})") from err

@@ -332,11 +332,12 @@ def test_scikit_learn_alone_missing_is_said_as_what_it_is_needed_for(qgis_app, m
         assert plugin.check_dependencies() == ["scikit-learn"]
         item = iface.bar.currentItem()
         assert "needs scikit-learn only to train Random Forest models" in item.text()
-        assert item.level() == Qgis.Info and len(_buttons(item)) == 1
+        assert item.level() == Qgis.Info and len(_buttons(item)) == 1 and item.duration() == 15  # (it goes away)
         monkeypatch.setattr(deps, "missing_dependencies", lambda extra=None: ["numba", "scikit-learn"] if extra
                             else ["numba"])
         plugin.check_dependencies()
         item = iface.bar.currentItem()
         assert "needs the Python packages numba, scikit-learn" in item.text() and item.level() == Qgis.Warning
+        assert item.duration() == 0  # (it stays until dealt with)
     finally:
         plugin.unload()

@@ -118,5 +118,8 @@ def test_every_parameter_has_a_tooltip_of_its_own(groundsieve_provider):
     cell = smrf.parameterDefinition("CELL")
     assert cell.help() == "Grid cell of the minimum surface (1 m in the paper)." and cell.help() in cell.toolTip()
     assert smrf.parameterDefinition("SCALAR").help().startswith("A point is ground within the elevation threshold")
+    # (a label's prefix gave the threshold "The final point test (0.5 m, 1.25)", the scalar's default in it)
+    assert "0.5 m" in smrf.parameterDefinition("THRESHOLD").help() and "1.25" not in \
+        smrf.parameterDefinition("THRESHOLD").help()
     dtm = groundsieve_provider.algorithm("dtm")
     assert "-1 = 40 m" in dtm.parameterDefinition("TILE_BUFFER").help()  # (its own, not a filter's reach)
