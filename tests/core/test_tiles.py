@@ -657,7 +657,6 @@ def test_an_interrupted_run_resumes_and_skips_the_tiles_done(scene_laz, tmp_path
     assert any("3 of" in m and "skipping" in m for m in messages)
     assert os.listdir(work) == []
     assert agreement(laspy.read(out).classification, whole_classes(scene_laz, SMRF())) >= 0.999
-    assert len(reads) == 1  # (its points read once for the bounds, however often the run reads the header)
     from osgeo import gdal
     clean = tmp_path / "clean.tif"
     run_ground_filter(scene_laz, None, SMRF(), options=tiled(), dtm_path=str(clean))
