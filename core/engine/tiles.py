@@ -955,6 +955,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     kept_out: Dict[int, int] = {}  # points kept in classes of their own, left out of the DTM
     replaced: Dict[int, int] = {}  # points of the input's other classes given 1 or 2
     demoted = [0, 0]  # points the input had as ground (2), and of them not ground now
+    not_last = [0, 0]  # ground points, and of them not their pulse's last return
     ground_by_class: Dict[int, int] = {}  # the DTM from classes: the tiles' own ground, by class
     structures: Dict[int, int] = {}  # those of its structure classes made ground
     filter_steps = steps.sub(0.3, 0.85)
@@ -1001,6 +1002,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             ground_by_class[int(code)] = ground_by_class.get(int(code), 0) + int(count)
         for k, count in enumerate(result.get("demoted", (0, 0))):
             demoted[k] += int(count)
+        for k, count in enumerate(result.get("not_last", (0, 0))):
+            not_last[k] += int(count)
         for code, count in result.get("replaced", ()):
             replaced[int(code)] = replaced.get(int(code), 0) + int(count)
         for code, count in result.get("structures", ()):
@@ -1118,10 +1121,10 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         if output_path and _ext(output_path) == VPC_EXTENSION:
             from ..raster.crs import lonlat_box
             write_vpc(staging.stage(output_path), [scan_header(o) for o in staged], outs, lonlat=lonlat_box)
-        from .workflow import demoted_note, replaced_note, structures_warning
-        note = demoted_note(*demoted, algorithm)
-        if note:
-            log(note)
+        from .workflow import canopy_ground_note, demoted_note, replaced_note, structures_warning
+        for note in (demoted_note(*demoted, algorithm), canopy_ground_note(*not_last, algorithm)):
+            if note:
+                log(note)
         note = replaced_note(replaced, algorithm)
         if note:
             log(note)
@@ -1617,7 +1620,7 @@ def _tile_job(job) -> Optional[dict]:
             return None
         cloud = tile_cloud(clouds, path=where)
         del clouds
-        replaced, structures, demoted, ground_classes = {}, {}, (0, 0), []
+        replaced, structures, demoted, ground_classes, not_last = {}, {}, (0, 0), [], (0, 0)
         if len(cloud) < getattr(job["algorithm"], "min_tile_points", MIN_TILE_POINTS):
             # Isolated points (a stray point far from the survey): too few for any filter's grid;
             # they keep their classes and are not ground.
@@ -1629,6 +1632,7 @@ def _tile_job(job) -> Optional[dict]:
                 from ..io.clouds import count_classes
                 ground_classes = sorted(count_classes(cloud.classification[ground & own]).items())
             demoted = workflow.demoted_ground(cloud.classification, ground, own & done.touched)
+            not_last = workflow.ground_not_last(cloud, ground & own)
             if not options.keep_existing_classes:  # said once for the run (the tile's log goes nowhere)
                 replaced = workflow.replaced_classes(cloud.classification, own & done.processable)
                 structures = workflow.structures_made_ground(cloud.classification, own & ground)
@@ -1669,7 +1673,7 @@ def _tile_job(job) -> Optional[dict]:
                       dtm_points=dtm_own, assigned=assigned, block=block, class_parts=class_parts, copc_read=copc_read,
                       kept_out=sorted(kept_out.items()), replaced=sorted(replaced.items()),
                       structures=sorted(structures.items()), area_bounds=area_bounds, gaps=gaps, hull=hull,
-                      demoted=list(demoted), ground_classes=ground_classes)
+                      demoted=list(demoted), ground_classes=ground_classes, not_last=list(not_last))
         _save_done(job["done_dir"], result)
         return result
     except Cancelled:
