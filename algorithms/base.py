@@ -364,9 +364,9 @@ UNDEFINED_CARTESIAN_WKT = ('LOCAL_CS["Undefined cartesian SRS",LOCAL_DATUM["Unkn
 FILTER_PARAMETER_HELP = {
     "INPUT": "A LAS/LAZ file (1.0-1.4, point formats 0-10), an ISPRS text file (x y z label), a folder of LAS/LAZ "
              "files or a virtual point cloud (.vpc): a folder or .vpc runs in buffered tiles. Only read, never changed.",
-    "PRESET": "A parameters file of this filter written by Tune, or a shipped preset's name (each is for one "
-              "filter, e.g. forest-smrf for SMRF): its values replace the filter's defaults; a value you change in "
-              "the dialog wins.",
+    "PRESET": "A parameters file of this filter written by Tune, or a shipped preset's file name (each is for "
+              "one filter, e.g. forest-smrf.json for SMRF): its values replace the filter's defaults; a value you "
+              "change in the dialog wins.",
     "LAST_RETURNS": "Only each pulse's last return is filtered; the other returns become non-ground (class 1): "
                     "canopy hits stay out of the ground. A cloud without return information (photogrammetry) "
                     "loses no point by it.",
