@@ -236,7 +236,7 @@ checkpoints.</p>""")
                     raise QgsProcessingException(why)
             if table:
                 x, y, z, ids, covers, geometries = self.readCheckpointFile(parameters, context, feedback, table,
-                                                                           mapping)
+                                                                           mapping, fields_offered=source is not None)
             else:
                 x, y, z, ids, covers, geometries = self.readCheckpoints(parameters, context, feedback, source, layer,
                                                                         mapping, land_cover_of, errors)
@@ -358,17 +358,19 @@ checkpoints.</p>""")
         from qgis.PyQt.QtCore import QUrl
         if source is not None and source.wkbType() != QgsWkbTypes.Type.NoGeometry:
             return None
+        from qgis.core import QgsMapLayer
         value, subset = parameters.get(self.CHECKPOINTS), False
         if isinstance(value, QgsProcessingFeatureSourceDefinition):  # (selected features, a feature limit)
             subset = value.selectedFeaturesOnly or value.featureLimit >= 0
             value = value.source.staticValue()
+        table = value if isinstance(value, QgsMapLayer) else None  # (a layer object: a script, the console)
         path = value if isinstance(value, str) else ""
         if source is not None and path and not os.path.isfile(path.split("|")[0]):
             table = QgsProcessingUtils.mapLayerFromString(path, context)  # (a layer of the project: its file)
-            if table is not None and table.providerType() == "ogr":
-                path = table.source()
-            elif table is not None and table.providerType() == "delimitedtext":
-                path = QUrl(table.source()).toLocalFile()
+        if table is not None and table.providerType() == "ogr":
+            path = table.source()
+        elif table is not None and table.providerType() == "delimitedtext":
+            path = QUrl(table.source()).toLocalFile()
         path = path.split("|")[0]
         if not path or not os.path.isfile(path):
             return None
@@ -383,7 +385,7 @@ checkpoints.</p>""")
         except OSError:
             return path  # (the reader names what is wrong)
 
-    def readCheckpointFile(self, parameters, context, feedback, path, mapping):  # noqa: N802
+    def readCheckpointFile(self, parameters, context, feedback, path, mapping, fields_offered=True):  # noqa: N802
         """readCheckpoints' values from a text or CSV file: its columns found by their header words, or
         named by the field parameters; x and y taken in the DTM's CRS."""
         from ..core.io.checkpoints import read_checkpoints
@@ -391,7 +393,11 @@ checkpoints.</p>""")
                  for column, name in (("z", self.Z_FIELD), ("id", self.ID_FIELD), ("land_cover", self.LAND_COVER_FIELD))}
         from ..core.errors import InputError
         try:
-            checkpoints = read_checkpoints(path, mapping=mapping, columns=named)
+            # (a land-cover column is read only when chosen, as a layer's, where QGIS offers the file's columns: a
+            # "cover" column of other words refused a run whose land-cover field was left empty, a power user; a
+            # file QGIS opens as no table offers none, and its class column is read as the command line reads it)
+            checkpoints = read_checkpoints(path, mapping=mapping, columns=named,
+                                           land_cover=bool(named["land_cover"]) or not fields_offered)
         except InputError as err:  # (x and y of other words, or no header: QGIS's delimited text layer names them)
             if "header" not in str(err):
                 raise

@@ -348,10 +348,21 @@ def dtm_extent_value(algorithm, parameters, name, context, input_path):
             crs = QgsCoordinateReferenceSystem.fromWkt(wkt)
     except Exception:  # noqa: BLE001 - an input the run will name; the extent is then taken as it is
         pass
+    label = algorithm.parameterDefinition(name).description().split(" (")[0]
+    given_crs = algorithm.parameterAsExtentCrs(parameters, name, context)
+    if not crs.isValid() and given_crs.isValid() and given_crs.isGeographic():
+        # (a canvas in EPSG:4326 over a cloud without a CRS: its degrees were taken as the cloud's metres)
+        raise QgsProcessingException(f"{label}: given in {given_crs.authid() or given_crs.description()} (degrees), "
+                                     "but the cloud has no CRS to reproject it to: give the extent in the cloud's "
+                                     "own coordinates, or assign the cloud its CRS")
     rect = algorithm.parameterAsExtent(parameters, name, context, crs) if crs.isValid() else \
         algorithm.parameterAsExtent(parameters, name, context)
-    if rect.isNull() or rect.isEmpty():
+    if rect.isNull():
         return None
+    if rect.isEmpty():  # (a zero width or height fell back to the points' extent without a word)
+        raise QgsProcessingException(f"{label}: x {rect.xMinimum():,.2f} to {rect.xMaximum():,.2f}, y "
+                                     f"{rect.yMinimum():,.2f} to {rect.yMaximum():,.2f} is empty (zero width or "
+                                     "height)")
     return rect.xMinimum(), rect.yMinimum(), rect.xMaximum(), rect.yMaximum()
 
 

@@ -94,7 +94,7 @@ class Discoverable:
     tooltips of its parameters."""
 
     #: a parameter's tooltip by its name (QgsProcessingParameterDefinition.setHelp): the dialog shows it on
-    #: the parameter's label, batch mode on its column, where the side panel's help is not shown (a QGIS
+    #: the parameter's label, batch mode on its cells, where the side panel's help is not shown (a QGIS
     #: plugin reviewer: 0-3 parameters of each algorithm had one)
     PARAMETER_HELP = {}
 

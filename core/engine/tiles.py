@@ -520,6 +520,10 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
         algorithm = for_survey(infos, log)
     outs = check_tiled_outputs(inputs, output_path, dtm_path, [i.point_format for i in infos], log)
     # the DTM's grid from the headers: a DTM cell far too small for the survey is refused now
+    if dtm_path and dtm.extent is not None:
+        counted = [i for i in infos if i.count]
+        workflow.check_extent(dtm, min(i.mins[0] for i in counted), min(i.mins[1] for i in counted),
+                              max(i.maxs[0] for i in counted), max(i.maxs[1] for i in counted))
     dtm_grid = survey_dtm_grid(infos, dtm.cell_size_m, dtm.extent) if dtm_path else None
     # The reach rounded up to whole metres: the buffer's edges then sit on whole metres, where the
     # filters' grids (edges on multiples of their cell) put theirs without floating-point doubt.

@@ -149,6 +149,29 @@ def parse_extent(value) -> Optional[Tuple[float, float, float, float]]:
     return xmin, ymin, xmax, ymax
 
 
+#: a DTM extent more than this many times the area of the points' box (and over 1 km²) is refused
+EXTENT_AREA_RATIO = 1000.0
+
+
+def check_extent(options: "DTMOptions", xmin: float, ymin: float, xmax: float, ymax: float) -> None:
+    """Refuse a DTM extent that misses the points' box (``xmin`` ... ``ymax``) or dwarfs it, before any work:
+    QGIS writes an extent xmin,xmax,ymin,ymax and the command line takes XMIN,YMIN,XMAX,YMAX, and one given in
+    the other's order made a valid box thousands of km wide, which the run refused as "2 points lie 4890.7 km
+    from the others" (a power user)."""
+    if options.extent is None:
+        return
+    ex0, ey0, ex1, ey1 = options.extent
+    meets = ex0 <= xmax and xmin <= ex1 and ey0 <= ymax and ymin <= ey1
+    area, points_area = (ex1 - ex0) * (ey1 - ey0), max(xmax - xmin, 1.0) * max(ymax - ymin, 1.0)
+    if meets and (area <= EXTENT_AREA_RATIO * points_area or area <= 1e6 / options.metres_per_unit ** 2):
+        return
+    why = "does not meet them" if not meets else f"is {area / points_area:,.0f} times their area"
+    raise InvalidParameterError(
+        f"DTM extent: x {ex0:,.2f} to {ex1:,.2f}, y {ey0:,.2f} to {ey1:,.2f} {why} (the points span x {xmin:,.2f} "
+        f"to {xmax:,.2f}, y {ymin:,.2f} to {ymax:,.2f}): are its numbers in the right order (QGIS writes an extent "
+        "xmin,xmax,ymin,ymax; --dtm-extent takes XMIN,YMIN,XMAX,YMAX) and in the cloud's CRS?")
+
+
 def extent_grid(options: "DTMOptions", max_cells: Optional[int] = None) -> Optional[GridSpec]:
     """The DTM's grid over ``options.extent`` (cells on multiples of the cell size; None without one)."""
     if options.extent is None:
@@ -623,6 +646,8 @@ def warn_about_units(path: str, infos, log) -> None:
 def check_dtm_memory(x, y, options: DTMOptions) -> GridSpec:
     """The DTM grid over the points ``x, y`` (those that may enter it), its memory checked against
     the budget: called before the filter runs, so that a DTM too large is refused before any work."""
+    if options.extent is not None and np.size(x):
+        check_extent(options, float(np.min(x)), float(np.min(y)), float(np.max(x)), float(np.max(y)))
     with memory_budget(options.memory_budget_bytes):
         return GridSpec.covering(*_with_extent(x, y, options), options.cell_size_m, what="DTM",
                                  bytes_per_cell=DTM_BYTES_PER_CELL, closed=True)

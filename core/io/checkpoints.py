@@ -182,11 +182,13 @@ def _header_columns(fields, path: str, named: Optional[Dict[str, str]] = None) -
 
 
 def read_checkpoints(path: str, *, mapping: Optional[Dict[str, str]] = None,
-                     columns: Optional[Dict[str, str]] = None) -> Checkpoints:
+                     columns: Optional[Dict[str, str]] = None, land_cover: bool = True) -> Checkpoints:
     """The checkpoints of a text/CSV file (see the module's notes on the format). Checkpoints without
     an id column are named by their line ("line 14"). ``columns`` names header columns the file's
     header words do not give away ({"z": "Elev_ortho", "id": "Name", "land_cover": "Surface"}; keys among
-    x, y, z, id, land_cover); it needs a header. Raises InputError naming the file and line."""
+    x, y, z, id, land_cover); without a header, ``field_3`` is the third column (OGR's name for it, which
+    QGIS's field lists show). ``land_cover`` False: no column is read as the land cover unless named (QGIS,
+    where the land-cover field is chosen or left empty). Raises InputError naming the file and line."""
     path = os.fspath(path)
     lines = [(n, line) for n, line in enumerate(_read_lines(path), 1)
              if line.strip() and not line.lstrip().startswith("#")]
@@ -205,10 +207,16 @@ def read_checkpoints(path: str, *, mapping: Optional[Dict[str, str]] = None,
     unknown = sorted(set(named) - set(COLUMN_NAMES))
     if unknown:
         raise InvalidParameterError(f"checkpoint columns: {', '.join(unknown)} is not one of {', '.join(COLUMN_NAMES)}")
-    if named and not header:
+    positional = {k: int(re.fullmatch(r"field_(\d+)", v).group(1)) - 1 for k, v in named.items()
+                  if re.fullmatch(r"field_(\d+)", v) and int(re.fullmatch(r"field_(\d+)", v).group(1)) >= 1}
+    if named and not header and len(positional) < len(named):
         raise InputError(f"{path}: has no header line, so it has no column "
-                         f"{' or '.join(repr(v) for v in named.values())} (without a header the columns are x y z, "
-                         "x y z class or id x y z [class])")
+                         f"{' or '.join(repr(v) for k, v in named.items() if k not in positional)} (without a header "
+                         "the columns are x y z, x y z class or id x y z [class], or field_1, field_2, ... by their "
+                         "place)")
+    if not header and any(i >= len(first) for i in positional.values()):
+        raise InputError(f"{path}, line {lines[0][0]}: {len(first)} field(s), no "
+                         f"{', '.join(v for k, v in named.items() if positional.get(k, 0) >= len(first))}")
     if header:
         columns = _header_columns(first, path, named)
         lines = lines[1:]
@@ -220,6 +228,12 @@ def read_checkpoints(path: str, *, mapping: Optional[Dict[str, str]] = None,
         columns = {"x": 0, "y": 1, "z": 2}
         if len(first) >= 4:
             columns["land_cover"] = 3
+    if not header:
+        for column, index in positional.items():  # (field_3 named for z: the third column is z)
+            columns = {k: i for k, i in columns.items() if i != index}
+            columns[column] = index
+    if not land_cover and "land_cover" not in named:
+        columns.pop("land_cover", None)
     if not lines:
         raise InputError(f"{path}: holds a header and no checkpoints")
     needed = max(columns.values()) + 1

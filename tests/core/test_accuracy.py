@@ -472,3 +472,20 @@ def test_columns_the_header_words_do_not_give_away_are_named(dtm, tmp_path):
         read_checkpoints(str(bare), columns={"z": "h"})
     with pytest.raises(InvalidParameterError, match="checkpoint columns: height is not one of"):
         read_checkpoints(str(cp), columns={"height": "Elev_ortho"})
+
+
+def test_a_file_without_header_names_its_columns_as_qgis_lists_them(tmp_path):
+    """QGIS lists a headerless CSV's columns as field_1, field_2, ...: naming field_4 for the heights was
+    refused ('has no header line') though the dialog offered it (a power user); the column by its place is
+    read now. A land-cover column found by its header word is left alone when the caller reads none."""
+    bare = tmp_path / "bare.csv"
+    bare.write_text("A,500010.5,5000020.5,81.25\nB,500011.5,5000021.5,82.5\n")
+    cp = read_checkpoints(str(bare), columns={"z": "field_4", "id": "field_1"})
+    assert cp.ids == ("A", "B") and list(cp.z) == [81.25, 82.5] and list(cp.x) == [500010.5, 500011.5]
+    with pytest.raises(InputError, match="no field_9"):
+        read_checkpoints(str(bare), columns={"z": "field_9"})
+    covered = tmp_path / "covered.csv"
+    covered.write_text("x,y,z,cover\n500010.5,5000020.5,81.25,forest\n")
+    with pytest.raises(InputError, match="'forest' is not a land cover"):
+        read_checkpoints(str(covered))
+    assert read_checkpoints(str(covered), land_cover=False).land_cover is None

@@ -528,3 +528,22 @@ def test_a_dtm_extent_gives_one_grid_whole_and_tiled(tmp_path, algorithm):
         DTMOptions(extent=(10, 0, 5, 1))
     with pytest.raises(InvalidParameterError, match="is not xmin,ymin,xmax,ymax"):
         DTMOptions(extent="1,2,3")
+
+
+@pytest.mark.parametrize("tiled", [False, True], ids=["whole", "tiled"])
+def test_an_extent_in_the_other_order_or_elsewhere_is_refused_before_the_work(tmp_path, tiled):
+    """QGIS writes an extent xmin,xmax,ymin,ymax, the command line takes XMIN,YMIN,XMAX,YMAX: one typed in the
+    other's order made a valid box thousands of km wide, refused as '2 points lie 4890.7 km from the others'
+    (a power user). Such an extent, and one that misses the points, is refused in its own words."""
+    rng = np.random.default_rng(4)
+    n = 20_000
+    x, y = 512700.0 + rng.uniform(0, 140, n), 5403540.0 + rng.uniform(0, 310, n)
+    src = tmp_path / "s.laz"
+    write_las(new_las(x, y, 300 + rng.normal(0, 0.05, n), classification=np.full(n, 2, np.uint8)), str(src))
+    for extent, why in (((512700, 512841, 5403540, 5403851), "times their area"),  # (QGIS's order, read as ours)
+                        ((600000, 5403540, 600141, 5403851), "does not meet them")):
+        with pytest.raises(InvalidParameterError, match=why + r".*QGIS writes an extent xmin,xmax,ymin,ymax"):
+            run_ground_filter(str(src), None, ClassGround(), options=FilterOptions(keep_existing_classes=True,
+                                                                                   tiling=_tiling(tiled)),
+                              dtm_path=str(tmp_path / "d.tif"), dtm=DTMOptions(extent=extent))
+    assert sorted(os.listdir(tmp_path)) == ["s.laz"]

@@ -352,6 +352,17 @@ def test_a_csv_s_text_columns_a_selection_and_a_delimited_text_table(groundsieve
                                                     "OUTPUT_HTML": str(tmp_path / "r2.html")})
     finally:
         QgsProject.instance().removeMapLayer(table.id())
+    # the table as a layer object (a script, the Python console), and a cover column nobody chose
+    table = QgsVectorLayer(url, "cp", "delimitedtext")
+    result = processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": table, "Z_FIELD": "Elev_ortho",
+                                                     "OUTPUT_HTML": str(tmp_path / "r4.html")})
+    assert result["COUNT"] == 40
+    del table
+    covered = tmp_path / "covered.csv"
+    covered.write_text("x,y,z,cover\n" + "".join(f"{x[i]!r},{y[i]!r},{z[i]!r},forest\n" for i in range(30)))
+    result = processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": str(covered),
+                                                     "OUTPUT_HTML": str(tmp_path / "r5.html")})
+    assert result["COUNT"] == 30 and result["NVA_RMSEZ"] is None  # (no land cover read: none was chosen)
     other = tmp_path / "gk.csv"
     other.write_text("Rechtswert;Hochwert;Hoehe\n" + "".join(f"{x[i]!r};{y[i]!r};{z[i]!r}\n" for i in range(5)))
     with pytest.raises(QgsProcessingException, match="names no x and no y and no z column.*delimited text layer with its X "):

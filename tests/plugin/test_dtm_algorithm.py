@@ -134,3 +134,25 @@ def test_a_dtm_extent_from_the_dialog_is_reprojected_to_the_cloud_s_crs(groundsi
     values, transform, _crs = _dtm(out)
     assert abs(transform[0] - x0) < 3 and abs(transform[3] - (y0 + 40)) < 3  # (the box of the reprojected box)
     assert 48 <= values.shape[1] <= 54 and 39 <= values.shape[0] <= 45
+
+
+def test_an_empty_extent_and_degrees_over_a_cloud_without_crs_are_refused(groundsieve_provider, scene_laz, tmp_path):
+    """A power user: a zero-width extent fell back to the points' extent without a word, and a canvas extent
+    in EPSG:4326 over a cloud without a CRS was taken as metres (refused as far points). Both are refused in
+    the dialog's words, before any work."""
+    import processing
+    from qgis.core import QgsProcessingException
+
+    from groundsieve.core.io import new_las, read_cloud, write_las
+    src, scene = scene_laz
+    x0, y0 = float(scene.x.min()) + 10, float(scene.y.min()) + 10
+    with pytest.raises(QgsProcessingException, match=r"DTM extent: x .* is empty \(zero width or height\)"):
+        processing.run("groundsieve:dtm", {"INPUT": str(src), "DTM": str(tmp_path / "a.tif"),
+                                           "DTM_EXTENT": f"{x0},{x0},{y0},{y0 + 40}"})
+    cloud = read_cloud(str(src))
+    bare = tmp_path / "nocrs.laz"
+    write_las(new_las(cloud.x, cloud.y, cloud.z, classification=cloud.classification), str(bare))
+    with pytest.raises(QgsProcessingException, match=r"given in EPSG:4326 \(degrees\), but the cloud has no CRS"):
+        processing.run("groundsieve:dtm", {"INPUT": str(bare), "DTM": str(tmp_path / "b.tif"),
+                                           "DTM_EXTENT": "9.17,9.18,48.78,48.79 [EPSG:4326]"})
+    assert sorted(os.listdir(tmp_path)) == ["nocrs.laz"]
