@@ -68,9 +68,10 @@ def style_dtm(layer):
     layer.triggerRepaint()
 
 
-#: the residual layer's classes of dz in units of the RMSEz, blue (the DTM too low) to red (too high)
-DZ_CLASSES = ((-np.inf, -2.0, "#2166ac"), (-2.0, -1.0, "#67a9cf"), (-1.0, 0.0, "#d1e5f0"),
-              (0.0, 1.0, "#fddbc7"), (1.0, 2.0, "#ef8a62"), (2.0, np.inf, "#b2182b"))
+#: the residual layer's classes of dz in units of the RMSEz, blue (the DTM too low) to red (too high), the two
+#: nearest 0 saturated enough to show on a grey hillshade (a power user: near white there)
+DZ_CLASSES = ((-np.inf, -2.0, "#2166ac"), (-2.0, -1.0, "#4393c3"), (-1.0, 0.0, "#92c5de"),
+              (0.0, 1.0, "#f4a582"), (1.0, 2.0, "#d6604d"), (2.0, np.inf, "#b2182b"))
 
 
 def style_residuals(layer, rmse, unit="m"):
