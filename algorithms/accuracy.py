@@ -361,12 +361,15 @@ checkpoints.</p>""")
         from qgis.core import QgsMapLayer
         value, subset = parameters.get(self.CHECKPOINTS), False
         if isinstance(value, QgsProcessingFeatureSourceDefinition):  # (selected features, a feature limit)
-            subset = value.selectedFeaturesOnly or value.featureLimit >= 0
+            subset = value.selectedFeaturesOnly or value.featureLimit >= 0 or \
+                bool(getattr(value, "filterExpression", ""))  # (QGIS 3.32: a source's filter expression)
             value = value.source.staticValue()
         table = value if isinstance(value, QgsMapLayer) else None  # (a layer object: a script, the console)
         path = value if isinstance(value, str) else ""
         if source is not None and path and not os.path.isfile(path.split("|")[0]):
             table = QgsProcessingUtils.mapLayerFromString(path, context)  # (a layer of the project: its file)
+        if table is not None and table.subsetString():  # (a layer's filter: the file has every row)
+            subset = True
         if table is not None and table.providerType() == "ogr":
             path = table.source()
         elif table is not None and table.providerType() == "delimitedtext":
@@ -377,8 +380,9 @@ checkpoints.</p>""")
         if subset:  # (the file is read whole: a selection of its table cannot be honoured)
             raise QgsProcessingException(
                 f"{self.label(self.CHECKPOINTS).split(' (')[0]} '{path}': a table without geometries, of which only "
-                "the selected features (or a number of them) are asked for: its file is read whole. Add it as a "
-                "delimited text layer with its X and Y fields to choose checkpoints, or leave the selection off")
+                "some rows are asked for (selected features, a filter or a number of them): its file is read whole. "
+                "Add it as a delimited text layer with its X and Y fields to choose checkpoints, or leave the "
+                "selection or filter off")
         try:
             with open(path, "rb") as f:
                 return None if b"\0" in f.read(4096) else path  # (a GeoPackage's table is no text file)

@@ -328,7 +328,8 @@ def dtm_extent_parameter(name):
     param = QgsProcessingParameterExtent(name, "DTM extent (empty = the points')", optional=True)
     param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
     param.setHelp("The DTM covers this extent, widened to whole cells on multiples of the cell size: two epochs' "
-                  "DTMs, or a hydraulic model's domain, on one grid of one size; cells without ground are nodata. "
+                  "DTMs, or a hydraulic model's domain, on one grid of one size; cells beyond the points' own DTM are "
+                  "nodata (the fill stops there too). "
                   "An extent in another CRS is reprojected to the cloud's.")
     return param
 

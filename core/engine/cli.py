@@ -78,7 +78,8 @@ def _add_common(parser: argparse.ArgumentParser) -> None:
                     help="fill DTM cells outside the ground hull (nearest value; default %(default)s)")
     io.add_argument("--dtm-extent", default="", metavar="XMIN,YMIN,XMAX,YMAX",
                     help="the DTM's extent in the cloud's CRS, widened to whole cells on multiples of the cell "
-                         "size: two epochs' DTMs or a model's domain on one grid of one size (default: the points')")
+                         "size: two epochs' DTMs or a model's domain on one grid of one size (default: the points'); "
+                         "with a negative first number write --dtm-extent=-100,-100,100,100")
     io.add_argument("--dtm-classes", default="", metavar="LIST",
                     help="classes of the input whose points enter the DTM with the ground, e.g. 9 (water) for "
                          "a flood model; a list or ranges as --ignore-classes (default none)")
@@ -268,7 +269,8 @@ def _add_dtm(sub) -> None:
                     help="fill DTM cells outside the ground hull (nearest value; default %(default)s)")
     io.add_argument("--dtm-extent", default="", metavar="XMIN,YMIN,XMAX,YMAX",
                     help="the DTM's extent in the cloud's CRS, widened to whole cells on multiples of the cell "
-                         "size: two epochs' DTMs or a model's domain on one grid of one size (default: the points')")
+                         "size: two epochs' DTMs or a model's domain on one grid of one size (default: the points'); "
+                         "with a negative first number write --dtm-extent=-100,-100,100,100")
     io.add_argument("--dtm-max-distance", type=float, default=dt["max_distance_m"], metavar="M",
                     help="leave DTM cells farther than this from any ground point empty, so that data gaps are "
                          "not bridged (m; 0 = no limit; default %(default)s)")

@@ -524,6 +524,9 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
         counted = [i for i in infos if i.count]
         workflow.check_extent(dtm, min(i.mins[0] for i in counted), min(i.mins[1] for i in counted),
                               max(i.maxs[0] for i in counted), max(i.maxs[1] for i in counted))
+        # (its cells counted now: a large extent was refused only after every tile, by the whole run's memory
+        # rule, a code reviewer; a tiled DTM is written block by block)
+        workflow.extent_grid(dtm, max_cells=MAX_SURVEY_DTM_CELLS, bytes_per_cell=0.0)
     dtm_grid = survey_dtm_grid(infos, dtm.cell_size_m, dtm.extent) if dtm_path else None
     # The reach rounded up to whole metres: the buffer's edges then sit on whole metres, where the
     # filters' grids (edges on multiples of their cell) put theirs without floating-point doubt.
@@ -1089,11 +1092,14 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             f"({ground_classes_counts(None, chosen)}).")
     dtm_out = None
     if dtm_writer is not None:
-        wanted = workflow.extent_grid(dtm, max_cells=MAX_SURVEY_DTM_CELLS)
+        wanted = workflow.extent_grid(dtm, max_cells=MAX_SURVEY_DTM_CELLS, bytes_per_cell=0.0)
         dtm_out = _dtm_extent(dtm_writer.grid, area_box, log) if wanted is None else \
             dtm_writer.grid.window(*_window_of(dtm_writer.grid, wanted))
-        if wanted is not None:
-            workflow.say_extent(dtm_out, None, unit, log)
+        if wanted is not None:  # (an extent without ground is warned about, as a whole run's)
+            points = _dtm_extent(dtm_writer.grid, area_box, lambda _m: None)
+            if points is not dtm_writer.grid:  # beyond the points' box nodata, as the whole run's DTM placed in it
+                dtm_writer.blank_outside(points)
+            workflow.say_extent(dtm_out, None if dtm_writer.has_values_in(dtm_out) else 0, unit, log)
     if dtm_out is not None and not n_copc:
         _say_stray_tiles(tiles, grid, dtm_out, log)
     if dtm_writer is not None and not dtm_points:  # (as a whole run refuses it, not an empty DTM written)
@@ -1232,7 +1238,10 @@ def _say_if_unclassified(infos, algorithm, log) -> None:
     sampled = [i for i in infos if i.count and not i.copc][:UNCLASSIFIED_SAMPLE_FILES]
     if not sampled:
         return
-    classes = np.concatenate([first_classes(i.path, UNCLASSIFIED_SAMPLE_POINTS) for i in sampled])
+    try:
+        classes = np.concatenate([first_classes(i.path, UNCLASSIFIED_SAMPLE_POINTS) for i in sampled])
+    except Exception:  # noqa: BLE001 - a damaged file: the tiles' reading names it in words (lazrs raised here)
+        return
     if classes.size == 0 or np.isin(classes, list(algorithm.classes)).any():
         return
     codes = ", ".join(str(c) for c in algorithm.classes)

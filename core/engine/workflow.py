@@ -172,24 +172,20 @@ def check_extent(options: "DTMOptions", xmin: float, ymin: float, xmax: float, y
         "xmin,xmax,ymin,ymax; --dtm-extent takes XMIN,YMIN,XMAX,YMAX) and in the cloud's CRS?")
 
 
-def extent_grid(options: "DTMOptions", max_cells: Optional[int] = None) -> Optional[GridSpec]:
-    """The DTM's grid over ``options.extent`` (cells on multiples of the cell size; None without one)."""
+def extent_grid(options: "DTMOptions", max_cells: Optional[int] = None,
+                bytes_per_cell: Optional[float] = None) -> Optional[GridSpec]:
+    """The DTM's grid over ``options.extent`` (cells on multiples of the cell size; None without one), its
+    memory checked at ``bytes_per_cell`` (DTM_BYTES_PER_CELL by default; 0 for a tiled run's, written block
+    by block)."""
     if options.extent is None:
         return None
+    bytes_per_cell = DTM_BYTES_PER_CELL if bytes_per_cell is None else bytes_per_cell
     xmin, ymin, xmax, ymax = options.extent
     extra = {} if max_cells is None else dict(max_cells=max_cells)
     return GridSpec.covering(np.array([xmin, xmax]), np.array([ymin, ymax]), options.cell_size_m, what="DTM",
-                             bytes_per_cell=DTM_BYTES_PER_CELL, closed=True, **extra)
+                             bytes_per_cell=bytes_per_cell, closed=True, **extra)
 
 
-def _with_extent(x, y, options: "DTMOptions"):
-    """``x, y`` with the corners of the DTM's extent, if any: the grid the DTM is computed on covers both,
-    so that the triangulation sees the points beyond the extent and the extent's cells are all there."""
-    if options.extent is None:
-        return x, y
-    xmin, ymin, xmax, ymax = options.extent
-    return np.concatenate([np.asarray(x, dtype=float), [xmin, xmax]]), \
-        np.concatenate([np.asarray(y, dtype=float), [ymin, ymax]])
 
 
 @dataclass
@@ -236,8 +232,10 @@ def select_points(cloud: PointCloud, options: FilterOptions) -> np.ndarray:
     keep = processable(cloud, options)
     if options.last_returns_only and cloud.has_return_info:
         rn, nr = cloud.return_number, cloud.number_of_returns
-        # A return is last when its number equals the count; files that leave both 0 count as single.
-        keep &= (rn >= nr) | (nr == 0)
+        # A return is last when its number equals the count; files that leave both 0 count as single, and a
+        # return number 0 (no number: "0 of 1", a writer's) is not taken for an earlier return (a code reviewer:
+        # every point was left out, "no point is left to filter")
+        keep &= (rn >= nr) | (nr == 0) | (rn == 0)
     return keep
 
 
@@ -380,7 +378,8 @@ def ground_not_last(cloud, ground: np.ndarray) -> tuple:
     if not cloud.has_return_info:
         return 0, 0
     rn, nr = cloud.return_number, cloud.number_of_returns
-    return int(np.count_nonzero(ground)), int(np.count_nonzero(ground & (rn < nr)))
+    # (a return number 0 is no number: "0 of 1" made every ground point a non-last return, a code reviewer)
+    return int(np.count_nonzero(ground)), int(np.count_nonzero(ground & (rn < nr) & (rn > 0)))
 
 
 def canopy_ground_note(ground: int, not_last: int, algorithm=None) -> str:
@@ -649,8 +648,9 @@ def check_dtm_memory(x, y, options: DTMOptions) -> GridSpec:
     if options.extent is not None and np.size(x):
         check_extent(options, float(np.min(x)), float(np.min(y)), float(np.max(x)), float(np.max(y)))
     with memory_budget(options.memory_budget_bytes):
-        return GridSpec.covering(*_with_extent(x, y, options), options.cell_size_m, what="DTM",
-                                 bytes_per_cell=DTM_BYTES_PER_CELL, closed=True)
+        extent_grid(options)  # (the extent's grid, which the points' DTM is placed in, counted too)
+        return GridSpec.covering(x, y, options.cell_size_m, what="DTM", bytes_per_cell=DTM_BYTES_PER_CELL,
+                                 closed=True)
 
 
 def _say_stray_points(x, y, grid: GridSpec, log, unit: str = "m") -> None:
@@ -677,10 +677,10 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions, why_none: str = "
     it found no ground point (quoted in the refusal); ``path``: the input, named in it."""
     from ..grids.rasterize import tin_dtm
     with memory_budget(options.memory_budget_bytes):
-        grid = GridSpec.covering(*_with_extent(x, y, options), options.cell_size_m, what="DTM",
-                                 bytes_per_cell=DTM_BYTES_PER_CELL, closed=True)
+        grid = GridSpec.covering(x, y, options.cell_size_m, what="DTM", bytes_per_cell=DTM_BYTES_PER_CELL,
+                                 closed=True)
     unit = length_label(options.metres_per_unit)  # (a cloud in feet: its lengths in feet)
-    if log is not None and options.extent is None:
+    if log is not None:
         _say_stray_points(x, y, grid, log, unit)
         if grid.ncols * grid.nrows < 16:  # (a corridor, 400 x 2 cells, is a DTM of its own)
             log(f"{WARNING_PREFIX}DTM: a cell of {options.cell_size_m:g} makes {grid.ncols:,} x {grid.nrows:,} cells over "
@@ -719,17 +719,25 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions, why_none: str = "
                 log(note)
     wanted = extent_grid(options)
     if wanted is not None:
-        grid, dtm = wanted, crop_to(dtm, grid, wanted)
+        grid, dtm = wanted, place_in(dtm, grid, wanted)
         if log is not None:
             say_extent(wanted, int(np.count_nonzero(np.isfinite(dtm))), unit, log)
     return grid, dtm
 
 
-def crop_to(values: np.ndarray, grid: GridSpec, wanted: GridSpec) -> np.ndarray:
-    """The cells of ``values`` (on ``grid``) that ``wanted`` (a grid on the same lattice, inside it) covers."""
+def place_in(values: np.ndarray, grid: GridSpec, wanted: GridSpec) -> np.ndarray:
+    """``values`` (on ``grid``) on the grid ``wanted`` (the same lattice): its cells that ``grid`` covers, the
+    others NaN. The DTM is made over its points and placed in the extent: beyond the points it is nodata,
+    filled or not, as a tiled run's, which has no block there (a code reviewer: a fill reached over the whole
+    extent whole and not tiled)."""
     c = grid.cell
     col0, row0 = int(round((wanted.x0 - grid.x0) / c)), int(round((grid.top - wanted.top) / c))
-    return values[row0:row0 + wanted.nrows, col0:col0 + wanted.ncols].copy()
+    out = np.full(wanted.shape, np.nan, dtype=values.dtype)
+    r0, r1 = max(row0, 0), min(row0 + wanted.nrows, grid.nrows)
+    c0, c1 = max(col0, 0), min(col0 + wanted.ncols, grid.ncols)
+    if r0 < r1 and c0 < c1:
+        out[r0 - row0:r1 - row0, c0 - col0:c1 - col0] = values[r0:r1, c0:c1]
+    return out
 
 
 def say_extent(grid: GridSpec, valued: Optional[int], unit: str, log) -> None:

@@ -201,7 +201,7 @@ class EchoGrid:
                         np.ascontiguousarray(bypass), float(self.dz_m), ground, steps=steps.sub(0.6, 0.99),
                         expected_s=3e-8 * n)
         if self.mode == "evidence" and has_returns:
-            ground &= rn >= nr  # a return followed by others is not the ground
+            ground &= (rn >= nr) | (rn == 0)  # a return followed by others is not the ground (0: no number)
         steps.report(1.0)
         return EchoGridResult(ground, has_returns, int(occupied.sum()), int(bypass.sum()))
 

@@ -218,6 +218,45 @@ class BlockGeoTIFF:
                 self._top[col0 + c] = np.minimum(self._top[col0 + c], row0 + top)
                 self._bottom[col0 + c] = np.maximum(self._bottom[col0 + c], row0 + bottom)
 
+    def blank_outside(self, grid: GridSpec, strip_rows: int = 1024) -> None:
+        """Set every cell of this raster outside ``grid`` (a part of it, on its lattice) to nodata, in strips
+        of rows: a tiled DTM given an extent beyond its points keeps no value there, as a whole run's (the
+        tiles' blocks, filled, reached to the tiles' edges)."""
+        c = self.grid.cell
+        col0, row0 = int(round((grid.x0 - self.grid.x0) / c)), int(round((self.grid.top - grid.top) / c))
+        col1, row1 = col0 + grid.ncols, row0 + grid.nrows
+        g = self.grid
+        # the rows' and columns' ends of the values (empty_cells reads them) are made anew from what is left
+        self._first[:], self._last[:], self._valued[:] = np.iinfo(np.int64).max, -1, 0
+        self._top[:], self._bottom[:] = np.iinfo(np.int64).max, -1
+        for start in range(0, g.nrows, strip_rows):
+            stop = min(start + strip_rows, g.nrows)
+            inside_rows = max(start, row0), min(stop, row1)
+            if inside_rows[0] >= inside_rows[1]:  # (the whole strip is outside)
+                self._band.WriteArray(np.full((stop - start, g.ncols), self.nodata), xoff=0, yoff=start)
+                continue
+            strip = self._band.ReadAsArray(0, start, g.ncols, stop - start)
+            keep = np.zeros(strip.shape, dtype=bool)
+            keep[inside_rows[0] - start:inside_rows[1] - start, max(col0, 0):max(min(col1, g.ncols), 0)] = True
+            if not keep.all():
+                strip[~keep] = self.nodata
+                self._band.WriteArray(strip, xoff=0, yoff=start)
+            valued = strip != self.nodata
+            r, first, last = _ends(valued, 1)
+            self._first[start + r], self._last[start + r] = first, last
+            self._valued[start + r] = valued[r].sum(axis=1)
+            cols, top, bottom = _ends(valued, 0)
+            self._top[cols] = np.minimum(self._top[cols], start + top)
+            self._bottom[cols] = np.maximum(self._bottom[cols], start + bottom)
+
+    def has_values_in(self, grid: GridSpec) -> bool:
+        """Whether a cell of ``grid`` (a part of this raster, on its lattice) may hold a value: a row of it
+        whose first and last written values reach into its columns."""
+        c = self.grid.cell
+        col0, row0 = int(round((grid.x0 - self.grid.x0) / c)), int(round((self.grid.top - grid.top) / c))
+        rows = slice(max(row0, 0), max(min(row0 + grid.nrows, self.grid.nrows), 0))
+        return bool(np.any((self._first[rows] <= col0 + grid.ncols - 1) & (self._last[rows] >= col0)))
+
     def _window(self, grid: Optional[GridSpec]):
         """(xoff, yoff, xsize, ysize) of ``grid`` in this raster's cells; None for the whole raster."""
         if grid is None or grid == self.grid:

@@ -13,7 +13,7 @@ import pytest
 
 from groundsieve.core.engine.tiles import TileOptions
 from groundsieve.core.engine.workflow import DTMOptions, FilterOptions, run_ground_filter
-from groundsieve.core.errors import Cancelled, InputError, InvalidParameterError
+from groundsieve.core.errors import Cancelled, GroundSieveError, InputError, InvalidParameterError
 from groundsieve.core.filters.classes import ClassGround
 from groundsieve.core.io import new_las, write_las
 from groundsieve.core.progress import WARNING_PREFIX, Steps
@@ -547,3 +547,44 @@ def test_an_extent_in_the_other_order_or_elsewhere_is_refused_before_the_work(tm
                                                                                    tiling=_tiling(tiled)),
                               dtm_path=str(tmp_path / "d.tif"), dtm=DTMOptions(extent=extent))
     assert sorted(os.listdir(tmp_path)) == ["s.laz"]
+
+
+def test_an_extent_beyond_the_points_is_nodata_filled_or_not_whole_and_tiled(tmp_path):
+    """With the fill on, a whole run filled the whole extent (33,600 cells of one invented value beyond the data)
+    where a tiled run left it nodata (a code reviewer): the DTM is made over its points and placed in the
+    extent, so beyond them both are nodata; within, both are filled."""
+    from osgeo import gdal
+    rng = np.random.default_rng(3)
+    n = 30_000
+    x, y = 1000.0 + rng.uniform(0, 160, n), 2000.0 + rng.uniform(0, 160, n)
+    src = tmp_path / "s.laz"
+    write_las(new_las(x, y, terrain(x - 1000, y - 2000), classification=np.full(n, 2, np.uint8)), str(src))
+    made = []
+    for tiled in (False, True):
+        out = tmp_path / f"d{int(tiled)}.tif"
+        run_ground_filter(str(src), None, ClassGround(), options=FilterOptions(keep_existing_classes=True,
+                                                                               tiling=_tiling(tiled)),
+                          dtm_path=str(out), dtm=DTMOptions(cell_size_m=1.0, fill_outside_hull=True,
+                                                            extent=(960.0, 1960.0, 1200.0, 2200.0)))
+        ds = gdal.Open(str(out))
+        band = ds.GetRasterBand(1)
+        values = band.ReadAsArray().astype(float)
+        values[values == band.GetNoDataValue()] = np.nan
+        made.append(values)
+        del band, ds
+    for values in made:  # rows from y 2200 down, columns from x 960
+        assert np.isnan(values[:, :40]).all() and np.isnan(values[:40, :]).all()  # beyond the points
+        assert np.isfinite(values[41:199, 41:199]).all()  # their own DTM, filled
+    np.testing.assert_allclose(made[0][41:199, 41:199], made[1][41:199, 41:199], atol=1e-3)
+
+
+def test_a_damaged_file_is_named_in_words_by_the_tiled_dtm_from_classes(delivery, tmp_path):
+    """The sample of the first points before the tiles read a truncated LAZ with no guard: lazrs's own error
+    and a traceback, where a filter's run names the damaged file (a code reviewer)."""
+    folder = tmp_path / "survey"
+    folder.mkdir()
+    (folder / "cut.laz").write_bytes(delivery.read_bytes()[:4000])
+    with pytest.raises(GroundSieveError) as err:
+        run_ground_filter(str(folder), None, ClassGround(), options=FilterOptions(keep_existing_classes=True),
+                          dtm_path=str(tmp_path / "d.tif"))
+    assert "cut.laz" in str(err.value)

@@ -467,3 +467,20 @@ def test_a_stray_point_that_stretches_the_dtm_is_said(tmp_path):
     run_ground_filter(str(tmp_path / "clean.laz"), None, SMRF(), dtm_path=str(tmp_path / "f.tif"),
                       dtm=DTMOptions(cell_size_m=1.0), log=lines.append)
     assert not any("far from the others" in line for line in lines)
+
+
+def test_return_number_0_is_no_number_not_an_earlier_return(scene, tmp_path):
+    """A writer's "0 of 1" (return number 0: none written) made every ground point a non-last return: a false
+    warning of canopy in the ground, and with 'only last returns' every point left out, "no point is left to
+    filter" (a code reviewer). Such a point is neither warned about nor left out."""
+    cloud = read_cloud(scene.path)
+    n = len(cloud)
+    src = tmp_path / "zero.las"
+    write_las(new_las(cloud.x, cloud.y, cloud.z, return_number=np.zeros(n, np.uint8),
+                      number_of_returns=np.ones(n, np.uint8)), str(src))
+    for last in (False, True):
+        lines = []
+        run = run_ground_filter(str(src), str(tmp_path / "out.las"), SMRF(),
+                                options=FilterOptions(last_returns_only=last), log=lines.append)
+        assert run.filtered.all() and run.ground.any()
+        assert not [line for line in lines if "are not the last return of their pulse" in line]

@@ -347,8 +347,13 @@ def test_a_csv_s_text_columns_a_selection_and_a_delimited_text_table(groundsieve
         assert result["COUNT"] == 40
         selected = QgsProcessingFeatureSourceDefinition(table.id(), True)
         table.selectByIds([1, 2])
-        with pytest.raises(QgsProcessingException, match=r"only the selected features .* its file is read whole"):
+        with pytest.raises(QgsProcessingException, match=r"only some rows are asked for .* its file is read whole"):
             processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": selected, "Z_FIELD": "Elev_ortho",
+                                                    "OUTPUT_HTML": str(tmp_path / "r2.html")})
+        table.removeSelection()
+        assert table.setSubsetString('"Name" = \'CP1\'')  # (a layer's filter was ignored: 40 used for 1, a reviewer)
+        with pytest.raises(QgsProcessingException, match=r"only some rows are asked for .* its file is read whole"):
+            processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": table.id(), "Z_FIELD": "Elev_ortho",
                                                     "OUTPUT_HTML": str(tmp_path / "r2.html")})
     finally:
         QgsProject.instance().removeMapLayer(table.id())
