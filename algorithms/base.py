@@ -310,28 +310,29 @@ def dtm_classes_parameter(name):
     return param
 
 
+def _advanced(param, text):
+    """``param`` among the advanced parameters, with the tooltip ``text``."""
+    param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
+    param.setHelp(text)
+    return param
+
+
 def dtm_max_distance_parameter(name):
     """The DTM's gap limit (ground filters and rfclassify), advanced."""
-    param = QgsProcessingParameterNumber(
+    return _advanced(QgsProcessingParameterNumber(
         name, "DTM: leave cells farther than this from any ground point empty (m, 0 = no limit)",
-        type=QgsProcessingParameterNumber.Type.Double, defaultValue=0.0, minValue=0.0)
-    param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
-    param.setHelp("A data gap (a missing tile, water without returns) is otherwise bridged by the "
-                  "triangulation: cells whose centre is farther than this from the centre of every cell holding a "
-                  "ground point stay nodata. In a survey, "
-                  "keep it at most the tile buffer.")
-    return param
+        type=QgsProcessingParameterNumber.Type.Double, defaultValue=0.0, minValue=0.0),
+        "A data gap (a missing tile, water without returns) is otherwise bridged by the triangulation: cells whose "
+        "centre is farther than this from the centre of every cell holding a ground point stay nodata. In a survey, "
+        "keep it at most the tile buffer.")
 
 
 def dtm_extent_parameter(name):
     """The DTM's extent (ground filters, the DTM from classes, rfclassify), advanced."""
-    param = QgsProcessingParameterExtent(name, "DTM extent (empty = the points')", optional=True)
-    param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
-    param.setHelp("The DTM covers this extent, widened to whole cells on multiples of the cell size: two epochs' "
-                  "DTMs, or a hydraulic model's domain, on one grid of one size; cells beyond the points' own DTM are "
-                  "nodata (the fill stops there too). "
-                  "An extent in another CRS is reprojected to the cloud's.")
-    return param
+    return _advanced(QgsProcessingParameterExtent(name, "DTM extent (empty = the points')", optional=True),
+                     "The DTM covers this extent, widened to whole cells on multiples of the cell size: two epochs' "
+                     "DTMs, or a hydraulic model's domain, on one grid of one size; cells beyond the points' own DTM "
+                     "are nodata (the fill stops there too). An extent in another CRS is reprojected to the cloud's.")
 
 
 def dtm_extent_value(algorithm, parameters, name, context, input_path):
