@@ -62,7 +62,8 @@ class AccuracyAlgorithm(Discoverable, QgsProcessingAlgorithm):
         "CHECKPOINTS": "Surveyed checkpoints: a point layer, or the survey's text or CSV file as it is (its x and "
                        "y then in the DTM's CRS). Their heights must be in the DTM's vertical datum and unit.",
         "Z_FIELD": "The field of the checkpoints' heights; empty = the points' Z (or a text file's z column).",
-        "ID_FIELD": "The field naming each checkpoint in the report; empty = the feature id (or the file's line).",
+        "ID_FIELD": "The field naming each checkpoint in the report; empty = the feature id (a file's id, name or "
+                    "point column, else its line).",
         "LAND_COVER_FIELD": "NVA (non-vegetated) or VVA (vegetated) per checkpoint, for the figures per land cover; "
                             "other words are mapped in Land cover values.",
         "LAND_COVER_MAP": "The land-cover field's other words as NVA or VVA, e.g. road=NVA,grass=NVA,forest=VVA.",
@@ -236,7 +237,7 @@ checkpoints.</p>""")
                     raise QgsProcessingException(why)
             if table:
                 x, y, z, ids, covers, geometries = self.readCheckpointFile(parameters, context, feedback, table,
-                                                                           mapping, fields_offered=source is not None)
+                                                                           mapping)
             else:
                 x, y, z, ids, covers, geometries = self.readCheckpoints(parameters, context, feedback, source, layer,
                                                                         mapping, land_cover_of, errors)
@@ -389,24 +390,32 @@ checkpoints.</p>""")
         except OSError:
             return path  # (the reader names what is wrong)
 
-    def readCheckpointFile(self, parameters, context, feedback, path, mapping, fields_offered=True):  # noqa: N802
+    def readCheckpointFile(self, parameters, context, feedback, path, mapping):  # noqa: N802
         """readCheckpoints' values from a text or CSV file: its columns found by their header words, or
         named by the field parameters; x and y taken in the DTM's CRS."""
-        from ..core.io.checkpoints import read_checkpoints
+        from ..core.io.checkpoints import UnknownLandCover, read_checkpoints
+        from ..core.raster.accuracy import empty_heights
         named = {column: self.parameterAsString(parameters, name, context) or ""
                  for column, name in (("z", self.Z_FIELD), ("id", self.ID_FIELD), ("land_cover", self.LAND_COVER_FIELD))}
         from ..core.errors import InputError
         try:
-            # (a land-cover column is read only when chosen, as a layer's, where QGIS offers the file's columns: a
-            # "cover" column of other words refused a run whose land-cover field was left empty, a power user; a
-            # file QGIS opens as no table offers none, and its class column is read as the command line reads it)
-            checkpoints = read_checkpoints(path, mapping=mapping, columns=named,
-                                           land_cover=bool(named["land_cover"]) or not fields_offered)
+            try:
+                checkpoints = read_checkpoints(path, mapping=mapping, columns=named)
+            except UnknownLandCover as err:
+                if named["land_cover"]:
+                    raise
+                # (a "cover" column found by its header word, of words this check does not know, refused a run
+                # whose land-cover field was left empty: a power user; the figures without it, and why)
+                checkpoints = read_checkpoints(path, mapping=mapping, columns=named, land_cover=False)
+                self.warn(feedback, f"the file's land-cover column is left out: {err}; map its words in "
+                                    f"'{self.label(self.LAND_COVER_MAP)}' for the NVA and VVA figures")
         except InputError as err:  # (x and y of other words, or no header: QGIS's delimited text layer names them)
             if "header" not in str(err):
                 raise
             raise InputError(f"{err}; or add the file as a delimited text layer with its X and Y fields and give "
                              "that layer") from None
+        for text in empty_heights(checkpoints):
+            self.warn(feedback, text)
         self.warn(feedback, f"{self.label(self.CHECKPOINTS).split(' (')[0]} '{path}': a text file without a CRS, read "
                             f"as x (easting), y (northing), z in the DTM's CRS, {len(checkpoints)} checkpoint(s); their "
                             "heights are taken as they are: they must be in the DTM's vertical datum (geoid) and unit")

@@ -55,7 +55,11 @@ the ground points unless <i>DTM: fill cells outside the ground hull</i> is ticke
 ground, whatever the filter made of them; for a flood model, with <i>Keep existing classes</i>, the
 DTM then holds the vendor's water surface while bridge decks (17) stay out of it. <i>DTM: leave cells
 farther than this from any ground point empty</i> (advanced, 0 = no limit): data gaps are otherwise
-bridged by the triangulation.</p>
+bridged by the triangulation. <i>DTM extent</i> (advanced): the DTM covers it, widened to whole cells on multiples of the cell size, nodata
+beyond the points' own DTM: two epochs' DTMs or a model's domain on one grid of one size. QGIS writes an
+extent xmin,xmax,ymin,ymax (an extent in another CRS is reprojected to the cloud's); one that misses the
+points, or is thousands of times their area, is refused. Heights of 32,768 or more (a geocentric export) make a
+Float64 DTM, others Float32.</p>
 <p><b>Ground points as a vector layer</b> (advanced, off by default): the ground points as a PointZ layer with return
 number and intensity; meant for small clouds.</p>
 <p>Outputs are written under a temporary name (<code>.NAME.gs&lt;process id&gt;-&lt;random&gt;.part</code> and the

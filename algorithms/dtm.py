@@ -18,6 +18,8 @@ class DTMFromClassesAlgorithm(GroundFilterAlgorithm):
         CLASSES="The classes whose points make the DTM, as the cloud has them (2 = ground; e.g. 2,9 with water, "
                 "2,9,11 with a road surface). Nothing is filtered again.",
         IGNORE_CLASSES="Points of these classes stay out of the DTM and of its extent (7 and 18, noise, by default).",
+        INPUT="A classified LAS/LAZ (1.2-1.4), a folder of them or a .vpc (a survey, in buffered tiles); a text file "
+              "carries no classes. Only read, never changed.",
         TILE_BUFFER="The margin read around each tile; -1 = 40 m: gaps in the ground up to this wide are bridged "
                     "as a run of the whole cloud bridges them.",
         DTM="The DTM: a cloud-optimised GeoTIFF of the triangulation of the ground classes' points.")
@@ -56,10 +58,13 @@ from the ground that are terrain too: 8 (model key points), 10 (rail), 11 (road 
 (6 building, 17 bridge deck, ...) is warned about.
 <b>Ignored classes</b> (default <code>7,18</code>, noise): left out of the DTM's extent too, so that a
 stray noise point far away does not stretch the grid; withheld points always are.
-<b>DTM cell size (m)</b>: in the unit of the cloud's CRS when you set it; the default 1 m is converted
+<b>DTM cell size (m)</b>: in the unit of the cloud's CRS when you set it; the default 1 m is 3 ft
 for a cloud in feet. <b>Fill cells outside the ground hull</b>: nearest value instead of nodata (-9999).
 <b>Leave cells farther than this from any ground point empty</b> (advanced, 0 = no limit): data gaps
-are otherwise bridged by the triangulation.</p>
+are otherwise bridged by the triangulation. <i>DTM extent</i> (advanced): the DTM covers it, widened to whole cells on multiples of the cell size, nodata
+beyond the points' own DTM: two epochs' DTMs or a model's domain on one grid of one size. QGIS writes an
+extent xmin,xmax,ymin,ymax (an extent in another CRS is reprojected to the cloud's); one that misses the
+points, or is thousands of times their area, is refused.</p>
 <h3>Surveys</h3>
 <p>A folder, a .vpc, a tile size or a cloud beyond the memory budget runs in square tiles, each
 triangulated with a buffer of 40 m around it (or <i>Tile buffer</i>): a gap in the ground up to that

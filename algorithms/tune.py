@@ -43,7 +43,7 @@ class TuneAlgorithm(Discoverable, QgsProcessingAlgorithm):
         "SECONDS": "Stop the search after this long and keep the best so far; 0 = no limit.",
         "SELECTION": "The set with the lowest error, or the one-standard-error rule: of the sets within one standard "
                      "error of the lowest, the one nearest the starting set (for a small or mixed patch).",
-        "START_PRESET": "Search from this preset (e.g. uav-photogrammetry-smrf); the parameters the search does not "
+        "START_PRESET": "Search from this preset (e.g. uav-photogrammetry-smrf.json); the parameters the search does not "
                         "cover keep its values.",
         "OUTPUT_PRESET": "The chosen set as a preset file: give it as the filter's Preset to run the survey with it.",
         "OUTPUT_HTML": "The report: the error of every set tried, one plot per parameter and the confusion matrices.",

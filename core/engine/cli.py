@@ -73,7 +73,7 @@ def _add_common(parser: argparse.ArgumentParser) -> None:
     io.add_argument("--dtm", metavar="PATH", help="DTM GeoTIFF (optional)")
     _add_json(io)
     io.add_argument("--dtm-cell", type=float, default=dt["cell_size_m"], metavar="M", action=_TYPED_CELL,
-                    help="DTM cell size (m; default %(default)s)")
+                    help="DTM cell size (m; default %(default)s, 3 ft in a CRS in feet; typed, in the CRS's unit)")
     io.add_argument("--dtm-fill", action=argparse.BooleanOptionalAction, default=dt["fill_outside_hull"],
                     help="fill DTM cells outside the ground hull (nearest value; default %(default)s)")
     io.add_argument("--dtm-extent", default="", metavar="XMIN,YMIN,XMAX,YMAX",
@@ -107,7 +107,8 @@ def _add_tiles(parser: argparse.ArgumentParser) -> None:
     tiles.add_argument("--tile-size", type=float, default=to["tile_size_m"], metavar="M",
                        help="tile size (m; 0 = from the memory budget; default %(default)s)")
     tiles.add_argument("--tile-buffer", type=float, default=-1.0, metavar="M",
-                       help="tile buffer (m; -1 = the filter's own reach; default %(default)s)")
+                       help="tile buffer (m; -1 = the filter's own reach, 40 m for the DTM from classes; default "
+                            "%(default)s)")
     tiles.add_argument("--memory-budget", type=float, default=to["memory_budget_mb"], metavar="MB",
                        help="memory budget (MB; 0 = a quarter of the RAM, at most 2048; default %(default)s): the tiles' "
                             "points and grids; each worker process also holds Python and its libraries (about "
@@ -264,7 +265,7 @@ def _add_dtm(sub) -> None:
     io.add_argument("--ignore-classes", default="7,18", metavar="LIST",
                     help="classes left out of the DTM and of its extent, e.g. noise; '' = none (default %(default)s)")
     io.add_argument("--dtm-cell", type=float, default=dt["cell_size_m"], metavar="M", action=_TYPED_CELL,
-                    help="DTM cell size (m; default %(default)s)")
+                    help="DTM cell size (m; default %(default)s, 3 ft in a CRS in feet; typed, in the CRS's unit)")
     io.add_argument("--dtm-fill", action=argparse.BooleanOptionalAction, default=dt["fill_outside_hull"],
                     help="fill DTM cells outside the ground hull (nearest value; default %(default)s)")
     io.add_argument("--dtm-extent", default="", metavar="XMIN,YMIN,XMAX,YMAX",

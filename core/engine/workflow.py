@@ -149,8 +149,11 @@ def parse_extent(value) -> Optional[Tuple[float, float, float, float]]:
     return xmin, ymin, xmax, ymax
 
 
-#: a DTM extent more than this many times the area of the points' box (and over 1 km²) is refused
+#: a DTM extent more than this many times the area of the points' box, and over EXTENT_AREA_M2, is refused: the
+#: other order of its numbers makes boxes thousands of km wide; a model's domain of a few km around a small
+#: survey stays (a technical writer: 2.5 x 2 km around a 60 m plot was refused at 1 km²)
 EXTENT_AREA_RATIO = 1000.0
+EXTENT_AREA_M2 = 1e11
 
 
 def check_extent(options: "DTMOptions", xmin: float, ymin: float, xmax: float, ymax: float) -> None:
@@ -163,7 +166,7 @@ def check_extent(options: "DTMOptions", xmin: float, ymin: float, xmax: float, y
     ex0, ey0, ex1, ey1 = options.extent
     meets = ex0 <= xmax and xmin <= ex1 and ey0 <= ymax and ymin <= ey1
     area, points_area = (ex1 - ex0) * (ey1 - ey0), max(xmax - xmin, 1.0) * max(ymax - ymin, 1.0)
-    if meets and (area <= EXTENT_AREA_RATIO * points_area or area <= 1e6 / options.metres_per_unit ** 2):
+    if meets and (area <= EXTENT_AREA_RATIO * points_area or area <= EXTENT_AREA_M2 / options.metres_per_unit ** 2):
         return
     why = "does not meet them" if not meets else f"is {area / points_area:,.0f} times their area"
     raise InvalidParameterError(
@@ -393,7 +396,8 @@ def canopy_ground_note(ground: int, not_last: int, algorithm=None) -> str:
     return (f"{WARNING_PREFIX}{not_last:,} of the {ground:,} ground points ({100 * not_last / ground:.0f} %) are not "
             "the last return of their pulse: the pulse went on below them, so the ground there is likely canopy "
             "(or roofs' edges), and the DTM lies on it. Check the DTM under vegetation; 'Filter only last returns' "
-            "keeps such points out of the ground, and another filter or setting may follow the terrain better.")
+            "(--last-returns) keeps such points out of the ground, and another filter or setting may follow the "
+            "terrain better.")
 
 
 def demoted_note(had: int, demoted: int, algorithm=None) -> str:

@@ -66,6 +66,8 @@ class Checkpoints:
     ids: Tuple[str, ...]
     land_cover: Optional[Tuple[str, ...]] = None
     source: str = "checkpoints"
+    #: the checkpoints left out for an empty height (their ids): a mark not observed, as a layer's NULL
+    no_height: Tuple[str, ...] = ()
 
     def __len__(self) -> int:
         return len(self.x)
@@ -237,12 +239,18 @@ def read_checkpoints(path: str, *, mapping: Optional[Dict[str, str]] = None,
     if not lines:
         raise InputError(f"{path}: holds a header and no checkpoints")
     needed = max(columns.values()) + 1
-    xyz, ids, covers = [], [], []
+    xyz, ids, covers, no_height = [], [], [], []
     for n, line in lines:
         fields = _split(line, delimiter)
         if len(fields) < max(columns[c] for c in ("x", "y", "z")) + 1:
             raise InputError(f"{path}, line {n}: {len(fields)} field(s), expected {needed} "
                              f"({', '.join(c for c, _i in sorted(columns.items(), key=lambda kv: kv[1]))})")
+        i = columns.get("id")
+        if not fields[columns["z"]].strip() and all(fields[columns[c]].strip() for c in ("x", "y")):
+            # (an empty height: a mark not observed, left out and named as a layer's NULL height is; the
+            # whole file was refused, a technical writer)
+            no_height.append(fields[i] if i is not None and i < len(fields) and fields[i] else f"line {n}")
+            continue
         row = []
         for column in ("x", "y", "z"):
             value = _number(fields[columns[column]], decimal_comma)
@@ -259,6 +267,8 @@ def read_checkpoints(path: str, *, mapping: Optional[Dict[str, str]] = None,
                 covers.append(land_cover_of(value, mapping))
             except UnknownLandCover as err:
                 raise UnknownLandCover(f"{path}, line {n}: {err}") from None
-    xyz = np.asarray(xyz, dtype=np.float64)
+    if not xyz:
+        raise InputError(f"{path}: every checkpoint's height (column z) is empty: is it the column of their heights?")
+    xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
     return Checkpoints(xyz[:, 0].copy(), xyz[:, 1].copy(), xyz[:, 2].copy(), tuple(ids),
-                       tuple(covers) if "land_cover" in columns else None, source=path)
+                       tuple(covers) if "land_cover" in columns else None, source=path, no_height=tuple(no_height))

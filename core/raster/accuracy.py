@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 import os
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Optional, Sequence, Tuple
 
@@ -384,10 +385,21 @@ def _warnings(n, status, ids, labelled, classes, covers, used, outliers, checkpo
 
 def check_accuracy_of(dtm_path: str, checkpoints: Checkpoints, *, band: int = 1,
                       name: Optional[str] = None) -> AccuracyResult:
-    """:func:`check_accuracy` of checkpoints read by core/io/checkpoints.py."""
-    return check_accuracy(dtm_path, checkpoints.x, checkpoints.y, checkpoints.z, ids=checkpoints.ids,
-                          land_cover=checkpoints.land_cover, band=band, name=name,
-                          checkpoints_name=checkpoints.source)
+    """:func:`check_accuracy` of checkpoints read by core/io/checkpoints.py; those left out for an empty
+    height are named in the warnings."""
+    result = check_accuracy(dtm_path, checkpoints.x, checkpoints.y, checkpoints.z, ids=checkpoints.ids,
+                            land_cover=checkpoints.land_cover, band=band, name=name,
+                            checkpoints_name=checkpoints.source)
+    return dataclasses.replace(result, warnings=empty_heights(checkpoints) + result.warnings)
+
+
+def empty_heights(checkpoints: Checkpoints) -> tuple:
+    """The warning on the checkpoints of a file left out for an empty height, as a tuple (empty without)."""
+    left = checkpoints.no_height
+    if not left:
+        return ()
+    return (f"{len(left)} checkpoint(s) with an empty height left out: {', '.join(left[:12])}"
+            + (" ..." if len(left) > 12 else ""),)
 
 
 # -- outputs ----------------------------------------------------------------------------------

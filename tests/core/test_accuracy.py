@@ -489,3 +489,22 @@ def test_a_file_without_header_names_its_columns_as_qgis_lists_them(tmp_path):
     with pytest.raises(InputError, match="'forest' is not a land cover"):
         read_checkpoints(str(covered))
     assert read_checkpoints(str(covered), land_cover=False).land_cover is None
+
+
+def test_an_empty_height_in_a_file_leaves_the_checkpoint_out_and_names_it(dtm, tmp_path):
+    """A checkpoint file with an empty height (a mark not observed) was refused whole ("'' is not a number"),
+    where a layer's NULL height leaves the checkpoint out and names it (a technical writer): the same now."""
+    x, y = points(30, seed=3)
+    z = plane(x, y) + 0.01
+    cp = tmp_path / "cp.csv"
+    cp.write_text("id,x,y,z\n" + "".join(f"P{i},{x[i]:.3f},{y[i]:.3f},{'' if i == 4 else f'{z[i]:.3f}'}\n"
+                                          for i in range(30)))
+    out, stdout = io.StringIO(), io.StringIO()
+    assert main(["accuracy", dtm, str(cp), "--json"], out=out, stdout=stdout) == 0, out.getvalue()
+    doc = json.loads(stdout.getvalue())
+    assert doc["count"] == 29
+    assert "WARNING: 1 checkpoint(s) with an empty height left out: P4" in out.getvalue()
+    empty = tmp_path / "empty.csv"
+    empty.write_text("id,x,y,z\n" + "".join(f"P{i},{x[i]:.3f},{y[i]:.3f},\n" for i in range(3)))
+    with pytest.raises(InputError, match="every checkpoint's height .* is empty"):
+        read_checkpoints(str(empty))
