@@ -1521,7 +1521,7 @@ def test_ground_that_is_not_its_pulse_s_last_return_is_warned_about(scene_laz, t
         said[name] = [line for line in lines if "are not the last return of their pulse" in line]
     assert said["smrf"] == []
     assert len(said["canopy"]) == 1 and said["canopy"][0].startswith(WARNING_PREFIX)
-    assert "'Filter only last returns' keeps such points out" in said["canopy"][0]
+    assert "'Filter only last returns' (--last-returns) keeps such points out" in said["canopy"][0]
 
 
 def test_a_dtm_of_an_extent_reads_only_the_files_that_reach_it(tmp_path):
