@@ -536,9 +536,6 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
         log(f"{WARNING_PREFIX}the tile buffer ({buffer_m:g} m) is less than the filter's reach ({reach:g} m): points "
             "near the tile edges may be classified otherwise than in a run of the whole cloud, and the DTM may show "
             "the tile lines; leave the buffer at -1 (the filter's reach) unless you mean it.")
-    if dtm_path and dtm.extent is not None and not output_path:
-        inputs, infos, outs = _files_for_extent(inputs, infos, outs, dtm.extent, 2 * buffer_m, log)
-        dtm_grid = survey_dtm_grid(infos, dtm.cell_size_m, dtm.extent)
     density = sample_density(next(i.path for i in infos if i.count))
     cluster = None
     from .cluster import parse_scheduler
@@ -554,22 +551,6 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
         if cluster is not None:
             cluster.close()
         raise
-
-
-def _files_for_extent(inputs, infos, outs, extent, margin: float, log):
-    """The files a DTM of ``extent`` needs when no classified copy is asked for: those whose header bounds
-    come within ``margin`` (twice the tile buffer: the points that reach the extent's cells, and the points
-    that decide theirs) of it. A DTM for a model's domain from a county's survey read every tile of it (a code
-    reviewer); the DTM within the extent is the same from these."""
-    x0, y0, x1, y1 = extent
-    keep = [k for k, i in enumerate(infos)
-            if i.count and i.mins[0] <= x1 + margin and i.maxs[0] >= x0 - margin
-            and i.mins[1] <= y1 + margin and i.maxs[1] >= y0 - margin]
-    if len(keep) == len(infos) or not keep:
-        return inputs, infos, outs
-    log(f"DTM extent: {len(keep):,} of the {len(infos):,} input files reach it (within {margin:g} of it, twice the "
-        "tile buffer); the others are not read, as no classified copy is asked for.")
-    return [inputs[k] for k in keep], [infos[k] for k in keep], [outs[k] for k in keep]
 
 
 def _say_tiles_beyond_workers(size: float, buffer_m: float, density: float, per_task: int, tiling: TileOptions,

@@ -1522,30 +1522,3 @@ def test_ground_that_is_not_its_pulse_s_last_return_is_warned_about(scene_laz, t
     assert said["smrf"] == []
     assert len(said["canopy"]) == 1 and said["canopy"][0].startswith(WARNING_PREFIX)
     assert "'Filter only last returns' (--last-returns) keeps such points out" in said["canopy"][0]
-
-
-def test_a_dtm_of_an_extent_reads_only_the_files_that_reach_it(tmp_path):
-    """A DTM for a model's domain from a county's survey read and filtered every tile of it (a code reviewer):
-    without a classified copy asked for, only the files within twice the tile buffer of the extent are read,
-    and the DTM in the extent is the one a run of every file makes."""
-    from osgeo import gdal
-    s = make_scene(SceneSpec(size_m=480.0, density_per_m2=1.5, seed=8))
-    src = tmp_path / "scene.laz"
-    write_scene(s, src)
-    west, east = _split_files(str(src), tmp_path / "in", float(s.x.min()) + 240.0)
-    x0, y0 = float(np.floor(s.x.min())), float(np.floor(s.y.min()))
-    extent = (x0 + 20.0, y0 + 100.0, x0 + 120.0, y0 + 200.0)  # (more than 2 x 38 m from the east file)
-    made, logs = [], []
-    for output in (str(tmp_path / "all.vpc"), None):
-        lines, dtm = [], tmp_path / f"dtm{len(made)}.tif"
-        run = run_ground_filter(str(tmp_path / "in"), output, SMRF(), options=tiled(), dtm_path=str(dtm),
-                                dtm=DTMOptions(extent=extent), log=lines.append)
-        ds = gdal.Open(str(dtm))
-        made.append((ds.GetGeoTransform(), ds.ReadAsArray()))
-        del ds
-        logs.append((run, lines))
-    assert [line for line in logs[1][1] if "1 of the 2 input files reach it" in line]
-    assert logs[1][0].point_count < logs[0][0].point_count
-    assert not [line for line in logs[0][1] if "input files reach it" in line]  # (a classified copy: every file)
-    assert made[0][0] == made[1][0]
-    np.testing.assert_allclose(made[0][1], made[1][1], atol=1e-4)
