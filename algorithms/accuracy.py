@@ -402,7 +402,7 @@ checkpoints.</p>""")
             try:
                 checkpoints = read_checkpoints(path, mapping=mapping, columns=named)
             except UnknownLandCover as err:
-                if named["land_cover"]:
+                if named["land_cover"] or mapping:  # (a map typed for it: its typo is said, as for a layer)
                     raise
                 # (a "cover" column found by its header word, of words this check does not know, refused a run
                 # whose land-cover field was left empty: a power user; the figures without it, and why)

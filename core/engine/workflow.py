@@ -149,26 +149,42 @@ def parse_extent(value) -> Optional[Tuple[float, float, float, float]]:
     return xmin, ymin, xmax, ymax
 
 
-#: a DTM extent more than this many times the area of the points' box, and over EXTENT_AREA_M2, is refused: the
-#: other order of its numbers makes boxes thousands of km wide; a model's domain of a few km around a small
-#: survey stays (a technical writer: 2.5 x 2 km around a 60 m plot was refused at 1 km²)
+#: a DTM extent more than this many times the area of the points' box is refused when its numbers in the other
+#: order (QGIS's xmin,xmax,ymin,ymax against the command line's XMIN,YMIN,XMAX,YMAX) fit the points, and when it
+#: is over EXTENT_AREA_M2 too; a model's domain of a few km around a small survey stays (a technical writer: 2.5 x
+#: 2 km around a 60 m plot was refused at 1 km²), a wrong order in a national grid does not (a code reviewer: in
+#: the British National Grid it made a valid 14 x 14 km box)
 EXTENT_AREA_RATIO = 1000.0
 EXTENT_AREA_M2 = 1e11
 
 
 def check_extent(options: "DTMOptions", xmin: float, ymin: float, xmax: float, ymax: float) -> None:
-    """Refuse a DTM extent that misses the points' box (``xmin`` ... ``ymax``) or dwarfs it, before any work:
+    """Refuse a DTM extent that misses the points' box (``xmin`` ... ``ymax``), one whose numbers in the other
+    order fit them where these dwarf them, or one that dwarfs them beyond any model's domain, before any work:
     QGIS writes an extent xmin,xmax,ymin,ymax and the command line takes XMIN,YMIN,XMAX,YMAX, and one given in
-    the other's order made a valid box thousands of km wide, which the run refused as "2 points lie 4890.7 km
-    from the others" (a power user)."""
+    the other's order made a valid box, refused as "2 points lie 4890.7 km from the others" (a power user)."""
     if options.extent is None:
         return
     ex0, ey0, ex1, ey1 = options.extent
-    meets = ex0 <= xmax and xmin <= ex1 and ey0 <= ymax and ymin <= ey1
-    area, points_area = (ex1 - ex0) * (ey1 - ey0), max(xmax - xmin, 1.0) * max(ymax - ymin, 1.0)
-    if meets and (area <= EXTENT_AREA_RATIO * points_area or area <= EXTENT_AREA_M2 / options.metres_per_unit ** 2):
+    points_area = max(xmax - xmin, 1.0) * max(ymax - ymin, 1.0)
+
+    def meets(x0, y0, x1, y1):
+        return x0 <= xmax and xmin <= x1 and y0 <= ymax and ymin <= y1
+
+    def fits(x0, y0, x1, y1):
+        return x0 < x1 and y0 < y1 and meets(x0, y0, x1, y1) and (x1 - x0) * (y1 - y0) <= EXTENT_AREA_RATIO * points_area
+
+    area = (ex1 - ex0) * (ey1 - ey0)
+    other = (ex0, ex1, ey0, ey1)  # (the middle two exchanged: the same four numbers read in the other order)
+    if not meets(ex0, ey0, ex1, ey1):
+        why = "does not meet them"
+    elif area > EXTENT_AREA_RATIO * points_area and fits(*other):
+        why = (f"is {area / points_area:,.0f} times their area, where its numbers in the other order, x {other[0]:,.2f} "
+               f"to {other[2]:,.2f}, y {other[1]:,.2f} to {other[3]:,.2f}, fit them")
+    elif area > EXTENT_AREA_RATIO * points_area and area > EXTENT_AREA_M2 / options.metres_per_unit ** 2:
+        why = f"is {area / points_area:,.0f} times their area"
+    else:
         return
-    why = "does not meet them" if not meets else f"is {area / points_area:,.0f} times their area"
     raise InvalidParameterError(
         f"DTM extent: x {ex0:,.2f} to {ex1:,.2f}, y {ey0:,.2f} to {ey1:,.2f} {why} (the points span x {xmin:,.2f} "
         f"to {xmax:,.2f}, y {ymin:,.2f} to {ymax:,.2f}): are its numbers in the right order (QGIS writes an extent "

@@ -202,9 +202,12 @@ def read_checkpoints(path: str, *, mapping: Optional[Dict[str, str]] = None,
     if len(first) < 3:
         raise InputError(f"{path}, line {lines[0][0]}: {len(first)} field(s); a checkpoint needs x, y and z "
                          f"({'spaces' if delimiter is None else repr(delimiter)} taken as the delimiter)")
-    header = any(_number(f, decimal_comma) is None for f in first[:3]) and \
+    def number_or_empty(f):  # (an empty height is a mark not observed, not a header's word)
+        return _number(f, decimal_comma) is not None or not f.strip()
+
+    header = any(not number_or_empty(f) for f in first[:3]) and \
         not (len(first) >= 4 and _number(first[0], decimal_comma) is None
-             and all(_number(f, decimal_comma) is not None for f in first[1:4]))
+             and all(_number(f, decimal_comma) is not None for f in first[1:3]) and number_or_empty(first[3]))
     named = {k: v for k, v in (columns or {}).items() if v}
     unknown = sorted(set(named) - set(COLUMN_NAMES))
     if unknown:
@@ -222,7 +225,7 @@ def read_checkpoints(path: str, *, mapping: Optional[Dict[str, str]] = None,
     if header:
         columns = _header_columns(first, path, named)
         lines = lines[1:]
-    elif len(first) >= 4 and _number(first[3], decimal_comma) is not None:
+    elif len(first) >= 4 and (_number(first[3], decimal_comma) is not None or _number(first[0], decimal_comma) is None):
         columns = {"id": 0, "x": 1, "y": 2, "z": 3}
         if len(first) >= 5:
             columns["land_cover"] = 4
@@ -246,7 +249,8 @@ def read_checkpoints(path: str, *, mapping: Optional[Dict[str, str]] = None,
             raise InputError(f"{path}, line {n}: {len(fields)} field(s), expected {needed} "
                              f"({', '.join(c for c, _i in sorted(columns.items(), key=lambda kv: kv[1]))})")
         i = columns.get("id")
-        if not fields[columns["z"]].strip() and all(fields[columns[c]].strip() for c in ("x", "y")):
+        if not fields[columns["z"]].strip() and all(_number(fields[columns[c]], decimal_comma) is not None
+                                                    for c in ("x", "y")):
             # (an empty height: a mark not observed, left out and named as a layer's NULL height is; the
             # whole file was refused, a technical writer)
             no_height.append(fields[i] if i is not None and i < len(fields) and fields[i] else f"line {n}")

@@ -508,3 +508,24 @@ def test_an_empty_height_in_a_file_leaves_the_checkpoint_out_and_names_it(dtm, t
     empty.write_text("id,x,y,z\n" + "".join(f"P{i},{x[i]:.3f},{y[i]:.3f},\n" for i in range(3)))
     with pytest.raises(InputError, match="every checkpoint's height .* is empty"):
         read_checkpoints(str(empty))
+
+
+@pytest.mark.parametrize("text, kept, left", [
+    ("P0,500062.3,5000020.5,\nP1,500063,5000021,81.5\n", ("P1",), ("P0",)),  # (the first line's, no header)
+    ("P1;100;200;\nP2;101;201;5\n", ("P2",), ("P1",)),
+])
+def test_empty_heights_however_written_are_left_out(tmp_path, text, kept, left):
+    """A code reviewer: an empty height on the first line of a file without header was taken for a header. (A
+    line short of its height's field, "P2,101,201", stays refused: it may as well be cut short.)"""
+    path = tmp_path / "cp.csv"
+    path.write_text(text)
+    cp = read_checkpoints(str(path))
+    assert cp.ids == kept and cp.no_height == left
+
+
+def test_bad_coordinates_beside_an_empty_height_are_still_refused(tmp_path):
+    """'P2,abc,def,' was left out as an empty height (a code reviewer): its coordinates are refused."""
+    path = tmp_path / "cp.csv"
+    path.write_text("P3,1,2,3\nP2,abc,def,\n")
+    with pytest.raises(InputError, match=r"line 2: 'abc' is not a number \(column x\)"):
+        read_checkpoints(str(path))

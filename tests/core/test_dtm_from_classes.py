@@ -588,3 +588,25 @@ def test_a_damaged_file_is_named_in_words_by_the_tiled_dtm_from_classes(delivery
         run_ground_filter(str(folder), None, ClassGround(), options=FilterOptions(keep_existing_classes=True),
                           dtm_path=str(tmp_path / "d.tif"))
     assert "cut.laz" in str(err.value)
+
+
+def test_an_extent_in_the_other_order_is_refused_in_a_national_grid_and_a_model_domain_is_not(tmp_path):
+    """In the British National Grid (x and y within 316 km of each other) the other order of a plot's extent
+    made a valid 14 x 14 km box, which a size rule of 100,000 km² let through (a code reviewer); a model's
+    domain of 2.5 x 2 km around a 60 m plot had been refused by a rule of 1 km² (a technical writer). The
+    other order is refused where its numbers fit the points; a large extent that fits no other way is taken."""
+    rng = np.random.default_rng(8)
+    n = 8_000
+    x, y = 384000.0 + rng.uniform(0, 100, n), 398000.0 + rng.uniform(0, 100, n)
+    src = tmp_path / "bng.laz"
+    write_las(new_las(x, y, 50 + rng.normal(0, 0.05, n), classification=np.full(n, 2, np.uint8)), str(src))
+    with pytest.raises(InvalidParameterError, match=r"where its numbers in the other order, x 384,000.00 to "
+                                                     r"384,100.00, y 398,000.00 to 398,100.00, fit them"):
+        run_ground_filter(str(src), None, ClassGround(), options=FilterOptions(keep_existing_classes=True),
+                          dtm_path=str(tmp_path / "d.tif"),
+                          dtm=DTMOptions(cell_size_m=5.0, extent=(384000, 384100, 398000, 398100)))  # (QGIS's order)
+    domain = (383000.0, 397000.0, 385500.0, 399000.0)  # (2.5 x 2 km around the plot: 500 times its area)
+    run_ground_filter(str(src), None, ClassGround(), options=FilterOptions(keep_existing_classes=True),
+                      dtm_path=str(tmp_path / "domain.tif"), dtm=DTMOptions(cell_size_m=5.0, extent=domain))
+    values, x0, top, cell = _read(tmp_path / "domain.tif")
+    assert (x0, top, cell) == (383000.0, 399000.0, 5.0) and values.shape == (400, 500)

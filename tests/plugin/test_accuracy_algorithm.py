@@ -367,7 +367,12 @@ def test_a_csv_s_text_columns_a_selection_and_a_delimited_text_table(groundsieve
     covered.write_text("x,y,z,cover\n" + "".join(f"{x[i]!r},{y[i]!r},{z[i]!r},forest\n" for i in range(30)))
     result = processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": str(covered),
                                                      "OUTPUT_HTML": str(tmp_path / "r5.html")})
-    assert result["COUNT"] == 30 and result["NVA_RMSEZ"] is None  # (no land cover read: none was chosen)
+    assert result["COUNT"] == 30 and result["NVA_RMSEZ"] is None  # (its words unknown and no field chosen: left out)
+    assert "the file's land-cover column is left out" in html.unescape((tmp_path / "r5.html").read_text())
+    # a land-cover map typed for it: its typo is said, as for a layer (a code reviewer)
+    with pytest.raises(QgsProcessingException, match="'forest' is not a land cover this check knows"):
+        processing.run("groundsieve:accuracy", {"DTM": dtm, "CHECKPOINTS": str(covered), "LAND_COVER_MAP": "forrest=VVA",
+                                                "OUTPUT_HTML": str(tmp_path / "r6.html")})
     other = tmp_path / "gk.csv"
     other.write_text("Rechtswert;Hochwert;Hoehe\n" + "".join(f"{x[i]!r};{y[i]!r};{z[i]!r}\n" for i in range(5)))
     with pytest.raises(QgsProcessingException, match="names no x and no y and no z column.*delimited text layer with its X "):
