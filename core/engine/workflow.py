@@ -205,8 +205,6 @@ def extent_grid(options: "DTMOptions", max_cells: Optional[int] = None,
                              bytes_per_cell=bytes_per_cell, closed=True, **extra)
 
 
-
-
 @dataclass
 class FilterRun:
     cloud: PointCloud
