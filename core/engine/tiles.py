@@ -943,7 +943,9 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         from ..raster.geotiff import BlockGeoTIFF
         from .workflow import length_label
         unit = length_label(dtm.metres_per_unit)  # (the notes' and the log's lengths, in the cloud's unit)
-        dtm_writer = BlockGeoTIFF(os.path.join(work, "dtm.tif"), dtm_grid, crs_wkt=crs_wkt)
+        heights = [abs(v) for i in infos if i.count for v in (i.mins[2], i.maxs[2])]
+        dtm_writer = BlockGeoTIFF(os.path.join(work, "dtm.tif"), dtm_grid, crs_wkt=crs_wkt,
+                                  largest_abs=max(heights, default=0.0))
         if rasters is not None:
             rasters.append(dtm_writer)
         if dtm.max_distance_m > grid.buffer:

@@ -166,16 +166,20 @@ class BlockGeoTIFF:
     (internal tiles, DEFLATE, overviews) at the output path, atomically. Blocks never written stay
     nodata. ``write_block`` may be called from several threads."""
 
-    def __init__(self, work_path: str, grid: GridSpec, *, crs_wkt: Optional[str] = None, nodata: float = NODATA):
-        """The work raster is Float64; the COG is Float32 or Float64 by the largest magnitude of the values
-        written (:func:`float_type_for`), as a whole run's DTM decides from its values (deciding from the
-        headers, a noise point's height made a tiled DTM Float64 where the whole run's was Float32)."""
+    def __init__(self, work_path: str, grid: GridSpec, *, crs_wkt: Optional[str] = None, nodata: float = NODATA,
+                 largest_abs: float = 0.0):
+        """The work raster is Float64 when heights of ``largest_abs`` (the headers' largest) need it, else Float32
+        (Float64 always cost 3 times the temporary disk and half as long again to finish, for a Float32 DTM:
+        an HPC reviewer); the COG is Float32 or Float64 by the largest magnitude of the values written
+        (:func:`float_type_for`), as a whole run's DTM decides from its values (deciding from the headers, a
+        noise point's height made a tiled DTM Float64 where the whole run's was Float32)."""
         import threading
 
         from osgeo import gdal
         gdal.UseExceptions()
         self.grid, self.nodata, self.work_path = grid, nodata, work_path
         self._largest = 0.0  # the largest magnitude written
+        self._work_type = np.dtype(float_type_for(largest_abs))
         self._lock = threading.Lock()
         # each row's first and last cell with a value and its count of such cells (blocks never
         # overlap): the cells between a row's first and last value that have none (empty_cells)
@@ -187,7 +191,8 @@ class BlockGeoTIFF:
         self._bottom = np.full(grid.ncols, -1, dtype=np.int64)
         try:
             self._ds = gdal.GetDriverByName("GTiff").Create(
-                work_path, grid.ncols, grid.nrows, 1, gdal.GDT_Float64,
+                work_path, grid.ncols, grid.nrows, 1,
+                gdal.GDT_Float64 if self._work_type == np.float64 else gdal.GDT_Float32,
                 options=["COMPRESS=DEFLATE", "TILED=YES", "BIGTIFF=IF_SAFER", "SPARSE_OK=TRUE", "PREDICTOR=3"])
             self._ds.SetGeoTransform(grid.geotransform)
             self._ds.SetMetadataItem("TIFFTAG_SOFTWARE", software())
@@ -204,7 +209,7 @@ class BlockGeoTIFF:
         """Write ``values`` (row 0 north, NaN = no data) with its north-west cell at (row0, col0)."""
         row0, col0 = int(row0), int(col0)
         valued = ~np.isnan(values)
-        data = np.where(valued, values, self.nodata).astype(np.float64)
+        data = np.where(valued, values, self.nodata).astype(self._work_type)
         largest = float(np.nanmax(np.abs(values))) if valued.any() else 0.0
         r, first, last = _ends(valued, 1)
         c, top, bottom = _ends(valued, 0)
@@ -225,29 +230,31 @@ class BlockGeoTIFF:
         c = self.grid.cell
         col0, row0 = int(round((grid.x0 - self.grid.x0) / c)), int(round((self.grid.top - grid.top) / c))
         col1, row1 = col0 + grid.ncols, row0 + grid.nrows
-        g = self.grid
+        self._band.FlushCache()
+        box = self._written_box()  # (beyond it nothing was written: nodata already)
         # the rows' and columns' ends of the values (empty_cells reads them) are made anew from what is left
         self._first[:], self._last[:], self._valued[:] = np.iinfo(np.int64).max, -1, 0
         self._top[:], self._bottom[:] = np.iinfo(np.int64).max, -1
-        for start in range(0, g.nrows, strip_rows):
-            stop = min(start + strip_rows, g.nrows)
-            inside_rows = max(start, row0), min(stop, row1)
-            if inside_rows[0] >= inside_rows[1]:  # (the whole strip is outside)
-                self._band.WriteArray(np.full((stop - start, g.ncols), self.nodata), xoff=0, yoff=start)
-                continue
-            strip = self._band.ReadAsArray(0, start, g.ncols, stop - start)
+        if box is None:
+            return
+        r0, r1, c0, c1 = box
+        strip_rows = max(1, min(strip_rows, self.STRIP_BYTES // (8 * (c1 - c0))))
+        for start in range(r0, r1, strip_rows):
+            stop = min(start + strip_rows, r1)
+            strip = self._band.ReadAsArray(c0, start, c1 - c0, stop - start)
             keep = np.zeros(strip.shape, dtype=bool)
-            keep[inside_rows[0] - start:inside_rows[1] - start, max(col0, 0):max(min(col1, g.ncols), 0)] = True
+            keep[max(row0, start) - start:max(min(row1, stop) - start, 0),
+                 max(col0 - c0, 0):max(min(col1, c1) - c0, 0)] = True
             if not keep.all():
                 strip[~keep] = self.nodata
-                self._band.WriteArray(strip, xoff=0, yoff=start)
+                self._band.WriteArray(strip, xoff=c0, yoff=start)
             valued = strip != self.nodata
             r, first, last = _ends(valued, 1)
-            self._first[start + r], self._last[start + r] = first, last
+            self._first[start + r], self._last[start + r] = c0 + first, c0 + last
             self._valued[start + r] = valued[r].sum(axis=1)
             cols, top, bottom = _ends(valued, 0)
-            self._top[cols] = np.minimum(self._top[cols], start + top)
-            self._bottom[cols] = np.maximum(self._bottom[cols], start + bottom)
+            self._top[c0 + cols] = np.minimum(self._top[c0 + cols], start + top)
+            self._bottom[c0 + cols] = np.maximum(self._bottom[c0 + cols], start + bottom)
 
     def has_values_in(self, grid: GridSpec) -> bool:
         """Whether a cell of ``grid`` (a part of this raster, on its lattice) may hold a value: a row of it
@@ -273,16 +280,37 @@ class BlockGeoTIFF:
         """Cells written with a value so far."""
         return int(self._valued.sum())
 
-    def _strips(self, strip_rows: int, halo: int = 0):
-        """The raster written, read back ``strip_rows`` rows at a time with up to ``halo`` rows above and
-        below each strip: (its first row, its rows, the rows read above it, the values read). The caller
-        holds the lock."""
+    #: bytes of one strip read back (its rows follow the width read)
+    STRIP_BYTES = 64 << 20
+
+    def _written_box(self, halo: int = 0):
+        """(row0, row1, col0, col1), the half-open box of the rows and columns holding a written value, grown
+        by ``halo`` cells and clipped to the raster; None when nothing holds one. Beyond it every cell is
+        nodata: a DTM extent far wider than the survey was read back whole (an HPC reviewer: 400 M cells and
+        4.8 GB for 5 M values)."""
+        rows, cols = np.flatnonzero(self._last >= 0), np.flatnonzero(self._bottom >= 0)
+        if rows.size == 0 or cols.size == 0:
+            return None
         g = self.grid
+        return (max(int(rows[0]) - halo, 0), min(int(rows[-1]) + 1 + halo, g.nrows),
+                max(int(cols[0]) - halo, 0), min(int(cols[-1]) + 1 + halo, g.ncols))
+
+    def _strips(self, strip_rows: int, halo: int = 0):
+        """The part of the raster that holds values (:meth:`_written_box`, with ``halo`` cells around), read
+        back at most ``strip_rows`` rows (and STRIP_BYTES) at a time with up to ``halo`` rows above and below
+        each strip: (its first row, its rows, the rows read above it, its first column, the values read). The
+        caller holds the lock."""
         self._band.FlushCache()
-        for row0 in range(0, g.nrows, strip_rows):
-            n = min(strip_rows, g.nrows - row0)
-            above, below = min(halo, row0), min(halo, g.nrows - row0 - n)
-            yield row0, n, above, self._band.ReadAsArray(0, row0 - above, g.ncols, n + above + below)
+        box = self._written_box(halo)
+        if box is None:
+            return
+        r0, r1, c0, c1 = box
+        width = c1 - c0
+        strip_rows = max(1, min(strip_rows, self.STRIP_BYTES // (8 * width)))
+        for row0 in range(r0, r1, strip_rows):
+            n = min(strip_rows, r1 - row0)
+            above, below = min(halo, row0 - r0), min(halo, r1 - row0 - n)
+            yield row0, n, above, c0, self._band.ReadAsArray(c0, row0 - above, width, n + above + below)
 
     def isolated_pits_and_spikes(self, strip_rows: int = 1024, check=None, depth: Optional[float] = None) -> tuple:
         """(pits, spikes) of the raster written, each :func:`~groundsieve.core.grids.rasterize.isolated_pits`'
@@ -295,15 +323,15 @@ class BlockGeoTIFF:
         depth = PIT_DEPTH if depth is None else depth
         found = [[0, 0.0, (-1, -1)], [0, 0.0, (-1, -1)]]  # pits, spikes: count, deepest, where
         with self._lock:
-            for row0, n, above, values in self._strips(strip_rows, halo=2):
+            for row0, n, above, col0, values in self._strips(strip_rows, halo=2):
                 values = values.astype(np.float64)
                 values[values == self.nodata] = np.nan
                 for kind in found:
-                    count, drop, r, k = isolated_pits(values, depth=depth, inner=(above, above + n, 0, self.grid.ncols),
+                    count, drop, r, k = isolated_pits(values, depth=depth, inner=(above, above + n, 0, values.shape[1]),
                                                       check=check)
                     kind[0] += count
                     if count and drop > kind[1]:
-                        kind[1], kind[2] = drop, (row0 - above + r, k)
+                        kind[1], kind[2] = drop, (row0 - above + r, col0 + k)
                     np.negative(values, out=values)  # (the spikes next)
         return tuple((count, deepest, where[0], where[1]) for count, deepest, where in found)
 
@@ -335,19 +363,19 @@ class BlockGeoTIFF:
             lo, hi = np.minimum(a[:, 1], b[:, 1]), np.maximum(a[:, 1], b[:, 1])
             margin = margin_cells * g.cell
             cx = g.x0 + (np.arange(g.ncols) + 0.5) * g.cell
-        cols = np.arange(g.ncols)
         enclosed = inside_count = 0
         with self._lock:
             has = self._last >= 0
             holes = bool(np.any(self._last[has] - self._first[has] + 1 - self._valued[has]))
             if not holes and poly is None:
                 return 0, 0
-            for row0, n, _above, values in self._strips(strip_rows):
+            for row0, n, _above, col0, values in self._strips(strip_rows):
                 empty = values == self.nodata
                 rows = np.arange(row0, row0 + n)[:, None]
+                cols = np.arange(col0, col0 + values.shape[1])
                 if holes:
                     between = ((cols[None, :] >= self._first[rows]) & (cols[None, :] <= self._last[rows])
-                               & (rows >= self._top[None, :]) & (rows <= self._bottom[None, :]))
+                               & (rows >= self._top[None, cols]) & (rows <= self._bottom[None, cols]))
                     enclosed += int(np.sum(empty & between))
                 if poly is not None:
                     yc = g.top - (rows[:, 0] + 0.5) * g.cell
@@ -358,7 +386,8 @@ class BlockGeoTIFF:
                     left = np.where(cross, xs, np.inf).min(axis=1) + margin
                     right = np.where(cross, xs, -np.inf).max(axis=1) - margin
                     inside_y = (yc >= poly[:, 1].min() + margin) & (yc <= poly[:, 1].max() - margin)
-                    inside = inside_y[:, None] & (cx[None, :] >= left[:, None]) & (cx[None, :] <= right[:, None])
+                    xs_c = cx[cols]
+                    inside = inside_y[:, None] & (xs_c[None, :] >= left[:, None]) & (xs_c[None, :] <= right[:, None])
                     inside_count += int(np.sum(empty & inside))
         return enclosed, inside_count
 

@@ -385,3 +385,36 @@ def test_a_closed_grid_s_origin_is_the_decimal_its_cell_stands_for():
     assert GridSpec.covering(x, y, 0.25, closed=True).x0 == 500003.5
     third = 1.0 / 3.0  # (a cell of no short decimal keeps its product)
     assert GridSpec.covering(x, y, third, closed=True).x0 == math.floor(500003.7 / third) * third
+
+
+def test_a_sparse_survey_raster_is_read_back_only_where_it_was_written(tmp_path):
+    """A DTM extent far wider than the survey made the tiled run read back its whole work raster for the pits,
+    the empty cells and the blanking beyond the points (an HPC reviewer: 400 M cells, 4.8 GB, for 5 M values).
+    Only the box of the written cells is read now, and the answers are those of the whole raster's."""
+    from groundsieve.core.raster.geotiff import BlockGeoTIFF
+    big = GridSpec(x0=0.0, top=20000.0, cell=1.0, nrows=20000, ncols=20000)  # 400 M cells, never allocated
+    writer = BlockGeoTIFF(str(tmp_path / "work.tif"), big)
+    reads = []
+    band_read = writer._band.ReadAsArray
+
+    class Band:  # (the GDAL band's reads counted)
+        def __getattr__(self, name):
+            return getattr(writer._band_real, name)
+
+        def ReadAsArray(self, *args):  # noqa: N802
+            reads.append(args[2] * args[3])
+            return band_read(*args)
+    writer._band_real, writer._band = writer._band, Band()
+    block = np.full((100, 120), 50.0)
+    block[40, 60] = 40.0  # an isolated pit 10 m deep
+    block[10:13, 10:13] = np.nan  # a hole with values all around
+    writer.write_block(5000, 7000, block)
+    (pits, depth, row, col), _spikes = writer.isolated_pits_and_spikes()
+    assert (pits, row, col) == (1, 5040, 7060) and depth == pytest.approx(10.0)
+    enclosed, _inside = writer.empty_cells()
+    assert enclosed == 9
+    writer.blank_outside(GridSpec(x0=7000.0, top=15000.0, cell=1.0, nrows=50, ncols=120))  # (the block's top half)
+    assert writer._last[5049] >= 0 and writer._last[5050] < 0  # (its bottom half blanked)
+    assert max(reads) <= 110 * 130  # (the written box, with a halo of 2: never the 400 M cells)
+    writer._band = writer._band_real
+    writer.close()
