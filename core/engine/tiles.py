@@ -1095,8 +1095,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     dtm_out = None
     if dtm_writer is not None:
         wanted = workflow.extent_grid(dtm, max_cells=MAX_SURVEY_DTM_CELLS, bytes_per_cell=0.0)
-        dtm_out = _dtm_extent(dtm_writer.grid, area_box, log) if wanted is None else \
-            dtm_writer.grid.window(*_window_of(dtm_writer.grid, wanted))
+        dtm_out = _dtm_extent(dtm_writer.grid, area_box, log) if wanted is None else wanted
         if wanted is not None:  # (an extent without ground is warned about, as a whole run's)
             points = _dtm_extent(dtm_writer.grid, area_box, lambda _m: None)
             if points is not dtm_writer.grid:  # beyond the points' box nodata, as the whole run's DTM placed in it
@@ -1704,13 +1703,6 @@ def _tile_job(job) -> Optional[dict]:
         raise GroundSieveError(f"{where} failed: {type(err).__name__}: {err}") from err
 
 
-def _window_of(full, wanted):
-    """(col0, row0, ncols, nrows) of the grid ``wanted`` in ``full`` (the same lattice, inside it)."""
-    c = full.cell
-    return (int(round((wanted.x0 - full.x0) / c)), int(round((full.top - wanted.top) / c)), wanted.ncols,
-            wanted.nrows)
-
-
 def _dtm_extent(full, box, log):
     """The survey DTM's grid: ``full`` (the headers' bounds) cut to ``box``, the bounds of the points that
     may enter it (neither withheld nor ignored), on the same lattice, as a whole run spans those points
@@ -1721,8 +1713,7 @@ def _dtm_extent(full, box, log):
         return full
     cut = GridSpec.covering(np.array([box[0], box[2]]), np.array([box[1], box[3]]), full.cell, what="DTM",
                             bytes_per_cell=0.0, max_cells=MAX_SURVEY_DTM_CELLS, closed=True)
-    c = full.cell
-    col0, row0 = int(round((cut.x0 - full.x0) / c)), int(round((full.top - cut.top) / c))
+    col0, row0 = full.offset_of(cut)
     # (points beyond the headers' bounds: the cut ends where it would, inside the full grid; a code reviewer)
     col1, row1 = min(col0 + cut.ncols, full.ncols), min(row0 + cut.nrows, full.nrows)
     col0, row0 = max(0, col0), max(0, row0)

@@ -722,15 +722,9 @@ def make_dtm(x, y, z, ground: np.ndarray, options: DTMOptions, why_none: str = "
             if note:
                 log(note)
     if log is not None:
-        from ..grids.rasterize import PIT_DEPTH, isolated_pits
-        check = steps.check if steps is not None else None
-        depth = PIT_DEPTH / options.metres_per_unit
-        pits = isolated_pits(dtm, depth=depth, check=check)
-        np.negative(dtm, out=dtm)  # (the spikes are the pits of the negated DTM: in place, no copy of the grid)
-        try:
-            spikes = isolated_pits(dtm, depth=depth, check=check)
-        finally:
-            np.negative(dtm, out=dtm)
+        from ..grids.rasterize import PIT_DEPTH, isolated_pits_and_spikes
+        pits, spikes = isolated_pits_and_spikes(dtm, depth=PIT_DEPTH / options.metres_per_unit,
+                                                check=steps.check if steps is not None else None)
         for note in (pits_note(*pits, grid, options.metres_per_unit),
                      pits_note(*spikes, grid, options.metres_per_unit, spikes=True)):
             if note:
@@ -748,8 +742,7 @@ def place_in(values: np.ndarray, grid: GridSpec, wanted: GridSpec) -> np.ndarray
     others NaN. The DTM is made over its points and placed in the extent: beyond the points it is nodata,
     filled or not, as a tiled run's, which has no block there (a code reviewer: a fill reached over the whole
     extent whole and not tiled)."""
-    c = grid.cell
-    col0, row0 = int(round((wanted.x0 - grid.x0) / c)), int(round((grid.top - wanted.top) / c))
+    col0, row0 = grid.offset_of(wanted)
     out = np.full(wanted.shape, np.nan, dtype=values.dtype)
     r0, r1 = max(row0, 0), min(row0 + wanted.nrows, grid.nrows)
     c0, c1 = max(col0, 0), min(col0 + wanted.ncols, grid.ncols)

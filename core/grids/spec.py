@@ -13,7 +13,7 @@ import contextvars
 import math
 import os
 from dataclasses import dataclass
-from typing import Optional
+from typing import Optional, Tuple
 
 import numpy as np
 
@@ -256,6 +256,11 @@ class GridSpec:
     @property
     def geotransform(self) -> tuple:
         return (self.x0, self.cell, 0.0, self.top, 0.0, -self.cell)
+
+    def offset_of(self, other: "GridSpec") -> Tuple[int, int]:
+        """(column, row) of the north-west cell of ``other``, a grid on this one's lattice, in this grid (may
+        lie outside it)."""
+        return int(round((other.x0 - self.x0) / self.cell)), int(round((self.top - other.top) / self.cell))
 
     def window(self, col0: int, row0: int, ncols: int, nrows: int) -> "GridSpec":
         """The ``ncols`` x ``nrows`` cells of this grid from column ``col0``, row ``row0``; an origin on the

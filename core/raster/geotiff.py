@@ -211,24 +211,32 @@ class BlockGeoTIFF:
         valued = ~np.isnan(values)
         data = np.where(valued, values, self.nodata).astype(self._work_type)
         largest = float(np.nanmax(np.abs(values))) if valued.any() else 0.0
-        r, first, last = _ends(valued, 1)
-        c, top, bottom = _ends(valued, 0)
         with self._lock:
             self._largest = max(self._largest, largest)
             self._band.WriteArray(data, xoff=col0, yoff=row0)
-            if r.size:
-                self._first[row0 + r] = np.minimum(self._first[row0 + r], col0 + first)
-                self._last[row0 + r] = np.maximum(self._last[row0 + r], col0 + last)
-                self._valued[row0 + r] += valued[r].sum(axis=1)
-                self._top[col0 + c] = np.minimum(self._top[col0 + c], row0 + top)
-                self._bottom[col0 + c] = np.maximum(self._bottom[col0 + c], row0 + bottom)
+            self._track(row0, col0, valued)
+
+    def _track(self, row0: int, col0: int, valued: np.ndarray) -> None:
+        """Add the cells ``valued`` (a block's, its north-west cell at ``row0``, ``col0``) to each row's first
+        and last value and count of values, and each column's first and last row with one."""
+        r, first, last = _ends(valued, 1)
+        if r.size:
+            c, top, bottom = _ends(valued, 0)
+            self._first[row0 + r] = np.minimum(self._first[row0 + r], col0 + first)
+            self._last[row0 + r] = np.maximum(self._last[row0 + r], col0 + last)
+            self._valued[row0 + r] += valued[r].sum(axis=1)
+            self._top[col0 + c] = np.minimum(self._top[col0 + c], row0 + top)
+            self._bottom[col0 + c] = np.maximum(self._bottom[col0 + c], row0 + bottom)
+
+    def _strip_rows(self, strip_rows: int, width: int) -> int:
+        """At most ``strip_rows`` rows of ``width`` cells, and at most STRIP_BYTES, a strip read back."""
+        return max(1, min(strip_rows, self.STRIP_BYTES // (8 * width)))
 
     def blank_outside(self, grid: GridSpec, strip_rows: int = 1024) -> None:
         """Set every cell of this raster outside ``grid`` (a part of it, on its lattice) to nodata, in strips
         of rows: a tiled DTM given an extent beyond its points keeps no value there, as a whole run's (the
         tiles' blocks, filled, reached to the tiles' edges)."""
-        c = self.grid.cell
-        col0, row0 = int(round((grid.x0 - self.grid.x0) / c)), int(round((self.grid.top - grid.top) / c))
+        col0, row0 = self.grid.offset_of(grid)
         col1, row1 = col0 + grid.ncols, row0 + grid.nrows
         self._band.FlushCache()
         box = self._written_box()  # (beyond it nothing was written: nodata already)
@@ -238,7 +246,7 @@ class BlockGeoTIFF:
         if box is None:
             return
         r0, r1, c0, c1 = box
-        strip_rows = max(1, min(strip_rows, self.STRIP_BYTES // (8 * (c1 - c0))))
+        strip_rows = self._strip_rows(strip_rows, c1 - c0)
         for start in range(r0, r1, strip_rows):
             stop = min(start + strip_rows, r1)
             strip = self._band.ReadAsArray(c0, start, c1 - c0, stop - start)
@@ -248,19 +256,12 @@ class BlockGeoTIFF:
             if not keep.all():
                 strip[~keep] = self.nodata
                 self._band.WriteArray(strip, xoff=c0, yoff=start)
-            valued = strip != self.nodata
-            r, first, last = _ends(valued, 1)
-            self._first[start + r], self._last[start + r] = c0 + first, c0 + last
-            self._valued[start + r] = valued[r].sum(axis=1)
-            cols, top, bottom = _ends(valued, 0)
-            self._top[c0 + cols] = np.minimum(self._top[c0 + cols], start + top)
-            self._bottom[c0 + cols] = np.maximum(self._bottom[c0 + cols], start + bottom)
+            self._track(start, c0, strip != self.nodata)
 
     def has_values_in(self, grid: GridSpec) -> bool:
         """Whether a cell of ``grid`` (a part of this raster, on its lattice) may hold a value: a row of it
         whose first and last written values reach into its columns."""
-        c = self.grid.cell
-        col0, row0 = int(round((grid.x0 - self.grid.x0) / c)), int(round((self.grid.top - grid.top) / c))
+        col0, row0 = self.grid.offset_of(grid)
         rows = slice(max(row0, 0), max(min(row0 + grid.nrows, self.grid.nrows), 0))
         return bool(np.any((self._first[rows] <= col0 + grid.ncols - 1) & (self._last[rows] >= col0)))
 
@@ -269,7 +270,7 @@ class BlockGeoTIFF:
         if grid is None or grid == self.grid:
             return None
         c = self.grid.cell
-        col0, row0 = int(round((grid.x0 - self.grid.x0) / c)), int(round((self.grid.top - grid.top) / c))
+        col0, row0 = self.grid.offset_of(grid)
         if abs(grid.cell - c) > 1e-9 * c or col0 < 0 or row0 < 0 or col0 + grid.ncols > self.grid.ncols \
                 or row0 + grid.nrows > self.grid.nrows:
             raise ValueError(f"the grid {grid} is not a part of the raster's {self.grid}")
@@ -306,7 +307,7 @@ class BlockGeoTIFF:
             return
         r0, r1, c0, c1 = box
         width = c1 - c0
-        strip_rows = max(1, min(strip_rows, self.STRIP_BYTES // (8 * width)))
+        strip_rows = self._strip_rows(strip_rows, width)
         for row0 in range(r0, r1, strip_rows):
             n = min(strip_rows, r1 - row0)
             above, below = min(halo, row0 - r0), min(halo, r1 - row0 - n)
@@ -319,20 +320,18 @@ class BlockGeoTIFF:
         tile's own interpolation has no values beyond its buffer, so with a small buffer it missed pits near
         its edges, and with a fill it counted cells on the survey's edge a run of the whole cloud never counts
         (a code reviewer)."""
-        from ..grids.rasterize import PIT_DEPTH, isolated_pits
+        from ..grids.rasterize import PIT_DEPTH, isolated_pits_and_spikes
         depth = PIT_DEPTH if depth is None else depth
         found = [[0, 0.0, (-1, -1)], [0, 0.0, (-1, -1)]]  # pits, spikes: count, deepest, where
         with self._lock:
             for row0, n, above, col0, values in self._strips(strip_rows, halo=2):
                 values = values.astype(np.float64)
                 values[values == self.nodata] = np.nan
-                for kind in found:
-                    count, drop, r, k = isolated_pits(values, depth=depth, inner=(above, above + n, 0, values.shape[1]),
-                                                      check=check)
+                for kind, (count, drop, r, k) in zip(found, isolated_pits_and_spikes(
+                        values, depth=depth, inner=(above, above + n, 0, values.shape[1]), check=check)):
                     kind[0] += count
                     if count and drop > kind[1]:
                         kind[1], kind[2] = drop, (row0 - above + r, col0 + k)
-                    np.negative(values, out=values)  # (the spikes next)
         return tuple((count, deepest, where[0], where[1]) for count, deepest, where in found)
 
     def empty_cells(self, polygon: Optional[np.ndarray] = None, margin_cells: float = 1.0,
