@@ -189,7 +189,7 @@ checkpoints.</p>""")
         for name in (self.Z_FIELD, self.ID_FIELD, self.LAND_COVER_FIELD):
             field = self.parameterAsString(parameters, name, context) or ""
             if field and source.fields().lookupField(field) < 0:
-                return (f"{self.label(name).split(' (')[0]}: the layer '{source.sourceName()}' has no field '{field}' "
+                return (f"{self.label(name, short=True)}: the layer '{source.sourceName()}' has no field '{field}' "
                         f"(its fields: {', '.join(names) or 'none'})")
         return None
 
@@ -199,8 +199,11 @@ checkpoints.</p>""")
         feedback.pushWarning(text)
         self._warnings = getattr(self, "_warnings", []) + [text]
 
-    def label(self, name):
-        return self.parameterDefinition(name).description()
+    def label(self, name, short=False):
+        """The dialog's label of the parameter ``name``; ``short``: without its bracketed remark, as a message
+        names it ("Checkpoints", not "Checkpoints (surveyed points)")."""
+        text = self.parameterDefinition(name).description()
+        return text.split(" (")[0] if short else text
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         errors, _workflow = core_modules()
@@ -277,7 +280,7 @@ checkpoints.</p>""")
         z_field = self.parameterAsString(parameters, self.Z_FIELD, context) or ""
         id_field = self.parameterAsString(parameters, self.ID_FIELD, context) or ""
         cover_field = self.parameterAsString(parameters, self.LAND_COVER_FIELD, context) or ""
-        label = self.label(self.CHECKPOINTS).split(" (")[0]
+        label = self.label(self.CHECKPOINTS, short=True)
         if source.wkbType() == QgsWkbTypes.Type.NoGeometry:
             raise QgsProcessingException(  # (a CSV given as it is was first said to have no Z: a flood modeller)
                 f"{label} '{source.sourceName()}': a table without geometries (a CSV opened without its coordinates?): "
@@ -303,7 +306,7 @@ checkpoints.</p>""")
                 try:
                     cover = land_cover_of(feature[cover_field], mapping)
                 except errors.GroundSieveError as err:
-                    raise QgsProcessingException(f"{where}, {self.label(self.LAND_COVER_FIELD).split(' (')[0]} "
+                    raise QgsProcessingException(f"{where}, {self.label(self.LAND_COVER_FIELD, short=True)} "
                                                  f"'{cover_field}': {err} in '{self.label(self.LAND_COVER_MAP)}'") from err
             if z_field:
                 height = _number(feature[z_field])
@@ -312,7 +315,7 @@ checkpoints.</p>""")
                     if not value:  # (a mark not observed: left out and named, as a point without a geometry)
                         no_height.append(fid)
                         continue
-                    raise QgsProcessingException(f"{where}, {self.label(self.Z_FIELD).split(' (')[0]} '{z_field}': "
+                    raise QgsProcessingException(f"{where}, {self.label(self.Z_FIELD, short=True)} '{z_field}': "
                                                  f"'{value}' is not a number")
             vertices = list(geometry.vertices())
             for part, vertex in enumerate(vertices, 1):
@@ -340,7 +343,7 @@ checkpoints.</p>""")
                                 f"{', '.join(no_height[:12])}" + (" ..." if len(no_height) > 12 else ""))
         if not x and no_height:
             raise QgsProcessingException(f"{label} '{source.sourceName()}': every checkpoint's "
-                                         f"{self.label(self.Z_FIELD).split(' (')[0]} '{z_field}' is empty (NULL): "
+                                         f"{self.label(self.Z_FIELD, short=True)} '{z_field}' is empty (NULL): "
                                          "is it the field of their heights?")
         if not x:
             raise QgsProcessingException(
@@ -380,24 +383,24 @@ checkpoints.</p>""")
             return None
         if subset:  # (the file is read whole: a selection of its table cannot be honoured)
             raise QgsProcessingException(
-                f"{self.label(self.CHECKPOINTS).split(' (')[0]} '{path}': a table without geometries, of which only "
+                f"{self.label(self.CHECKPOINTS, short=True)} '{path}': a table without geometries, of which only "
                 "some rows are asked for (selected features, a filter or a number of them): its file is read whole. "
                 "Add it as a delimited text layer with its X and Y fields to choose checkpoints, or leave the "
                 "selection or filter off")
+        from ..core.io.checkpoints import is_text_file
         try:
             with open(path, "rb") as f:
-                return None if b"\0" in f.read(4096) else path  # (a GeoPackage's table is no text file)
+                return path if is_text_file(f.read(4096)) else None  # (a GeoPackage's table is no text file)
         except OSError:
             return path  # (the reader names what is wrong)
 
     def readCheckpointFile(self, parameters, context, feedback, path, mapping):  # noqa: N802
         """readCheckpoints' values from a text or CSV file: its columns found by their header words, or
         named by the field parameters; x and y taken in the DTM's CRS."""
-        from ..core.io.checkpoints import UnknownLandCover, read_checkpoints
+        from ..core.io.checkpoints import ColumnsError, UnknownLandCover, read_checkpoints
         from ..core.raster.accuracy import empty_heights
         named = {column: self.parameterAsString(parameters, name, context) or ""
                  for column, name in (("z", self.Z_FIELD), ("id", self.ID_FIELD), ("land_cover", self.LAND_COVER_FIELD))}
-        from ..core.errors import InputError
         try:
             try:
                 checkpoints = read_checkpoints(path, mapping=mapping, columns=named)
@@ -409,14 +412,12 @@ checkpoints.</p>""")
                 checkpoints = read_checkpoints(path, mapping=mapping, columns=named, land_cover=False)
                 self.warn(feedback, f"the file's land-cover column is left out: {err}; map its words in "
                                     f"'{self.label(self.LAND_COVER_MAP)}' for the NVA and VVA figures")
-        except InputError as err:  # (x and y of other words, or no header: QGIS's delimited text layer names them)
-            if "header" not in str(err):
-                raise
-            raise InputError(f"{err}; or add the file as a delimited text layer with its X and Y fields and give "
-                             "that layer") from None
+        except ColumnsError as err:  # (x and y of other words, or no header: QGIS's delimited text layer names them)
+            raise ColumnsError(f"{err}; or add the file as a delimited text layer with its X and Y fields and give "
+                               "that layer") from None
         for text in empty_heights(checkpoints):
             self.warn(feedback, text)
-        self.warn(feedback, f"{self.label(self.CHECKPOINTS).split(' (')[0]} '{path}': a text file without a CRS, read "
+        self.warn(feedback, f"{self.label(self.CHECKPOINTS, short=True)} '{path}': a text file without a CRS, read "
                             f"as x (easting), y (northing), z in the DTM's CRS, {len(checkpoints)} checkpoint(s); their "
                             "heights are taken as they are: they must be in the DTM's vertical datum (geoid) and unit")
         covers = checkpoints.land_cover

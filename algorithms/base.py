@@ -462,9 +462,8 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
                                                      minValue=p.minimum, **extra)
             if p.advanced:
                 param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
-            text = f"{p.help[0].upper()}{p.help[1:]}." if p.help else self.panelHelp(param.description())
-            if text:
-                param.setHelp(text)
+            if p.help:  # (else addParameter takes the help panel's paragraph on it)
+                param.setHelp(f"{p.help[0].upper()}{p.help[1:]}.")
             self.addParameter(param)
 
     def filterArguments(self, parameters, context):  # noqa: N802

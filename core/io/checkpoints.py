@@ -46,6 +46,16 @@ KNOWN_LAND_COVERS = {"nva": NVA, "nonvegetated": NVA, "vva": VVA, "vegetated": V
 KNOWN_TEXT = "NVA, VVA, non-vegetated, vegetated"
 
 
+class ColumnsError(InputError):
+    """The file's header (or its lack) does not tell its x, y, z columns, or a column named is not in it: QGIS's
+    delimited text layer, which names the X and Y fields, reads it (the caller may say so)."""
+
+
+def is_text_file(raw: bytes) -> bool:
+    """Whether the first bytes ``raw`` of a file are text (no NUL byte): a GeoPackage or a LAS file is none."""
+    return b"\0" not in raw[:4096]
+
+
 class UnknownLandCover(InputError):
     """A land-cover value that is neither known nor in the caller's mapping (the caller says where to map it)."""
 
@@ -125,7 +135,7 @@ def _read_lines(path: str):
         raise InputError(f"{path}: is a folder, not a checkpoint file") from None
     except OSError as err:
         raise InputError(f"{path}: cannot be read ({err.strerror or err})") from None
-    if b"\0" in raw[:4096]:
+    if not is_text_file(raw):
         raise InputError(f"{path}: is not a text file (give the checkpoints as x, y, z text or CSV)")
     try:
         text = raw.decode("utf-8-sig")
@@ -168,7 +178,7 @@ def _header_columns(fields, path: str, named: Optional[Dict[str, str]] = None) -
     keys = [_key(name) for name in fields]
     for column, name in (named or {}).items():
         if _key(name) not in keys:
-            raise InputError(f"{path}, line 1: the header ({', '.join(repr(f) for f in fields)}) has no column "
+            raise ColumnsError(f"{path}, line 1: the header ({', '.join(repr(f) for f in fields)}) has no column "
                              f"'{name}' (given for {column.replace('_', ' ')})")
         columns[column] = keys.index(_key(name))
     for i, name in enumerate(fields):
@@ -178,7 +188,7 @@ def _header_columns(fields, path: str, named: Optional[Dict[str, str]] = None) -
                 columns[column] = i
     missing = [c for c in ("x", "y", "z") if c not in columns]
     if missing:
-        raise InputError(f"{path}, line 1: the header ({', '.join(repr(f) for f in fields)}) names no "
+        raise ColumnsError(f"{path}, line 1: the header ({', '.join(repr(f) for f in fields)}) names no "
                          f"{' and no '.join(missing)} column (x: x/easting/e, y: y/northing/n, z: z/elevation/height/h)")
     return columns
 
@@ -215,7 +225,7 @@ def read_checkpoints(path: str, *, mapping: Optional[Dict[str, str]] = None,
     positional = {k: int(re.fullmatch(r"field_(\d+)", v).group(1)) - 1 for k, v in named.items()
                   if re.fullmatch(r"field_(\d+)", v) and int(re.fullmatch(r"field_(\d+)", v).group(1)) >= 1}
     if named and not header and len(positional) < len(named):
-        raise InputError(f"{path}: has no header line, so it has no column "
+        raise ColumnsError(f"{path}: has no header line, so it has no column "
                          f"{' or '.join(repr(v) for k, v in named.items() if k not in positional)} (without a header "
                          "the columns are x y z, x y z class or id x y z [class], or field_1, field_2, ... by their "
                          "place)")
