@@ -64,14 +64,9 @@ def _number(kind):
     return {int: int, float: float}.get(kind, str)
 
 
-def _add_common(parser: argparse.ArgumentParser) -> None:
-    fo, dt = _defaults(FilterOptions), _defaults(DTMOptions)
-    io = parser.add_argument_group("input and outputs")
-    io.add_argument("--input", required=True, metavar="PATH",
-                    help="LAS/LAZ (1.2-1.4, point formats 0-10), a folder of them, a .vpc, or an ISPRS .txt")
-    io.add_argument("--output", metavar="PATH", help="classified LAS/LAZ (a .vpc for several input files)")
-    io.add_argument("--dtm", metavar="PATH", help="DTM GeoTIFF (optional)")
-    _add_json(io)
+def _add_dtm_options(io, dt: dict, dtm_classes: bool) -> None:
+    """The DTM's options, the filters' and the DTM from classes' (``dtm_classes``: the filters' --dtm-classes,
+    the classes added to their ground; the DTM from classes names its own with --classes)."""
     io.add_argument("--dtm-cell", type=float, default=dt["cell_size_m"], metavar="M", action=_TYPED_CELL,
                     help="DTM cell size (m; default %(default)s, 3 ft in a CRS in feet; typed, in the CRS's unit)")
     io.add_argument("--dtm-fill", action=argparse.BooleanOptionalAction, default=dt["fill_outside_hull"],
@@ -80,12 +75,24 @@ def _add_common(parser: argparse.ArgumentParser) -> None:
                     help="the DTM's extent in the cloud's CRS, widened to whole cells on multiples of the cell "
                          "size: two epochs' DTMs or a model's domain on one grid of one size (default: the points'); "
                          "with a negative first number write --dtm-extent=-100,-100,100,100")
-    io.add_argument("--dtm-classes", default="", metavar="LIST",
-                    help="classes of the input whose points enter the DTM with the ground, e.g. 9 (water) for "
-                         "a flood model; a list or ranges as --ignore-classes (default none)")
+    if dtm_classes:
+        io.add_argument("--dtm-classes", default="", metavar="LIST",
+                        help="classes of the input whose points enter the DTM with the ground, e.g. 9 (water) for "
+                             "a flood model; a list or ranges as --ignore-classes (default none)")
     io.add_argument("--dtm-max-distance", type=float, default=dt["max_distance_m"], metavar="M",
                     help="leave DTM cells farther than this from any ground point empty, so that data gaps are "
                          "not bridged (m; 0 = no limit; default %(default)s)")
+
+
+def _add_common(parser: argparse.ArgumentParser) -> None:
+    fo, dt = _defaults(FilterOptions), _defaults(DTMOptions)
+    io = parser.add_argument_group("input and outputs")
+    io.add_argument("--input", required=True, metavar="PATH",
+                    help="LAS/LAZ (1.2-1.4, point formats 0-10), a folder of them, a .vpc, or an ISPRS .txt")
+    io.add_argument("--output", metavar="PATH", help="classified LAS/LAZ (a .vpc for several input files)")
+    io.add_argument("--dtm", metavar="PATH", help="DTM GeoTIFF (optional)")
+    _add_json(io)
+    _add_dtm_options(io, dt, dtm_classes=True)
     io.add_argument("--last-returns", action=argparse.BooleanOptionalAction, default=fo["last_returns_only"],
                     help="filter only last returns (others become non-ground; default %(default)s)")
     io.add_argument("--ignore-classes", default=None, metavar="LIST",
@@ -264,17 +271,7 @@ def _add_dtm(sub) -> None:
                          "surface the vendor classed apart; a list or ranges as --ignore-classes (default %(default)s)")
     io.add_argument("--ignore-classes", default="7,18", metavar="LIST",
                     help="classes left out of the DTM and of its extent, e.g. noise; '' = none (default %(default)s)")
-    io.add_argument("--dtm-cell", type=float, default=dt["cell_size_m"], metavar="M", action=_TYPED_CELL,
-                    help="DTM cell size (m; default %(default)s, 3 ft in a CRS in feet; typed, in the CRS's unit)")
-    io.add_argument("--dtm-fill", action=argparse.BooleanOptionalAction, default=dt["fill_outside_hull"],
-                    help="fill DTM cells outside the ground hull (nearest value; default %(default)s)")
-    io.add_argument("--dtm-extent", default="", metavar="XMIN,YMIN,XMAX,YMAX",
-                    help="the DTM's extent in the cloud's CRS, widened to whole cells on multiples of the cell "
-                         "size: two epochs' DTMs or a model's domain on one grid of one size (default: the points'); "
-                         "with a negative first number write --dtm-extent=-100,-100,100,100")
-    io.add_argument("--dtm-max-distance", type=float, default=dt["max_distance_m"], metavar="M",
-                    help="leave DTM cells farther than this from any ground point empty, so that data gaps are "
-                         "not bridged (m; 0 = no limit; default %(default)s)")
+    _add_dtm_options(io, dt, dtm_classes=False)
     _add_tiles(parser)
     parser.set_defaults(filter="dtm", output=None)
 
