@@ -562,14 +562,7 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         option last among the inputs, right above the outputs (QGIS's dialog lists every output
         after every input); the ground-point layer off by default and advanced; the filter's
         intermediate rasters (rasterOutputs) off by default."""
-        self.addParameter(QgsProcessingParameterNumber(
-            self.DTM_CELL, "DTM cell size (m)", type=QgsProcessingParameterNumber.Type.Double,
-            defaultValue=1.0, minValue=0.0))
-        self.addParameter(QgsProcessingParameterBoolean(
-            self.DTM_FILL, "DTM: fill cells outside the ground hull (nearest value)", defaultValue=False))
-        self.addParameter(dtm_classes_parameter(self.DTM_CLASSES))
-        self.addParameter(dtm_max_distance_parameter(self.DTM_MAX_DISTANCE))
-        self.addParameter(dtm_extent_parameter(self.DTM_EXTENT))
+        self.addDtmParameters()
         self.addParameter(QgsProcessingParameterFileDestination(
             self.OUTPUT, "Classified point cloud (a .vpc for several input files)",
             fileFilter="LAZ (*.laz);;LAS (*.las);;Virtual point cloud (*.vpc)"))
@@ -585,6 +578,19 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         # step can take them, and the dialog and qgis_process help list them
         self.addOutput(QgsProcessingOutputNumber(self.GROUND_COUNT, "Ground points"))
         self.addOutput(QgsProcessingOutputNumber(self.POINT_COUNT, "Points classified"))
+
+    def addDtmParameters(self, dtm_classes=True):  # noqa: N802
+        """The DTM's options, the filters' and the DTM from classes' (``dtm_classes``: the filters' DTM classes,
+        added to their ground; the DTM from classes names its own ground classes)."""
+        self.addParameter(QgsProcessingParameterNumber(
+            self.DTM_CELL, "DTM cell size (m)", type=QgsProcessingParameterNumber.Type.Double,
+            defaultValue=1.0, minValue=0.0))
+        self.addParameter(QgsProcessingParameterBoolean(
+            self.DTM_FILL, "DTM: fill cells outside the ground hull (nearest value)", defaultValue=False))
+        if dtm_classes:
+            self.addParameter(dtm_classes_parameter(self.DTM_CLASSES))
+        self.addParameter(dtm_max_distance_parameter(self.DTM_MAX_DISTANCE))
+        self.addParameter(dtm_extent_parameter(self.DTM_EXTENT))
 
     def addExtraOutputParameters(self):  # noqa: N802
         """The filter's intermediate rasters (evcrasters): optional, not created by default."""

@@ -1,12 +1,10 @@
 """groundsieve:dtm — DTM from classified points: the ground an earlier classification made (a vendor's
 class 2, an earlier run's, a hand-edited one) as a DTM, without filtering it again."""
-from qgis.core import (QgsProcessingException, QgsProcessingOutputNumber, QgsProcessingParameterBoolean,
-                       QgsProcessingParameterNumber, QgsProcessingParameterRasterDestination,
+from qgis.core import (QgsProcessingException, QgsProcessingOutputNumber, QgsProcessingParameterRasterDestination,
                        QgsProcessingParameterString)
 
 from .base import (FILTER_PARAMETER_HELP, INPUT_FILTER, GroundFilterAlgorithm, core_modules, dialog_help, dtm_cell_set,
-                   dtm_extent_parameter, dtm_extent_value, dtm_max_distance_parameter,
-                   feedback_callables)
+                   dtm_extent_value, feedback_callables)
 
 
 class DTMFromClassesAlgorithm(GroundFilterAlgorithm):
@@ -90,13 +88,7 @@ with one of the ground filters.</p>""")
         self.addTileParameters()
         buffer = self.parameterDefinition(self.TILE_BUFFER)  # (its reach is a fixed 40 m)
         buffer.setDescription("Tile buffer (m; -1 = 40 m, gaps in the ground up to this wide are bridged)")
-        self.addParameter(QgsProcessingParameterNumber(
-            self.DTM_CELL, "DTM cell size (m)", type=QgsProcessingParameterNumber.Type.Double,
-            defaultValue=1.0, minValue=0.0))
-        self.addParameter(QgsProcessingParameterBoolean(
-            self.DTM_FILL, "DTM: fill cells outside the ground hull (nearest value)", defaultValue=False))
-        self.addParameter(dtm_max_distance_parameter(self.DTM_MAX_DISTANCE))
-        self.addParameter(dtm_extent_parameter(self.DTM_EXTENT))
+        self.addDtmParameters(dtm_classes=False)
         self.addParameter(QgsProcessingParameterRasterDestination(self.DTM, "DTM (ground surface)"))
         self.addOutput(QgsProcessingOutputNumber(self.GROUND_COUNT, "Ground points"))
         self.addOutput(QgsProcessingOutputNumber(self.POINT_COUNT, "Points read"))
