@@ -169,6 +169,24 @@ READ_SHARE = 0.8
 #: checked between chunks (about 0.1 s of LAZ decompression each on this machine)
 CHUNK_POINTS = 500_000
 
+#: How laspy's writer treats header texts beyond ASCII (system identifier, generating software, VLR and
+#: EVLR descriptions). Vendors write Latin-1 there ("Soci\xe9t\xe9"); laspy keeps such a text as the
+#: bytes it read and, told "replace", writes them back unchanged (strict, its default, it refused them
+#: once the whole run was done: a format reviewer). Our own texts are ASCII.
+TEXT_ERRORS = "replace"
+
+
+def writable_evlrs(evlrs):
+    """``evlrs`` (a laspy ``VLRList``) to give ``LasWriter.write_evlrs``, which takes no text errors
+    of its own: its descriptions are written as :data:`TEXT_ERRORS` says."""
+    from laspy.vlrs.vlrlist import VLRList
+
+    class _Records(VLRList):
+        def write_to(self, stream, as_extended=False, encoding_errors="strict"):
+            return super().write_to(stream, as_extended=as_extended, encoding_errors=TEXT_ERRORS)
+
+    return _Records(evlrs)
+
 
 def header_crs_wkt(header) -> Optional[str]:
     """The CRS of a laspy header as WKT (from its WKT or GeoTIFF records), or None when it has none
@@ -460,7 +478,8 @@ def check_laz_wave_packets(src: str, out: Optional[str]) -> None:
             points = reader.read_points(50_000)
             header = copy.deepcopy(reader.header)
         buffer = io.BytesIO()
-        with laspy.LasWriter(buffer, header=header, do_compress=True, closefd=False) as writer:
+        with laspy.LasWriter(buffer, header=header, do_compress=True, closefd=False,
+                             encoding_errors=TEXT_ERRORS) as writer:
             writer.write_points(points)
         buffer.seek(0)
         with laspy.open(buffer) as back:
@@ -732,6 +751,27 @@ def laspy_reason(err: BaseException) -> str:
     return str(err) or type(err).__name__
 
 
+def header_records_problem(path: str, err: BaseException) -> Optional[str]:
+    """What laspy refuses in ``path``'s header records that is not damage, in words (None for any other
+    error): two extra-bytes dimensions of one name (or one named as a dimension of the point format), or
+    a text of the records that is not UTF-8 (a vendor's Latin-1 dimension name). Both were called
+    "damaged or truncated", or given in laspy's bare words (a format reviewer)."""
+    found = re.search(r"field '([^']*)' occurs more than once", str(err))
+    if found:
+        return (f"{path}: its extra-bytes descriptions name the dimension '{found.group(1)}' twice, or name one "
+                "its point format already has, so its points cannot be told apart: rename one (e.g. with PDAL's "
+                "translate or LAStools' las2las) and run again")
+    if isinstance(err, UnicodeDecodeError):
+        import traceback
+        frames = traceback.extract_tb(err.__traceback__)
+        what = ("the name of one of its extra-bytes dimensions" if frames and frames[-1].name == "format_name" else
+                "a text of its header's records (an extra-bytes dimension's description, or its CRS's text)")
+        byte = err.object[err.start:err.start + 1].hex() if isinstance(err.object, bytes) else "?"
+        return (f"{path}: {what} is not UTF-8 text (byte 0x{byte}, Latin-1?), which the LAS reader cannot read: "
+                "rewrite that text in ASCII (e.g. with PDAL's translate or LAStools' las2las) and run again")
+    return None
+
+
 def _read_las(path: str, steps: Steps) -> PointCloud:
     import laspy
     check_las_layout(path)
@@ -761,6 +801,9 @@ def _read_las(path: str, steps: Steps) -> PointCloud:
         raise  # cancelled
     except Exception as err:  # laspy raises many types for damaged files
         msg = laspy_reason(err)
+        problem = header_records_problem(path, err)
+        if problem:
+            raise InputError(problem) from err
         if "signature" in msg.lower():
             raise UnsupportedFormatError(f"{path}: not a LAS/LAZ file ({msg})") from err
         raise InputError(f"{path}: cannot be read; the file is damaged or truncated ({msg})") from err
@@ -992,16 +1035,15 @@ def write_las(las, path: str, *, atomic: bool = True, steps: Optional[Steps] = N
 def _write_chunks(las, path: str, compress: bool, steps: Optional[Steps]) -> None:
     """What ``LasData.write`` does, chunk by chunk."""
     import laspy
-    if steps is None:
-        las.write(path, do_compress=compress)
-        return
     n = len(las.points)
-    with open(path, "wb+") as out, laspy.LasWriter(out, las.header, do_compress=compress, closefd=False) as writer:
+    with open(path, "wb+") as out, laspy.LasWriter(out, las.header, do_compress=compress, closefd=False,
+                                                   encoding_errors=TEXT_ERRORS) as writer:
         for start in range(0, n, CHUNK_POINTS):
             writer.write_points(las.points[start:start + CHUNK_POINTS])
-            steps.report(min(start + CHUNK_POINTS, n) / n)
+            if steps is not None:
+                steps.report(min(start + CHUNK_POINTS, n) / n)
         if las.header.version.minor >= 4 and las.evlrs is not None:
-            writer.write_evlrs(las.evlrs)
+            writer.write_evlrs(writable_evlrs(las.evlrs))
 
 
 def write_classified(cloud: PointCloud, classification: np.ndarray, path: str, *, atomic: bool = True,

@@ -18,8 +18,8 @@ from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 import numpy as np
 
 from ..errors import GroundSieveError, InputError, OutputError, UnsupportedFormatError
-from .clouds import (PointCloud, check_las_layout, finish_copy, header_crs_wkt, laspy_reason, point_data_end,
-                     records_held)
+from .clouds import (TEXT_ERRORS, PointCloud, check_las_layout, finish_copy, header_crs_wkt, laspy_reason, point_data_end,
+                     header_records_problem, records_held, writable_evlrs)
 from .outputs import LAS_EXTENSIONS, _ext, _reason, atomic_path, check_classes_fit
 
 VPC_EXTENSION = ".vpc"
@@ -69,6 +69,7 @@ def scan_header(path: str) -> LasInfo:
     try:
         with laspy.open(path) as reader:
             h = reader.header
+            h.point_format.dtype()  # (two extra-bytes dimensions of one name are refused here, before any work)
             held = records_held(path, h)
             if held is not None and held < int(h.point_count) and not (h.version.minor >= 4 and h.number_of_evlrs):
                 raise InputError(f"{path}: the header announces {int(h.point_count):,} points but the file holds "
@@ -92,7 +93,8 @@ def scan_header(path: str) -> LasInfo:
     except (InputError, UnsupportedFormatError):
         raise
     except Exception as err:  # laspy raises many types for damaged files
-        raise InputError(f"{path}: cannot read its LAS header ({laspy_reason(err)})") from err
+        raise InputError(header_records_problem(path, err)
+                         or f"{path}: cannot read its LAS header ({laspy_reason(err)})") from err
 
 
 #: the bounds read from the points of files whose headers have none, by (path, size, modification time): a
@@ -646,7 +648,7 @@ def write_classified_stream(src: str, dst: str, classification: np.ndarray, *,
             with atomic_path(dst) if atomic else contextlib.nullcontext(dst) as tmp:
                 # Not COPC any more (the LAZ chunks are not the octree's nodes): no COPC records.
                 with laspy.open(tmp, mode="w", header=plain_header(reader.header),
-                                do_compress=_ext(dst) == ".laz") as writer:
+                                do_compress=_ext(dst) == ".laz", encoding_errors=TEXT_ERRORS) as writer:
                     start = 0
                     for chunk in reader.chunk_iterator(chunk_points):
                         if check is not None:
@@ -656,7 +658,7 @@ def write_classified_stream(src: str, dst: str, classification: np.ndarray, *,
                         writer.write_points(chunk)
                         start += n
                     if reader.header.version.minor >= 4 and plain_evlrs(reader.header):
-                        writer.write_evlrs(plain_evlrs(reader.header))
+                        writer.write_evlrs(writable_evlrs(plain_evlrs(reader.header)))
                 finish_copy(tmp, src, name or dst)
     except OSError as err:
         raise OutputError(f"{name or dst}: cannot be written ({_reason(err)})") from err
@@ -832,14 +834,15 @@ def assemble_classified(src: str, dst: str, pieces: Sequence[dict], name: Option
         with atomic_path(dst) if atomic else contextlib.nullcontext(dst) as tmp:
             with open(tmp, "wb") as f:
                 writer = laspy.LasWriter(f, header=header, do_compress=compress, closefd=False,
-                                         laz_backend=_pieces_backend(pieces) if compress else None)
+                                         laz_backend=_pieces_backend(pieces) if compress else None,
+                                         encoding_errors=TEXT_ERRORS)
                 _merge_stats(writer.header, [p["stats"] for p in pieces])
                 if not compress:
                     for piece in pieces:
                         with open(piece["path"], "rb") as g:
                             _copy_bytes(g, f, os.path.getsize(piece["path"]))
                 if evlrs:  # after the points (the LAZ backend's done() writes the chunks first)
-                    writer.write_evlrs(evlrs)
+                    writer.write_evlrs(writable_evlrs(evlrs))
                 writer.close()
             finish_copy(tmp, src, name or dst)
     except OSError as err:

@@ -20,7 +20,7 @@ from laspy.vlrs.vlrlist import VLRList
 
 from groundsieve.core.engine.tiles import TileOptions
 from groundsieve.core.engine.workflow import FilterOptions, run_ground_filter
-from groundsieve.core.errors import OutputError
+from groundsieve.core.errors import InputError, OutputError
 from groundsieve.core.filters.smrf import SMRF
 
 
@@ -357,3 +357,74 @@ def test_an_extra_bytes_type_las_does_not_define_is_refused_in_words(tmp_path, t
                                          r"does not define"):
         run_ground_filter(str(src), str(tmp_path / "out.las"), SMRF(), options=tiled_or_whole(tiled))
     assert not (tmp_path / "out.las").exists()
+
+
+@pytest.mark.parametrize("tiled", [False, True])
+@pytest.mark.parametrize("ext", ["las", "laz"])
+def test_header_texts_beyond_ascii_are_copied_as_they_are(tmp_path, tiled, ext):
+    """Vendors write Latin-1 into the header's texts (a system identifier "Soci\xe9t\xe9", a VLR's or
+    EVLR's description "donn\xe9es"): laspy's writer refused them once the whole run was done, with
+    a traceback (a format reviewer). The copy keeps their bytes."""
+    n = 3000
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    header.scales, header.offsets = [0.01] * 3, [500000.0, 4000000.0, 0.0]
+    header.vlrs.append(laspy.VLR(user_id="MYCORP", record_id=42, description="vendor blob", record_data=b"abc" * 8))
+    las = laspy.LasData(header)
+    rng = np.random.default_rng(3)
+    las.x, las.y = 500000 + rng.uniform(0, 120, n), 4000000 + rng.uniform(0, 120, n)
+    las.z = rng.uniform(0, 0.3, n) + (rng.random(n) < 0.3) * rng.uniform(2, 15, n)
+    las.evlrs = VLRList([laspy.VLR(user_id="MYCORP", record_id=7, description="vendor notes", record_data=b"x" * 100)])
+    src = tmp_path / "in.las"
+    las.write(str(src))
+    data = bytearray(src.read_bytes())
+    data[26:58] = b"Soci\xe9t\xe9 X".ljust(32, b"\0")
+    vlr = struct.unpack_from("<H", data, 94)[0]
+    assert data[vlr + 2:vlr + 8] == b"MYCORP"
+    data[vlr + 22:vlr + 54] = b"donn\xe9es".ljust(32, b"\0")
+    evlr, = struct.unpack_from("<Q", data, 235)
+    assert data[evlr + 2:evlr + 8] == b"MYCORP"
+    data[evlr + 28:evlr + 60] = b"\xe9tude".ljust(32, b"\0")
+    src.write_bytes(bytes(data))
+    out = tmp_path / f"out.{ext}"
+    run = run_ground_filter(str(src), str(out), SMRF(), options=tiled_or_whole(tiled))
+    assert run.ground_count > 0
+    with laspy.open(str(out)) as reader:
+        assert reader.header.system_identifier == b"Soci\xe9t\xe9 X"
+        assert [v.description for v in reader.header.vlrs if v.user_id == "MYCORP"] == [b"donn\xe9es"]
+        assert [v.description for v in reader.header.evlrs if v.user_id == "MYCORP"] == [b"\xe9tude"]
+        assert reader.header.point_count == n
+    assert src.read_bytes() == bytes(data)
+
+
+def _two_extra_dims(path, second_name: bytes):
+    """A LAS 1.2 file with extra-bytes dimensions 'ampA' and 'ampB', the second renamed to ``second_name``."""
+    header = laspy.LasHeader(point_format=1, version="1.2")
+    header.scales, header.offsets = [0.01] * 3, [500000.0, 4000000.0, 0.0]
+    for name in ("ampA", "ampB"):
+        header.add_extra_dim(laspy.ExtraBytesParams(name=name, type=np.uint16))
+    las = laspy.LasData(header)
+    rng = np.random.default_rng(4)
+    las.x, las.y, las.z = 500000 + rng.uniform(0, 50, 500), 4000000 + rng.uniform(0, 50, 500), rng.uniform(0, 1, 500)
+    las.write(str(path))
+    data = bytearray(path.read_bytes())
+    at = data.index(b"ampB\0")
+    data[at:at + 32] = second_name.ljust(32, b"\0")
+    path.write_bytes(bytes(data))
+    return path
+
+
+@pytest.mark.parametrize("tiled", [False, True])
+@pytest.mark.parametrize("name, words", [
+    (b"ampA", "name the dimension 'ampA' twice, or name one its point format already has"),
+    (b"gps_time", "name the dimension 'gps_time' twice"),
+    (b"\xc9cho", "the name of one of its extra-bytes dimensions is not UTF-8 text (byte 0xc9"),
+])
+def test_extra_bytes_names_laspy_cannot_take_are_refused_for_what_they_are(tmp_path, tiled, name, words):
+    """Two extra-bytes dimensions of one name were "damaged or truncated"; a Latin-1 name was laspy's
+    "'utf-8' codec can't decode" (a format reviewer). Refused in words, naming the file, before any work."""
+    src = _two_extra_dims(tmp_path / "in.las", name)
+    with pytest.raises(InputError) as err:
+        run_ground_filter(str(src), str(tmp_path / "out.las"), SMRF(), options=tiled_or_whole(tiled))
+    assert str(err.value).startswith(f"{src}: ") and words in str(err.value)
+    assert "damaged" not in str(err.value) and "codec" not in str(err.value)
+    assert os.listdir(tmp_path) == ["in.las"]
