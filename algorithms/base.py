@@ -397,9 +397,11 @@ FILTER_PARAMETER_HELP = {
     "TILE_BUFFER": "The margin read around each tile so that no seam shows; -1 = the filter's own reach (e.g. "
                    "SMRF's window).",
     "MEMORY_BUDGET": "The memory the tiles' points and grids may take, shared by the tiles that run at once; 0 = a "
-                     "quarter of the RAM, at most 2048 MB. Each worker process's Python and libraries (about "
-                     "130 MB) come on top.",
-    "WORKERS": "How many tiles run at once; 0 = one per core.",
+                     "quarter of the job's memory (the RAM, or its control group's limit), at most 2048 MB. Each "
+                     "worker process's Python and libraries (130-250 MB, measured) come on top.",
+    "WORKERS": "How many tiles run at once; 0 = one per core this process may use. With no tile size set, the "
+               "tiles are planned from the memory budget shared by the workers: set the tile size for the same "
+               "results with other workers.",
     "WORK_FOLDER": "Where the temporary tiles go (each input's points uncompressed, about 75 bytes a point at "
                    "most), removed at the end; a run killed midway resumes from them.",
     "SCHEDULER": "Run the tiles on a Dask cluster (tcp://host:port) or on N local worker processes (local:N); "

@@ -117,11 +117,15 @@ def _add_tiles(parser: argparse.ArgumentParser) -> None:
                        help="tile buffer (m; -1 = the filter's own reach, 40 m for the DTM from classes; default "
                             "%(default)s)")
     tiles.add_argument("--memory-budget", type=float, default=to["memory_budget_mb"], metavar="MB",
-                       help="memory budget (MB; 0 = a quarter of the RAM, at most 2048; default %(default)s): the tiles' "
-                            "points and grids; each worker process also holds Python and its libraries (about "
-                            "130 MB), outside it")
+                       help="memory budget (MB; 0 = a quarter of the job's memory (the RAM, or its control group's limit "
+                            "under SLURM or a container), at most 2048, and below ulimit -v; default %(default)s): "
+                            "the tiles' points and grids; each worker process also holds Python and its libraries "
+                            "(130-250 MB, measured), outside it")
     tiles.add_argument("--workers", type=int, default=to["workers"], metavar="N",
-                       help="tiles at the same time on this machine (0 = every core; default %(default)s)")
+                       help="tiles at the same time on this machine (0 = every core this process may use: its CPU set, "
+                            "e.g. SLURM's, and quota; default %(default)s); with no tile size set, the tiles are "
+                            "planned from the memory budget shared by the workers, so other workers plan other "
+                            "tiles: set --tile-size for the same results on any machine")
     tiles.add_argument("--work-folder", metavar="PATH",
                        help="working folder for temporary tiles (default: beside the output); with a Dask "
                             "scheduler, on a file system every worker sees at the same path")

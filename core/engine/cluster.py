@@ -113,7 +113,8 @@ def parse_scheduler(text: str) -> Tuple[str, object]:
         return "", None
     m = re.fullmatch(r"local(?::(\d+))?", text)
     if m:
-        n = int(m.group(1) or (os.cpu_count() or 1))
+        from ..machine import usable_cpus
+        n = int(m.group(1) or usable_cpus())
         if n < 1:
             raise InvalidParameterError(f"Dask scheduler {text!r}: local:N needs N >= 1 workers")
         return "local", n

@@ -90,16 +90,18 @@ MIN_TILE_POINTS = 50
 #: in 20 files: about equal, 16.0-18.6 s against 17.9-18.7 s; docs/BENCHMARKS.md)
 PROCESS_MIN_POINTS = 10_000_000
 
-def machine_memory_bytes() -> int:
-    try:
-        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
-    except (ValueError, OSError, AttributeError):
-        return 8 << 30
-
-
 def default_memory_budget_mb() -> float:
-    """A quarter of the machine's RAM, at most 2 GB: room for QGIS and for the other programs."""
-    return float(min(machine_memory_bytes() // 4, 2 << 30) // (1 << 20))
+    """A quarter of the memory this job has (the machine's RAM, at most its control group's limit), at most
+    2 GB: room for QGIS and for the other programs; below an address-space limit (``ulimit -v``), a quarter
+    of what is left of it (core/machine.py): threads reserve address space far beyond what they use (each
+    its stack and malloc arena, OpenBLAS its buffers), and with 60 % of it the sparse solve of a tile's fill
+    waited for ever on OpenBLAS's allocation under ``ulimit -v 1500000``."""
+    from ..machine import address_space_left, machine_memory_bytes
+    budget = min(machine_memory_bytes() // 4, 2 << 30)
+    left = address_space_left(first=True)
+    if left is not None:
+        budget = min(budget, left // 4)
+    return float(max(budget // (1 << 20), 1))
 
 
 @dataclass(frozen=True)
@@ -109,9 +111,10 @@ class TileOptions:
     tile_size_m: float = 0.0
     #: buffer around each tile (m); None = the filter's reach (``reach_m``)
     buffer_m: Optional[float] = None
-    #: memory the tiles of all workers together may use (MB); 0 = a quarter of the RAM, at most 2 GB
+    #: memory the tiles of all workers together may use (MB); 0 = a quarter of the job's memory (the RAM, at
+    #: most its control group's limit), at most 2 GB, and below ``ulimit -v`` (core/machine.py)
     memory_budget_mb: float = 0.0
-    #: tiles run at the same time; 0 = every core
+    #: tiles run at the same time; 0 = every core this process may use (its CPU set and quota)
     workers: int = 0
     #: where the temporary tiles go (removed at the end); None = beside the output
     work_dir: Optional[str] = None
@@ -145,7 +148,8 @@ class TileOptions:
 
     @property
     def worker_count(self) -> int:
-        return int(self.workers) or (os.cpu_count() or 1)
+        from ..machine import usable_cpus
+        return int(self.workers) or usable_cpus()
 
 
 def filter_reach_m(algorithm) -> float:
@@ -611,7 +615,10 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
     unit = length_label(metres_per_unit(infos[0].crs_wkt) or 1.0)  # (a survey in feet: feet)
     log(f"{len(inputs)} file(s), {total:,} points; tiles of {size:g} {unit} with a buffer of {buffer_m:g} {unit} "
         f"({'set' if tiling.buffer_m is not None else getattr(algorithm, 'reach_words', 'the filter reach')}); "
-        f"{tiling.worker_count} worker(s).")
+        f"{tiling.worker_count} worker(s)."
+        + ("" if tiling.tile_size_m or cluster is not None else
+           f" (The tile size is planned from the memory budget shared by the workers: set it, {size:g}, for the "
+           "same tiles and so the same classes and DTM with other workers or on another machine.)"))
     steps.check()
     parent = tiling.work_dir or os.path.dirname(os.path.abspath(output_path or dtm_path or inputs[0]))
     if os.path.exists(parent) and not os.path.isdir(parent):
@@ -1462,6 +1469,8 @@ def keep_freed_memory() -> bool:
 def _init_worker(environ: Dict[str, str], parent: int = 0) -> None:
     os.environ.update(environ)  # before the job imports numba or starts lazrs's thread pool
     keep_freed_memory()
+    from ..machine import fit_address_space
+    fit_address_space()
     import signal
     # Ctrl-C in a terminal reaches every process of the group: the run that started this worker
     # decides (it stops its workers, see stop_workers), not a KeyboardInterrupt traceback per worker
@@ -1508,7 +1517,8 @@ def _worker_pool(workers: int, use_processes: bool):
     exe = _python_executable()
     if exe:
         ctx.set_executable(exe)
-    share = max(1, (os.cpu_count() or 1) // workers)
+    from ..machine import usable_cpus
+    share = max(1, usable_cpus() // workers)
     return ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
                                initargs=(worker_thread_environ(share), os.getpid()))
 

@@ -966,6 +966,8 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     cancelled run leaves none of them. The input file is never modified."""
     steps = Steps(progress, is_cancelled)
     log = log or (lambda _msg: None)
+    from ..machine import fit_address_space
+    fit_address_space()  # (under ulimit -v: before the run starts its threads)
     rasters = {path: fn for path, fn in (rasters or {}).items() if path}
     check_classes_wanted(input_path, algorithm, options)
     warning = not_terrain_warning(algorithm)

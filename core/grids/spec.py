@@ -42,8 +42,10 @@ _BUDGET = contextvars.ContextVar("groundsieve_memory_budget", default=None)
 
 
 def available_memory_bytes() -> int:
-    """Memory this process can still take: the kernel's MemAvailable, and below the address-space
-    limit (``ulimit -v``, ``resource.RLIMIT_AS``) when one is set, what is left of it."""
+    """Memory this process can still take: the kernel's MemAvailable, at most its control group's limit
+    (a batch job's), and below the address-space limit (``ulimit -v``, ``resource.RLIMIT_AS``) when one
+    is set, what is left of it (core/machine.py)."""
+    from ..machine import address_space_left, cgroup_memory_limit
     avail = None
     with contextlib.suppress(OSError, ValueError):
         with open("/proc/meminfo") as f:
@@ -56,17 +58,9 @@ def available_memory_bytes() -> int:
             avail = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
     if avail is None:
         avail = 8 << 30  # no way to know (not Linux): assume a modest machine
-    with contextlib.suppress(ImportError, OSError, ValueError):
-        import resource
-        soft, _hard = resource.getrlimit(resource.RLIMIT_AS)
-        if soft != resource.RLIM_INFINITY:
-            used = 0
-            with open("/proc/self/status") as f:
-                for line in f:
-                    if line.startswith("VmSize:"):
-                        used = int(line.split()[1]) * 1024
-                        break
-            avail = min(avail, max(0, soft - used))
+    for limit in (cgroup_memory_limit(), address_space_left()):
+        if limit is not None:
+            avail = min(avail, limit)
     return int(avail)
 
 

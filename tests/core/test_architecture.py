@@ -26,7 +26,7 @@ GDAL_PACKAGE = "raster"
 #: (folder). Two names on one layer (e.g. filters and learn) must not import each other.
 LAYERS = (
     ("errors",),
-    ("progress", "validate", "metrics"),
+    ("progress", "validate", "metrics", "machine"),
     ("io", "grids"),
     ("raster",),
     ("filters",),

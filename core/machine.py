@@ -1,0 +1,153 @@
+"""What this process may use of the machine: its memory and its cores, as a batch system grants them.
+
+A job of SLURM, Kubernetes or systemd gets its memory as a control group's limit and its cores as a CPU
+set (its affinity) or a CPU quota; Grid Engine's ``h_vmem`` and PBS's ``vmem`` limit the address space
+(``ulimit -v``). The machine's RAM and ``os.cpu_count()`` ignore all four: a 2-core job on a 64-core node
+planned 64 workers, and a job of 1.5 GB ran whole and died, as a research software engineer found.
+"""
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+from typing import List, Optional
+
+#: a control group's "no limit" (cgroup v1 writes 2**63 rounded down to a page)
+_UNLIMITED = 1 << 60
+
+
+def physical_memory_bytes() -> int:
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return 8 << 30
+
+
+def _cgroup_paths(proc_cgroup: str) -> List[tuple]:
+    """(hierarchy, path) of this process's control groups: ("", path) for cgroup v2, (controllers, path)
+    for v1."""
+    paths = []
+    with contextlib.suppress(OSError):
+        with open(proc_cgroup) as f:
+            for line in f:
+                parts = line.rstrip("\n").split(":", 2)
+                if len(parts) == 3:
+                    paths.append((parts[1], parts[2]))
+    return paths
+
+
+def _ancestors(path: str) -> List[str]:
+    """``path`` and each folder above it, to the root: a limit set on any of them holds."""
+    parts = [p for p in path.split("/") if p]
+    return ["/" + "/".join(parts[:i]) if i else "" for i in range(len(parts), -1, -1)]
+
+
+def _read_number(path: str) -> Optional[int]:
+    with contextlib.suppress(OSError, ValueError):
+        with open(path) as f:
+            text = f.read().split()
+        if text and text[0] != "max":
+            return int(text[0])
+    return None
+
+
+def cgroup_memory_limit(root: str = "/sys/fs/cgroup", proc_cgroup: str = "/proc/self/cgroup") -> Optional[int]:
+    """The smallest memory limit of this process's control group and those above it (v2 ``memory.max``,
+    v1 ``memory.limit_in_bytes``); None without one. A container sees its own group as the mount's root,
+    so the mount's top files count too."""
+    limits = []
+    for controllers, path in _cgroup_paths(proc_cgroup):
+        if controllers == "":
+            files = [f"{root}{p}/memory.max" for p in _ancestors(path)]
+        elif "memory" in controllers.split(","):
+            files = [f"{root}/memory{p}/memory.limit_in_bytes" for p in _ancestors(path)]
+        else:
+            continue
+        limits += [v for v in map(_read_number, files) if v is not None and 0 < v < _UNLIMITED]
+    return min(limits) if limits else None
+
+
+def cgroup_cpu_limit(root: str = "/sys/fs/cgroup", proc_cgroup: str = "/proc/self/cgroup") -> Optional[int]:
+    """The cores a control group's CPU quota allows (v2 ``cpu.max``, v1 ``cpu.cfs_quota_us`` over
+    ``cpu.cfs_period_us``), rounded up; None without a quota."""
+    quotas = []
+    for controllers, path in _cgroup_paths(proc_cgroup):
+        for p in _ancestors(path):
+            if controllers == "":
+                with contextlib.suppress(OSError, ValueError):
+                    with open(f"{root}{p}/cpu.max") as f:
+                        quota, period = (f.read().split() + ["100000"])[:2]
+                    if quota != "max" and int(period) > 0:
+                        quotas.append(int(quota) / int(period))
+            elif "cpu" in controllers.split(","):
+                quota = _read_number(f"{root}/{controllers}{p}/cpu.cfs_quota_us")
+                period = _read_number(f"{root}/{controllers}{p}/cpu.cfs_period_us")
+                if quota is not None and quota > 0 and period:
+                    quotas.append(quota / period)
+    return max(1, math.ceil(min(quotas) - 1e-9)) if quotas else None
+
+
+def usable_cpus() -> int:
+    """The cores this process may run on: its CPU set (``taskset``, SLURM's cpusets), at most its control
+    group's quota; ``os.cpu_count()`` where neither can be read."""
+    try:
+        n = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        n = os.cpu_count() or 1
+    quota = cgroup_cpu_limit()
+    return max(1, min(n, quota) if quota else n)
+
+
+#: address_space_left(first=True)'s answer, by limit: what was left the first time it was asked
+_FIRST_LEFT: dict = {}
+
+
+def address_space_left(first: bool = False) -> Optional[int]:
+    """What is left below the address-space limit (``ulimit -v``, ``RLIMIT_AS``) when one is set: the limit
+    less this process's virtual size now (``first``: when this process first asked, under the same limit,
+    so that a run's budget does not shrink as it goes); None without a limit."""
+    with contextlib.suppress(ImportError, OSError, ValueError):
+        import resource
+        soft, _hard = resource.getrlimit(resource.RLIMIT_AS)
+        if soft != resource.RLIM_INFINITY:
+            if first and soft in _FIRST_LEFT:
+                return _FIRST_LEFT[soft]
+            used = 0
+            with open("/proc/self/status") as f:
+                for line in f:
+                    if line.startswith("VmSize:"):
+                        used = int(line.split()[1]) * 1024
+                        break
+            left = max(0, soft - used)
+            _FIRST_LEFT.setdefault(soft, left)
+            return left
+    return None
+
+
+def machine_memory_bytes() -> int:
+    """The memory this process's job has: the machine's RAM, at most its control group's limit."""
+    limit = cgroup_memory_limit()
+    ram = physical_memory_bytes()
+    return min(ram, limit) if limit else ram
+
+
+#: malloc arenas a process keeps under an address-space limit (glibc's default: 8 a core, each reserving 64 MB)
+ARENAS_UNDER_LIMIT = 2
+
+
+def fit_address_space() -> bool:
+    """Under an address-space limit (``ulimit -v``), have glibc's malloc keep ARENAS_UNDER_LIMIT arenas:
+    each thread's own arena reserves 64 MB of address space it mostly never uses, and under
+    ``ulimit -v 1200000`` a tiled run's threads ended the process at their start ("cannot allocate memory
+    for thread-local data: ABORT", no message of ours); with two arenas it ran. True when done; False
+    without a limit or where the C library is not glibc."""
+    if address_space_left() is None:
+        return False
+    import ctypes
+    import ctypes.util
+    try:
+        mallopt = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").mallopt
+    except (OSError, AttributeError):
+        return False
+    M_ARENA_MAX = -8  # (malloc.h)
+    return bool(mallopt(M_ARENA_MAX, ARENAS_UNDER_LIMIT))

@@ -1,0 +1,105 @@
+"""What a run may use of the machine, as a batch system grants it (core/machine.py): a research software
+engineer's 2-core SLURM job on a large node planned every core of the node, and a job limited to 1.5 GB ran
+a cloud whole that the default budget of the machine's RAM allowed, and died with a traceback."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+from groundsieve.core import machine
+from groundsieve.core.engine import tiles
+
+
+def _cgroups(tmp_path, lines, files):
+    tmp_path.mkdir(parents=True, exist_ok=True)
+    proc = tmp_path / "cgroup"
+    proc.write_text("".join(line + "\n" for line in lines))
+    for rel, text in files.items():
+        path = tmp_path / "fs" / rel
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+    return str(tmp_path / "fs"), str(proc)
+
+
+def test_a_cgroup_v2_memory_limit_of_the_group_or_a_group_above_it_is_found(tmp_path):
+    root, proc = _cgroups(tmp_path, ["0::/slurm/job_42/step_0"], {
+        "slurm/job_42/step_0/memory.max": "max\n",
+        "slurm/job_42/memory.max": "1610612736\n",   # the job's --mem=1.5G
+        "slurm/memory.max": "max\n",
+        "memory.max": "max\n"})
+    assert machine.cgroup_memory_limit(root, proc) == 1610612736
+
+
+def test_a_cgroup_v1_memory_limit_is_found_and_its_no_limit_is_none(tmp_path):
+    root, proc = _cgroups(tmp_path, ["4:memory:/job", "3:cpu,cpuacct:/job"], {
+        "memory/job/memory.limit_in_bytes": "2147483648\n",
+        "memory/memory.limit_in_bytes": "9223372036854771712\n"})
+    assert machine.cgroup_memory_limit(root, proc) == 2 << 30
+    root, proc = _cgroups(tmp_path / "b", ["4:memory:/"], {"memory/memory.limit_in_bytes": "9223372036854771712\n"})
+    assert machine.cgroup_memory_limit(root, proc) is None
+    assert machine.cgroup_memory_limit(str(tmp_path / "none"), str(tmp_path / "none.txt")) is None
+
+
+def test_a_cpu_quota_counts_its_cores_rounded_up(tmp_path):
+    root, proc = _cgroups(tmp_path, ["0::/kubepods/pod1"], {"kubepods/pod1/cpu.max": "150000 100000\n",
+                                                           "kubepods/cpu.max": "max 100000\n"})
+    assert machine.cgroup_cpu_limit(root, proc) == 2
+    root, proc = _cgroups(tmp_path / "b", ["2:cpu,cpuacct:/docker/x"], {
+        "cpu,cpuacct/docker/x/cpu.cfs_quota_us": "-1\n", "cpu,cpuacct/docker/x/cpu.cfs_period_us": "100000\n",
+        "cpu,cpuacct/docker/cpu.cfs_quota_us": "300000\n", "cpu,cpuacct/docker/cpu.cfs_period_us": "100000\n"})
+    assert machine.cgroup_cpu_limit(root, proc) == 3
+
+
+def test_every_core_means_the_cores_this_process_may_use(monkeypatch):
+    monkeypatch.setattr(os, "sched_getaffinity", lambda _pid: {0}, raising=False)
+    monkeypatch.setattr(os, "cpu_count", lambda: 64)
+    monkeypatch.setattr(machine, "cgroup_cpu_limit", lambda *a: None)
+    assert machine.usable_cpus() == 1
+    assert tiles.TileOptions().worker_count == 1 and tiles.TileOptions(workers=3).worker_count == 3
+    monkeypatch.setattr(os, "sched_getaffinity", lambda _pid: set(range(64)), raising=False)
+    monkeypatch.setattr(machine, "cgroup_cpu_limit", lambda *a: 4)
+    assert tiles.TileOptions().worker_count == 4
+
+
+def test_the_default_budget_is_a_quarter_of_the_jobs_memory(monkeypatch):
+    monkeypatch.setattr(machine, "physical_memory_bytes", lambda: 256 << 30)
+    monkeypatch.setattr(machine, "cgroup_memory_limit", lambda *a: 2 << 30)
+    monkeypatch.setattr(machine, "address_space_left", lambda first=False: None)
+    assert tiles.default_memory_budget_mb() == 512
+    monkeypatch.setattr(machine, "cgroup_memory_limit", lambda *a: None)
+    assert tiles.default_memory_budget_mb() == 2048
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RLIMIT_AS and /proc are Linux's")
+def test_the_default_budget_stays_below_ulimit_v():
+    """Run in a process of its own, whose address space is limited to what it uses now and 1 GB more."""
+    code = ("import resource\n"
+            "from groundsieve.core.engine import tiles\n"
+            "from groundsieve.core.machine import address_space_left\n"
+            "assert address_space_left() is None, address_space_left()\n"
+            "free = tiles.default_memory_budget_mb()\n"
+            "used = int(next(l.split()[1] for l in open('/proc/self/status') if l.startswith('VmSize:'))) * 1024\n"
+            "resource.setrlimit(resource.RLIMIT_AS, (used + (1 << 30), resource.RLIM_INFINITY))\n"
+            "left = address_space_left()\n"
+            "print(free, tiles.default_memory_budget_mb(), left)\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True).stdout
+    free, limited, left = map(float, out.split())
+    assert 0 < left <= 1 << 30
+    assert limited <= left / 4 / (1 << 20) + 1 and limited < free
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RLIMIT_AS, /proc and glibc are Linux's")
+def test_under_ulimit_v_malloc_keeps_few_arenas():
+    code = ("import resource\n"
+            "from groundsieve.core.machine import fit_address_space\n"
+            "before = fit_address_space()\n"
+            "used = int(next(l.split()[1] for l in open('/proc/self/status') if l.startswith('VmSize:'))) * 1024\n"
+            "resource.setrlimit(resource.RLIMIT_AS, (used + (1 << 30), resource.RLIM_INFINITY))\n"
+            "print(before, fit_address_space())\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True).stdout
+    assert out.split() == ["False", "True"]
