@@ -197,13 +197,46 @@ def header_crs_wkt(header) -> Optional[str]:
         try:
             crs = header.parse_crs()
         except Exception:
-            return None
+            crs = None
+        crs = _crs_of_geokeys(header, crs)
         if crs is None:
             return None
         try:
             return _with_geokey_heights(crs, header).to_wkt()
         except Exception:  # (the horizontal CRS is kept when no compound can be made of the keys)
             return crs.to_wkt()
+
+
+def _geokeys(records) -> dict:
+    """{key id: value} of the GeoTIFF keys whose value is in the directory itself."""
+    from laspy.vlrs.known import GeoKeyDirectoryVlr
+    keys = {}
+    for record in records:
+        if isinstance(record, GeoKeyDirectoryVlr):
+            keys.update({int(k.id): int(k.value_offset) for k in record.geo_keys if int(k.tiff_tag_location) == 0})
+    return keys
+
+
+def _crs_of_geokeys(header, crs):
+    """``crs`` (laspy's CRS of ``header``, or None), or the CRS GDAL reads from the header's GeoTIFF keys
+    where laspy's leaves out what they say (core/io/geokeys.py: a projection without EPSG code, an ESRI
+    PE string, a unit key); a WKT record is taken as laspy has it."""
+    from laspy.vlrs.known import WktCoordinateSystemVlr
+    from .geokeys import gdal_crs_wkt, laspy_misreads
+    records = list(header.vlrs) + list(header.evlrs or [])
+    if any(isinstance(r, WktCoordinateSystemVlr) and r.string for r in records):
+        return crs
+    if not laspy_misreads(_geokeys(records), crs):
+        return crs
+    raw = {}
+    for record in records:
+        if getattr(record, "user_id", "") == "LASF_Projection" and record.record_id in (34735, 34736, 34737):
+            raw.setdefault(record.record_id, record.record_data_bytes())
+    wkt = gdal_crs_wkt(raw.get(34735, b""), raw.get(34736, b""), raw.get(34737, b""))
+    if wkt is None:
+        return crs
+    import pyproj
+    return pyproj.CRS.from_wkt(wkt)
 
 
 #: GeoTIFF's VerticalCSTypeGeoKey and VerticalUnitsGeoKey, and the EPSG length units the second may
@@ -242,15 +275,12 @@ def _with_geokey_heights(crs, header):
     CRS only for heights in another unit than x and y: LAStools writes it (metres) into nearly every
     file, and a compound CRS of "unknown height (metre)" told two tiles of one survey apart and took
     the EPSG code off their DTMs (a code reviewer). A WKT CRS, and a 3D one, are kept as they are."""
-    from laspy.vlrs.known import GeoKeyDirectoryVlr, WktCoordinateSystemVlr
+    from laspy.vlrs.known import WktCoordinateSystemVlr
     records = list(header.vlrs) + list(header.evlrs or [])
     if any(isinstance(r, WktCoordinateSystemVlr) and r.string for r in records) or crs.is_compound \
             or crs.is_vertical or len(crs.axis_info) != 2:
         return crs
-    keys = {}
-    for record in records:
-        if isinstance(record, GeoKeyDirectoryVlr):
-            keys.update({int(k.id): int(k.value_offset) for k in record.geo_keys if int(k.tiff_tag_location) == 0})
+    keys = _geokeys(records)
     code, unit = keys.get(_VERTICAL_CS_KEY), keys.get(_VERTICAL_UNITS_KEY)
     if code is None and unit is None:
         return crs

@@ -1,5 +1,6 @@
 """The core's architecture, checked on its source: free of QGIS and Qt, GDAL (osgeo) only in
-core/raster/, imports one way down the layers, and no filter importing another filter.
+core/raster/ (and, imported where it is used, in core/io/geokeys.py: a LAS file's GeoTIFF keys are read by
+GDAL's libgeotiff where laspy misreads them, and without GDAL as laspy reads them), imports one way down the layers, and no filter importing another filter.
 
 The checker is a plain function of a folder, so the tests below also run it on planted trees
 that break each rule: a rule that cannot fail would prove nothing."""
@@ -21,6 +22,8 @@ CORE = REPO / "core"
 FORBIDDEN = ("qgis", "PyQt5", "PyQt6", "PyQt4", "PySide2", "PySide6", "sip")
 GDAL = ("osgeo", "gdal", "ogr", "osr")
 GDAL_PACKAGE = "raster"
+#: modules outside GDAL_PACKAGE that may import GDAL inside a function (the core imports without it)
+GDAL_MODULES = ("io/geokeys.py",)
 
 #: The layers, lowest first: a module imports only from lower layers or from its own package
 #: (folder). Two names on one layer (e.g. filters and learn) must not import each other.
@@ -112,7 +115,7 @@ def violations(root: Path = CORE) -> List[str]:
         for line, mod in imported_modules(tree):
             if top(mod) in FORBIDDEN:
                 found.append(f"{where}:{line}: imports QGIS/Qt ({mod})")
-            if top(mod) in GDAL and rel.parts[0] != GDAL_PACKAGE:
+            if top(mod) in GDAL and rel.parts[0] != GDAL_PACKAGE and rel.as_posix() not in GDAL_MODULES:
                 found.append(f"{where}:{line}: imports GDAL ({mod}) outside core/{GDAL_PACKAGE}/")
         if rel.parts == ("__init__.py",):
             continue  # the core's own docstring

@@ -358,3 +358,90 @@ def test_the_dtm_notes_of_a_cloud_in_feet_are_in_feet(tmp_path, tiled):
     assert len(pits) == 1 and "cells more than 1.64 ft below" in pits[0], pits
     count = int(pits[0].split("DTM: ")[1].split(" isolated")[0])
     assert 1 <= count <= 8, pits  # the deep ones only
+
+
+def _keyed_las(path, keys, doubles=(), text=b"", feet=False):
+    """A LAS 1.2 file whose CRS is GeoTIFF keys ``[(key, location, count, value)]`` with their doubles and
+    ASCII parameters; coordinates in US survey feet with ``feet``."""
+    import struct
+
+    import laspy
+    import numpy as np
+
+    from groundsieve.core.synthetic import SceneSpec, make_scene
+    scene = make_scene(SceneSpec(size_m=60.0, density_per_m2=2.0, seed=3))
+    f = 1200 / 3937 if feet else 1.0
+    data = [1, 1, 0, len(keys)]
+    for key in keys:
+        data += list(key)
+    header = laspy.LasHeader(point_format=1, version="1.2")
+    header.scales, header.offsets = np.array([0.01, 0.01, 0.01]), np.array([500000.0 // f, 5600000.0 // f, 0.0])
+    header.vlrs.append(laspy.VLR(user_id="LASF_Projection", record_id=34735, description="GeoKeyDirectoryTag",
+                                 record_data=struct.pack(f"<{len(data)}H", *data)))
+    if doubles:
+        header.vlrs.append(laspy.VLR(user_id="LASF_Projection", record_id=34736, description="GeoDoubleParamsTag",
+                                     record_data=struct.pack(f"<{len(doubles)}d", *doubles)))
+    if text:
+        header.vlrs.append(laspy.VLR(user_id="LASF_Projection", record_id=34737, description="GeoAsciiParamsTag",
+                                     record_data=text))
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = (scene.x + 500000.0) / f, (scene.y + 5600000.0) / f, scene.z / f
+    las.classification = scene.classification
+    las.write(str(path))
+    return path
+
+
+#: a transverse Mercator in US survey feet without EPSG code, as LAStools' -tm writes it: user-defined keys
+USER_DEFINED_TM = [(1024, 0, 1, 1), (2048, 0, 1, 4269), (3072, 0, 1, 32767), (3074, 0, 1, 32767),
+                   (3075, 0, 1, 1), (3076, 0, 1, 9003), (3080, 34736, 1, 0), (3081, 34736, 1, 1),
+                   (3082, 34736, 1, 3), (3083, 34736, 1, 4), (3092, 34736, 1, 2)]
+ESRI_UTM32N = (b'ESRI PE String = PROJCS["WGS_1984_UTM_Zone_32N",GEOGCS["GCS_WGS_1984",DATUM["D_WGS_1984",'
+               b'SPHEROID["WGS_1984",6378137.0,298.257223563]],PRIMEM["Greenwich",0.0],UNIT["Degree",'
+               b'0.0174532925199433]],PROJECTION["Transverse_Mercator"],PARAMETER["False_Easting",500000.0],'
+               b'PARAMETER["False_Northing",0.0],PARAMETER["Central_Meridian",9.0],PARAMETER["Scale_Factor",0.9996],'
+               b'PARAMETER["Latitude_Of_Origin",0.0],UNIT["Meter",1.0]]|\0')
+
+
+def test_a_crs_of_geotiff_keys_without_epsg_code_is_read_as_pdal_reads_it(tmp_path):
+    """laspy builds a CRS from the keys' EPSG codes only: user-defined keys (LAStools' -tm, TerraScan) were
+    read as their bare datum, NAD83 in degrees (the DTM labelled EPSG:4269, the lengths in feet unconverted,
+    "the CRS is likely wrong"); ArcGIS's PE string as no CRS; an EPSG code with a unit key of another unit
+    in metres (a format reviewer). GDAL (libgeotiff, as PDAL) reads the keys (core/io/geokeys.py)."""
+    import laspy
+    import pyproj
+
+    from groundsieve.core.io.clouds import header_crs_wkt
+
+    def crs(name, *args, **kw):
+        wkt = header_crs_wkt(laspy.open(str(_keyed_las(tmp_path / name, *args, **kw))).header)
+        return pyproj.CRS(wkt) if wkt else None
+
+    tm = crs("tm.las", USER_DEFINED_TM, doubles=(-81.0, 0.0, 0.9996, 1640416.667, 0.0), feet=True)
+    assert tm.is_projected and tm.axis_info[0].unit_name == "US survey foot"
+    assert tm.coordinate_operation.method_name == "Transverse Mercator" and tm.datum.name.startswith("North American Datum 1983")
+    esri = crs("esri.las", [(1024, 0, 1, 1), (1026, 34737, len(ESRI_UTM32N) - 1, 0), (3072, 0, 1, 32767)], text=ESRI_UTM32N)
+    assert esri.to_epsg() == 32632 and esri.name == "WGS 84 / UTM zone 32N"
+    override = crs("override.las", [(1024, 0, 1, 1), (3072, 0, 1, 32632), (3076, 0, 1, 9003)], feet=True)
+    assert override.is_projected and override.axis_info[0].unit_name == "US survey foot" and override.to_epsg() is None
+    # what laspy reads right stays laspy's: an EPSG code, in its own unit or with a units key of the same
+    assert crs("utm.las", [(1024, 0, 1, 1), (3072, 0, 1, 32632), (3076, 0, 1, 9001)]).to_epsg() == 32632
+    assert crs("none.las", []) is None
+
+
+def test_a_cloud_whose_user_defined_keys_are_in_feet_runs_in_feet_and_its_dtm_says_so(tmp_path):
+    from osgeo import osr
+
+    from groundsieve.core.engine.workflow import DTMOptions, run_ground_filter
+    from groundsieve.core.filters.smrf import SMRF
+    from groundsieve.core.progress import WARNING_PREFIX
+    src = _keyed_las(tmp_path / "tm.las", USER_DEFINED_TM, doubles=(-81.0, 0.0, 0.9996, 1640416.667, 0.0), feet=True)
+    lines = []
+    run_ground_filter(str(src), str(tmp_path / "o.las"), SMRF(), dtm_path=str(tmp_path / "o.tif"),
+                      dtm=DTMOptions(), log=lines.append)
+    assert any("the CRS's unit is US survey foot: lengths in metres (the defaults, a preset's) are converted" in line
+               for line in lines), lines
+    assert not any(line.startswith(WARNING_PREFIX) and "geographic" in line for line in lines), lines
+    from osgeo import gdal
+    ref = osr.SpatialReference(gdal.Open(str(tmp_path / "o.tif")).GetProjection())
+    assert ref.IsProjected() and ref.GetLinearUnitsName() == "US survey foot"
+    assert ref.GetProjParm("central_meridian") == -81.0
