@@ -112,6 +112,25 @@ def elevation_unit(crs_wkt: Optional[str]) -> str:
     return ""
 
 
+def geotiff_crs(crs_wkt: Optional[str]) -> Optional[str]:
+    """The CRS a GeoTIFF is given: ``crs_wkt``, but for a compound CRS whose vertical part has no EPSG code
+    (an unknown datum in US survey feet, as a LAS 1.2 file's keys give heights in feet) its horizontal
+    part. GeoTIFF keys cannot name such a vertical CRS; GDAL dropped it and put the band's unit and
+    description into a .aux.xml beside the temporary file, which never reached the DTM: one more hidden
+    file a run, and a DTM without its unit (a format reviewer). The unit stays the band's unit type."""
+    if not crs_wkt:
+        return crs_wkt
+    import pyproj
+    try:
+        crs = pyproj.CRS.from_wkt(crs_wkt)
+    except pyproj.exceptions.CRSError:
+        return crs_wkt
+    if crs.is_compound and len(crs.sub_crs_list) == 2 and crs.sub_crs_list[1].is_vertical \
+            and crs.sub_crs_list[1].to_epsg() is None:
+        return crs.sub_crs_list[0].to_wkt()
+    return crs_wkt
+
+
 def unit_warning(path: str, crs_wkt: Optional[str], lengths: str = "every length parameter",
                  bounds: Optional[Tuple[float, float, float, float]] = None) -> Optional[str]:
     """What to tell the user when the cloud has no CRS, or one whose unit is not the metre (the

@@ -12,7 +12,7 @@ from ..errors import OutputError
 from ..grids.spec import GridSpec
 from ..io import atomic_path
 from ..io.provenance import software
-from .crs import elevation_unit
+from .crs import elevation_unit, geotiff_crs
 
 #: a DTM band's description (QGIS names the band after it in the legend: "Band 1: elevation")
 ELEVATION_BAND = "elevation"
@@ -71,7 +71,7 @@ def write_geotiff(path: str, values: np.ndarray, grid: GridSpec, *, crs_wkt: Opt
         mem.SetGeoTransform(grid.geotransform)
         mem.SetMetadataItem("TIFFTAG_SOFTWARE", software())
         if crs_wkt:
-            mem.SetProjection(crs_wkt)
+            mem.SetProjection(geotiff_crs(crs_wkt))
         band = mem.GetRasterBand(1)
         band.SetNoDataValue(nodata)
         if elevation:
@@ -197,7 +197,7 @@ class BlockGeoTIFF:
             self._ds.SetGeoTransform(grid.geotransform)
             self._ds.SetMetadataItem("TIFFTAG_SOFTWARE", software())
             if crs_wkt:
-                self._ds.SetProjection(crs_wkt)
+                self._ds.SetProjection(geotiff_crs(crs_wkt))
             self._band = self._ds.GetRasterBand(1)
             self._band.SetNoDataValue(nodata)
             self._band.SetUnitType(elevation_unit(crs_wkt))

@@ -1,4 +1,6 @@
 """core/raster/crs.py: boxes in WGS 84 for GeoJSON/STAC (the .vpc's bbox and geometry)."""
+import os
+
 import pytest
 
 from groundsieve.core.raster.crs import lonlat_box
@@ -445,3 +447,28 @@ def test_a_cloud_whose_user_defined_keys_are_in_feet_runs_in_feet_and_its_dtm_sa
     ref = osr.SpatialReference(gdal.Open(str(tmp_path / "o.tif")).GetProjection())
     assert ref.IsProjected() and ref.GetLinearUnitsName() == "US survey foot"
     assert ref.GetProjParm("central_meridian") == -81.0
+
+
+@pytest.mark.parametrize("tiled", [False, True])
+def test_heights_in_feet_of_an_unknown_datum_leave_no_aux_xml_and_the_dtm_keeps_their_unit(tmp_path, tiled):
+    """UTM in metres with heights in US survey feet by the units key alone: GeoTIFF keys cannot name the
+    vertical CRS "unknown height (US survey foot)", and GDAL wrote the band's unit into a hidden
+    .NAME...part.tif.aux.xml beside the temporary file, one more each run, the DTM without its unit (a
+    format reviewer)."""
+    from osgeo import gdal
+
+    from groundsieve.core.engine.tiles import TileOptions
+    from groundsieve.core.engine.workflow import DTMOptions, FilterOptions, run_ground_filter
+    from groundsieve.core.filters.smrf import SMRF
+    folder = tmp_path / "in"
+    folder.mkdir()
+    src = _geokey_las(folder / "ft.las", [(1024, 1), (1025, 1), (3072, 32632), (4099, 9003)], z_factor=1200 / 3937)
+    out = tmp_path / "out"
+    out.mkdir()
+    options = FilterOptions(tiling=TileOptions(tile_size_m=30.0, workers=1)) if tiled else FilterOptions()
+    for _ in range(2):
+        run_ground_filter(str(src), str(out / "o.las"), SMRF(), dtm_path=str(out / "o.tif"), dtm=DTMOptions(),
+                          options=options)
+    assert sorted(os.listdir(out)) == ["o.las", "o.tif"]
+    dtm = gdal.Open(str(out / "o.tif"))
+    assert dtm.GetRasterBand(1).GetUnitType() == "US survey foot" and "32632" in dtm.GetProjection()
