@@ -111,7 +111,9 @@ def run_features(input_path: str, output_path: str, spec: FeatureSpec = FeatureS
     ``ignore_classes`` (noise 7 and 18 by default; a list or text such as "7,18,20-25") stay out
     of every neighbourhood and get no value (NaN): the features written are those the classifier
     computes on the same cloud."""
+    from .tiles import refuse_in_a_workers_import
     from .workflow import FilterOptions, processable
+    refuse_in_a_workers_import()
     steps = Steps(progress, is_cancelled)
     log = log or (lambda _msg: None)
     check_output_path(output_path, inputs=[input_path])

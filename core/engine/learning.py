@@ -126,6 +126,8 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
     from ..io import check_output_path, read_cloud
     from ..metrics import class_report
     from ..progress import Steps
+    from .tiles import refuse_in_a_workers_import
+    refuse_in_a_workers_import()
     steps = Steps(progress, is_cancelled)
     log = log or (lambda _msg: None)
     check_output_path(model_path, inputs=[input_path, validation_path, test_path], extensions=(MODEL_EXTENSION,),
@@ -406,7 +408,8 @@ def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_pat
     from ..progress import Steps
     from .workflow import (DTMOptions, FilterOptions, check_dtm_memory, check_outputs, dtm_points, make_dtm,
                            processable, write_outputs)
-    from .tiles import TileOptions, needs_tiling
+    from .tiles import TileOptions, needs_tiling, refuse_in_a_workers_import
+    refuse_in_a_workers_import()
     if needs_tiling(input_path, tiling or TileOptions()):
         return classify_survey(input_path, output_path, model_path, dtm_path=dtm_path, dtm=dtm,
                                ignore_classes=ignore_classes, tiling=tiling, progress=progress,

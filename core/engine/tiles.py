@@ -479,6 +479,7 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     """Classify ``input_path`` (a LAS/LAZ, a folder or a .vpc) tile by tile; see the module's docstring.
     ``options`` is a ``workflow.FilterOptions`` (its ``tiling`` field a :class:`TileOptions`), ``dtm``
     a ``workflow.DTMOptions``."""
+    refuse_in_a_workers_import()
     from . import workflow
     steps = steps or Steps()
     log = log or (lambda _msg: None)
@@ -1507,6 +1508,32 @@ def _exit_with_parent(parent: int) -> None:
     threading.Thread(target=watch, name="groundsieve-parent-watch", daemon=True).start()
 
 
+def started_by_a_script() -> Optional[str]:
+    """The Python script (a file) this process was started with, if any: spawned worker processes import it
+    again (not the command line's ``python -m groundsieve``, nor QGIS)."""
+    main = sys.modules.get("__main__")
+    path = getattr(main, "__file__", None)
+    spec = getattr(main, "__spec__", None)
+    if not path or (spec is not None and (spec.name or "").split(".")[0] == "groundsieve"):
+        return None
+    return path
+
+
+def refuse_in_a_workers_import() -> None:
+    """Refuse a run started while a worker process imports the script that started the engine: spawned
+    workers import the parent's ``__main__`` again, and a script without ``if __name__ == "__main__":`` ran
+    its runs again in every worker (each refused by the working folder's lock, or, for small files, run
+    and written again), while the run itself ended with "a worker ended abruptly ... lack of memory" (a
+    research software engineer)."""
+    import multiprocessing.process
+    if getattr(multiprocessing.process.current_process(), "_inheriting", False):
+        raise GroundSieveError(
+            f"{getattr(sys.modules.get('__mp_main__'), '__file__', None) or 'the script'}: a GroundSieve worker "
+            "process is importing this script, "
+            "which starts a run at import: put the script's work under `if __name__ == \"__main__\":` (worker "
+            "processes import the script that started the run; docs/API.md)")
+
+
 def _worker_pool(workers: int, use_processes: bool):
     """The pool the tiles and the per-file jobs run on: spawned worker processes (with this QGIS's
     Python when it is not sys.executable), each with its share of the cores, or threads."""
@@ -1606,10 +1633,14 @@ def _record_as_completed(pool, function, jobs, record, check=None, stage="jobs")
                 try:
                     result = fut.result()
                 except BrokenProcessPool as err:
+                    script = started_by_a_script()
                     raise GroundSieveError(
-                        f"a worker process ended abruptly during the {stage} (most often the system stops one "
-                        "for lack of memory: see its log, e.g. dmesg); use a smaller memory budget or fewer "
-                        "workers") from err
+                        f"a worker process ended abruptly during the {stage} ("
+                        + (f"the script that started the run, {script}, is imported again by every worker process: "
+                           "its work must be under `if __name__ == \"__main__\":` (docs/API.md); if it is, "
+                           if script else "")
+                        + "most often the system stops one for lack of memory: see its log, e.g. dmesg); use a "
+                        "smaller memory budget or fewer workers") from err
                 del fut
                 record(result)
                 del result

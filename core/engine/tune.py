@@ -505,7 +505,9 @@ def tune(cloud, name: str, options: TuneOptions = TuneOptions(), *, base: Option
     defaults); the searched parameters move, the others stay. The budget counts filter runs:
     parameters of ``parameters.CHEAP`` (SMRF's threshold and scalar) are re-scored on a run's
     surface, several values per run, at no cost to the budget."""
+    from .tiles import refuse_in_a_workers_import
     from .workflow import call_filter
+    refuse_in_a_workers_import()
     if name not in P.FILTERS:
         raise InvalidParameterError(f"unknown filter {name!r} (one of {', '.join(P.FILTERS)})")
     steps = Steps(progress, is_cancelled)

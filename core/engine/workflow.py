@@ -964,6 +964,8 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     ``f(run) -> (values, grid)`` (e.g. the intermediate grids a filter keeps in ``run.detail``).
     All outputs are written to temporary files and renamed together at the end: a failed or
     cancelled run leaves none of them. The input file is never modified."""
+    from .tiles import refuse_in_a_workers_import
+    refuse_in_a_workers_import()
     steps = Steps(progress, is_cancelled)
     log = log or (lambda _msg: None)
     from ..machine import fit_address_space

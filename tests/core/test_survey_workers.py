@@ -308,3 +308,39 @@ def test_the_client_sees_a_cancel_while_its_workers_run():
             assert not finished, "the cancel came only after the job"
         finally:
             release.set()
+
+
+_SCRIPT = '''import sys
+from groundsieve.core.engine.tiles import TileOptions
+from groundsieve.core.engine.workflow import FilterOptions, run_ground_filter
+from groundsieve.core.errors import GroundSieveError
+from groundsieve.core.filters.smrf import SMRF
+{body}
+'''
+_RUN = ('run_ground_filter(sys.argv[1], sys.argv[2], SMRF(), options=FilterOptions(tiling=TileOptions('
+        'tile_size_m=30.0, workers=2, parallel="processes")))')
+
+
+@pytest.mark.parametrize("catches", [True, False])
+def test_a_script_without_a_main_guard_is_told_so_not_blamed_on_memory(survey, tmp_path, catches):
+    """Spawned workers import the script that started the run: without `if __name__ == "__main__":` its
+    run started again in every worker, and the run ended "a worker process ended abruptly ... lack of
+    memory" (a research software engineer). The workers' imports are refused in words naming the script;
+    a script that catches the refusal runs to its end, one that does not names itself in the run's error."""
+    import subprocess
+    import sys
+    body = (f"try:\n    {_RUN}\n    print('done')\nexcept GroundSieveError as err:\n    print('refused:', err)\n"
+            if catches else f"{_RUN}\nprint('done')\n")
+    script = tmp_path / "noguard.py"
+    script.write_text(_SCRIPT.format(body=body))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+    out = subprocess.run([sys.executable, str(script), survey, str(tmp_path / "out.vpc")], capture_output=True,
+                         text=True, env=env, timeout=300, cwd=tmp_path)
+    said = out.stdout + out.stderr
+    assert f"{script}: a GroundSieve worker process is importing this script" in said, said[-3000:]
+    assert 'put the script\'s work under `if __name__ == "__main__":`' in said
+    if catches:
+        assert out.returncode == 0 and out.stdout.strip().splitlines()[-1] == "done", said[-3000:]
+    else:
+        assert out.returncode != 0
+        assert f"the script that started the run, {script}, is imported again by every worker process" in said
