@@ -20,7 +20,9 @@ def _numba_cache_folder() -> None:
     neither the package's folders nor the user's cache folder can be written (a root-owned install run
     by a service account, cron, QGIS Server or ``docker --user`` with an unwritable HOME: a release
     engineer). Then the cache goes to ``<temp>/groundsieve-numba-<uid>``. Nothing is changed where
-    numba can cache, or where NUMBA_CACHE_DIR is set."""
+    numba can cache, or where NUMBA_CACHE_DIR is set to a folder it can write. One it cannot write (a
+    cache compiled into a container's image or a read-only shared install: numba can only use a cache it
+    may write) is treated as none: every run failed with that traceback (a research software engineer)."""
     import os
     import sys
     import tempfile
@@ -32,8 +34,10 @@ def _numba_cache_folder() -> None:
                 return True
         except OSError:
             return False
-    if os.environ.get("NUMBA_CACHE_DIR") or not sys.platform.startswith("linux"):
+    if not sys.platform.startswith("linux"):
         return  # (elsewhere numba's user cache is not ~/.cache/numba, and the plugin's folder is the user's)
+    if os.environ.get("NUMBA_CACHE_DIR") and writable(os.environ["NUMBA_CACHE_DIR"]):
+        return
     if writable(os.path.join(os.path.dirname(os.path.abspath(__file__)), "grids", "__pycache__")):
         return
     user = os.path.join(os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "numba")

@@ -58,3 +58,30 @@ def test_an_empty_cache_is_said_before_a_run_and_the_command_line_says_it(tmp_pa
         out = io.StringIO()
         assert main(["smrf", "--input", str(src), "--output", str(tmp_path / "o.laz")], out=out) == 0
         assert (kernels.COMPILING in out.getvalue()) == compiles
+
+
+def test_a_numba_cache_dir_that_cannot_be_written_is_treated_as_none():
+    """A NUMBA_CACHE_DIR compiled into a container's image or on a read-only share made every run fail
+    with numba's "cannot cache function ...: no locator available" (a research software engineer):
+    numba uses only a cache it may write. The cache then goes where it would without the variable."""
+    if os.geteuid() != 0 or not shutil.which("setpriv"):
+        pytest.skip("needs root and setpriv to run as another user (nobody)")
+    if not os.access(PLUGINS, os.X_OK) or any(not os.stat(p).st_mode & 0o001 for p in Path(PLUGINS).parents
+                                              if str(p) != "/"):
+        pytest.skip(f"{PLUGINS} cannot be reached by another user")
+    import tempfile
+    readonly = tempfile.mkdtemp(prefix="gs-ro-cache-")
+    try:
+        os.chmod(readonly, 0o555)
+        code = ("import os, groundsieve.core.grids._kernels as k\n"
+                "import numpy as np\n"
+                "print(os.environ.get('NUMBA_CACHE_DIR', ''))\n")
+        env = {k: v for k, v in os.environ.items() if k not in ("XDG_CACHE_HOME",)}
+        env.update(HOME="/nonexistent", PYTHONPATH=PLUGINS, NUMBA_CACHE_DIR=readonly)
+        proc = subprocess.run(["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups", sys.executable, "-c",
+                               code], capture_output=True, text=True, env=env, cwd="/", timeout=300)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        assert os.path.basename(proc.stdout.strip()).startswith("groundsieve-numba-"), proc.stdout
+    finally:
+        os.chmod(readonly, 0o755)
+        shutil.rmtree(readonly, ignore_errors=True)
