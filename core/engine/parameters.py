@@ -170,8 +170,17 @@ SUMMARY = {
 }
 
 
+def known_filter(name) -> str:
+    """``name`` if it names a filter of FILTERS, else InvalidParameterError (a script's "SMRF" was a KeyError)."""
+    if name not in FILTERS:
+        from ..errors import InvalidParameterError
+        hint = f" (names are in lower case: {str(name).lower()!r})" if str(name).lower() in FILTERS else ""
+        raise InvalidParameterError(f"unknown filter {name!r}{hint} (one of {', '.join(FILTERS)})")
+    return name
+
+
 def filter_class(name: str):
-    module, cls, _params = FILTERS[name]
+    module, cls, _params = FILTERS[known_filter(name)]
     return getattr(importlib.import_module(f"..filters.{module}", __package__), cls)
 
 
@@ -188,7 +197,7 @@ def filter_fields(name: str) -> List[dataclasses.Field]:
 
 
 def params(name: str) -> Sequence[Param]:
-    return FILTERS[name][2]
+    return FILTERS[known_filter(name)][2]
 
 
 def default(name: str, field: str):
@@ -196,7 +205,9 @@ def default(name: str, field: str):
     for f in filter_fields(name):
         if f.name == field:
             return f.default
-    raise KeyError(f"{name} has no field {field}")
+    from ..errors import InvalidParameterError
+    raise InvalidParameterError(f"{FILTERS[name][1]} has no parameter {field!r} (its parameters: "
+                                f"{', '.join(f.name for f in filter_fields(name))})")
 
 
 def core_only_fields(name: str) -> List[dataclasses.Field]:

@@ -54,6 +54,8 @@ class Preset:
         values (field -> value) that differ from the filter's defaults, and those of the fields in
         ``typed`` whatever their value (the command line knows what was typed)."""
         given, typed = given or {}, set(typed)
+        for key in given:
+            P.default(self.filter, key)  # (an unknown field is refused in words, not as a KeyError)
         built = P.filter_class(self.filter)(**merge(self.filter, self.values, given, typed))
         return P.mark_user_set(built, {k for k, v in given.items() if v != P.default(self.filter, k) or k in typed})
 
@@ -183,6 +185,9 @@ def shipped_path(name: str) -> Optional[str]:
 
 def load_preset(path: str, expected_filter: Optional[str] = None) -> Preset:
     """Read and validate a preset file (or a shipped preset's name)."""
+    path = os.fspath(path)
+    if expected_filter is not None:
+        P.known_filter(expected_filter)
     if not os.path.isfile(path):
         shipped = shipped_path(path) if os.sep not in path and "/" not in path else None
         if shipped is None:
@@ -201,7 +206,11 @@ def load_preset(path: str, expected_filter: Optional[str] = None) -> Preset:
 def preset_dict(name: str, values: Mapping[str, object], *, description: str = "",
                 source: Optional[Mapping[str, object]] = None) -> dict:
     """The JSON object of a preset giving ``values`` (field -> value) of filter ``name``."""
-    to_name = {fld: key for key, fld in P.preset_names(name).items()}
+    to_name = {fld: key for key, fld in P.preset_names(P.known_filter(name)).items()}
+    for key in values:
+        if key not in to_name:
+            P.default(name, key)  # (its words for an unknown field)
+            raise PresetError(f"{key!r} of {P.FILTERS[name][1]} is set by a run, not by a preset")
     return {"format": FORMAT, "format_version": FORMAT_VERSION, "groundsieve": _version(), "filter": name,
             "parameters": {to_name[k]: v for k, v in values.items()},
             "description": description, "source": dict(source or {})}

@@ -319,6 +319,8 @@ class TiledRun:
     copc_inputs: List[str] = field(default_factory=list)
     #: the filter as it ran (its lengths in the CRS's unit: workflow.defaults_in_crs_unit)
     algorithm: object = None
+    #: the run's warnings (its log's "Warning: " lines, without the prefix; set by run_ground_filter)
+    warnings: List[str] = field(default_factory=list)
 
 
 def output_files(inputs: Sequence[str], output_path: Optional[str]) -> List[Optional[str]]:

@@ -22,6 +22,7 @@ Deterministic: no random numbers; the same patch, filter and options give the sa
 from __future__ import annotations
 
 import math
+import os
 import time
 from dataclasses import dataclass, field
 from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple
@@ -512,8 +513,8 @@ def tune(cloud, name: str, options: TuneOptions = TuneOptions(), *, base: Option
         raise InvalidParameterError(f"unknown filter {name!r} (one of {', '.join(P.FILTERS)})")
     steps = Steps(progress, is_cancelled)
     log = log or (lambda _m: None)
-    if isinstance(cloud, str):
-        cloud = read_cloud(cloud)
+    if isinstance(cloud, (str, os.PathLike)):
+        cloud = read_cloud(os.fspath(cloud))
     where = cloud.path or "the tuning patch"
     cloud = _in_metres(cloud, log)
     use, ref_all = reference_ground(cloud, where)

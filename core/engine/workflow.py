@@ -24,7 +24,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable, List, Optional, Tuple
 
 import numpy as np
@@ -215,10 +215,21 @@ class FilterRun:
     dtm: Optional[np.ndarray] = None
     detail: object = None       #: what the filter's ``run`` returned (see call_filter)
     algorithm: object = None    #: the filter as it ran (its lengths in the CRS's unit: defaults_in_crs_unit)
+    #: as a tiled run's ``TiledRun`` has them (run_ground_filter returns either): the input, the classified
+    #: file written (none without an output), the DTM's path, and the run's warnings (its log's "Warning: "
+    #: lines, without the prefix)
+    inputs: List[str] = field(default_factory=list)
+    outputs: List[str] = field(default_factory=list)
+    dtm_path: Optional[str] = None
+    warnings: List[str] = field(default_factory=list)
 
     @property
     def ground_count(self) -> int:
         return int(self.ground.sum())
+
+    @property
+    def point_count(self) -> int:
+        return len(self.cloud)
 
     @property
     def crs_wkt(self) -> Optional[str]:
@@ -966,8 +977,53 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     cancelled run leaves none of them. The input file is never modified."""
     from .tiles import refuse_in_a_workers_import
     refuse_in_a_workers_import()
+    input_path, output_path, dtm_path = _path(input_path, "input"), _path(output_path, "output"), _path(dtm_path, "DTM")
+    options = FilterOptions() if options is None else options
+    dtm = DTMOptions() if dtm is None else dtm
+    algorithm = _filter_of(algorithm)
     steps = Steps(progress, is_cancelled)
-    log = log or (lambda _msg: None)
+    said, log = _collecting(log)
+    run = _run_ground_filter(input_path, output_path, algorithm, options, dtm_path, dtm, rasters, steps, log)
+    run.warnings = said
+    return run
+
+
+def _path(path, what: str) -> Optional[str]:
+    """``path`` as text (a ``pathlib.Path`` or any path-like; None stays None)."""
+    if path is None:
+        return None
+    try:
+        return os.fspath(path)
+    except TypeError:
+        raise InvalidParameterError(f"the {what} must be a path (got {type(path).__name__} {path!r})") from None
+
+
+def _filter_of(algorithm):
+    """``algorithm``, or the filter a name gives with its defaults ("smrf", as tune and presets take it)."""
+    if isinstance(algorithm, str):
+        from . import parameters as P
+        return P.filter_class(algorithm)()
+    if not callable(getattr(algorithm, "run", None)) and not callable(algorithm):
+        raise InvalidParameterError(f"the filter must be a filter object (e.g. SMRF()) or a filter's name "
+                                    f"(got {type(algorithm).__name__})")
+    return algorithm
+
+
+def _collecting(log):
+    """(the warnings, a log that keeps them and passes every line on to ``log``)."""
+    from ..progress import warning_of
+    said: List[str] = []
+    out = log or (lambda _msg: None)
+
+    def collect(msg: str) -> None:
+        text = warning_of(msg)
+        if text is not None:
+            said.append(text)
+        out(msg)
+    return said, collect
+
+
+def _run_ground_filter(input_path, output_path, algorithm, options, dtm_path, dtm, rasters, steps, log):
     from ..machine import fit_address_space
     fit_address_space()  # (under ulimit -v: before the run starts its threads)
     rasters = {path: fn for path, fn in (rasters or {}).items() if path}
@@ -1048,4 +1104,5 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
         extra.insert(0, (dtm_path, run.dtm, run.dtm_grid, {"elevation": True}))
     write_outputs(cloud, cls, output_path, extra, steps.sub(at_write, 1.0), log)
     steps.report(1.0)
+    run.inputs, run.outputs, run.dtm_path = [input_path], [output_path] if output_path else [], dtm_path
     return run
