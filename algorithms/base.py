@@ -25,7 +25,7 @@ _ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
 
 COMMON_HELP = """
 <h3>Input and outputs</h3>
-<p><b>Input point cloud</b>: LAS 1.2-1.4 or LAZ (point formats 0-10), or an ISPRS filter-test text
+<p><b>Input point cloud</b>: LAS 1.0-1.4 or LAZ (point formats 0-10), or an ISPRS filter-test text
 file <code>x y z label</code> (.txt); or, for a survey, a folder of LAS/LAZ files (the folder button beside
 "...", or type its path) or a QGIS virtual point cloud (.vpc, as "Build virtual point cloud" writes it). The files are
 only read, never changed. Lengths given in metres

@@ -16,7 +16,7 @@ class DTMFromClassesAlgorithm(GroundFilterAlgorithm):
         CLASSES="The classes whose points make the DTM, as the cloud has them (2 = ground; e.g. 2,9 with water, "
                 "2,9,11 with a road surface). Nothing is filtered again.",
         IGNORE_CLASSES="Points of these classes stay out of the DTM and of its extent (7 and 18, noise, by default).",
-        INPUT="A classified LAS/LAZ (1.2-1.4), a folder of them or a .vpc (a survey, in buffered tiles); a text file "
+        INPUT="A classified LAS/LAZ (1.0-1.4), a folder of them or a .vpc (a survey, in buffered tiles); a text file "
               "carries no classes. Only read, never changed.",
         TILE_BUFFER="The margin read around each tile; -1 = 40 m: gaps in the ground up to this wide are bridged "
                     "as a run of the whole cloud bridges them.",
@@ -48,7 +48,7 @@ points of the <i>Ground classes</i> (2 by default) are interpolated linearly on 
 triangulation, as the ground filters' DTMs are, and every other point stays out of it. The run says how
 many points of each other class it left out.</p>
 <h3>Parameters</h3>
-<p><b>Input point cloud</b>: LAS 1.2-1.4 or LAZ, a folder of them or a .vpc (a survey, run in buffered
+<p><b>Input point cloud</b>: LAS 1.0-1.4 or LAZ, a folder of them or a .vpc (a survey, run in buffered
 tiles). Only read, never changed. <b>Ground classes</b>: the classes of the DTM's points: 2 (ground);
 add 9 (water) for a flood model's water surface, e.g. <code>2,9</code>, and the classes the vendor kept apart
 from the ground that are terrain too: 8 (model key points), 10 (rail), 11 (road surface), e.g.

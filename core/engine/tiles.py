@@ -92,15 +92,18 @@ PROCESS_MIN_POINTS = 10_000_000
 
 def default_memory_budget_mb() -> float:
     """A quarter of the memory this job has (the machine's RAM, at most its control group's limit), at most
-    2 GB: room for QGIS and for the other programs; below an address-space limit (``ulimit -v``), a quarter
-    of what is left of it (core/machine.py): threads reserve address space far beyond what they use (each
-    its stack and malloc arena, OpenBLAS its buffers), and with 60 % of it the sparse solve of a tile's fill
-    waited for ever on OpenBLAS's allocation under ``ulimit -v 1500000``."""
+    2 GB: room for QGIS and for the other programs; below an address-space limit (``ulimit -v``), at most
+    DEFAULT_MEMORY_FRACTION (60 %) of what was left of it when the run first asked, as a grid's guard takes
+    (core/machine.py). Measured on a 3.7 M point LAZ with a 0.5 m DTM that ran whole and died with a
+    traceback: done in tiles under ulimit -v 1200000 to 1500000 (with machine.fit_address_space's two
+    malloc arenas; without them a tile's sparse solve waited for ever in OpenBLAS at 1500000); at
+    1000000 a tile runs out of memory, said as such, and a smaller budget runs."""
+    from ..grids.spec import DEFAULT_MEMORY_FRACTION
     from ..machine import address_space_left, machine_memory_bytes
     budget = min(machine_memory_bytes() // 4, 2 << 30)
     left = address_space_left(first=True)
     if left is not None:
-        budget = min(budget, left // 4)
+        budget = min(budget, int(DEFAULT_MEMORY_FRACTION * left))
     return float(max(budget // (1 << 20), 1))
 
 
@@ -1742,6 +1745,10 @@ def _tile_job(job) -> Optional[dict]:
         if full is not None:
             raise full from err
         raise GroundSieveError(f"{where} failed: {type(err).__name__}: {err}") from err
+    except MemoryError as err:  # (under ulimit -v 1000000 a tile ran out: say what to change)
+        from ..errors import MemoryBudgetError
+        raise MemoryBudgetError(f"{where}: out of memory ({err}); give a smaller memory budget than this run's "
+                                "(the log's first lines say it) or fewer workers") from err
     except Exception as err:  # an unexpected failure still names the tile
         raise GroundSieveError(f"{where} failed: {type(err).__name__}: {err}") from err
 

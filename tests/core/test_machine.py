@@ -89,7 +89,7 @@ def test_the_default_budget_stays_below_ulimit_v():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True).stdout
     free, limited, left = map(float, out.split())
     assert 0 < left <= 1 << 30
-    assert limited <= left / 4 / (1 << 20) + 1 and limited < free
+    assert limited <= 0.6 * left / (1 << 20) + 1 and limited < free
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RLIMIT_AS, /proc and glibc are Linux's")
@@ -103,3 +103,24 @@ def test_under_ulimit_v_malloc_keeps_few_arenas():
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True).stdout
     assert out.split() == ["False", "True"]
+
+
+def test_a_tile_out_of_memory_is_a_memory_error_that_says_what_to_change(tmp_path):
+    """Under ulimit -v 1000000 a tile's numpy allocation failed: "tile ... failed: MemoryError", kind "other"
+    on the command line. It is the memory kind, with what to change."""
+    from groundsieve.core.engine.workflow import FilterOptions, run_ground_filter
+    from groundsieve.core.errors import MemoryBudgetError
+    from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+    src = tmp_path / "s.laz"
+    write_scene(make_scene(SceneSpec(size_m=60.0, density_per_m2=2.0, seed=3)), str(src))
+
+    class Hungry:
+        reach_m = 5.0
+
+        def __call__(self, xyz, steps=None):
+            raise MemoryError("Unable to allocate 35.6 MiB for an array")
+    hungry = Hungry()
+    with pytest.raises(MemoryBudgetError, match=r"^tile .* of s.laz: out of memory \(Unable to allocate 35.6 MiB.*\); "
+                                                r"give a smaller memory budget than this run's"):
+        run_ground_filter(str(src), None, hungry, options=FilterOptions(tiling=tiles.TileOptions(
+            tile_size_m=30.0, workers=1, buffer_m=5.0)))
