@@ -88,7 +88,7 @@ def _add_common(parser: argparse.ArgumentParser) -> None:
     fo, dt = _defaults(FilterOptions), _defaults(DTMOptions)
     io = parser.add_argument_group("input and outputs")
     io.add_argument("--input", required=True, metavar="PATH",
-                    help="LAS/LAZ (1.2-1.4, point formats 0-10), a folder of them, a .vpc, or an ISPRS .txt")
+                    help="LAS/LAZ (1.0-1.4, point formats 0-10), a folder of them, a .vpc, or an ISPRS .txt")
     io.add_argument("--output", metavar="PATH", help="classified LAS/LAZ (a .vpc for several input files)")
     io.add_argument("--dtm", metavar="PATH", help="DTM GeoTIFF (optional)")
     _add_json(io)
@@ -267,7 +267,7 @@ def _add_dtm(sub) -> None:
                             "are triangulated as the ground filters' DTMs are. A folder or a .vpc runs in buffered "
                             "tiles (a buffer of 40 m unless --tile-buffer says otherwise).")
     io = parser.add_argument_group("input and output")
-    io.add_argument("--input", required=True, metavar="PATH", help="LAS/LAZ (1.2-1.4), a folder of them, or a .vpc")
+    io.add_argument("--input", required=True, metavar="PATH", help="LAS/LAZ (1.0-1.4), a folder of them, or a .vpc")
     io.add_argument("--dtm", required=True, metavar="PATH", help="the DTM GeoTIFF")
     _add_json(io, DTM_JSON)
     io.add_argument("--classes", default="2", metavar="LIST",

@@ -74,6 +74,7 @@ def scan_header(path: str) -> LasInfo:
             if held is not None and held < int(h.point_count) and not (h.version.minor >= 4 and h.number_of_evlrs):
                 raise InputError(f"{path}: the header announces {int(h.point_count):,} points but the file holds "
                                  f"{held:,} point records: the file is truncated or its header's count is wrong")
+            _check_point_counts(path, h, held)
             if int(h.point_count) == 0:
                 _check_not_growing(path, h, held)
             damaged = _copc_damage(path) if is_copc_header(h) else ""
@@ -127,6 +128,25 @@ def _read_bounds(reader, chunk: int):
 
 #: what a complete LAZ without points holds after its header at most (the chunk table's offset and table)
 EMPTY_LAZ_TAIL = 65536
+
+
+def _check_point_counts(path: str, header, held: Optional[int]) -> None:
+    """Refuse a LAS 1.4 file of point formats 0-5 whose two point counts disagree where the legacy one is
+    the number of point records the file holds: its writer left the LAS 1.4 count wrong. A count of 0
+    was refused as a file still being written, a smaller one read that many points and dropped the rest
+    with a warning, the run done (a format reviewer: 58 % of the points gone, exit status 0)."""
+    if header.version.minor < 4 or header.point_format.id > 5 or held is None:
+        return
+    with open(path, "rb") as f:
+        f.seek(107)
+        raw = f.read(4)
+    legacy = int.from_bytes(raw, "little") if len(raw) == 4 else 0
+    count = int(header.point_count)
+    if legacy and legacy == held and count != legacy:
+        raise InputError(f"{path}: its two point counts disagree: the LAS 1.4 count says {count:,}, the legacy "
+                         f"count {legacy:,}, as many as the point records the file holds; its writer left the LAS 1.4 "
+                         "count wrong: repair its header (e.g. LAStools' lasinfo -repair, which counts the records) "
+                         "and run again")
 
 
 def _check_not_growing(path: str, header, held: Optional[int]) -> None:

@@ -61,3 +61,33 @@ def test_the_same_in_laz_is_refused_with_a_message(tmp_path):
     write_over_announced(src, compress=True)
     with pytest.raises(InputError, match="cannot be read; the file is damaged or truncated"):
         read_cloud(str(src))
+
+
+@pytest.mark.parametrize("count64", [0, 1000])
+def test_a_las14_count_that_disagrees_with_a_legacy_count_matching_the_records_is_refused(tmp_path, count64):
+    """LAS 1.4, point format 1: the legacy count right, the 64-bit count 0 (refused as "still being written")
+    or smaller (read that many, the rest dropped with a warning, the run done: a format reviewer)."""
+    import struct
+
+    import laspy
+    import numpy as np
+
+    from groundsieve.core.engine.workflow import run_ground_filter
+    from groundsieve.core.errors import InputError
+    from groundsieve.core.filters.smrf import SMRF
+    n = 3000
+    header = laspy.LasHeader(point_format=1, version="1.4")
+    header.scales, header.offsets = [0.01] * 3, [500000.0, 4000000.0, 0.0]
+    las = laspy.LasData(header)
+    rng = np.random.default_rng(5)
+    las.x, las.y, las.z = 500000 + rng.uniform(0, 60, n), 4000000 + rng.uniform(0, 60, n), rng.uniform(0, 1, n)
+    src = tmp_path / "in.las"
+    las.write(str(src))
+    data = bytearray(src.read_bytes())
+    struct.pack_into("<I", data, 107, n)       # the legacy count, as LAStools writes it
+    struct.pack_into("<Q", data, 247, count64)  # the LAS 1.4 count, wrong
+    src.write_bytes(bytes(data))
+    with pytest.raises(InputError, match=rf"in.las: its two point counts disagree: the LAS 1.4 count says {count64:,}, "
+                                         r"the legacy count 3,000, as many as the point records the file holds"):
+        run_ground_filter(str(src), str(tmp_path / "out.las"), SMRF())
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.las"]
