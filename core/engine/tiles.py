@@ -48,8 +48,8 @@ import numpy as np
 from ..errors import Cancelled, GroundSieveError, InputError, InvalidParameterError, OutputError
 from ..io.clouds import extra_records_warning
 from ..io.lasfiles import (CHUNK_POINTS, VPC_EXTENSION, LasInfo, TileGrid, assemble_classified, bin_file,
-                           check_survey, expand_inputs, iter_chunks, merge_bounds, piece_cuts, read_part, scan_header,
-                           tile_cloud, write_classified_piece, write_classified_stream, write_vpc)
+                           check_survey, expand_inputs, folder_note, iter_chunks, merge_bounds, piece_cuts, read_part,
+                           scan_header, tile_cloud, write_classified_piece, write_classified_stream, write_vpc)
 from ..io.outputs import LAS_EXTENSIONS, StagedOutputs, _ext, _reason, check_output_path
 from ..progress import WARNING_PREFIX, Steps
 
@@ -490,6 +490,9 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     log = log or (lambda _msg: None)
     tiling: TileOptions = getattr(options, "tiling", None) or TileOptions()
     inputs = expand_inputs(input_path)
+    note = folder_note(input_path)
+    if note:
+        log(note)
     infos = [scan_header(p) for p in inputs]
     check_survey(infos)
     if not any(i.count for i in infos):

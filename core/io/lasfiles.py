@@ -20,6 +20,7 @@ import numpy as np
 from ..errors import GroundSieveError, InputError, OutputError, UnsupportedFormatError
 from .clouds import (TEXT_ERRORS, PointCloud, check_las_layout, finish_copy, header_crs_wkt, laspy_reason, point_data_end,
                      header_records_problem, records_held, writable_evlrs)
+from ..progress import WARNING_PREFIX
 from .outputs import LAS_EXTENSIONS, _ext, _reason, atomic_path, check_classes_fit
 
 VPC_EXTENSION = ".vpc"
@@ -216,7 +217,15 @@ def expand_inputs(path: str) -> List[str]:
     the files a ``.vpc`` references."""
     path = os.fspath(path)
     if os.path.isdir(path):
-        files = sorted(os.path.join(path, n) for n in os.listdir(path)
+        names = os.listdir(path)
+        broken = sorted(n for n in names if _ext(n) in LAS_EXTENSIONS and os.path.islink(os.path.join(path, n))
+                        and not os.path.exists(os.path.join(path, n)))
+        if broken:  # (a tile of the delivery missing: left out without a word, a hole in the DTM; a format reviewer)
+            where = os.path.join(path, broken[0])
+            raise InputError(f"{where}: a link to a file that does not exist ({os.readlink(where)})"
+                             + (f", as {len(broken) - 1:,} more in the folder" if len(broken) > 1 else "")
+                             + "; mend or remove the link(s)")
+        files = sorted(os.path.join(path, n) for n in names
                        if _ext(n) in LAS_EXTENSIONS and os.path.isfile(os.path.join(path, n)))
         if not files:
             raise InputError(f"{path}: the folder holds no .las or .laz file")
@@ -226,6 +235,18 @@ def expand_inputs(path: str) -> List[str]:
     if _ext(path) == VPC_EXTENSION:
         return read_vpc(path)
     return [path]
+
+
+def folder_note(path: str) -> str:
+    """What a folder given as input holds that its run leaves out: sub-folders (not searched); "" otherwise."""
+    if not os.path.isdir(path):
+        return ""
+    subs = sorted(n for n in os.listdir(path) if os.path.isdir(os.path.join(path, n)) and not n.startswith("."))
+    if not subs:
+        return ""
+    shown = ", ".join(subs[:3]) + (", ..." if len(subs) > 3 else "")
+    return (f"{WARNING_PREFIX}{path}: {len(subs):,} sub-folder(s) not searched ({shown}): only the .las/.laz files "
+            "in the folder itself are the survey; give a .vpc (or one folder) to take the others too.")
 
 
 def check_survey(infos: Sequence[LasInfo]) -> None:

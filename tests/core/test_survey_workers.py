@@ -344,3 +344,22 @@ def test_a_script_without_a_main_guard_is_told_so_not_blamed_on_memory(survey, t
     else:
         assert out.returncode != 0
         assert f"the script that started the run, {script}, is imported again by every worker process" in said
+
+
+def test_a_broken_link_in_a_survey_folder_is_refused_and_sub_folders_are_said(survey, tmp_path):
+    """A delivery folder's tile that is a broken link was left out without a word (a hole in the DTM), and
+    a sub-folder's files too (a format reviewer)."""
+    folder = tmp_path / "links"
+    folder.mkdir()
+    for name in ("a.laz", "b.laz"):
+        os.symlink(os.path.join(survey, name), folder / name)
+    os.symlink(str(tmp_path / "nowhere.laz"), folder / "c.laz")
+    with pytest.raises(InputError, match=r"links/c.laz: a link to a file that does not exist \(.*nowhere.laz\); mend"):
+        run_ground_filter(str(folder), str(tmp_path / "o.vpc"), SMRF())
+    os.remove(folder / "c.laz")
+    (folder / "block2").mkdir()
+    os.symlink(os.path.join(survey, "c.laz"), folder / "block2" / "c.laz")
+    lines = []
+    run = run_ground_filter(str(folder), str(tmp_path / "o.vpc"), SMRF(), log=lines.append)
+    assert len(run.inputs) == 2
+    assert any("links: 1 sub-folder(s) not searched (block2)" in w for w in run.warnings), run.warnings
