@@ -585,8 +585,28 @@ def waveform_note(path: str) -> str:
     """A warning when a LAS file says it holds its waveform packets but they cannot be found: its
     classified copy says it holds none (the points' wave packet fields are kept as they are)."""
     _at, _total, why = internal_waveform(path)
-    return (f"{WARNING_PREFIX}{path}: {why}; a classified copy leaves them out and says in its header that it "
-            "holds none") if why else ""
+    if why:
+        return (f"{WARNING_PREFIX}{path}: {why}; a classified copy leaves them out and says in its header that it "
+                "holds none")
+    return external_waveform_note(path)
+
+
+def external_waveform_note(path: str) -> str:
+    """A warning when a LAS 1.3/1.4 file keeps its waveform packets in an external file (global encoding bit
+    2: NAME.wdp beside it, as Riegl and LAStools deliver them): its classified copy keeps the points' wave
+    packet fields, which point into a file the copy does not have (it went without a word: a format
+    reviewer)."""
+    import struct
+    with open(path, "rb") as f:
+        head = f.read(8)
+    if len(head) < 8 or head[:4] != b"LASF" or not struct.unpack_from("<H", head, 6)[0] & 4:
+        return ""
+    wdp = os.path.splitext(path)[0] + ".wdp"
+    there = os.path.exists(wdp) or os.path.exists(os.path.splitext(path)[0] + ".WDP")
+    return (f"{WARNING_PREFIX}{path}: its waveform packets are in an external file ({os.path.basename(wdp)} beside "
+            f"it{'' if there else ', not found'}): the classified copy keeps the points' wave packet fields, which "
+            "point into that file, but not the file; copy it beside the classified copy under the copy's name "
+            "(NAME.wdp) to keep the waveforms with it.")
 
 
 def carry_waveform_packets(src: str, dst: str) -> None:

@@ -428,3 +428,27 @@ def test_extra_bytes_names_laspy_cannot_take_are_refused_for_what_they_are(tmp_p
     assert str(err.value).startswith(f"{src}: ") and words in str(err.value)
     assert "damaged" not in str(err.value) and "codec" not in str(err.value)
     assert os.listdir(tmp_path) == ["in.las"]
+
+
+@pytest.mark.parametrize("tiled", [False, True])
+def test_waveforms_in_an_external_file_are_said(tmp_path, tiled):
+    """Global encoding bit 2: the packets are in NAME.wdp beside the file (Riegl, LAStools). The copy kept
+    the wave packet fields pointing into a file it does not have, without a word (a format reviewer)."""
+    header = laspy.LasHeader(point_format=4, version="1.3")
+    header.scales, header.offsets = [0.01] * 3, [500000.0, 4000000.0, 0.0]
+    las = laspy.LasData(header)
+    rng = np.random.default_rng(6)
+    n = 2000
+    las.x, las.y, las.z = 500000 + rng.uniform(0, 60, n), 4000000 + rng.uniform(0, 60, n), rng.uniform(0, 1, n)
+    las.wavepacket_index = np.ones(n, np.uint8)
+    las.wavepacket_offset = 60 + 256 * np.arange(n, dtype=np.uint64)
+    las.wavepacket_size = np.full(n, 256, np.uint32)
+    src = tmp_path / "in.las"
+    las.write(str(src))
+    data = bytearray(src.read_bytes())
+    struct.pack_into("<H", data, 6, (struct.unpack_from("<H", data, 6)[0] & ~2) | 4)  # external packets
+    src.write_bytes(bytes(data))
+    (tmp_path / "in.wdp").write_bytes(b"\0" * 60 + rng.integers(0, 256, n * 256, dtype=np.uint8).tobytes())
+    run = run_ground_filter(str(src), str(tmp_path / "out.las"), SMRF(), options=tiled_or_whole(tiled))
+    assert any(w.startswith(f"{src}: its waveform packets are in an external file (in.wdp beside it): the classified "
+                            "copy keeps the points' wave packet fields") for w in run.warnings), run.warnings
