@@ -1774,7 +1774,8 @@ def _dtm_extent(full, box, log):
     if (col0, row0, ncols, nrows) == (0, 0, full.ncols, full.nrows):
         return full
     log(f"DTM: cut to the {ncols:,} x {nrows:,} cells of the points it may hold (the files' bounds make "
-        f"{full.ncols:,} x {full.nrows:,}: withheld or ignored points lie beyond them).")
+        f"{full.ncols:,} x {full.nrows:,}: withheld or ignored points lie beyond them, or a header's bounds are "
+        "wider than its points).")
     return full.window(col0, row0, ncols, nrows)
 
 

@@ -340,7 +340,8 @@ def load_hybrid_model(path: Optional[str] = None):
     bad = unknown_features(model.features)
     if bad:
         raise InputError(f"{path}: this model was trained on features the hybrid filter does not compute "
-                         f"({', '.join(bad)}); use it with groundsieve:rfclassify, or train a model on the "
+                         f"({', '.join(bad)}); use it with groundsieve:rfclassify (in Python without QGIS: "
+                         f"core.engine.learning.classify_file, docs/API.md), or train a model on the "
                          f"hybrid features")
     if GROUND_CLASS not in [int(c) for c in model.classes]:
         raise InputError(f"{path}: this model has no ground class (2) (its classes: "
