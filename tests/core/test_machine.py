@@ -73,20 +73,24 @@ def test_the_default_budget_is_a_quarter_of_the_jobs_memory(monkeypatch):
     assert tiles.default_memory_budget_mb() == 2048
 
 
+def _limited(before: str, after: str) -> str:
+    """The output of Python code run in a process of its own: ``before``, then its address space limited to
+    what it uses and 1 GB more, then ``after``."""
+    code = ("import resource\n" + before
+            + "used = int(next(l.split()[1] for l in open('/proc/self/status') if l.startswith('VmSize:'))) * 1024\n"
+            "resource.setrlimit(resource.RLIMIT_AS, (used + (1 << 30), resource.RLIM_INFINITY))\n" + after)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True).stdout
+
+
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RLIMIT_AS and /proc are Linux's")
 def test_the_default_budget_stays_below_ulimit_v():
-    """Run in a process of its own, whose address space is limited to what it uses now and 1 GB more."""
-    code = ("import resource\n"
-            "from groundsieve.core.engine import tiles\n"
-            "from groundsieve.core.machine import address_space_left\n"
-            "assert address_space_left() is None, address_space_left()\n"
-            "free = tiles.default_memory_budget_mb()\n"
-            "used = int(next(l.split()[1] for l in open('/proc/self/status') if l.startswith('VmSize:'))) * 1024\n"
-            "resource.setrlimit(resource.RLIMIT_AS, (used + (1 << 30), resource.RLIM_INFINITY))\n"
-            "left = address_space_left()\n"
-            "print(free, tiles.default_memory_budget_mb(), left)\n")
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True).stdout
+    out = _limited("from groundsieve.core.engine import tiles\n"
+                   "from groundsieve.core.machine import address_space_left\n"
+                   "assert address_space_left() is None, address_space_left()\n"
+                   "free = tiles.default_memory_budget_mb()\n",
+                   "left = address_space_left()\n"
+                   "print(free, tiles.default_memory_budget_mb(), left)\n")
     free, limited, left = map(float, out.split())
     assert 0 < left <= 1 << 30
     assert limited <= 0.6 * left / (1 << 20) + 1 and limited < free
@@ -94,14 +98,9 @@ def test_the_default_budget_stays_below_ulimit_v():
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RLIMIT_AS, /proc and glibc are Linux's")
 def test_under_ulimit_v_malloc_keeps_few_arenas():
-    code = ("import resource\n"
-            "from groundsieve.core.machine import fit_address_space\n"
-            "before = fit_address_space()\n"
-            "used = int(next(l.split()[1] for l in open('/proc/self/status') if l.startswith('VmSize:'))) * 1024\n"
-            "resource.setrlimit(resource.RLIMIT_AS, (used + (1 << 30), resource.RLIM_INFINITY))\n"
-            "print(before, fit_address_space())\n")
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True).stdout
+    out = _limited("from groundsieve.core.machine import fit_address_space\n"
+                   "before = fit_address_space()\n",
+                   "print(before, fit_address_space())\n")
     assert out.split() == ["False", "True"]
 
 
