@@ -669,6 +669,12 @@ def warn_about_units(path: str, infos, log) -> None:
     warning = check_lengths_unit(path, infos[0].crs_wkt, bounds)
     if warning:
         log(WARNING_PREFIX + warning)
+    conflicts = [i for i in infos if getattr(i, "crs_conflict", "")]
+    if conflicts:
+        more = f" (and {len(conflicts) - 1:,} more file(s) so)" if len(conflicts) > 1 else ""
+        log(f"{WARNING_PREFIX}{conflicts[0].path}: its two CRS records disagree: {conflicts[0].crs_conflict}{more}. The "
+            "WKT is taken, as LAS 1.4 and PDAL take it: check which is right, and rewrite the file with that one "
+            "before you trust the DTM's place.")
 
 
 def check_dtm_memory(x, y, options: DTMOptions) -> GridSpec:

@@ -207,6 +207,47 @@ def header_crs_wkt(header) -> Optional[str]:
             return crs.to_wkt()
 
 
+def crs_records_conflict(header) -> str:
+    """The two CRS a header names when its WKT record and its GeoTIFF keys name different horizontal CRS
+    ("WGS 84 / UTM zone 33N" and "WGS 84 / UTM zone 32N": the WKT is taken, as laspy, PDAL and LAS 1.4 have
+    it); "" otherwise. A file with a stale record beside a new one ran without a word, its DTM placed by
+    the WKT (a format reviewer)."""
+    from laspy.vlrs.known import GeoKeyDirectoryVlr, WktCoordinateSystemVlr
+    records = list(header.vlrs) + list(header.evlrs or [])
+    wkt = [r for r in records if isinstance(r, WktCoordinateSystemVlr) and r.string]
+    keys = [r for r in records if isinstance(r, GeoKeyDirectoryVlr)]
+    if not wkt or not keys:
+        return ""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            import pyproj
+            by_wkt = pyproj.CRS.from_wkt(wkt[0].string)
+            by_keys = _crs_of_geokeys_only(header, keys[0])
+        except Exception:  # (a record that cannot be read is said elsewhere, or not at all, as before)
+            return ""
+    if by_keys is None:
+        return ""
+
+    def horizontal(crs):
+        return crs.sub_crs_list[0] if crs.is_compound else crs
+    a, b = horizontal(by_wkt), horizontal(by_keys)
+    if a.equals(b, ignore_axis_order=True) or (a.to_epsg() is not None and a.to_epsg() == b.to_epsg()):
+        return ""
+    return f"the WKT record says {a.name}, the GeoTIFF keys {b.name}"
+
+
+def _crs_of_geokeys_only(header, directory):
+    """The CRS of the header's GeoTIFF keys alone (laspy's, or GDAL's where laspy misreads them)."""
+    crs = directory.parse_crs()
+
+    class _KeysOnly:  # the header without its WKT records, for _crs_of_geokeys
+        vlrs = [r for r in header.vlrs if getattr(r, "user_id", "") == "LASF_Projection"
+                and getattr(r, "record_id", 0) in (34735, 34736, 34737)]
+        evlrs = []
+    return _crs_of_geokeys(_KeysOnly, crs)
+
+
 def _geokeys(records) -> dict:
     """{key id: value} of the GeoTIFF keys whose value is in the directory itself."""
     from laspy.vlrs.known import GeoKeyDirectoryVlr

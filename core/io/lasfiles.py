@@ -18,8 +18,8 @@ from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 import numpy as np
 
 from ..errors import GroundSieveError, InputError, OutputError, UnsupportedFormatError
-from .clouds import (TEXT_ERRORS, PointCloud, check_las_layout, finish_copy, header_crs_wkt, laspy_reason, point_data_end,
-                     header_records_problem, records_held, writable_evlrs)
+from .clouds import (TEXT_ERRORS, PointCloud, check_las_layout, crs_records_conflict, finish_copy, header_crs_wkt,
+                     header_records_problem, laspy_reason, point_data_end, records_held, writable_evlrs)
 from ..progress import WARNING_PREFIX
 from .outputs import LAS_EXTENSIONS, _ext, _reason, atomic_path, check_classes_fit
 
@@ -50,6 +50,8 @@ class LasInfo:
     #: the header's bounds were empty (every min and max one value: a writer that never filled them in)
     #: and are the points' own, read from them (a tiled run planned on them failed at its end)
     bounds_from_points: bool = False
+    #: the two CRS its WKT record and its GeoTIFF keys name when they differ (clouds.crs_records_conflict)
+    crs_conflict: str = ""
 
     @property
     def area_m2(self) -> float:
@@ -91,7 +93,7 @@ def scan_header(path: str) -> LasInfo:
                            header_crs_wkt(h),
                            copc=is_copc_header(h) and not damaged, record_size=int(h.point_format.size),
                            later_returns=_later_returns(h), held=held, copc_damaged=damaged,
-                           bounds_from_points=empty_bounds)
+                           bounds_from_points=empty_bounds, crs_conflict=crs_records_conflict(h))
     except (InputError, UnsupportedFormatError):
         raise
     except Exception as err:  # laspy raises many types for damaged files

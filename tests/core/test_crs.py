@@ -472,3 +472,30 @@ def test_heights_in_feet_of_an_unknown_datum_leave_no_aux_xml_and_the_dtm_keeps_
     assert sorted(os.listdir(out)) == ["o.las", "o.tif"]
     dtm = gdal.Open(str(out / "o.tif"))
     assert dtm.GetRasterBand(1).GetUnitType() == "US survey foot" and "32632" in dtm.GetProjection()
+
+
+@pytest.mark.parametrize("tiled", [False, True])
+def test_a_wkt_record_and_geotiff_keys_that_disagree_are_warned_about(tmp_path, tiled):
+    """A stale GeoTIFF key directory beside a WKT record (UTM 32N against 33N) ran without a word, the DTM
+    placed by the WKT (a format reviewer). The WKT is still taken; the run says the two disagree."""
+    import laspy
+    import pyproj
+
+    from groundsieve.core.engine.tiles import TileOptions
+    from groundsieve.core.engine.workflow import FilterOptions, run_ground_filter
+    from groundsieve.core.filters.smrf import SMRF
+    options = FilterOptions(tiling=TileOptions(tile_size_m=30.0, workers=1)) if tiled else FilterOptions()
+    said = {}
+    for name, epsg in (("stale", 32633), ("same", 32632)):
+        src = _geokey_las(tmp_path / f"{name}.las", [(1024, 1), (1025, 1), (3072, 32632)])
+        las = laspy.read(str(src))
+        las.header.vlrs.append(laspy.vlrs.known.WktCoordinateSystemVlr(pyproj.CRS.from_epsg(epsg).to_wkt()))
+        las.write(str(src))
+        run = run_ground_filter(str(src), str(tmp_path / f"{name}_out.las"), SMRF(), options=options)
+        said[name] = [w for w in run.warnings if "CRS records disagree" in w]
+        assert pyproj.CRS.from_wkt(run.crs_wkt).to_epsg() == epsg
+    assert said["same"] == []
+    assert said["stale"] == [f"{tmp_path / 'stale.las'}: its two CRS records disagree: the WKT record says WGS 84 / "
+                             "UTM zone 33N, the GeoTIFF keys WGS 84 / UTM zone 32N. The WKT is taken, as LAS 1.4 and "
+                             "PDAL take it: check which is right, and rewrite the file with that one before you trust "
+                             "the DTM's place."]
