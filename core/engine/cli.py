@@ -153,6 +153,12 @@ TUNE_JSON = ("\"input\", \"filter\", \"metric\", \"parameters\" (chosen), \"sear
              "\"preset\", \"report\", \"warnings\"")
 
 
+RFTRAIN_JSON = ("\"input\", \"model\", \"report\", \"features\", \"classes\" (learnt), \"test_accuracy\", "
+                "\"seconds\", \"warnings\"")
+RFCLASSIFY_JSON = ("\"input\", \"output\", \"outputs\" (the classified files), \"model\", \"dtm\" (or null), "
+                   "\"points\", \"ground\" (predicted 2), \"seconds\", \"tiles\" (null without tiles), \"warnings\"")
+
+
 def _add_json(group, fields: str = FILTER_JSON) -> None:
     group.add_argument("--json", action="store_true", help=(JSON_HELP % fields).replace("%", "%%"))
 
@@ -255,7 +261,109 @@ def build_parser() -> argparse.ArgumentParser:
     _add_tune(sub)
     _add_dtm(sub)
     _add_accuracy(sub)
+    _add_rftrain(sub)
+    _add_rfclassify(sub)
     return parser
+
+
+def _add_rftrain(sub) -> None:
+    """``rftrain``: groundsieve:rftrain's Random Forest training (core/engine/learning.py train_file)."""
+    from ..learn.rf import CRITERIA, DEFAULT_PRESET, PRESETS, SCALERS, ForestParams
+    from .learning import TrainOptions
+    fp = _defaults(ForestParams)
+    summary = "train a Random Forest on a labelled cloud (its classes): a model file for rfclassify and hybrid"
+    parser = sub.add_parser("rftrain", help=summary, description=f"{summary}; the features of --features (matrone2024's "
+                            "C1-C5, or HYBRID: the learned hybrid filter's, x, y, z only, whose ground model also runs "
+                            "in hybrid --model), a spatial split into training, validation and test blocks, and an "
+                            "HTML report.")
+    io = parser.add_argument_group("input and outputs")
+    io.add_argument("--input", required=True, metavar="PATH", help="the labelled LAS/LAZ (its classification is the label)")
+    io.add_argument("--model", required=True, metavar="PATH", help="the model file to write (.npz)")
+    io.add_argument("--report", metavar="PATH", help="the HTML report to write")
+    io.add_argument("--validation", metavar="PATH", help="a labelled file for validation (default: blocks of the input)")
+    io.add_argument("--test", metavar="PATH", help="a labelled file for the test (default: blocks of the input)")
+    _add_json(io, RFTRAIN_JSON)
+    forest = parser.add_argument_group("features and forest")
+    forest.add_argument("--features", choices=list(PRESETS), default=DEFAULT_PRESET,
+                        help="the features (default %(default)s)")
+    forest.add_argument("--classes", default="", metavar="LIST",
+                        help="the ASPRS classes to learn, e.g. 2,3,5,6 ('' = every class present but 0, 7 and 18; "
+                             "with HYBRID: ground against the rest)")
+    forest.add_argument("--trees", type=int, default=fp["n_trees"], metavar="N", help="trees (default %(default)s)")
+    forest.add_argument("--criterion", choices=list(CRITERIA), default=fp["criterion"])
+    forest.add_argument("--scaler", choices=list(SCALERS), default=fp["scaler"])
+    forest.add_argument("--max-depth", type=int, default=0, metavar="N", help="tree depth (0 = none; default %(default)s)")
+    forest.add_argument("--samples-per-tree", type=int, default=fp["max_samples"], metavar="N",
+                        help="points drawn per tree (0 = all; default %(default)s)")
+    forest.add_argument("--block", type=float, default=_defaults(TrainOptions)["block_m"], metavar="M",
+                        help="block size of the spatial split (m; default %(default)s)")
+    parser.set_defaults(filter="rftrain")
+
+
+def run_rftrain(args, out) -> dict:
+    """Run ``rftrain``; return its JSON document."""
+    from ..io.clouds import parse_classes
+    from ..learn.rf import PRESETS, ForestParams
+    from .learning import TrainOptions, train_file
+    warnings, log = _collecting_log(out)
+    options = TrainOptions(features=PRESETS[args.features], classes=parse_classes(args.classes) or None,
+                           params=ForestParams(n_trees=args.trees, criterion=args.criterion, scaler=args.scaler,
+                                               max_depth=args.max_depth or None,
+                                               max_samples=args.samples_per_tree or None),
+                           block_m=args.block)
+    start = time.monotonic()
+    run = train_file(args.input, args.model, args.report, options, validation_path=args.validation,
+                     test_path=args.test, progress=_progress_printer(out), is_cancelled=_interrupt_seen, log=log)
+    accuracy = run.model.meta.get("test_accuracy")
+    print(f"Model {args.model}: {len(run.features)} features, classes "
+          f"{', '.join(str(int(c)) for c in run.model.classes)}; test accuracy "
+          f"{'-' if accuracy is None else f'{100 * accuracy:.2f} %'}.", file=out)
+    return {"status": "done", "input": args.input, "model": args.model, "report": args.report,
+            "features": list(run.features), "classes": [int(c) for c in run.model.classes],
+            "test_accuracy": accuracy, "seconds": round(time.monotonic() - start, 3),
+            "warnings": list(warnings) + [w for w in (run.warnings or []) if w not in warnings]}
+
+
+def _add_rfclassify(sub) -> None:
+    """``rfclassify``: groundsieve:rfclassify, a saved model applied (core/engine/learning.py classify_file)."""
+    dt = _defaults(DTMOptions)
+    summary = "classify a cloud with a model from rftrain (its ASPRS classes), and optionally make a DTM"
+    parser = sub.add_parser("rfclassify", help=summary, description=f"{summary} from the points predicted as "
+                            "ground (2). A folder, a .vpc, a tile size or a cloud beyond the memory budget runs in "
+                            "buffered tiles (models of ground against the rest only).")
+    io = parser.add_argument_group("input and outputs")
+    io.add_argument("--input", required=True, metavar="PATH", help="LAS/LAZ (1.0-1.4), a folder of them, or a .vpc")
+    io.add_argument("--model", required=True, metavar="PATH", help="the model file (.npz) from rftrain")
+    io.add_argument("--output", required=True, metavar="PATH", help="classified LAS/LAZ (a .vpc for several inputs)")
+    io.add_argument("--dtm", metavar="PATH", help="DTM GeoTIFF of the predicted ground (optional)")
+    _add_json(io, RFCLASSIFY_JSON)
+    io.add_argument("--ignore-classes", default="7,18", metavar="LIST",
+                    help="classes kept as they are, not predicted, out of the DTM; '' = none (default %(default)s)")
+    _add_dtm_options(io, dt, dtm_classes=True)
+    _add_tiles(parser)
+    parser.set_defaults(filter="rfclassify")
+
+
+def run_rfclassify(args, out) -> dict:
+    """Run ``rfclassify``; return its JSON document."""
+    from .learning import classify_file
+    warnings, log = _collecting_log(out)
+    dtm = DTMOptions(cell_size_m=args.dtm_cell, cell_set=bool(getattr(args, "dtm_cell_typed", False)),
+                     fill_outside_hull=args.dtm_fill, classes=args.dtm_classes, max_distance_m=args.dtm_max_distance,
+                     extent=args.dtm_extent or None)
+    start = time.monotonic()
+    result = classify_file(args.input, args.output, args.model, dtm_path=args.dtm, dtm=dtm,
+                           ignore_classes=args.ignore_classes, tiling=_tiling(args),
+                           progress=_progress_printer(out), is_cancelled=_interrupt_seen, log=log)
+    if isinstance(result, tuple):  # one cloud in memory: (cloud, predicted classes)
+        cloud, predicted = result
+        points, ground, tiles, outputs = len(cloud), int((predicted == 2).sum()), None, [args.output]
+    else:
+        points, ground, tiles, outputs = result.point_count, result.ground_count, result.tiles, list(result.outputs)
+    print(f"{points:,} points, {ground:,} predicted ground.", file=out)
+    return {"status": "done", "input": args.input, "output": args.output, "outputs": outputs, "model": args.model,
+            "dtm": args.dtm or None, "points": int(points), "ground": int(ground),
+            "seconds": round(time.monotonic() - start, 3), "tiles": tiles, "warnings": list(warnings)}
 
 
 def _add_dtm(sub) -> None:
@@ -598,7 +706,8 @@ def _wants_json(argv: List[str]) -> bool:
 def _run(args, out):
     """(exit status, JSON document) of the command, the log and the one-line errors on ``out``."""
     try:
-        run = {"tune": run_tune, "dtm": run_dtm, "accuracy": run_accuracy}.get(args.filter, run_filter)
+        run = {"tune": run_tune, "dtm": run_dtm, "accuracy": run_accuracy, "rftrain": run_rftrain,
+               "rfclassify": run_rfclassify}.get(args.filter, run_filter)
         return 0, run(args, out)
     except _Usage as err:
         print(f"groundsieve: {err}", file=out)

@@ -525,3 +525,30 @@ def test_a_filter_parameter_s_help_is_in_the_command_s_help_too():
     text = " ".join(help_of("smrf").split())
     assert "Elevation scalar (m per unit slope): a point is ground within the elevation threshold" in text
     assert "Kernel size (m): the side of the square kernels" in " ".join(help_of("echogrid").split())
+
+
+def test_rftrain_and_rfclassify_run_from_the_shell_whole_and_tiled(scene, tmp_path):
+    """Training and applying a classifier were QGIS's only (groundsieve:rftrain, rfclassify): a shell user
+    had no route (a research software engineer)."""
+    model, report = str(tmp_path / "m.npz"), str(tmp_path / "r.html")
+    out, stdout = io.StringIO(), io.StringIO()
+    assert main(["rftrain", "--input", scene, "--model", model, "--report", report, "--trees", "8", "--max-depth", "8",
+                 "--json"], out=out, stdout=stdout) == 0, out.getvalue()
+    trained = json.loads(stdout.getvalue())
+    assert trained["status"] == "done" and trained["classes"] == [1, 2] and len(trained["features"]) == 6
+    assert 0.8 < trained["test_accuracy"] <= 1 and os.path.exists(model) and os.path.exists(report)
+    truth = np.asarray(laspy.read(scene).classification) == 2
+    for tiled in (False, True):
+        output, dtm = str(tmp_path / f"c{tiled}.laz"), str(tmp_path / f"d{tiled}.tif")
+        out, stdout = io.StringIO(), io.StringIO()
+        args = ["rfclassify", "--input", scene, "--model", model, "--output", output, "--dtm", dtm, "--json"]
+        assert main(args + (["--tile-size", "30"] if tiled else []), out=out, stdout=stdout) == 0, out.getvalue()
+        done = json.loads(stdout.getvalue())
+        assert done["points"] == len(truth) and (done["tiles"] is not None) == tiled and os.path.exists(dtm)
+        predicted = np.asarray(laspy.read(output).classification) == 2
+        assert done["ground"] == int(predicted.sum()) and (predicted == truth).mean() > 0.9
+    out, stdout = io.StringIO(), io.StringIO()
+    assert main(["rfclassify", "--input", scene, "--model", str(tmp_path / "none.npz"), "--output",
+                 str(tmp_path / "x.laz"), "--json"], out=out, stdout=stdout) == 1
+    failed = json.loads(stdout.getvalue())
+    assert failed["kind"] in ("input", "parameter") and "none.npz" in failed["error"]
