@@ -248,12 +248,13 @@ def build_parser() -> argparse.ArgumentParser:
                     "cloud in feet the defaults and a preset's values are converted, and the options you "
                     "type are read in feet. `python -m groundsieve FILTER --help` lists "
                     "a filter's parameters.",
-        epilog="Exit status: 0 done, 1 refused or failed (one line saying why), 2 bad usage, 130 interrupted "
+        epilog="Exit status: 0 done, 1 refused or failed (one line saying why), 2 bad usage, 3 an internal error "
+               "(a traceback: a bug to report), 75 the Dask cluster failed (worth a retry once it is back), 130 interrupted "
                "(Ctrl-C or SIGTERM; a survey's finished tiles are kept in --work-folder, when given, for the "
                "next run to resume). The log goes to stderr. With --json, stdout holds one JSON document "
                f"alone: for a filter {{\"status\": \"done\", {FILTER_JSON}}}; for tune the chosen \"parameters\" "
                "and the cross-validated \"cv\" figures; for accuracy the \"all\", \"nva\" and \"vva\" figures; when the exit status is not 0, {\"status\": \"failed\" "
-               f"(1, 2) or \"interrupted\" (130), \"kind\" ({JSON_KINDS}), \"error\": the one-line message}}.")
+               f"(1, 2, 3, 75) or \"interrupted\" (130), \"kind\" ({JSON_KINDS}), \"error\": the one-line message}}.")
     sub = parser.add_subparsers(title="filters", metavar="FILTER", required=True)
     for name in P.FILTERS:
         _add_filter(sub, name)
@@ -696,6 +697,11 @@ def _interrupt_seen() -> bool:
 
 #: the exit status of an interrupted run (128 + SIGINT, as shells report Ctrl-C)
 INTERRUPTED = 130
+#: the exit status of a run the Dask cluster failed (sysexits' EX_TEMPFAIL: a job wrapper may retry it once the
+#: cluster is back; a refusal, 1, would fail again: a research software engineer's SLURM --requeue)
+EXIT_RETRY = 75
+#: the exit status of an internal error (an exception that is no refusal of ours: a traceback, a bug)
+EXIT_BUG = 3
 
 
 def _wants_json(argv: List[str]) -> bool:
@@ -718,7 +724,8 @@ def _run(args, out):
         if INTERRUPT_SEEN[0]:  # (the interrupt came back as a library's error, wrapped as ours)
             return _interrupted(out)
         print(f"groundsieve: {err}", file=out)
-        return 1, {"status": "failed", "kind": error_kind(err), "error": str(err)}
+        kind = error_kind(err)
+        return EXIT_RETRY if kind == "cluster" else 1, {"status": "failed", "kind": kind, "error": str(err)}
     except Exception:
         if INTERRUPT_SEEN[0]:  # the interrupt, come back as a library's error (lazrs: LazrsError)
             return _interrupted(out)
@@ -744,7 +751,8 @@ def error_kind(err: BaseException) -> str:
 
 def main(argv: Optional[List[str]] = None, out=None, stdout=None) -> int:
     """Run the command; 0 = done, 1 = refused or failed (the message, no traceback), 2 = bad usage,
-    130 = interrupted (Ctrl-C; SIGTERM too under ``python -m groundsieve``). The log goes to ``out``
+    75 = the Dask cluster failed, 130 = interrupted (Ctrl-C; SIGTERM too under ``python -m groundsieve``;
+    an internal error raises, which ``python -m groundsieve`` ends with EXIT_BUG). The log goes to ``out``
     (stderr); with ``--json`` one JSON document goes to ``stdout`` (sys.stdout) at the end."""
     out = out or sys.stderr
     FINISHED[0] = INTERRUPT_SEEN[0] = False

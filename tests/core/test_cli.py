@@ -552,3 +552,28 @@ def test_rftrain_and_rfclassify_run_from_the_shell_whole_and_tiled(scene, tmp_pa
                  str(tmp_path / "x.laz"), "--json"], out=out, stdout=stdout) == 1
     failed = json.loads(stdout.getvalue())
     assert failed["kind"] in ("input", "parameter") and "none.npz" in failed["error"]
+
+
+def test_a_cluster_failure_and_an_internal_error_have_exit_statuses_of_their_own(scene, tmp_path, monkeypatch):
+    """A refusal, a bug and a lost Dask cluster all exited 1: a job wrapper could not tell "retry" from "do
+    not" (a research software engineer). The cluster's is 75 (EX_TEMPFAIL), a bug's 3 (with its traceback)."""
+    from groundsieve.core.engine import cli, workflow
+    from groundsieve.core.engine.cluster import ClusterError
+
+    def lost(*_a, **_k):
+        raise ClusterError("the connection to the Dask scheduler tcp://10.0.0.5:8786 was lost")
+    monkeypatch.setattr(workflow, "run_ground_filter", lost)
+    stdout = io.StringIO()
+    assert main(["smrf", "--input", scene, "--output", str(tmp_path / "o.laz"), "--json"], out=io.StringIO(),
+                stdout=stdout) == cli.EXIT_RETRY == 75
+    assert json.loads(stdout.getvalue())["kind"] == "cluster"
+    code = ("import sys, runpy\n"
+            "import groundsieve.core.engine.workflow as w\n"
+            "def bug(*a, **k):\n    raise RuntimeError('a bug')\n"
+            "w.run_ground_filter = bug\n"
+            f"sys.argv = ['groundsieve', 'smrf', '--input', {scene!r}, '--output', {str(tmp_path / 'b.laz')!r}]\n"
+            "runpy.run_module('groundsieve', run_name='__main__')\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          env=dict(os.environ, PYTHONPATH=PLUGINS), timeout=120)
+    assert proc.returncode == cli.EXIT_BUG == 3, proc.stderr[-2000:]
+    assert "Traceback" in proc.stderr and "RuntimeError: a bug" in proc.stderr
