@@ -1,6 +1,7 @@
 """Coordinates in WGS 84 (longitude, latitude), where a format asks for them (GeoJSON/STAC)."""
 from __future__ import annotations
 
+import functools
 from typing import Optional, Tuple
 
 
@@ -113,11 +114,13 @@ def elevation_unit(crs_wkt: Optional[str]) -> str:
 
 
 def geotiff_crs(crs_wkt: Optional[str]) -> Optional[str]:
-    """The CRS a GeoTIFF is given: ``crs_wkt``, but for a compound CRS whose vertical part has no EPSG code
-    (an unknown datum in US survey feet, as a LAS 1.2 file's keys give heights in feet) its horizontal
-    part. GeoTIFF keys cannot name such a vertical CRS; GDAL dropped it and put the band's unit and
-    description into a .aux.xml beside the temporary file, which never reached the DTM: one more hidden
-    file a run, and a DTM without its unit (a format reviewer). The unit stays the band's unit type."""
+    """The CRS a GeoTIFF is given: ``crs_wkt``, but for a compound CRS whose vertical part GeoTIFF keys cannot
+    hold (GDAL's own test: :func:`_keys_hold`), its horizontal part. GDAL dropped such a vertical CRS (an
+    unknown datum in US survey feet, as a LAS 1.2 file's units key gives heights in feet; a WKT's NAVD88
+    height (ftUS) without an ID) and put the band's unit and description into a .aux.xml beside the
+    temporary file, which never reached the DTM: one more hidden file a run, a DTM without its unit (a
+    format reviewer, then a code reviewer). The unit stays the band's unit type; the vertical CRSs GDAL
+    writes (EGM96 height in feet, NAVD88 (Geoid18): a code reviewer) are kept."""
     if not crs_wkt:
         return crs_wkt
     import pyproj
@@ -125,10 +128,34 @@ def geotiff_crs(crs_wkt: Optional[str]) -> Optional[str]:
         crs = pyproj.CRS.from_wkt(crs_wkt)
     except pyproj.exceptions.CRSError:
         return crs_wkt
-    if crs.is_compound and len(crs.sub_crs_list) == 2 and crs.sub_crs_list[1].is_vertical \
-            and crs.sub_crs_list[1].to_epsg() is None:
-        return crs.sub_crs_list[0].to_wkt()
-    return crs_wkt
+    if not crs.is_compound or len(crs.sub_crs_list) != 2 or _keys_hold(crs_wkt, elevation_unit(crs_wkt)):
+        return crs_wkt
+    return crs.sub_crs_list[0].to_wkt()
+
+
+@functools.lru_cache(maxsize=32)
+def _keys_hold(crs_wkt: str, unit: str) -> bool:
+    """Whether GDAL writes ``crs_wkt`` into a GeoTIFF's keys whole, with a band of heights in ``unit``: a
+    one-pixel GeoTIFF in memory so made is written; GDAL puts what its keys cannot hold into a .aux.xml."""
+    import uuid
+    from osgeo import gdal
+    name = f"/vsimem/groundsieve-crs-{uuid.uuid4().hex}.tif"
+    gdal.PushErrorHandler("CPLQuietErrorHandler")
+    try:
+        mem = gdal.GetDriverByName("MEM").Create("", 1, 1, 1, gdal.GDT_Float32)  # (copied, as the DTMs are)
+        mem.SetProjection(crs_wkt)
+        mem.SetGeoTransform([0.0, 1.0, 0.0, 1.0, 0.0, -1.0])
+        mem.GetRasterBand(1).SetUnitType(unit or "m")
+        gdal.Translate(name, mem, format="GTiff")
+        mem = None
+        return gdal.VSIStatL(name + ".aux.xml") is None
+    except RuntimeError:
+        return False
+    finally:
+        for path in (name, name + ".aux.xml"):
+            if gdal.VSIStatL(path) is not None:
+                gdal.Unlink(path)
+        gdal.PopErrorHandler()
 
 
 def unit_warning(path: str, crs_wkt: Optional[str], lengths: str = "every length parameter",

@@ -499,3 +499,41 @@ def test_a_wkt_record_and_geotiff_keys_that_disagree_are_warned_about(tmp_path, 
                              "UTM zone 33N, the GeoTIFF keys WGS 84 / UTM zone 32N. The WKT is taken, as LAS 1.4 and "
                              "PDAL take it: check which is right, and rewrite the file with that one before you trust "
                              "the DTM's place."]
+
+
+def test_a_dtm_keeps_the_vertical_crs_gdal_can_write_and_its_unit_always(tmp_path):
+    """GDAL decides what GeoTIFF keys hold (core/raster/crs.py geotiff_crs tries it): a vertical CRS they
+    cannot hold (NAVD88 height (ftUS) without an ID) left a .aux.xml beside the temporary file and a DTM
+    without its unit; one they can (EGM96 height in feet, NAVD88 under another name) was dropped by a rule
+    on EPSG codes (a code reviewer)."""
+    import numpy as np
+    import pyproj
+    from osgeo import gdal
+    from pyproj.crs import CompoundCRS, VerticalCRS
+    from pyproj.crs.coordinate_system import VerticalCS
+
+    from groundsieve.core.grids.spec import GridSpec
+    from groundsieve.core.raster.geotiff import write_geotiff
+
+    def compound(name, datum, axis):
+        return CompoundCRS(f"UTM + {name}", [pyproj.CRS.from_epsg(26917), VerticalCRS(
+            name, datum=datum, vertical_cs=VerticalCS(axis=axis))]).to_wkt()
+    cases = {"navd88_ftus_noid": (compound("NAVD88 height (ftUS)", "North American Vertical Datum 1988",
+                                           "GRAVITY_HEIGHT_US_FT"), "US survey foot", None),
+             "egm96_ft": (compound("EGM96 height (ft)", "EGM96 geoid", "GRAVITY_HEIGHT_FT"), "ft", "EGM96 geoid"),
+             "navd88_renamed": (compound("NAVD88 (Geoid18)", "North American Vertical Datum 1988", "GRAVITY_HEIGHT"),
+                                "m", "North American Vertical Datum 1988")}
+    grid = GridSpec(500000.0, 4000010.0, 1.0, 10, 10)
+    gdal.SetConfigOption("GTIFF_REPORT_COMPD_CS", "YES")
+    try:
+        for name, (wkt, unit, datum) in cases.items():
+            path = tmp_path / f"{name}.tif"
+            write_geotiff(str(path), np.ones((10, 10), "float32"), grid, crs_wkt=wkt, elevation=True)
+            ds = gdal.Open(str(path))
+            crs = pyproj.CRS.from_wkt(ds.GetProjection())
+            assert ds.GetRasterBand(1).GetUnitType() == unit, name
+            assert (crs.sub_crs_list[1].datum.name if crs.is_compound else None) == datum, name
+            ds = None
+    finally:
+        gdal.SetConfigOption("GTIFF_REPORT_COMPD_CS", None)
+    assert sorted(os.listdir(tmp_path)) == sorted(f"{n}.tif" for n in cases)
