@@ -1009,6 +1009,8 @@ def _filter_of(algorithm):
     if isinstance(algorithm, str):
         from . import parameters as P
         return P.filter_class(algorithm)()
+    if isinstance(algorithm, type) and callable(getattr(algorithm, "run", None)):
+        return algorithm()  # (a filter's class, SMRF for SMRF(): its defaults; a TypeError after the read before)
     if not callable(getattr(algorithm, "run", None)) and not callable(algorithm):
         raise InvalidParameterError(f"the filter must be a filter object (e.g. SMRF()) or a filter's name "
                                     f"(got {type(algorithm).__name__})")

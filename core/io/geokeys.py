@@ -78,20 +78,25 @@ def gdal_crs_wkt(directory: bytes, doubles: bytes = b"", text: bytes = b"") -> O
         dataset = gdal.Open(name)
         ref = dataset.GetSpatialRef() if dataset is not None else None
         dataset = None
-    except RuntimeError:  # (where exceptions are on)
-        ref = None
+        title = (ref.GetName() or "") if ref is not None else ""
+        if title.startswith(ESRI_PE):  # (GDAL keeps ArcGIS's citation as the CRS's name: the PE string itself)
+            esri = osr.SpatialReference()
+            try:
+                if esri.SetFromUserInput(title[len(ESRI_PE):]) == 0 and (esri.IsProjected() or esri.IsGeographic()):
+                    ref = esri
+            except RuntimeError:  # (a PE string GDAL cannot read, where exceptions are on: the keys' CRS as GDAL has it)
+                pass
+        # keys that name no horizontal CRS (units alone, as LAStools writes into nearly every file) are no CRS:
+        # GDAL made them an "unnamed" engineering CRS (a code reviewer)
+        if ref is None or not (ref.IsProjected() or ref.IsGeographic()):
+            return None
+        ref = _epsg_match(ref, osr) or ref
+        return ref.ExportToWkt(["FORMAT=WKT2_2019"])
+    except RuntimeError:  # (where exceptions are on: keys GDAL cannot read are read as laspy reads them)
+        return None
     finally:
         gdal.Unlink(name)
         gdal.PopErrorHandler()
-    if ref is None or not (ref.IsProjected() or ref.IsGeographic() or ref.IsLocal()):
-        return None
-    name = ref.GetName() or ""
-    if name.startswith(ESRI_PE):  # (GDAL keeps ArcGIS's citation as the CRS's name: the PE string itself reads better)
-        esri = osr.SpatialReference()
-        if esri.SetFromUserInput(name[len(ESRI_PE):]) == 0 and (esri.IsProjected() or esri.IsGeographic()):
-            ref = esri
-    ref = _epsg_match(ref, osr) or ref
-    return ref.ExportToWkt(["FORMAT=WKT2_2019"])
 
 
 def _epsg_match(ref, osr):

@@ -71,3 +71,9 @@ def test_presets_and_tuning_refuse_bad_names_as_groundsieve_errors_and_take_path
     assert load_preset(Path(load_preset("uav-lidar-smrf").path), "smrf").filter == "smrf"
     result = tune(scene, "smrf", TuneOptions(budget=4, blocks=3))
     assert result.best is not None
+
+
+def test_a_filter_class_given_for_an_instance_runs_with_its_defaults(scene):
+    """SMRF for SMRF() was a TypeError traceback once the file was read (a code reviewer)."""
+    assert np.array_equal(run_ground_filter(scene, None, SMRF).classification,
+                          run_ground_filter(scene, None, SMRF()).classification)

@@ -537,3 +537,32 @@ def test_a_dtm_keeps_the_vertical_crs_gdal_can_write_and_its_unit_always(tmp_pat
     finally:
         gdal.SetConfigOption("GTIFF_REPORT_COMPD_CS", None)
     assert sorted(os.listdir(tmp_path)) == sorted(f"{n}.tif" for n in cases)
+
+
+def test_geotiff_keys_that_name_no_horizontal_crs_are_still_no_crs(tmp_path):
+    """Units alone (LAStools writes them into nearly every file): GDAL made them an "unnamed" engineering CRS,
+    which hid the "no CRS" warning, took feet for metres and, beside a WKT record, was a false "the two CRS
+    records disagree" (a code reviewer). A bad ESRI PE string with GDAL's exceptions on refused the file."""
+    import subprocess
+    import sys
+
+    import laspy
+    import pyproj
+
+    from groundsieve.core.io.clouds import crs_records_conflict, header_crs_wkt
+    units = [(1024, 0, 1, 1), (1025, 0, 1, 1), (3076, 0, 1, 9002), (4099, 0, 1, 9002)]
+    src = _keyed_las(tmp_path / "units.las", units)
+    assert header_crs_wkt(laspy.open(str(src)).header) is None
+    las = laspy.read(str(src))
+    las.header.vlrs.append(laspy.vlrs.known.WktCoordinateSystemVlr(pyproj.CRS.from_epsg(32632).to_wkt()))
+    las.write(str(tmp_path / "both.las"))
+    header = laspy.open(str(tmp_path / "both.las")).header
+    assert pyproj.CRS.from_wkt(header_crs_wkt(header)).to_epsg() == 32632 and crs_records_conflict(header) == ""
+    bad = _keyed_las(tmp_path / "bad.las", [(1024, 0, 1, 1), (1026, 34737, 26, 0), (3072, 0, 1, 32767)],
+                     text=b"ESRI PE String = garbage|\0")
+    code = ("from osgeo import gdal, osr\ngdal.UseExceptions(); osr.UseExceptions()\nimport laspy\n"
+            "from groundsieve.core.io.lasfiles import scan_header\n"
+            f"print(scan_header({str(bad)!r}).crs_wkt)\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    assert out.returncode == 0 and out.stdout.strip() == "None", out.stderr[-2000:]
