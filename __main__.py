@@ -1,4 +1,5 @@
 """``python -m groundsieve``: the ground filters without QGIS (see core/engine/cli.py)."""
+import os
 import sys
 
 from .core.engine.cli import EXIT_BUG, FINISHED, INTERRUPT_SEEN, main
@@ -24,4 +25,12 @@ if __name__ == "__main__":
     signal.signal(signal.SIGTERM, signal.SIG_IGN)  # the interpreter's shutdown: not killed by a late SIGTERM
     if signal.getsignal(signal.SIGINT) is _interrupt:
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # nor by a late Ctrl-C (it ended as killed, exit -2)
+    import threading
+    if any(t.is_alive() and not t.daemon for t in threading.enumerate() if t is not threading.main_thread()):
+        # A thread the run could not stop (one stuck in a library's C code: OpenBLAS retrying an allocation
+        # for ever) would hold the interpreter's shutdown, SIGTERM ignored, for ever (a code reviewer): the run
+        # has said how it ended and removed its temporaries; leave now.
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
     sys.exit(code)

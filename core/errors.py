@@ -33,3 +33,10 @@ class Cancelled(GroundSieveError):
 
 class MemoryBudgetError(InvalidParameterError):
     """A grid would need more memory than the run may use (refused before allocating it)."""
+
+
+def out_of_memory(what: str, err: BaseException) -> "MemoryBudgetError":
+    """A MemoryError met while ``what`` (a file, a tile) was read or worked on, in words: what to change. Reading
+    a file's points under a tight ulimit -v was called a damaged or truncated file (a code reviewer)."""
+    return MemoryBudgetError(f"{what}: out of memory ({err or 'MemoryError'}); give a smaller memory budget "
+                             "(the log's first lines say this run's) or fewer workers, or more memory")

@@ -131,6 +131,75 @@ def machine_memory_bytes() -> int:
     return min(ram, limit) if limit else ram
 
 
+#: address space a thread that calls BLAS takes on its first call, beyond any budget: OpenBLAS's buffer (a
+#: code reviewer saw malloc(134221824) in gdb); when it cannot have it, OpenBLAS retries for ever, and under
+#: ulimit -v 800000 two tile threads waited there with the run at 30 %, SIGTERM unheard
+BLAS_BUFFER_BYTES = 128 << 20
+#: address space a run takes beyond its budget and its BLAS buffers: the threads' stacks (numba's, lazrs's,
+#: the pool's), what two malloc arenas keep; a run with one worker and a budget of 120 MB was done where 260 MB
+#: were left beyond the budget (ulimit -v 1000000, bench/ulimit.py)
+RUN_OVERHEAD_BYTES = 64 << 20
+
+
+def address_space_reserve(workers: int) -> int:
+    """What a run of ``workers`` tiles at a time needs of the address space beyond its memory budget (the
+    BLAS buffers are a pool the threads share: one for each thread that calls BLAS at once)."""
+    return RUN_OVERHEAD_BYTES + BLAS_BUFFER_BYTES * max(1, int(workers))
+
+
+def warm_blas(callers: int, seconds: float = 0.1) -> None:
+    """Under an address-space limit, have OpenBLAS take its buffers now, one for each of ``callers`` threads
+    that call it at once, while the run has not yet filled the address space: a sparse solve (SuperLU, which
+    calls BLAS's dtrsv without Python's lock, as the fills of SMRF and PMF do) from that many threads at once.
+    OpenBLAS keeps the buffers it made and hands them to later callers; one it cannot make later, it retries
+    for ever (a code reviewer's run waited at 30 % with SIGTERM unheard, under ulimit -v 800000, and mine under
+    1000000 with a budget and a reserve counted for it). Nothing without a limit."""
+    if address_space_left() is None or callers < 1:
+        return
+    import threading
+    import time
+
+    import numpy as np
+    try:
+        from scipy.sparse import diags, kron, identity
+        from scipy.sparse.linalg import splu
+    except ImportError:
+        return
+    n = 40  # a 40 x 40 grid's Laplacian: dense enough for supernodes, which SuperLU solves with dtrsv
+    line = diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(n, n))
+    lu = splu((kron(line, identity(n)) + kron(identity(n), line)).tocsc())
+    rhs = np.ones(n * n)
+    start = threading.Barrier(callers)
+
+    def solve():
+        start.wait()
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            lu.solve(rhs)
+    threads = [threading.Thread(target=solve, name="groundsieve-blas-warm", daemon=True) for _ in range(callers)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+
+
+def check_address_space(workers: int) -> None:
+    """Refuse a run that an address-space limit (``ulimit -v``) leaves too little to take its BLAS buffers
+    and threads (:func:`address_space_reserve`) and some tiles: there OpenBLAS waits for ever (a code reviewer).
+    Nothing without a limit."""
+    left = address_space_left(first=True)
+    need = address_space_reserve(workers) + (64 << 20)
+    if left is not None and left >= need:
+        warm_blas(max(1, int(workers)))
+    if left is not None and left < need:
+        from .errors import MemoryBudgetError
+        raise MemoryBudgetError(
+            f"the address-space limit (ulimit -v) leaves {left / 2**20:,.0f} MB to this run, which needs about "
+            f"{need / 2**20:,.0f} MB beyond Python and its libraries for {max(1, int(workers))} worker(s) (their BLAS "
+            "buffers, threads and some tiles): raise the limit (by "
+            f"{(need - left) / 2**20:,.0f} MB or more) or use fewer workers")
+
+
 #: malloc arenas a process keeps under an address-space limit (glibc's default: 8 a core, each reserving 64 MB)
 ARENAS_UNDER_LIMIT = 2
 

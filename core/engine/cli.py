@@ -726,6 +726,13 @@ def _run(args, out):
         print(f"groundsieve: {err}", file=out)
         kind = error_kind(err)
         return EXIT_RETRY if kind == "cluster" else 1, {"status": "failed", "kind": kind, "error": str(err)}
+    except MemoryError as err:  # (out of memory where no step of ours named it: a ulimit -v or a cgroup's limit)
+        if INTERRUPT_SEEN[0]:
+            return _interrupted(out)
+        from ..errors import out_of_memory
+        message = str(out_of_memory(args.input if hasattr(args, "input") else "the run", err))
+        print(f"groundsieve: {message}", file=out)
+        return 1, {"status": "failed", "kind": "memory", "error": message}
     except Exception:
         if INTERRUPT_SEEN[0]:  # the interrupt, come back as a library's error (lazrs: LazrsError)
             return _interrupted(out)

@@ -90,7 +90,7 @@ MIN_TILE_POINTS = 50
 #: in 20 files: about equal, 16.0-18.6 s against 17.9-18.7 s; docs/BENCHMARKS.md)
 PROCESS_MIN_POINTS = 10_000_000
 
-def default_memory_budget_mb() -> float:
+def default_memory_budget_mb(workers: int = 1) -> float:
     """A quarter of the memory this job has (the machine's RAM, at most its control group's limit), at most
     2 GB: room for QGIS and for the other programs; below an address-space limit (``ulimit -v``), at most
     DEFAULT_MEMORY_FRACTION (60 %) of what was left of it when the run first asked, as a grid's guard takes
@@ -99,11 +99,11 @@ def default_memory_budget_mb() -> float:
     malloc arenas; without them a tile's sparse solve waited for ever in OpenBLAS at 1500000); at
     1000000 a tile runs out of memory, said as such, and a smaller budget runs."""
     from ..grids.spec import DEFAULT_MEMORY_FRACTION
-    from ..machine import address_space_left, machine_memory_bytes
+    from ..machine import address_space_left, address_space_reserve, machine_memory_bytes
     budget = min(machine_memory_bytes() // 4, 2 << 30)
     left = address_space_left(first=True)
-    if left is not None:
-        budget = min(budget, int(DEFAULT_MEMORY_FRACTION * left))
+    if left is not None:  # (and what ``workers`` threads take beyond it: machine.address_space_reserve)
+        budget = min(budget, int(DEFAULT_MEMORY_FRACTION * (left - address_space_reserve(workers))))
     return float(max(budget // (1 << 20), 1))
 
 
@@ -146,7 +146,7 @@ class TileOptions:
 
     @property
     def budget_bytes(self) -> int:
-        mb = self.memory_budget_mb or default_memory_budget_mb()
+        mb = self.memory_budget_mb or default_memory_budget_mb(self.worker_count)
         return int(mb * (1 << 20))
 
     @property
@@ -1478,8 +1478,9 @@ def keep_freed_memory() -> bool:
 def _init_worker(environ: Dict[str, str], parent: int = 0) -> None:
     os.environ.update(environ)  # before the job imports numba or starts lazrs's thread pool
     keep_freed_memory()
-    from ..machine import fit_address_space
+    from ..machine import fit_address_space, warm_blas
     fit_address_space()
+    warm_blas(1)  # (a worker process runs one tile at a time: one BLAS buffer, taken before its tiles)
     import signal
     # Ctrl-C in a terminal reaches every process of the group: the run that started this worker
     # decides (it stops its workers, see stop_workers), not a KeyboardInterrupt traceback per worker
@@ -1749,9 +1750,8 @@ def _tile_job(job) -> Optional[dict]:
             raise full from err
         raise GroundSieveError(f"{where} failed: {type(err).__name__}: {err}") from err
     except MemoryError as err:  # (under ulimit -v 1000000 a tile ran out: say what to change)
-        from ..errors import MemoryBudgetError
-        raise MemoryBudgetError(f"{where}: out of memory ({err}); give a smaller memory budget than this run's "
-                                "(the log's first lines say it) or fewer workers") from err
+        from ..errors import out_of_memory
+        raise out_of_memory(where, err) from err
     except Exception as err:  # an unexpected failure still names the tile
         raise GroundSieveError(f"{where} failed: {type(err).__name__}: {err}") from err
 

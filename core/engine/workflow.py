@@ -1032,8 +1032,9 @@ def _collecting(log):
 
 
 def _run_ground_filter(input_path, output_path, algorithm, options, dtm_path, dtm, rasters, steps, log):
-    from ..machine import fit_address_space
+    from ..machine import check_address_space, fit_address_space
     fit_address_space()  # (under ulimit -v: before the run starts its threads)
+    check_address_space(options.tiling.worker_count if options.tiling is not None else 1)
     rasters = {path: fn for path, fn in (rasters or {}).items() if path}
     check_classes_wanted(input_path, algorithm, options)
     warning = not_terrain_warning(algorithm)

@@ -890,6 +890,9 @@ def _read_las(path: str, steps: Steps) -> PointCloud:
                 las = laspy.LasData(header=header, points=_read_points(reader, int(header.point_count), steps.sub(0.0, READ_SHARE)))
     except GroundSieveError:
         raise  # cancelled
+    except MemoryError as err:
+        from ..errors import out_of_memory
+        raise out_of_memory(path, err) from err
     except Exception as err:  # laspy raises many types for damaged files
         msg = laspy_reason(err)
         problem = header_records_problem(path, err)

@@ -17,7 +17,7 @@ from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..errors import GroundSieveError, InputError, OutputError, UnsupportedFormatError
+from ..errors import GroundSieveError, InputError, OutputError, UnsupportedFormatError, out_of_memory
 from .clouds import (TEXT_ERRORS, PointCloud, check_las_layout, crs_records_conflict, finish_copy, header_crs_wkt,
                      header_records_problem, laspy_reason, point_data_end, records_held, writable_evlrs)
 from ..progress import WARNING_PREFIX
@@ -530,6 +530,8 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
                           "point the working folder at a disk with more room") from err
     except GroundSieveError:
         raise
+    except MemoryError as err:
+        raise out_of_memory(path, err) from err
     except Exception as err:  # laspy / lazrs on a damaged or truncated file
         raise InputError(f"{path}: cannot read its points ({type(err).__name__}: {err}); "
                          "the file is damaged or truncated") from err
@@ -707,6 +709,8 @@ def write_classified_stream(src: str, dst: str, classification: np.ndarray, *,
         raise OutputError(f"{name or dst}: cannot be written ({_reason(err)})") from err
     except GroundSieveError:
         raise
+    except MemoryError as err:
+        raise out_of_memory(src, err) from err
     except Exception as err:  # laspy / lazrs on a damaged or truncated input
         raise InputError(f"{src}: cannot read its points ({type(err).__name__}: {err}); "
                          "the file is damaged or truncated") from err
@@ -901,6 +905,8 @@ def iter_chunks(path: str, chunk_points: int = CHUNK_POINTS, first: int = 0) -> 
             yield from _chunks(reader, first, None, chunk_points, path)
     except GroundSieveError:
         raise
+    except MemoryError as err:
+        raise out_of_memory(path, err) from err
     except Exception as err:
         raise InputError(f"{path}: cannot read its points ({type(err).__name__}: {err}); "
                          "the file is damaged or truncated") from err

@@ -577,3 +577,20 @@ def test_a_cluster_failure_and_an_internal_error_have_exit_statuses_of_their_own
                           env=dict(os.environ, PYTHONPATH=PLUGINS), timeout=120)
     assert proc.returncode == cli.EXIT_BUG == 3, proc.stderr[-2000:]
     assert "Traceback" in proc.stderr and "RuntimeError: a bug" in proc.stderr
+
+
+def test_a_thread_the_run_could_not_stop_does_not_hold_the_command_line(scene, tmp_path):
+    """A tile thread stuck in C (OpenBLAS retrying an allocation for ever under ulimit -v) held the interpreter's
+    shutdown after the run had said it failed, SIGTERM ignored, for ever (a code reviewer)."""
+    code = ("import sys, threading, time, runpy\n"
+            "import groundsieve.core.engine.workflow as w\n"
+            "from groundsieve.core.errors import InputError\n"
+            "def stuck(*a, **k):\n"
+            "    threading.Thread(target=time.sleep, args=(3600,), daemon=False).start()\n"
+            "    raise InputError('a refusal, a thread left behind')\n"
+            "w.run_ground_filter = stuck\n"
+            f"sys.argv = ['groundsieve', 'smrf', '--input', {scene!r}, '--output', {str(tmp_path / 'o.laz')!r}]\n"
+            "runpy.run_module('groundsieve', run_name='__main__')\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          env=dict(os.environ, PYTHONPATH=PLUGINS), timeout=120)
+    assert proc.returncode == 1 and "a refusal, a thread left behind" in proc.stderr, proc.stderr[-2000:]

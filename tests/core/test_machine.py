@@ -120,6 +120,53 @@ def test_a_tile_out_of_memory_is_a_memory_error_that_says_what_to_change(tmp_pat
             raise MemoryError("Unable to allocate 35.6 MiB for an array")
     hungry = Hungry()
     with pytest.raises(MemoryBudgetError, match=r"^tile .* of s.laz: out of memory \(Unable to allocate 35.6 MiB.*\); "
-                                                r"give a smaller memory budget than this run's"):
+                                                r"give a smaller memory budget \(the log's first lines say this run's\)"):
         run_ground_filter(str(src), None, hungry, options=FilterOptions(tiling=tiles.TileOptions(
             tile_size_m=30.0, workers=1, buffer_m=5.0)))
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RLIMIT_AS, /proc and glibc are Linux's")
+def test_too_little_address_space_is_refused_before_the_run_and_enough_warms_blas():
+    """Under ulimit -v 800000 a run tiled, then two threads waited for ever in OpenBLAS's allocation of its
+    buffer, SIGTERM unheard (a code reviewer). Too little is refused at once; enough has OpenBLAS take its
+    buffers before the tiles (machine.warm_blas)."""
+    out = _limited("from groundsieve.core import machine\n"
+                   "from groundsieve.core.errors import MemoryBudgetError\n"
+                   "need = machine.address_space_reserve(2) + (64 << 20)\n",
+                   "try:\n    machine.check_address_space(2)\n    print('ran')\n"
+                   "except MemoryBudgetError as err:\n    print('refused' if 'ulimit -v' in str(err) else err)\n"
+                   "print(need < (1 << 30))\n")
+    assert out.split() == ["ran", "True"]  # (1 GB left: enough, and the warm-up did not hang or fail)
+    code = ("import resource\nfrom groundsieve.core import machine\n"
+            "used = int(next(l.split()[1] for l in open('/proc/self/status') if l.startswith('VmSize:'))) * 1024\n"
+            "resource.setrlimit(resource.RLIMIT_AS, (used + (200 << 20), resource.RLIM_INFINITY))\n"
+            "try:\n    machine.check_address_space(2)\n    print('ran')\n"
+            "except Exception as err:\n    print(type(err).__name__, err)\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+    said = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True).stdout
+    assert said.startswith("MemoryBudgetError the address-space limit (ulimit -v) leaves 2") and "raise the limit" in said
+
+
+def test_running_out_of_memory_reading_a_file_is_said_as_memory_not_damage(tmp_path, monkeypatch):
+    """Under ulimit -v 1000000 a file's reading ran out of memory: "cannot read its points ...; the file is
+    damaged or truncated", kind input (a code reviewer)."""
+    import laspy
+
+    from groundsieve.core.engine.workflow import run_ground_filter
+    from groundsieve.core.errors import MemoryBudgetError
+    from groundsieve.core.filters.smrf import SMRF
+    from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+    src = tmp_path / "s.laz"
+    write_scene(make_scene(SceneSpec(size_m=40.0, density_per_m2=2.0, seed=3)), str(src))
+
+    def no_memory(self, n):
+        raise MemoryError("Allocation failed (probably too large).")
+    monkeypatch.setattr(laspy.LasReader, "read_points", no_memory)
+    for options in (None, _tiled_options()):
+        with pytest.raises(MemoryBudgetError, match=r"s.laz: out of memory \(Allocation failed"):
+            run_ground_filter(str(src), str(tmp_path / "o.laz"), SMRF(), options=options)
+
+
+def _tiled_options():
+    from groundsieve.core.engine.workflow import FilterOptions
+    return FilterOptions(tiling=tiles.TileOptions(tile_size_m=20.0, workers=1))
