@@ -710,10 +710,10 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
             QgsProcessingParameterNumber(self.TILE_BUFFER, "Tile buffer (m; -1 = the filter's own reach)",
                                          type=QgsProcessingParameterNumber.Type.Double, defaultValue=-1.0,
                                          minValue=-1.0),
-            QgsProcessingParameterNumber(self.MEMORY_BUDGET, "Memory budget (MB; 0 = a quarter of the RAM, "
+            QgsProcessingParameterNumber(self.MEMORY_BUDGET, "Memory budget (MB; 0 = a quarter of the memory, "
                                          "at most 2048)", type=QgsProcessingParameterNumber.Type.Integer,
                                          defaultValue=0, minValue=0),
-            QgsProcessingParameterNumber(self.WORKERS, "Tiles at the same time (0 = every core)",
+            QgsProcessingParameterNumber(self.WORKERS, "Tiles at the same time (0 = every core it may use)",
                                          type=QgsProcessingParameterNumber.Type.Integer, defaultValue=0, minValue=0),
             QgsProcessingParameterFile(self.WORK_FOLDER, "Working folder for temporary tiles (default: beside "
                                        "the output)", behavior=QgsProcessingParameterFile.Behavior.Folder,

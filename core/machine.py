@@ -189,8 +189,6 @@ def check_address_space(workers: int) -> None:
     Nothing without a limit."""
     left = address_space_left(first=True)
     need = address_space_reserve(workers) + (64 << 20)
-    if left is not None and left >= need:
-        warm_blas(max(1, int(workers)))
     if left is not None and left < need:
         from .errors import MemoryBudgetError
         raise MemoryBudgetError(

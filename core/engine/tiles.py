@@ -107,6 +107,12 @@ def default_memory_budget_mb(workers: int = 1) -> float:
     return float(max(budget // (1 << 20), 1))
 
 
+#: below this much address space left under ulimit -v, "every core" is one worker: each more takes OpenBLAS's
+#: 128 MB buffer and its stacks, and the tiles had less (lasR's bcts_2, 824 k points, ran out under 1000000
+#: with two workers where one ran)
+TIGHT_ADDRESS_SPACE = 2 << 30
+
+
 @dataclass(frozen=True)
 class TileOptions:
     """How a run is cut into tiles (all optional: the defaults decide from the input)."""
@@ -151,8 +157,13 @@ class TileOptions:
 
     @property
     def worker_count(self) -> int:
-        from ..machine import usable_cpus
-        return int(self.workers) or usable_cpus()
+        from ..machine import address_space_left, usable_cpus
+        if self.workers:
+            return int(self.workers)
+        left = address_space_left(first=True)
+        if left is not None and left < TIGHT_ADDRESS_SPACE:
+            return 1  # (under a tight ulimit -v each worker's BLAS buffer and stacks cost more than it gives)
+        return usable_cpus()
 
 
 def filter_reach_m(algorithm) -> float:
@@ -489,6 +500,8 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     steps = steps or Steps()
     log = log or (lambda _msg: None)
     tiling: TileOptions = getattr(options, "tiling", None) or TileOptions()
+    from ..machine import warm_blas
+    warm_blas(tiling.worker_count)  # (under ulimit -v: OpenBLAS's buffers for the tile threads, taken first)
     inputs = expand_inputs(input_path)
     note = folder_note(input_path)
     if note:

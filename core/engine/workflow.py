@@ -1070,6 +1070,8 @@ def _run_ground_filter(input_path, output_path, algorithm, options, dtm_path, dt
                          steps=steps, log=log)
     if not os.path.exists(input_path):  # before the outputs: a mistyped input explains the rest
         raise InputError(f"{input_path}: no such file or folder")
+    from ..machine import warm_blas
+    warm_blas(1)  # (under ulimit -v: OpenBLAS's buffer for this thread's fills, taken before the cloud is read)
     check_outputs(input_path, output_path, [dtm_path, *rasters])
     if _ext(input_path) in LAS_EXTENSIONS:
         from ..io.lasfiles import scan_header
