@@ -67,6 +67,25 @@ def cgroup_memory_limit(root: str = "/sys/fs/cgroup", proc_cgroup: str = "/proc/
     return min(limits) if limits else None
 
 
+def cgroup_memory_left(root: str = "/sys/fs/cgroup", proc_cgroup: str = "/proc/self/cgroup") -> Optional[int]:
+    """What this process's control groups with a memory limit have left of it (limit less usage: v2
+    ``memory.max`` and ``memory.current``, v1 ``memory.limit_in_bytes`` and ``memory.usage_in_bytes``), the
+    smallest; None without a limit. A grid's guard took the whole limit for what was free (a code reviewer)."""
+    left = []
+    for controllers, path in _cgroup_paths(proc_cgroup):
+        for p in _ancestors(path):
+            if controllers == "":
+                limit, used = _read_number(f"{root}{p}/memory.max"), _read_number(f"{root}{p}/memory.current")
+            elif "memory" in controllers.split(","):
+                limit = _read_number(f"{root}/memory{p}/memory.limit_in_bytes")
+                used = _read_number(f"{root}/memory{p}/memory.usage_in_bytes")
+            else:
+                break
+            if limit is not None and 0 < limit < _UNLIMITED:
+                left.append(max(0, limit - (used or 0)))
+    return min(left) if left else None
+
+
 def cgroup_cpu_limit(root: str = "/sys/fs/cgroup", proc_cgroup: str = "/proc/self/cgroup") -> Optional[int]:
     """The cores a control group's CPU quota allows (v2 ``cpu.max``, v1 ``cpu.cfs_quota_us`` over
     ``cpu.cfs_period_us``), rounded up; None without a quota."""

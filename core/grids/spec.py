@@ -42,10 +42,10 @@ _BUDGET = contextvars.ContextVar("groundsieve_memory_budget", default=None)
 
 
 def available_memory_bytes() -> int:
-    """Memory this process can still take: the kernel's MemAvailable, at most its control group's limit
-    (a batch job's), and below the address-space limit (``ulimit -v``, ``resource.RLIMIT_AS``) when one
+    """Memory this process can still take: the kernel's MemAvailable, at most what its control group's limit
+    (a batch job's) has left, and below the address-space limit (``ulimit -v``, ``resource.RLIMIT_AS``) when one
     is set, what is left of it (core/machine.py)."""
-    from ..machine import address_space_left, cgroup_memory_limit
+    from ..machine import address_space_left, cgroup_memory_left
     avail = None
     with contextlib.suppress(OSError, ValueError):
         with open("/proc/meminfo") as f:
@@ -58,7 +58,7 @@ def available_memory_bytes() -> int:
             avail = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
     if avail is None:
         avail = 8 << 30  # no way to know (not Linux): assume a modest machine
-    for limit in (cgroup_memory_limit(), address_space_left()):
+    for limit in (cgroup_memory_left(), address_space_left()):
         if limit is not None:
             avail = min(avail, limit)
     return int(avail)

@@ -170,3 +170,12 @@ def test_running_out_of_memory_reading_a_file_is_said_as_memory_not_damage(tmp_p
 def _tiled_options():
     from groundsieve.core.engine.workflow import FilterOptions
     return FilterOptions(tiling=tiles.TileOptions(tile_size_m=20.0, workers=1))
+
+
+def test_what_a_cgroup_limit_has_left_is_the_limit_less_its_usage(tmp_path):
+    root, proc = _cgroups(tmp_path, ["0::/job"], {"job/memory.max": "2147483648\n", "job/memory.current": "1610612736\n",
+                                                 "memory.max": "max\n"})
+    assert machine.cgroup_memory_left(root, proc) == 512 << 20
+    root, proc = _cgroups(tmp_path / "v1", ["4:memory:/job"], {"memory/job/memory.limit_in_bytes": "1073741824\n",
+                                                              "memory/job/memory.usage_in_bytes": "268435456\n"})
+    assert machine.cgroup_memory_left(root, proc) == 768 << 20
