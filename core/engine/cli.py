@@ -349,9 +349,7 @@ def run_rfclassify(args, out) -> dict:
     """Run ``rfclassify``; return its JSON document."""
     from .learning import classify_file
     warnings, log = _collecting_log(out)
-    dtm = DTMOptions(cell_size_m=args.dtm_cell, cell_set=bool(getattr(args, "dtm_cell_typed", False)),
-                     fill_outside_hull=args.dtm_fill, classes=args.dtm_classes, max_distance_m=args.dtm_max_distance,
-                     extent=args.dtm_extent or None)
+    dtm = dtm_options(args)
     start = time.monotonic()
     result = classify_file(args.input, args.output, args.model, dtm_path=args.dtm, dtm=dtm,
                            ignore_classes=args.ignore_classes, tiling=_tiling(args),
@@ -395,9 +393,7 @@ def run_dtm(args, out) -> dict:
     warnings, log = _collecting_log(out)
     ground = ClassGround(args.classes)
     options = FilterOptions(ignore_classes=args.ignore_classes, keep_existing_classes=True, tiling=_tiling(args))
-    dtm = DTMOptions(cell_size_m=args.dtm_cell, cell_set=bool(getattr(args, "dtm_cell_typed", False)),
-                     fill_outside_hull=args.dtm_fill, max_distance_m=args.dtm_max_distance,
-                     extent=args.dtm_extent or None)
+    dtm = dtm_options(args, classes=False)
     return _run_documented(args, out, ground, options, dtm, warnings, log, "of the ground classes")
 
 
@@ -669,10 +665,14 @@ def options_from(args, log=None):
     options = FilterOptions(last_returns_only=args.last_returns, ignore_noise=args.ignore_noise,
                             ignore_classes=args.ignore_classes, keep_existing_classes=args.keep_classes,
                             tiling=tiling)
-    return algorithm, options, DTMOptions(cell_size_m=args.dtm_cell, cell_set=bool(getattr(args, "dtm_cell_typed", False)),
-                                          fill_outside_hull=args.dtm_fill,
-                                          classes=args.dtm_classes, max_distance_m=args.dtm_max_distance,
-                                          extent=args.dtm_extent or None)
+    return algorithm, options, dtm_options(args)
+
+
+def dtm_options(args, classes: bool = True) -> DTMOptions:
+    """The DTM's options of the command line (_add_dtm_options), ``classes``: with --dtm-classes."""
+    return DTMOptions(cell_size_m=args.dtm_cell, cell_set=bool(getattr(args, "dtm_cell_typed", False)),
+                      fill_outside_hull=args.dtm_fill, classes=args.dtm_classes if classes else "",
+                      max_distance_m=args.dtm_max_distance, extent=args.dtm_extent or None)
 
 
 def _tiling(args) -> TileOptions:
