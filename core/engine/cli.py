@@ -671,7 +671,7 @@ def options_from(args, log=None):
 def dtm_options(args, classes: bool = True) -> DTMOptions:
     """The DTM's options of the command line (_add_dtm_options), ``classes``: with --dtm-classes."""
     return DTMOptions(cell_size_m=args.dtm_cell, cell_set=bool(getattr(args, "dtm_cell_typed", False)),
-                      fill_outside_hull=args.dtm_fill, classes=args.dtm_classes if classes else "",
+                      fill_outside_hull=args.dtm_fill, classes=args.dtm_classes if classes else (),
                       max_distance_m=args.dtm_max_distance, extent=args.dtm_extent or None)
 
 
