@@ -51,39 +51,33 @@ def _read_number(path: str) -> Optional[int]:
     return None
 
 
-def cgroup_memory_limit(root: str = "/sys/fs/cgroup", proc_cgroup: str = "/proc/self/cgroup") -> Optional[int]:
-    """The smallest memory limit of this process's control group and those above it (v2 ``memory.max``,
-    v1 ``memory.limit_in_bytes``); None without one. A container sees its own group as the mount's root,
-    so the mount's top files count too."""
-    limits = []
+def _memory_groups(root: str, proc_cgroup: str):
+    """(limit, usage or None) of each of this process's control groups, and those above them, that has a memory
+    limit (v2 ``memory.max`` and ``memory.current``, v1 ``memory.limit_in_bytes`` and ``memory.usage_in_bytes``).
+    A container sees its own group as the mount's root, so the mount's top files count too."""
     for controllers, path in _cgroup_paths(proc_cgroup):
         if controllers == "":
-            files = [f"{root}{p}/memory.max" for p in _ancestors(path)]
+            files = [(f"{root}{p}/memory.max", f"{root}{p}/memory.current") for p in _ancestors(path)]
         elif "memory" in controllers.split(","):
-            files = [f"{root}/memory{p}/memory.limit_in_bytes" for p in _ancestors(path)]
+            files = [(f"{root}/memory{p}/memory.limit_in_bytes", f"{root}/memory{p}/memory.usage_in_bytes")
+                     for p in _ancestors(path)]
         else:
             continue
-        limits += [v for v in map(_read_number, files) if v is not None and 0 < v < _UNLIMITED]
-    return min(limits) if limits else None
+        for limit_file, usage_file in files:
+            limit = _read_number(limit_file)
+            if limit is not None and 0 < limit < _UNLIMITED:
+                yield limit, _read_number(usage_file)
+
+
+def cgroup_memory_limit(root: str = "/sys/fs/cgroup", proc_cgroup: str = "/proc/self/cgroup") -> Optional[int]:
+    """The smallest memory limit of this process's control group and those above it; None without one."""
+    return min((limit for limit, _used in _memory_groups(root, proc_cgroup)), default=None)
 
 
 def cgroup_memory_left(root: str = "/sys/fs/cgroup", proc_cgroup: str = "/proc/self/cgroup") -> Optional[int]:
-    """What this process's control groups with a memory limit have left of it (limit less usage: v2
-    ``memory.max`` and ``memory.current``, v1 ``memory.limit_in_bytes`` and ``memory.usage_in_bytes``), the
+    """What this process's control groups with a memory limit have left of it (limit less usage), the
     smallest; None without a limit. A grid's guard took the whole limit for what was free (a code reviewer)."""
-    left = []
-    for controllers, path in _cgroup_paths(proc_cgroup):
-        for p in _ancestors(path):
-            if controllers == "":
-                limit, used = _read_number(f"{root}{p}/memory.max"), _read_number(f"{root}{p}/memory.current")
-            elif "memory" in controllers.split(","):
-                limit = _read_number(f"{root}/memory{p}/memory.limit_in_bytes")
-                used = _read_number(f"{root}/memory{p}/memory.usage_in_bytes")
-            else:
-                break
-            if limit is not None and 0 < limit < _UNLIMITED:
-                left.append(max(0, limit - (used or 0)))
-    return min(left) if left else None
+    return min((max(0, limit - (used or 0)) for limit, used in _memory_groups(root, proc_cgroup)), default=None)
 
 
 def cgroup_cpu_limit(root: str = "/sys/fs/cgroup", proc_cgroup: str = "/proc/self/cgroup") -> Optional[int]:
@@ -229,11 +223,18 @@ def fit_address_space() -> bool:
     without a limit or where the C library is not glibc."""
     if address_space_left() is None:
         return False
+    set_option = mallopt()
+    if set_option is None:
+        return False
+    M_ARENA_MAX = -8  # (malloc.h)
+    return bool(set_option(M_ARENA_MAX, ARENAS_UNDER_LIMIT))
+
+
+def mallopt():
+    """glibc's ``mallopt`` (set an option of malloc), or None where the C library is not glibc."""
     import ctypes
     import ctypes.util
     try:
-        mallopt = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").mallopt
+        return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").mallopt
     except (OSError, AttributeError):
-        return False
-    M_ARENA_MAX = -8  # (malloc.h)
-    return bool(mallopt(M_ARENA_MAX, ARENAS_UNDER_LIMIT))
+        return None

@@ -24,6 +24,20 @@ def warning_of(line: str) -> Optional[str]:
     return line[len(WARNING_PREFIX):] if line.startswith(WARNING_PREFIX) else None
 
 
+def collecting_warnings(log):
+    """(the warnings, a log that keeps them, as :func:`warning_of` gives them, and passes every line on to
+    ``log``): the run's result and the command line's JSON carry them."""
+    said = []
+    out = log or (lambda _msg: None)
+
+    def collect(msg: str) -> None:
+        text = warning_of(msg)
+        if text is not None:
+            said.append(text)
+        out(msg)
+    return said, collect
+
+
 def _noop_progress(_fraction: float) -> None:
     return None
 

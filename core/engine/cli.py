@@ -32,7 +32,6 @@ import time
 from typing import List, Optional
 
 from ..errors import GroundSieveError
-from ..progress import warning_of
 from . import parameters as P
 from .tiles import TileOptions
 from .workflow import DTMOptions, FilterOptions
@@ -541,14 +540,8 @@ def run_filter(args, out) -> dict:
 def _collecting_log(out):
     """(the run's warnings, a log that prints each line to ``out`` and collects the warnings): the CRS's unit,
     said before the work, and the rest, for --json too."""
-    warnings = []
-
-    def log(msg):
-        warning = warning_of(msg)
-        if warning is not None:
-            warnings.append(warning)
-        print(msg, file=out, flush=True)
-    return warnings, log
+    from ..progress import collecting_warnings
+    return collecting_warnings(lambda msg: print(msg, file=out, flush=True))
 
 
 def _run_documented(args, out, algorithm, options, dtm, warnings, log, ground_words: str) -> dict:

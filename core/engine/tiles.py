@@ -1477,12 +1477,9 @@ def keep_freed_memory() -> bool:
     1.77 -> 0.64 s, their time 9.9 -> 8.9 s, the peak RSS the same (0.80 / 0.84 GB);
     docs/BENCHMARKS.md. Only in the worker processes the engine starts (never in QGIS itself);
     False where the C library is not glibc."""
-    import ctypes
-    import ctypes.util
-    try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        mallopt = libc.mallopt
-    except (OSError, AttributeError):
+    from ..machine import mallopt as glibc_mallopt
+    mallopt = glibc_mallopt()
+    if mallopt is None:
         return False
     M_TRIM_THRESHOLD, M_MMAP_MAX = -1, -4  # (malloc.h)
     return bool(mallopt(M_MMAP_MAX, 0)) and bool(mallopt(M_TRIM_THRESHOLD, 2 ** 31 - 1))

@@ -988,7 +988,8 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     dtm = DTMOptions() if dtm is None else dtm
     algorithm = _filter_of(algorithm)
     steps = Steps(progress, is_cancelled)
-    said, log = _collecting(log)
+    from ..progress import collecting_warnings
+    said, log = collecting_warnings(log)
     run = _run_ground_filter(input_path, output_path, algorithm, options, dtm_path, dtm, rasters, steps, log)
     run.warnings = said
     return run
@@ -1015,20 +1016,6 @@ def _filter_of(algorithm):
         raise InvalidParameterError(f"the filter must be a filter object (e.g. SMRF()) or a filter's name "
                                     f"(got {type(algorithm).__name__})")
     return algorithm
-
-
-def _collecting(log):
-    """(the warnings, a log that keeps them and passes every line on to ``log``)."""
-    from ..progress import warning_of
-    said: List[str] = []
-    out = log or (lambda _msg: None)
-
-    def collect(msg: str) -> None:
-        text = warning_of(msg)
-        if text is not None:
-            said.append(text)
-        out(msg)
-    return said, collect
 
 
 def _run_ground_filter(input_path, output_path, algorithm, options, dtm_path, dtm, rasters, steps, log):

@@ -133,6 +133,14 @@ def _read_bounds(reader, chunk: int):
 EMPTY_LAZ_TAIL = 65536
 
 
+def points_error(path: str, err: BaseException) -> GroundSieveError:
+    """laspy's or lazrs's error reading the points of ``path``, in words: out of memory (a tight ulimit -v: it
+    was called a damaged file, a code reviewer), else a damaged or truncated file."""
+    if isinstance(err, MemoryError):
+        return out_of_memory(path, err)
+    return InputError(f"{path}: cannot read its points ({type(err).__name__}: {err}); the file is damaged or truncated")
+
+
 def _check_point_counts(path: str, header, held: Optional[int]) -> None:
     """Refuse a LAS 1.4 file of point formats 0-5 whose two point counts disagree where the legacy one is
     the number of point records the file holds: its writer left the LAS 1.4 count wrong. A count of 0
@@ -530,11 +538,8 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
                           "point the working folder at a disk with more room") from err
     except GroundSieveError:
         raise
-    except MemoryError as err:
-        raise out_of_memory(path, err) from err
     except Exception as err:  # laspy / lazrs on a damaged or truncated file
-        raise InputError(f"{path}: cannot read its points ({type(err).__name__}: {err}); "
-                         "the file is damaged or truncated") from err
+        raise points_error(path, err) from err
     finally:
         for f in index_files.values():
             f.close()
@@ -709,11 +714,8 @@ def write_classified_stream(src: str, dst: str, classification: np.ndarray, *,
         raise OutputError(f"{name or dst}: cannot be written ({_reason(err)})") from err
     except GroundSieveError:
         raise
-    except MemoryError as err:
-        raise out_of_memory(src, err) from err
     except Exception as err:  # laspy / lazrs on a damaged or truncated input
-        raise InputError(f"{src}: cannot read its points ({type(err).__name__}: {err}); "
-                         "the file is damaged or truncated") from err
+        raise points_error(src, err) from err
 
 
 # -- the classified copy in pieces, from the records the binning kept -------------------------------
@@ -905,8 +907,5 @@ def iter_chunks(path: str, chunk_points: int = CHUNK_POINTS, first: int = 0) -> 
             yield from _chunks(reader, first, None, chunk_points, path)
     except GroundSieveError:
         raise
-    except MemoryError as err:
-        raise out_of_memory(path, err) from err
     except Exception as err:
-        raise InputError(f"{path}: cannot read its points ({type(err).__name__}: {err}); "
-                         "the file is damaged or truncated") from err
+        raise points_error(path, err) from err
