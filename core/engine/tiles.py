@@ -92,12 +92,10 @@ PROCESS_MIN_POINTS = 10_000_000
 
 def default_memory_budget_mb(workers: int = 1) -> float:
     """A quarter of the memory this job has (the machine's RAM, at most its control group's limit), at most
-    2 GB: room for QGIS and for the other programs; below an address-space limit (``ulimit -v``), at most
-    DEFAULT_MEMORY_FRACTION (60 %) of what was left of it when the run first asked, as a grid's guard takes
-    (core/machine.py). Measured on a 3.7 M point LAZ with a 0.5 m DTM that ran whole and died with a
-    traceback: done in tiles under ulimit -v 1200000 to 1500000 (with machine.fit_address_space's two
-    malloc arenas; without them a tile's sparse solve waited for ever in OpenBLAS at 1500000); at
-    1000000 a tile runs out of memory, said as such, and a smaller budget runs."""
+    2 GB: room for QGIS and for the other programs; below an address-space limit (``ulimit -v``),
+    DEFAULT_MEMORY_FRACTION (60 %) of what was left of it when the run first asked beyond what ``workers``
+    threads take outside the budget (machine.address_space_reserve: OpenBLAS's buffers, stacks). Measured
+    with bench/ulimit.py, in BENCHMARKS ("A batch job's address-space limit")."""
     from ..grids.spec import DEFAULT_MEMORY_FRACTION
     from ..machine import address_space_left, address_space_reserve, machine_memory_bytes
     budget = min(machine_memory_bytes() // 4, 2 << 30)

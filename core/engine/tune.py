@@ -509,8 +509,7 @@ def tune(cloud, name: str, options: TuneOptions = TuneOptions(), *, base: Option
     from .tiles import refuse_in_a_workers_import
     from .workflow import call_filter
     refuse_in_a_workers_import()
-    if name not in P.FILTERS:
-        raise InvalidParameterError(f"unknown filter {name!r} (one of {', '.join(P.FILTERS)})")
+    P.known_filter(name)
     steps = Steps(progress, is_cancelled)
     log = log or (lambda _m: None)
     if isinstance(cloud, (str, os.PathLike)):

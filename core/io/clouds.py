@@ -198,7 +198,7 @@ def header_crs_wkt(header) -> Optional[str]:
             crs = header.parse_crs()
         except Exception:
             crs = None
-        crs = _crs_of_geokeys(header, crs)
+        crs = _crs_of_geokeys(_records(header), crs)
         if crs is None:
             return None
         try:
@@ -207,13 +207,18 @@ def header_crs_wkt(header) -> Optional[str]:
             return crs.to_wkt()
 
 
+def _records(header) -> list:
+    """The header's VLRs and EVLRs (laspy's records), in that order."""
+    return list(header.vlrs) + list(header.evlrs or [])
+
+
 def crs_records_conflict(header) -> str:
     """The two CRS a header names when its WKT record and its GeoTIFF keys name different horizontal CRS
     ("WGS 84 / UTM zone 33N" and "WGS 84 / UTM zone 32N": the WKT is taken, as laspy, PDAL and LAS 1.4 have
     it); "" otherwise. A file with a stale record beside a new one ran without a word, its DTM placed by
     the WKT (a format reviewer)."""
     from laspy.vlrs.known import GeoKeyDirectoryVlr, WktCoordinateSystemVlr
-    records = list(header.vlrs) + list(header.evlrs or [])
+    records = _records(header)
     wkt = [r for r in records if isinstance(r, WktCoordinateSystemVlr) and r.string]
     keys = [r for r in records if isinstance(r, GeoKeyDirectoryVlr)]
     if not wkt or not keys:
@@ -223,7 +228,8 @@ def crs_records_conflict(header) -> str:
         try:
             import pyproj
             by_wkt = pyproj.CRS.from_wkt(wkt[0].string)
-            by_keys = _crs_of_geokeys_only(header, keys[0])
+            by_keys = _crs_of_geokeys([r for r in records if not isinstance(r, WktCoordinateSystemVlr)],
+                                      keys[0].parse_crs())
         except Exception:  # (a record that cannot be read is said elsewhere, or not at all, as before)
             return ""
     if by_keys is None:
@@ -237,17 +243,6 @@ def crs_records_conflict(header) -> str:
     return f"the WKT record says {a.name}, the GeoTIFF keys {b.name}"
 
 
-def _crs_of_geokeys_only(header, directory):
-    """The CRS of the header's GeoTIFF keys alone (laspy's, or GDAL's where laspy misreads them)."""
-    crs = directory.parse_crs()
-
-    class _KeysOnly:  # the header without its WKT records, for _crs_of_geokeys
-        vlrs = [r for r in header.vlrs if getattr(r, "user_id", "") == "LASF_Projection"
-                and getattr(r, "record_id", 0) in (34735, 34736, 34737)]
-        evlrs = []
-    return _crs_of_geokeys(_KeysOnly, crs)
-
-
 def _geokeys(records) -> dict:
     """{key id: value} of the GeoTIFF keys whose value is in the directory itself."""
     from laspy.vlrs.known import GeoKeyDirectoryVlr
@@ -258,13 +253,12 @@ def _geokeys(records) -> dict:
     return keys
 
 
-def _crs_of_geokeys(header, crs):
-    """``crs`` (laspy's CRS of ``header``, or None), or the CRS GDAL reads from the header's GeoTIFF keys
+def _crs_of_geokeys(records, crs):
+    """``crs`` (laspy's CRS of the header ``records``, or None), or the CRS GDAL reads from their GeoTIFF keys
     where laspy's leaves out what they say (core/io/geokeys.py: a projection without EPSG code, an ESRI
     PE string, a unit key); a WKT record is taken as laspy has it."""
     from laspy.vlrs.known import WktCoordinateSystemVlr
     from .geokeys import gdal_crs_wkt, laspy_misreads
-    records = list(header.vlrs) + list(header.evlrs or [])
     if any(isinstance(r, WktCoordinateSystemVlr) and r.string for r in records):
         return crs
     if not laspy_misreads(_geokeys(records), crs):
@@ -317,7 +311,7 @@ def _with_geokey_heights(crs, header):
     file, and a compound CRS of "unknown height (metre)" told two tiles of one survey apart and took
     the EPSG code off their DTMs (a code reviewer). A WKT CRS, and a 3D one, are kept as they are."""
     from laspy.vlrs.known import WktCoordinateSystemVlr
-    records = list(header.vlrs) + list(header.evlrs or [])
+    records = _records(header)
     if any(isinstance(r, WktCoordinateSystemVlr) and r.string for r in records) or crs.is_compound \
             or crs.is_vertical or len(crs.axis_info) != 2:
         return crs

@@ -554,6 +554,19 @@ def test_rftrain_and_rfclassify_run_from_the_shell_whole_and_tiled(scene, tmp_pa
     assert failed["kind"] in ("input", "parameter") and "none.npz" in failed["error"]
 
 
+def _python_m_groundsieve_with(run_code: str, scene, output):
+    """``python -m groundsieve smrf`` on ``scene``, in a process of its own whose run_ground_filter is the function
+    ``run`` that ``run_code`` defines."""
+    code = ("import sys, runpy\n"
+            "import groundsieve.core.engine.workflow as w\n"
+            + run_code +
+            "w.run_ground_filter = run\n"
+            f"sys.argv = ['groundsieve', 'smrf', '--input', {str(scene)!r}, '--output', {str(output)!r}]\n"
+            "runpy.run_module('groundsieve', run_name='__main__')\n")
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          env=dict(os.environ, PYTHONPATH=PLUGINS), timeout=120)
+
+
 def test_a_cluster_failure_and_an_internal_error_have_exit_statuses_of_their_own(scene, tmp_path, monkeypatch):
     """A refusal, a bug and a lost Dask cluster all exited 1: a job wrapper could not tell "retry" from "do
     not" (a research software engineer). The cluster's is 75 (EX_TEMPFAIL), a bug's 3 (with its traceback)."""
@@ -567,14 +580,7 @@ def test_a_cluster_failure_and_an_internal_error_have_exit_statuses_of_their_own
     assert main(["smrf", "--input", scene, "--output", str(tmp_path / "o.laz"), "--json"], out=io.StringIO(),
                 stdout=stdout) == cli.EXIT_RETRY == 75
     assert json.loads(stdout.getvalue())["kind"] == "cluster"
-    code = ("import sys, runpy\n"
-            "import groundsieve.core.engine.workflow as w\n"
-            "def bug(*a, **k):\n    raise RuntimeError('a bug')\n"
-            "w.run_ground_filter = bug\n"
-            f"sys.argv = ['groundsieve', 'smrf', '--input', {scene!r}, '--output', {str(tmp_path / 'b.laz')!r}]\n"
-            "runpy.run_module('groundsieve', run_name='__main__')\n")
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          env=dict(os.environ, PYTHONPATH=PLUGINS), timeout=120)
+    proc = _python_m_groundsieve_with("def run(*a, **k):\n    raise RuntimeError('a bug')\n", scene, tmp_path / "b.laz")
     assert proc.returncode == cli.EXIT_BUG == 3, proc.stderr[-2000:]
     assert "Traceback" in proc.stderr and "RuntimeError: a bug" in proc.stderr
 
@@ -582,15 +588,10 @@ def test_a_cluster_failure_and_an_internal_error_have_exit_statuses_of_their_own
 def test_a_thread_the_run_could_not_stop_does_not_hold_the_command_line(scene, tmp_path):
     """A tile thread stuck in C (OpenBLAS retrying an allocation for ever under ulimit -v) held the interpreter's
     shutdown after the run had said it failed, SIGTERM ignored, for ever (a code reviewer)."""
-    code = ("import sys, threading, time, runpy\n"
-            "import groundsieve.core.engine.workflow as w\n"
-            "from groundsieve.core.errors import InputError\n"
-            "def stuck(*a, **k):\n"
-            "    threading.Thread(target=time.sleep, args=(3600,), daemon=False).start()\n"
-            "    raise InputError('a refusal, a thread left behind')\n"
-            "w.run_ground_filter = stuck\n"
-            f"sys.argv = ['groundsieve', 'smrf', '--input', {scene!r}, '--output', {str(tmp_path / 'o.laz')!r}]\n"
-            "runpy.run_module('groundsieve', run_name='__main__')\n")
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          env=dict(os.environ, PYTHONPATH=PLUGINS), timeout=120)
+    proc = _python_m_groundsieve_with("import threading, time\n"
+                                      "from groundsieve.core.errors import InputError\n"
+                                      "def run(*a, **k):\n"
+                                      "    threading.Thread(target=time.sleep, args=(3600,), daemon=False).start()\n"
+                                      "    raise InputError('a refusal, a thread left behind')\n",
+                                      scene, tmp_path / "o.laz")
     assert proc.returncode == 1 and "a refusal, a thread left behind" in proc.stderr, proc.stderr[-2000:]
