@@ -128,6 +128,11 @@ def _add_tiles(parser: argparse.ArgumentParser) -> None:
     tiles.add_argument("--work-folder", metavar="PATH",
                        help="working folder for temporary tiles (default: beside the output); with a Dask "
                             "scheduler, on a file system every worker sees at the same path")
+    tiles.add_argument("--only", default="", metavar="FILE",
+                       help="one file of a survey input (a folder or a .vpc): its number from 0 (a job array's task id, "
+                            "e.g. $SLURM_ARRAY_TASK_ID), its name or its path; only its points are classified, on the "
+                            "survey's tiles buffered by its neighbours' points. --output and --dtm are then folders "
+                            "(the file's copy and DTM there under its name) or a .las/.laz and a .tif")
     tiles.add_argument("--scheduler", default=to["scheduler"], metavar="ADDRESS",
                        help="Dask scheduler: empty = this machine, local:N = a local Dask cluster of N worker "
                             "processes, tcp://host:port = a running scheduler (needs dask[distributed]; the "
@@ -356,11 +361,13 @@ def run_rfclassify(args, out) -> dict:
     if isinstance(result, tuple):  # one cloud in memory: (cloud, predicted classes)
         cloud, predicted = result
         points, ground, tiles, outputs = len(cloud), int((predicted == 2).sum()), None, [args.output]
+        dtm_path = args.dtm or None
     else:
         points, ground, tiles, outputs = result.point_count, result.ground_count, result.tiles, list(result.outputs)
+        dtm_path = result.dtm_path
     print(f"{points:,} points, {ground:,} predicted ground.", file=out)
     return {"status": "done", "input": args.input, "output": args.output, "outputs": outputs, "model": args.model,
-            "dtm": args.dtm or None, "points": int(points), "ground": int(ground),
+            "dtm": dtm_path, "points": int(points), "ground": int(ground),
             "seconds": round(time.monotonic() - start, 3), "tiles": tiles, "warnings": list(warnings)}
 
 
@@ -565,7 +572,7 @@ def filter_document(args, algorithm, run, seconds: float, warnings=()) -> dict:
     tiled = run.cloud is None
     return {"status": "done", "input": args.input, "output": args.output,
             "outputs": list(run.outputs) if tiled else [p for p in [args.output] if p],
-            "dtm": (run.dtm_path if tiled else None) or args.dtm or None,
+            "dtm": run.dtm_path if tiled else (args.dtm or None),
             "points": int(run.point_count if tiled else len(run.cloud)), "ground": int(run.ground_count),
             "seconds": round(seconds, 3), "tiles": int(run.tiles) if tiled else None,
             "tile_size": float(run.tile_size_m) if tiled else None,
@@ -671,7 +678,7 @@ def dtm_options(args, classes: bool = True) -> DTMOptions:
 def _tiling(args) -> TileOptions:
     return TileOptions(tile_size_m=args.tile_size, buffer_m=None if args.tile_buffer < 0 else args.tile_buffer,
                        memory_budget_mb=args.memory_budget, workers=args.workers,
-                       work_dir=args.work_folder or None, scheduler=args.scheduler or "")
+                       work_dir=args.work_folder or None, scheduler=args.scheduler or "", only=args.only)
 
 
 #: set once the run has ended (its outputs in place or its error said): a SIGTERM then changes nothing

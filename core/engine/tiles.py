@@ -133,6 +133,10 @@ class TileOptions:
     #: processes, "tcp://host:port" = a running scheduler (engine/cluster.py). Not part of the
     #: working folder's name (repr=False): a run may resume on another cluster.
     scheduler: str = field(default="", repr=False)
+    #: one file of a survey input (a folder or a .vpc): its 0-based place in the survey (a job array's
+    #: task id), its name or its path; "" = every file. Only that file's points are classified and
+    #: written, on the tiles of the whole survey, buffered by its neighbours' points (engine/one_file.py)
+    only: object = ""
 
     def __post_init__(self):
         from .cluster import parse_scheduler
@@ -147,6 +151,10 @@ class TileOptions:
             raise InvalidParameterError(f"parallel must be auto, threads or processes (got {self.parallel!r})")
         if int(self.workers) != self.workers or self.workers < 0:
             raise InvalidParameterError(f"workers must be a whole number >= 0 (0 = every core; got {self.workers})")
+        if not isinstance(self.only, (str, int, os.PathLike)) or isinstance(self.only, bool) \
+                or (isinstance(self.only, int) and self.only < 0):
+            raise InvalidParameterError(f"only must be one file of the survey: its place from 0, its name or its path "
+                                        f"(got {self.only!r})")
 
     @property
     def budget_bytes(self) -> int:
@@ -501,23 +509,35 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     from ..machine import warm_blas
     warm_blas(tiling.worker_count)  # (under ulimit -v: OpenBLAS's buffers for the tile threads, taken first)
     inputs = expand_inputs(input_path)
+    only = None  # one file of the survey, buffered by its neighbours (engine/one_file.py)
+    if str(tiling.only) != "":
+        from .one_file import OPTION, only_index
+        if not is_survey_input(input_path):
+            raise InvalidParameterError(f"{input_path}: {OPTION} picks one file of a survey (a folder or a .vpc); "
+                                        "this input is a single file")
+        only = only_index(tiling.only, inputs, input_path)
     note = folder_note(input_path)
-    if note:
+    if note and only is None:
         log(note)
     infos = [scan_header(p) for p in inputs]
     check_survey(infos)
     if not any(i.count for i in infos):
         raise InputError(f"{input_path}: the input holds no points")
+    if only is not None and not infos[only].count:
+        raise InputError(f"{inputs[only]}: the file holds no points: nothing to classify")
     empty = [os.path.basename(i.path) for i in infos if not i.count]
-    if empty:  # (a survey's empty file was taken without a word: an HPC reviewer)
+    if empty and only is None:  # (a survey's empty file was taken without a word: an HPC reviewer)
         log(f"{len(empty):,} of the {len(infos):,} input files hold no points ({', '.join(empty[:3])}"
             f"{', ...' if len(empty) > 3 else ''}): they add nothing (the classified copy of one is empty too).")
     from ..io.lasfiles import twin_files
     for twins in twin_files(infos):  # (read twice, their points count twice)
+        if only is not None and inputs[only] not in twins:
+            continue  # (one job of an array tells of its own file)
         log(f"{WARNING_PREFIX}{', '.join(os.path.basename(p) for p in twins[:4])}{' ...' if len(twins) > 4 else ''}: "
             "the same point count and bounds in their headers: the same points twice (a copy, or a classified copy "
             "beside its input)? Every file is read, so such points count twice; leave the copies out of the input.")
-    for info in infos:  # as a run of the whole file says (a tiled one dropped 8,554 points without a word)
+    for info in (infos if only is None else [infos[only]]):  # as a run of the whole file says (a tiled one
+        # dropped 8,554 points without a word)
         if info.held is not None and info.held > info.count:
             log(extra_records_warning(info.path, info.count, info.held))
         if info.version >= "1.3":  # (as the whole run's reading says)
@@ -533,7 +553,7 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
             log(f"{WARNING_PREFIX}{info.path}: {info.copc_damaged}: its points are read as a plain LAZ file's, "
                 "binned instead of read by bounds")
     if getattr(algorithm, "ground_of_any_class", False):
-        _say_if_unclassified(infos, algorithm, log)
+        _say_if_unclassified(infos if only is None else [infos[only]], algorithm, log)
     workflow.warn_about_units(input_path, infos, log)
     algorithm, dtm = workflow.defaults_in_crs_unit(algorithm, dtm, infos[0].crs_wkt, input_path, log)
     workflow.check_model_units(algorithm, input_path, infos[0].crs_wkt, log)
@@ -542,7 +562,14 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     for_survey = getattr(algorithm, "for_survey", None)
     if for_survey is not None:
         algorithm = for_survey(infos, log)
-    outs = check_tiled_outputs(inputs, output_path, dtm_path, [i.point_format for i in infos], log)
+    if only is None:
+        outs = check_tiled_outputs(inputs, output_path, dtm_path, [i.point_format for i in infos], log)
+    else:  # one file's copy, into a folder every job of an array shares, or a .las/.laz
+        from .one_file import make_output_folders, only_outputs
+        output_path, dtm_path = only_outputs(inputs[only], output_path, dtm_path)
+        make_output_folders([output_path, dtm_path])
+        mine = check_tiled_outputs([inputs[only]], output_path, dtm_path, [infos[only].point_format], log)
+        outs = [mine[0] if m == only else None for m in range(len(inputs))]
     # the DTM's grid from the headers: a DTM cell far too small for the survey is refused now
     if dtm_path and dtm.extent is not None:
         counted = [i for i in infos if i.count]
@@ -552,6 +579,17 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
         # rule, a code reviewer; a tiled DTM is written block by block)
         workflow.extent_grid(dtm, max_cells=MAX_SURVEY_DTM_CELLS, bytes_per_cell=0.0)
     dtm_grid = survey_dtm_grid(infos, dtm.cell_size_m, dtm.extent) if dtm_path else None
+    if dtm_grid is not None and only is not None:  # the survey DTM's cells over the file's header bounds
+        target = infos[only]
+        dtm_grid = grid_window(dtm_grid, (target.mins[0], target.mins[1], target.maxs[0], target.maxs[1]))
+        if dtm_grid is not None and dtm.extent is not None:
+            dtm_grid = grid_window(dtm_grid, dtm.extent)
+        if dtm_grid is None:
+            if not output_path:
+                raise InputError(f"{inputs[only]}: the file lies outside the DTM's extent: no DTM for it, and no "
+                                 "classified copy asked for")
+            log(f"{WARNING_PREFIX}{inputs[only]}: the file lies outside the DTM's extent: no DTM is written for it.")
+            dtm_path = None
     # The reach rounded up to whole metres: the buffer's edges then sit on whole metres, where the
     # filters' grids (edges on multiples of their cell) put theirs without floating-point doubt.
     reach = filter_reach_m(algorithm)
@@ -570,7 +608,7 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
         cluster = Cluster(tiling.scheduler, log, steps.is_cancelled)
     try:
         return _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path, dtm, dtm_grid, buffer_m,
-                             density, tiling, steps, log, workflow, cluster)
+                             density, tiling, steps, log, workflow, cluster, only)
     except BaseException:
         if cluster is not None:
             cluster.close()
@@ -595,9 +633,10 @@ def _say_tiles_beyond_workers(size: float, buffer_m: float, density: float, per_
 
 
 def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path, dtm, dtm_grid, buffer_m, density,
-                  tiling, steps, log, workflow, cluster):
-    """run_tiled's run once its inputs are checked: the tiles planned, the working folder held."""
-    total = sum(i.count for i in infos)
+                  tiling, steps, log, workflow, cluster, only=None):
+    """run_tiled's run once its inputs are checked: the tiles planned, the working folder held; ``only``:
+    the place of the one file to run (engine/one_file.py), None for every file."""
+    total = sum(i.count for i in infos) if only is None else infos[only].count
     per_task, threads = cluster.memory_per_task() if cluster is not None else (None, 0)
     chosen = bool(tiling.tile_size_m or tiling.memory_budget_mb)  # the user's tiles, not the cluster's plan
     if per_task and not chosen:
@@ -633,6 +672,18 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
     from ..raster.crs import metres_per_unit
     from .workflow import length_label
     unit = length_label(metres_per_unit(infos[0].crs_wkt) or 1.0)  # (a survey in feet: feet)
+    one = None  # the one file's run: its place among the files read, its tiles, the box its neighbours lend
+    if only is not None:
+        from .one_file import neighbours, reach_box, tile_range
+        tiles_of = tile_range(infos[only], size)
+        box = reach_box(tiles_of, size, buffer_m)
+        keep = neighbours(infos, only, box)
+        name, files = os.path.basename(inputs[only]), len(inputs)
+        inputs, infos, outs = [inputs[m] for m in keep], [infos[m] for m in keep], [outs[m] for m in keep]
+        one = dict(index=keep.index(only), of=files, tiles=tiles_of, clip=box)
+        log(f"{name}, file {only} of the survey's {files:,} (numbered from 0), alone: its tiles read their buffers "
+            f"from {len(keep) - 1:,} neighbouring file(s); every file run so on the same tiles gets the classes and "
+            "DTM of a run of the whole survey.")
     log(f"{len(inputs)} file(s), {total:,} points; tiles of {size:g} {unit} with a buffer of {buffer_m:g} {unit} "
         f"({'set' if tiling.buffer_m is not None else getattr(algorithm, 'reach_words', 'the filter reach')}); "
         f"{tiling.worker_count} worker(s)."
@@ -648,7 +699,8 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
     # The working folder is named after everything the tiles' results depend on: a run killed or
     # crashed midway finds it again and skips the tiles already done.
     work = os.path.join(parent, WORK_PREFIX + _fingerprint(infos, grid, algorithm, options,
-                                                                     dtm if dtm_path else None))
+                                                                     dtm if dtm_path else None,
+                                                                     None if one is None else inputs[one["index"]]))
     if os.path.isdir(work):
         lock = _lock_working_folder(work)  # another run still using it is refused, its folder left alone
         log(f"Resuming the interrupted run in {work}.")
@@ -675,7 +727,7 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
             "only a run of the same inputs and parameters resumes from one: delete those you will not run again.")
     try:
         return _run_locked(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling,
-                           steps, log, workflow, total, dtm_grid, cluster)
+                           steps, log, workflow, total, dtm_grid, cluster, one)
     finally:
         lock.close()
 
@@ -768,7 +820,7 @@ def _lock_working_folder(work: str):
 
 
 def _run_locked(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling, steps,
-                log, workflow, total, dtm_grid, cluster=None):
+                log, workflow, total, dtm_grid, cluster=None, one=None):
     """run_tiled's run once the working folder is held (on ``cluster`` when connected already: the
     run closes it)."""
     pool = None
@@ -783,7 +835,7 @@ def _run_locked(work, inputs, infos, outs, output_path, grid, algorithm, options
             # process started once: its imports and numba caches loaded once)
             pool = _worker_pool(tiling.worker_count, True)
         run = _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling,
-                   steps, log, workflow, cluster=cluster, rasters=rasters, pool=pool, dtm_grid=dtm_grid)
+                   steps, log, workflow, cluster=cluster, rasters=rasters, pool=pool, dtm_grid=dtm_grid, one=one)
     except BaseException:
         if pool is not None:  # its workers' tiles are not waited for: the run says why at once
             stop_workers(pool)
@@ -857,12 +909,13 @@ def _reserve(paths, work: str) -> None:
             return  # (a file system without fallocate: EOPNOTSUPP, EINVAL)
 
 
-def _fingerprint(infos, grid, algorithm, options, dtm) -> str:
+def _fingerprint(infos, grid, algorithm, options, dtm, only: Optional[str] = None) -> str:
     """What a working folder's results depend on: the inputs, the tiles and their buffer, the filter,
     the options but how the tiles are run (workers, threads or processes, the memory budget and the
     scheduler change where and when a tile runs, not its result: a reviewer's run killed on 2
     workers did not resume on 1), the DTM, and the code: a run resumed with another core/ (same
-    version) mixed tiles of both versions, its classes and DTM those of neither."""
+    version) mixed tiles of both versions, its classes and DTM those of neither. ``only``: the one file
+    of the survey the run classifies (the jobs of an array, each its file, in one folder at once)."""
     import dataclasses
     import hashlib
     import json as _json
@@ -873,7 +926,7 @@ def _fingerprint(infos, grid, algorithm, options, dtm) -> str:
     dtm_results = dataclasses.replace(dtm, memory_budget_bytes=None) \
         if dataclasses.is_dataclass(dtm) and hasattr(dtm, "memory_budget_bytes") else dtm
     text = _json.dumps([files, grid.size, grid.buffer, repr(algorithm), repr(results), repr(dtm_results), WORK_FORMAT,
-                        _core_digest()], default=str)
+                        _core_digest()] + ([os.path.realpath(only)] if only else []), default=str)
     return hashlib.sha1(text.encode()).hexdigest()[:16]
 
 
@@ -886,7 +939,11 @@ def _save_json(path, doc) -> None:
 
 
 def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_path, dtm, tiling, steps, log,
-         workflow, cluster=None, rasters=None, pool=None, dtm_grid=None) -> TiledRun:
+         workflow, cluster=None, rasters=None, pool=None, dtm_grid=None, one=None) -> TiledRun:
+    """The run (steps 1-4 of the module's docstring) in its held working folder. ``one``: the run of one
+    file of the survey (engine/one_file.py): ``index``, its place in ``infos`` (the others are its
+    neighbours, binned in ``clip`` only, of which nothing is written), and ``tiles``, the tiles its header
+    bounds touch."""
     t_start = time.perf_counter()
     import json as _json
     from ..io.lasfiles import TilePart
@@ -923,11 +980,12 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         for k, info in enumerate(infos):
             if not info.count or info.copc:  # a COPC file is read by bounds by its tiles
                 continue
-            pieces = min(tiling.worker_count, info.count // BIN_PIECE_POINTS) if len(infos) == 1 else 1
+            alone = len(infos) == 1 or (one is not None and k == one["index"])
+            pieces = min(tiling.worker_count, info.count // BIN_PIECE_POINTS) if alone else 1
             records = _records_path(work, k)
             if pieces <= 1:
                 bin_jobs.append(dict(key=("bin", k), path=info.path, file_index=k, grid=grid, work=work,
-                                     records=records))
+                                     records=records, clip=None if alone or one is None else one["clip"]))
                 continue
             cuts = [info.count * p // pieces for p in range(pieces + 1)]
             bin_jobs += [dict(key=("bin", k, p), path=info.path, file_index=k, grid=grid, work=work, first=cuts[p],
@@ -938,8 +996,10 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         for k in sorted(binned_parts):  # in file (and piece) order, whatever order the jobs finished in
             for key, part in binned_parts[k].items():
                 tiles.setdefault(key, []).append(part)
+        # (a neighbour of the one file run keeps no class: a stand-in of one)
         classes = [np.lib.format.open_memmap(os.path.join(work, f"f{k:05d}.cls.npy"), mode="w+", dtype=np.uint8,
-                                             shape=(max(info.count, 1),)) for k, info in enumerate(infos)]
+                                             shape=(max(info.count if one is None or k == one["index"] else 0, 1),))
+                   for k, info in enumerate(infos)]
         for c in classes:
             c.flush()
         del classes
@@ -955,6 +1015,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     from ..io.copc import plan_tiles
     copc_tiles = plan_tiles(infos, grid.size, grid.buffer)  # the tiles COPC inputs may have points in
     keys = sorted(set(keys) | set(copc_tiles))
+    if one is not None:
+        keys = _one_files_tiles(keys, tiles, copc_tiles, one, grid, dtm_grid, infos, log)
     if copc_tiles:  # ... and those whose buffer reaches into them
         from ..io.copc import add_buffer_sources
         add_buffer_sources(copc_tiles, infos, keys, grid.size, grid.buffer)
@@ -964,6 +1026,10 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         "bounds by each tile, not binned).")
     assigned = [0] * len(infos)
     crs_wkt = infos[0].crs_wkt
+    # the points the run classifies, and what its messages name: one file's, or the survey's
+    mine = infos if one is None else [infos[one["index"]]]
+    total_points = sum(i.count for i in mine)
+    where = mine[0].path if len(mine) == 1 else f"{len(inputs)} input files"
     # 2. the DTM's block writer, on the grid run_tiled made from the headers
     dtm_writer = None
     if dtm_path:
@@ -1016,7 +1082,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                  class_paths=class_paths, algorithm=algorithm, options=options, dtm=dtm if dtm_path else None,
                  dtm_grid=dtm_writer.grid if dtm_writer is not None else None,
                  is_cancelled=None if use_processes or tiling.scheduler else tile_cancelled,
-                 own_classes=bool(tiling.scheduler))
+                 own_classes=bool(tiling.scheduler), only=None if one is None else one["index"])
             for key, before in zip(keys, done_before) if before is None]
     if not tiling.scheduler:  # (a cluster run says where its tiles go)
         log(f"{len(keys)} tile(s) on {workers} worker(s) ({'processes' if use_processes else 'threads'}).")
@@ -1109,6 +1175,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                 failed.set()  # (worker processes are stopped by the run: stop_workers)
                 raise
     for k, info in enumerate(infos):
+        if one is not None and k != one["index"]:
+            continue  # (a neighbour lends its points to the tiles' buffers; none of them is classified)
         if assigned[k] != info.count:
             raise InputError(f"{info.path}: {assigned[k]:,} of {info.count:,} points were classified; "
                              "the file's header and its points disagree")
@@ -1117,21 +1185,22 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     if getattr(algorithm, "ground_of_any_class", False):
         from .workflow import ground_classes_counts
         chosen = {c: ground_by_class.get(c, 0) for c in getattr(algorithm, "classes", ())}
-        log(f"Ground: {ground_total:,} of {sum(i.count for i in infos):,} points, of the ground classes "
+        log(f"Ground: {ground_total:,} of {total_points:,} points, of the ground classes "
             f"({ground_classes_counts(None, chosen)}).")
     dtm_out = None
     if dtm_writer is not None:
         wanted = workflow.extent_grid(dtm, max_cells=MAX_SURVEY_DTM_CELLS, bytes_per_cell=0.0)
+        if wanted is not None and one is not None:  # (the extent's cells over the one file, run_tiled made them)
+            wanted = dtm_writer.grid
         dtm_out = _dtm_extent(dtm_writer.grid, area_box, log) if wanted is None else wanted
         if wanted is not None:  # (an extent without ground is warned about, as a whole run's)
             points = _dtm_extent(dtm_writer.grid, area_box, lambda _m: None)
             if points is not dtm_writer.grid:  # beyond the points' box nodata, as the whole run's DTM placed in it
                 dtm_writer.blank_outside(points)
             workflow.say_extent(dtm_out, None if dtm_writer.has_values_in(dtm_out) else 0, unit, log)
-    if dtm_out is not None and not n_copc:
+    if dtm_out is not None and not n_copc and one is None:  # (one file's neighbours hold a few tiles' points)
         _say_stray_tiles(tiles, grid, dtm_out, log)
     if dtm_writer is not None and not dtm_points:  # (as a whole run refuses it, not an empty DTM written)
-        where = inputs[0] if len(inputs) == 1 else f"{len(inputs)} input files"
         why = getattr(algorithm, "no_ground_in_survey", "")
         if why:  # (the DTM from classes filters nothing: its input lacks the classes; an HPC reviewer)
             raise InputError(f"{where}: no DTM can be made: {why}")
@@ -1166,8 +1235,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         note = replaced_note(replaced, algorithm)
         if note:
             log(note)
-        warning = structures_warning(structures, replaced, inputs[0] if len(inputs) == 1 else
-                                     f"{len(inputs)} input files", algorithm)
+        warning = structures_warning(structures, replaced, where, algorithm)
         if warning:
             log(warning)
         if dtm_writer is not None:
@@ -1197,9 +1265,32 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         log(f"Wrote the DTM {dtm_path} ({g.ncols:,} x {g.nrows:,} cells of {g.cell:g} {unit}).")
     steps.report(1.0)
     log(f"Done in {time.perf_counter() - t_start:.1f} s.")
-    return TiledRun(inputs, [o for o in outs if o], sum(i.count for i in infos), ground_total, crs_wkt,
+    return TiledRun(inputs if one is None else [inputs[one["index"]]], [o for o in outs if o], total_points,
+                    ground_total, crs_wkt,
                     grid.size, grid.buffer, len(tile_log), dtm_path, tile_log=tile_log,
                     copc_inputs=[i.path for i in infos if i.copc], algorithm=algorithm)
+
+
+def _one_files_tiles(keys, tiles, copc_tiles, one, grid, dtm_grid, infos, log) -> list:
+    """The tiles the run of one file filters (engine/one_file.py): those holding its points, and with a
+    DTM those making its cells (``dtm_grid``, the survey DTM's cells over its header bounds), whose
+    values then come from the same points as in the run of the whole survey. A tile of its points beyond
+    its header's bounds lies beyond the area its neighbours lent points for: said."""
+    k = one["index"]
+    i0, i1, j0, j1 = one["tiles"]
+    chosen, beyond = [], 0
+    for key in keys:
+        holds = any(p.file_index == k and p.own_count for p in tiles.get(key, ())) \
+            or any(src.file_index == k for src in copc_tiles.get(key, ()))
+        inside = i0 <= key[0] <= i1 and j0 <= key[1] <= j1
+        if holds or (inside and dtm_grid is not None and _block_cells(dtm_grid, grid.bounds(key)) is not None):
+            chosen.append(key)
+            beyond += holds and not inside
+    if beyond:
+        log(f"{WARNING_PREFIX}{infos[k].path}: {beyond:,} tile(s) of its points lie beyond its header's bounds, so "
+            "beyond the area its neighbours' points were read for: near them, its classes may differ from a run "
+            "of the whole survey. Rewrite the file with a tool that recomputes its header.")
+    return chosen
 
 
 @contextlib.contextmanager
@@ -1361,7 +1452,8 @@ def _bin_job(job) -> dict:
     first, stop = job.get("first", 0), job.get("stop")
     bounds: list = []
     parts = bin_file(job["path"], job["file_index"], job["grid"], job["work"], check=job.get("check"),
-                     first=first, stop=stop, piece=job.get("piece"), records=job.get("records"), bounds=bounds)
+                     first=first, stop=stop, piece=job.get("piece"), records=job.get("records"), bounds=bounds,
+                     clip=job.get("clip"))
     points = (stop if stop is not None else scan_header(job["path"]).count) - first
     return dict(file_index=job["file_index"], first=first, parts=parts, points=points, bounds=bounds)
 
@@ -1402,7 +1494,7 @@ def _write_pieces(infos, outs, tiling) -> List[list]:
     cut on LAZ chunk boundaries."""
     from ..io.lasfiles import laz_chunk_points
     mode = tiling.parallel if tiling.parallel != "auto" else _auto_parallel(sum(i.count for i in infos))
-    split = len(infos) == 1 and (mode == "processes" or bool(tiling.scheduler))
+    split = sum(1 for o in outs if o) == 1 and (mode == "processes" or bool(tiling.scheduler))
     result = []
     for info, out in zip(infos, outs):
         if not out or not info.count or info.copc:  # a COPC input has no kept records: it is streamed
@@ -1687,7 +1779,9 @@ def _tile_job(job) -> Optional[dict]:
             files.append(np.full(idx.size, file_index, dtype=np.int32))
         index = np.concatenate(indices)
         file_of = np.concatenate(files)
-        own = index >= 0
+        in_tile = index >= 0  # the points in the tile (the rest is its buffer)
+        # those it classifies: of every file, or of the one file run (its neighbours' lend their points)
+        own = in_tile if job.get("only") is None else in_tile & (file_of == job["only"])
         if not own.any() and job["dtm"] is None:  # (with a DTM: the tile's block, from its buffer)
             return None
         cloud = tile_cloud(clouds, path=where)
@@ -1730,7 +1824,7 @@ def _tile_job(job) -> Optional[dict]:
         block, kept_out, dtm_own, area_bounds, gaps, hull = None, {}, 0, None, [], []
         if job["dtm"] is not None:
             area = workflow.processable(cloud, options)
-            mine = area & own  # (the DTM's extent: the points that may enter it, as a whole run's grid)
+            mine = area & in_tile  # (the DTM's extent: the points that may enter it, as a whole run's grid)
             if mine.any():
                 xs, ys = cloud.x[mine], cloud.y[mine]
                 area_bounds = [float(xs.min()), float(ys.min()), float(xs.max()), float(ys.max())]
@@ -1769,9 +1863,22 @@ def _dtm_extent(full, box, log):
     may enter it (neither withheld nor ignored), on the same lattice, as a whole run spans those points
     only. A stray noise point, ignored, stretched a tiled DTM 2,300 x 300 cells where the whole run's was
     300 x 300 (a surveyor). ``full`` when the box is not known (a resumed run's older tiles)."""
-    from ..grids.spec import GridSpec
     if box is None or not math.isfinite(box[0]):
         return full
+    cut = grid_window(full, box)
+    if cut is full or cut is None:  # (None: no point's box beyond the grid; kept whole, as before)
+        return full
+    log(f"DTM: cut to the {cut.ncols:,} x {cut.nrows:,} cells of the points it may hold (the files' bounds make "
+        f"{full.ncols:,} x {full.nrows:,}: withheld or ignored points lie beyond them, or a header's bounds are "
+        "wider than its points).")
+    return cut
+
+
+def grid_window(full, box):
+    """The cells of the grid ``full`` that the box (xmin, ymin, xmax, ymax) covers, on its lattice (a
+    closed covering: a box on cell edges adds no cell), as a window of it; ``full`` itself when that is
+    all of it, None when the box misses it."""
+    from ..grids.spec import GridSpec
     cut = GridSpec.covering(np.array([box[0], box[2]]), np.array([box[1], box[3]]), full.cell, what="DTM",
                             bytes_per_cell=0.0, max_cells=MAX_SURVEY_DTM_CELLS, closed=True)
     col0, row0 = full.offset_of(cut)
@@ -1779,11 +1886,10 @@ def _dtm_extent(full, box, log):
     col1, row1 = min(col0 + cut.ncols, full.ncols), min(row0 + cut.nrows, full.nrows)
     col0, row0 = max(0, col0), max(0, row0)
     ncols, nrows = col1 - col0, row1 - row0
+    if ncols <= 0 or nrows <= 0:
+        return None
     if (col0, row0, ncols, nrows) == (0, 0, full.ncols, full.nrows):
         return full
-    log(f"DTM: cut to the {ncols:,} x {nrows:,} cells of the points it may hold (the files' bounds make "
-        f"{full.ncols:,} x {full.nrows:,}: withheld or ignored points lie beyond them, or a header's bounds are "
-        "wider than its points).")
     return full.window(col0, row0, ncols, nrows)
 
 

@@ -465,7 +465,8 @@ def merge_bounds(a: Optional[list], b: list) -> list:
 
 def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk_points: int = CHUNK_POINTS,
              check=None, first: int = 0, stop: Optional[int] = None, piece: Optional[int] = None,
-             records: Optional[str] = None, bounds: Optional[list] = None) -> Dict[tuple, TilePart]:
+             records: Optional[str] = None, bounds: Optional[list] = None,
+             clip: Optional[Sequence[float]] = None) -> Dict[tuple, TilePart]:
     """Stream ``path`` once (laspy chunks) and write, for every tile its points or buffer touch,
     the part of the file that tile needs into ``work_dir``. Tiles exist only where points are.
     ``first``/``stop`` bin only those points of the file (one ``piece`` of it, named in the parts'
@@ -478,7 +479,11 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
     A point goes to its own tile (``TileGrid.key_of``) and to every tile whose buffer holds it
     (:func:`_in_buffer`), in one numba pass a chunk (``_binning_kernels``); each part lists its
     points in file order. ``bounds``: a list given the points' [xmin, ymin, xmax, ymax] (as stored,
-    scaled integers), to compare with the header's."""
+    scaled integers), to compare with the header's.
+
+    ``clip`` (xmin, ymin, xmax, ymax): only the points in that box are binned, numbered (and kept in
+    ``records``) 0, 1, ... in file order among them, not by their place in the file: a neighbouring
+    file that lends a few tiles their buffers (engine/one_file.py), of which nothing is written."""
     import laspy
 
     from ._binning_kernels import bin_chunk_kernel
@@ -498,8 +503,14 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
             for chunk in _chunks(reader, first, stop, chunk_points, path):
                 if check is not None:
                     check()
-                n = len(chunk)
                 recs = np.ascontiguousarray(chunk.array)
+                if clip is not None:
+                    x = recs["X"] * scales[0] + offsets[0]
+                    y = recs["Y"] * scales[1] + offsets[1]
+                    recs = recs[(x >= clip[0]) & (x <= clip[2]) & (y >= clip[1]) & (y <= clip[3])]
+                    if not len(recs):
+                        continue
+                n = len(recs)
                 raw = recs.view(np.uint8).reshape(n, recs.dtype.itemsize)
                 flat = memoryview(raw).cast("B")
                 done = 0

@@ -1,0 +1,208 @@
+"""One file of a survey at a time (``TileOptions.only``, ``--only``): the jobs of a job array, each
+classifying its file on the survey's tiles with its neighbours' points in the buffers, give the
+classified files and the DTM of one run of the whole survey (engine/one_file.py)."""
+from __future__ import annotations
+
+import json
+import os
+
+import laspy
+import numpy as np
+import pytest
+
+from groundsieve.core.engine.tiles import TileOptions, _fingerprint
+from groundsieve.core.engine.workflow import DTMOptions, FilterOptions, run_ground_filter
+from groundsieve.core.errors import InputError, InvalidParameterError, OutputError
+from groundsieve.core.filters.smrf import SMRF
+from groundsieve.core.io.lasfiles import TileGrid, bin_file, scan_header, write_vpc
+from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+
+NAMES = "abcd"
+
+
+@pytest.fixture(scope="module")
+def survey(tmp_path_factory):
+    """A 120 m scene cut into 4 files of 60 x 60 m, and the run of the whole survey (tiles of 30 m with a
+    10 m buffer cross the files' edges)."""
+    root = tmp_path_factory.mktemp("one_file")
+    whole = root / "whole.laz"
+    write_scene(make_scene(SceneSpec(size_m=120.0, density_per_m2=2.0, seed=5)), whole)
+    las = laspy.read(whole)
+    folder = root / "in"
+    folder.mkdir()
+    x0, y0 = las.header.mins[:2]
+    qx, qy = np.asarray(las.x) >= x0 + 60.0, np.asarray(las.y) >= y0 + 60.0
+    for name, sel in zip(NAMES, (~qx & ~qy, qx & ~qy, ~qx & qy, qx & qy)):
+        part = laspy.LasData(las.header)
+        part.points = las.points[sel]
+        part.write(folder / f"{name}.laz")
+    out = root / "whole"
+    out.mkdir()
+    run_ground_filter(str(folder), str(out / "classified.vpc"), SMRF(), options=_options(),
+                      dtm_path=str(out / "dtm.tif"), dtm=DTMOptions(cell_size_m=1.0))
+    return dict(folder=str(folder), classified=str(out / "classified"), dtm=str(out / "dtm.tif"), root=root)
+
+
+def _options(**tiling):
+    return FilterOptions(tiling=TileOptions(**{**dict(tile_size_m=30.0, buffer_m=10.0, workers=1), **tiling}))
+
+
+def _raster(path):
+    from osgeo import gdal
+    ds = gdal.Open(str(path))
+    return ds.GetGeoTransform(), ds.GetRasterBand(1).ReadAsArray(), ds.GetProjection()
+
+
+def _same_cells(part_path, whole_path):
+    """The cells of the DTM ``part_path`` equal those of ``whole_path`` where it lies (both on one lattice)."""
+    (g, part, crs), (wg, whole, wcrs) = _raster(part_path), _raster(whole_path)
+    assert g[1] == wg[1] and crs == wcrs
+    col, row = round((g[0] - wg[0]) / wg[1]), round((g[3] - wg[3]) / wg[5])
+    assert col >= 0 and row >= 0 and row + part.shape[0] <= whole.shape[0] and col + part.shape[1] <= whole.shape[1]
+    assert np.array_equal(part, whole[row:row + part.shape[0], col:col + part.shape[1]])
+    return part
+
+
+def test_each_files_job_gives_the_whole_surveys_classes_and_dtm(survey, tmp_path):
+    covered = 0
+    for k, name in enumerate(NAMES):
+        logs = []
+        run = run_ground_filter(survey["folder"], str(tmp_path / "classified"), SMRF(), options=_options(only=k),
+                                dtm_path=str(tmp_path / "dtm"), dtm=DTMOptions(cell_size_m=1.0), log=logs.append)
+        mine = tmp_path / "classified" / f"{name}.laz"
+        assert run.inputs == [os.path.join(survey["folder"], f"{name}.laz")] and run.outputs == [str(mine)]
+        assert run.dtm_path == str(tmp_path / "dtm" / f"{name}.tif")
+        job, whole = laspy.read(mine), laspy.read(os.path.join(survey["classified"], f"{name}.laz"))
+        assert run.point_count == len(job.points) == len(whole.points) > 5000
+        assert np.array_equal(job.classification, whole.classification)
+        assert run.ground_count == int(np.count_nonzero(job.classification == 2))
+        assert np.array_equal(job.gps_time, laspy.read(os.path.join(survey["folder"], f"{name}.laz")).gps_time)
+        cells = _same_cells(run.dtm_path, survey["dtm"])
+        covered += int(np.count_nonzero(cells != -9999))
+        # its neighbours lent their points: the log says how many, and nothing of theirs is written
+        assert any(f"{name}.laz, file {k} of the survey's 4" in line and "from 3 neighbouring file(s)" in line
+                   for line in logs)
+    assert sorted(os.listdir(tmp_path / "classified")) == [f"{n}.laz" for n in NAMES]
+    # the four DTMs cover the whole run's valued cells (they share the edge column or row they both touch)
+    assert covered >= int(np.count_nonzero(_raster(survey["dtm"])[1] != -9999))
+
+
+def test_a_file_named_or_by_path_of_a_vpc_with_its_outputs_named(survey, tmp_path):
+    files = [os.path.join(survey["folder"], f"{n}.laz") for n in NAMES]
+    vpc = tmp_path / "survey.vpc"
+    write_vpc(str(vpc), [scan_header(p) for p in files], files)
+    for only in ("d.laz", files[3]):
+        out, dtm = tmp_path / f"d{len(only)}.las", tmp_path / f"d{len(only)}.tif"
+        run = run_ground_filter(str(vpc), str(out), SMRF(), options=_options(only=only), dtm_path=str(dtm),
+                                dtm=DTMOptions(cell_size_m=1.0))
+        assert run.outputs == [str(out)] and run.dtm_path == str(dtm)
+        assert np.array_equal(laspy.read(out).classification,
+                              laspy.read(os.path.join(survey["classified"], "d.laz")).classification)
+        _same_cells(dtm, survey["dtm"])
+
+
+def test_a_dtm_extent_is_cut_to_the_file_and_a_file_outside_it_gets_no_dtm(survey, tmp_path):
+    g, whole, _ = _raster(survey["dtm"])
+    x0, top = g[0], g[3]
+    extent = (x0 + 20.0, top - 110.0, x0 + 50.0, top - 80.0)  # inside file a (south-west), 30 x 30 cells
+    wdir = tmp_path / "whole"
+    wdir.mkdir()
+    run_ground_filter(survey["folder"], None, SMRF(), options=_options(), dtm_path=str(wdir / "dtm.tif"),
+                      dtm=DTMOptions(cell_size_m=1.0, extent=extent))
+    run = run_ground_filter(survey["folder"], None, SMRF(), options=_options(only="a.laz"),
+                            dtm_path=str(tmp_path / "a.tif"), dtm=DTMOptions(cell_size_m=1.0, extent=extent))
+    assert _raster(run.dtm_path)[1].shape == (30, 30)
+    _same_cells(run.dtm_path, wdir / "dtm.tif")
+    logs = []
+    run = run_ground_filter(survey["folder"], str(tmp_path / "cls"), SMRF(), options=_options(only="d.laz"),
+                            dtm_path=str(tmp_path / "dtm"), dtm=DTMOptions(cell_size_m=1.0, extent=extent),
+                            log=logs.append)
+    assert run.dtm_path is None and not (tmp_path / "dtm" / "d.tif").exists()
+    assert (tmp_path / "cls" / "d.laz").exists()
+    assert any("d.laz: the file lies outside the DTM's extent: no DTM is written for it" in line for line in logs)
+    with pytest.raises(InputError, match=r"d\.laz: the file lies outside the DTM's extent"):
+        run_ground_filter(survey["folder"], None, SMRF(), options=_options(only=3), dtm_path=str(tmp_path / "x.tif"),
+                          dtm=DTMOptions(cell_size_m=1.0, extent=extent))
+
+
+def test_a_far_file_is_not_read_and_the_neighbours_are_binned_only_where_the_tiles_reach(tmp_path):
+    """Three files in a row, 60 m each: the tiles of the first (30 m, buffer 10 m) reach into the second,
+    not into the third; of the second only the points within reach are binned."""
+    write_scene(make_scene(SceneSpec(size_m=180.0, density_per_m2=1.0, seed=3)), tmp_path / "whole.laz")
+    las = laspy.read(tmp_path / "whole.laz")
+    folder = tmp_path / "row"
+    folder.mkdir()
+    x = np.asarray(las.x)
+    x0 = float(np.floor(las.header.mins[0] / 30.0) * 30.0)  # (the files' edges on the tiles' edges)
+    for k in range(3):
+        part = laspy.LasData(las.header)
+        part.points = las.points[(x >= x0 + 60 * k) & (x < x0 + 60 * (k + 1))]
+        part.write(folder / f"f{k}.laz")
+    logs = []
+    run_ground_filter(str(folder), str(tmp_path / "out"), SMRF(), options=_options(only=0), log=logs.append)
+    assert any("f0.laz, file 0 of the survey's 3" in line and "from 1 neighbouring file(s)" in line for line in logs)
+    assert any(line.startswith("2 file(s), ") for line in logs)
+    # the binning of a neighbour keeps the points in the box only, numbered among themselves
+    info = scan_header(str(folder / "f1.laz"))
+    box = (info.mins[0] - 1.0, info.mins[1] - 50.0, info.mins[0] + 11.0, info.maxs[1] + 50.0)
+    grid = TileGrid(30.0, 10.0)
+    (tmp_path / "w1").mkdir()
+    (tmp_path / "w2").mkdir()
+    clipped = bin_file(str(folder / "f1.laz"), 1, grid, str(tmp_path / "w1"), clip=box)
+    full = bin_file(str(folder / "f1.laz"), 1, grid, str(tmp_path / "w2"))
+    px = np.asarray(laspy.read(folder / "f1.laz").x)
+    inside = int(np.count_nonzero(px <= box[2]))
+    assert 0 < inside < len(px) // 3
+    record = clipped[next(iter(clipped))].record_size
+    assert os.path.getsize(tmp_path / "w1" / "f00001.rec") == inside * record
+    # a tile wholly inside the box has the same points as in the full binning
+    key = (int(np.floor(info.mins[0] / 30.0)) - 1, int(np.floor(info.mins[1] / 30.0)) + 1)
+    assert clipped[key].count == full[key].count > 0 and clipped[key].own_count == full[key].own_count == 0
+
+
+def test_the_jobs_of_an_array_use_working_folders_of_their_own(survey):
+    infos = [scan_header(os.path.join(survey["folder"], f"{n}.laz")) for n in NAMES]
+    grid, options = TileGrid(30.0, 10.0), _options()
+    prints = {_fingerprint(infos, grid, SMRF(), options, None, only) for only in [None] + [i.path for i in infos]}
+    assert len(prints) == 5
+
+
+def test_bad_choices_of_the_one_file_are_refused_in_words(survey, tmp_path):
+    folder = survey["folder"]
+
+    def run(only, output=str(tmp_path / "o"), path=folder):
+        return run_ground_filter(path, output, SMRF(), options=_options(only=only))
+    with pytest.raises(InvalidParameterError, match=r"--only 4: the survey has 4 file\(s\), numbered 0 to 3 "
+                                                    r"\(for a job array: --array=0-3\)"):
+        run(4)
+    with pytest.raises(InvalidParameterError, match=r"--only e\.laz: no file of the survey has that name \(its 4 "
+                                                    r"file\(s\): a\.laz, b\.laz, c\.laz, \.\.\.\)"):
+        run("e.laz")
+    with pytest.raises(InvalidParameterError, match=r"a\.laz: --only picks one file of a survey"):
+        run(0, path=os.path.join(folder, "a.laz"))
+    with pytest.raises(OutputError, match=r"classified\.vpc: with --only, a run writes one file's classified copy"):
+        run(0, output=str(tmp_path / "classified.vpc"))
+    with pytest.raises(InvalidParameterError, match="only must be one file of the survey"):
+        TileOptions(only=-1)
+    empty = tmp_path / "with_empty"
+    empty.mkdir()
+    las = laspy.read(os.path.join(folder, "a.laz"))
+    las.write(empty / "a.laz")
+    none = laspy.LasData(las.header)
+    none.points = las.points[:0]
+    none.write(empty / "b.laz")
+    with pytest.raises(InputError, match=r"b\.laz: the file holds no points: nothing to classify"):
+        run("b.laz", path=str(empty))
+    assert not (tmp_path / "o").exists() or not os.listdir(tmp_path / "o")
+
+
+def test_the_command_line_runs_one_file_of_a_survey(survey, tmp_path, capsys):
+    from groundsieve.core.engine.cli import main
+    code = main(["smrf", "--input", survey["folder"], "--output", str(tmp_path / "cls"), "--dtm", str(tmp_path / "dtm"),
+                 "--tile-size", "30", "--tile-buffer", "10", "--workers", "1", "--only", "2", "--json"])
+    assert code == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["outputs"] == [str(tmp_path / "cls" / "c.laz")] and doc["dtm"] == str(tmp_path / "dtm" / "c.tif")
+    assert doc["points"] == len(laspy.read(tmp_path / "cls" / "c.laz").points)
+    assert np.array_equal(laspy.read(tmp_path / "cls" / "c.laz").classification,
+                          laspy.read(os.path.join(survey["classified"], "c.laz")).classification)
