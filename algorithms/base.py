@@ -77,7 +77,7 @@ so that no seam shows at tile or file edges: only the tile's own points keep the
 only where points are; they run <i>Tiles at the same time</i> at once (worker processes under
 qgis_process for 10 million points or more, threads below that and in the desktop), sharing the
 <i>Memory budget</i> for their points and grids (a worker process also holds Python and its libraries,
-about 130 MB, outside it); their temporary files (the tiles, and each input's points uncompressed, about
+130-250 MB, measured, outside it); their temporary files (the tiles, and each input's points uncompressed, about
 75 bytes a point at most) go to the <i>Working folder</i> and are removed at the end. A COPC input is not
 copied there: each tile reads its points from it by bounds. A run killed or failed midway resumes when started again with the same inputs and
 parameters, skipping the tiles done (after a failure only when you chose the working folder). With several input files the output names a .vpc and
@@ -86,6 +86,13 @@ one seamless cloud-optimised GeoTIFF over the whole survey. <i>Dask scheduler ad
 package dask[distributed]): the tiles run on a Dask cluster (tcp://host:port) or on N local worker processes
 (local:N); the workers must see the input and the working folder at the same paths (a shared file system). The ground points layer and the filter's
 intermediate grids are not written in a tiled run.</p>
+<p><i>One file of the survey</i> (advanced; for a job array, one batch job per file): its number from 0 (a
+.vpc's files in its order, a folder's by name; e.g. <code>--ONLY=$SLURM_ARRAY_TASK_ID</code> in qgis_process),
+its name or its path. Only that file's points are classified, on the tiles of a run of the whole survey,
+each reading its buffer from the neighbouring files: with the same parameters in every job, the files'
+classes and DTM cells are those of one run of the whole survey. The outputs are that file's: in their
+paths <code>{name}</code> is its name without extension (<code>--OUTPUT=out/{name}.laz
+--DTM=dtm/{name}.tif</code>), so that every job writes its own.</p>
 """
 
 
@@ -406,6 +413,9 @@ FILTER_PARAMETER_HELP = {
                    "most), removed at the end; a run killed midway resumes from them.",
     "SCHEDULER": "Run the tiles on a Dask cluster (tcp://host:port) or on N local worker processes (local:N); "
                  "needs the Python package dask[distributed].",
+    "ONLY": "For a job array, one batch job per file: the one file of the survey to classify (its number from 0, "
+            "its name or its path), its tiles buffered by the neighbouring files; {name} in the outputs' paths is "
+            "its name.",
     "DTM_CELL": "The DTM's cell size in the CRS's unit; its cells lie on multiples of it, so DTMs of one cell size "
                 "share their cells. The default 1 m is 3 ft in a CRS in feet.",
     "DTM_FILL": "Fill the cells outside the convex hull of the ground points with the nearest value, instead of "
@@ -628,6 +638,8 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         except errors.GroundSieveError as err:
             raise QgsProcessingException(str(err)) from err
         tiled = run.cloud is None  # a tiled run (survey scale) holds no cloud in memory
+        if tiled and options.tiling.only != "":  # one file of the survey: its own outputs' paths
+            output_path, dtm_path = (run.outputs or [None])[0], run.dtm_path
         # (the CRS's unit was said before the work, by the core's log: see feedback_callables)
         results = {self.OUTPUT: output_path, self.GROUND_COUNT: run.ground_count,
                    self.POINT_COUNT: run.point_count if tiled else len(run.cloud)}
@@ -700,6 +712,7 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
     WORKERS = "WORKERS"
     WORK_FOLDER = "WORK_FOLDER"
     SCHEDULER = "SCHEDULER"
+    ONLY = "ONLY"
 
     def addTileParameters(self):  # noqa: N802
         """Advanced parameters of tiled runs (folders, .vpc, clouds beyond the memory budget)."""
@@ -720,7 +733,9 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
                                        optional=True),
             QgsProcessingParameterString(self.SCHEDULER, "Dask scheduler address (empty = this machine; "
                                          "tcp://host:port, or local:N for N local worker processes)",
-                                         defaultValue="", optional=True)]
+                                         defaultValue="", optional=True),
+            QgsProcessingParameterString(self.ONLY, "One file of the survey (a job array's: its number from 0, "
+                                         "its name or path; empty = every file)", defaultValue="", optional=True)]
         for param in advanced:
             param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
             self.addParameter(param)
@@ -733,7 +748,8 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
                            memory_budget_mb=self.parameterAsInt(parameters, self.MEMORY_BUDGET, context),
                            workers=self.parameterAsInt(parameters, self.WORKERS, context),
                            work_dir=self.parameterAsFile(parameters, self.WORK_FOLDER, context) or None,
-                           scheduler=(self.parameterAsString(parameters, self.SCHEDULER, context) or "").strip())
+                           scheduler=(self.parameterAsString(parameters, self.SCHEDULER, context) or "").strip(),
+                           only=(self.parameterAsString(parameters, self.ONLY, context) or "").strip())
 
     def writeGroundPointsOrUndo(self, parameters, context, feedback, run, written):  # noqa: N802
         """The ground-point layer, written by QGIS after the core has committed the other outputs:

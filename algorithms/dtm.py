@@ -124,6 +124,8 @@ with one of the ground filters.</p>""")
         except errors.GroundSieveError as err:
             raise QgsProcessingException(str(err)) from err
         tiled = run.cloud is None
+        if tiled and options.tiling.only != "":  # one file of the survey: its DTM's path
+            dtm_path = run.dtm_path
         styles.style_when_loaded(context, dtm_path, styles.DTM_STYLE)
         return {self.DTM: dtm_path, self.GROUND_COUNT: run.ground_count,
                 self.POINT_COUNT: run.point_count if tiled else len(run.cloud)}

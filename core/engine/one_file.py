@@ -22,10 +22,6 @@ from ..errors import InvalidParameterError, OutputError
 from ..io.lasfiles import LasInfo
 from ..io.outputs import LAS_EXTENSIONS, _ext
 
-#: what the messages call the setting (the command line's option; the API's field is ``only``)
-OPTION = "--only"
-
-
 def only_index(only, inputs: Sequence[str], input_path: str) -> int:
     """The position in ``inputs`` (the survey's files, in the order of the folder's sorted names or of
     the .vpc) of the file ``only`` names: its 0-based position (a whole number, as a job array's task id
@@ -36,7 +32,7 @@ def only_index(only, inputs: Sequence[str], input_path: str) -> int:
         k = int(text)
         if k >= n:
             raise InvalidParameterError(
-                f"{input_path}: {OPTION} {k}: the survey has {n:,} file(s), numbered 0 to {n - 1:,} (for a job "
+                f"{input_path}: no file {k} in the survey: it has {n:,} file(s), numbered 0 to {n - 1:,} (for a job "
                 f"array: --array=0-{n - 1})")
         return k
     real = os.path.realpath(text) if os.path.exists(text) else None
@@ -48,29 +44,38 @@ def only_index(only, inputs: Sequence[str], input_path: str) -> int:
         return named[0]
     if len(named) > 1:
         raise InvalidParameterError(
-            f"{input_path}: {OPTION} {text}: {len(named)} of its files have that name ({inputs[named[0]]}, "
+            f"{input_path}: {len(named)} files of the survey are named {text} ({inputs[named[0]]}, "
             f"{inputs[named[1]]}); give the file's path or its number ({named[0]}, {named[1]})")
     shown = ", ".join(os.path.basename(p) for p in inputs[:3]) + (", ..." if n > 3 else "")
-    raise InvalidParameterError(f"{input_path}: {OPTION} {text}: no file of the survey has that name (its {n:,} "
-                                f"file(s): {shown}); give a name, a path or a number from 0 to {n - 1:,}")
+    raise InvalidParameterError(f"{input_path}: no file of the survey is named {text} (its {n:,} file(s): {shown}); "
+                                f"give a name, a path or a number from 0 to {n - 1:,}")
+
+
+#: in an output's path, replaced by the one file's name without its extension (for QGIS's destinations,
+#: which are files: --OUTPUT=out/{name}.laz --DTM=dtm/{name}.tif)
+NAME_FIELD = "{name}"
 
 
 def only_outputs(target: str, output_path: Optional[str], dtm_path: Optional[str]) -> Tuple[Optional[str], Optional[str]]:
     """Where one file's outputs go: ``output_path`` a .las/.laz (its classified copy) or a folder
     (made if missing; the copy there under the file's name, a COPC file's as .laz), ``dtm_path`` a .tif
-    or a folder (the DTM there as the file's name .tif). A folder is what every job of an array is
-    given, each writing its own file into it."""
-    name = re.sub(r"\.copc\.laz$", ".laz", os.path.basename(target), flags=re.I)
+    or a folder (the DTM there as the file's name .tif); in either, ``{name}`` is the file's name without
+    its extension. A folder, or a path with ``{name}``, is what every job of an array is given, each
+    writing its own file."""
+    stem = re.sub(r"(\.copc)?\.la[sz]$", "", os.path.basename(target), flags=re.I)
     out = dtm = None
     if output_path:
+        output_path = os.fspath(output_path).replace(NAME_FIELD, stem)
         if _ext(output_path) == ".vpc":
-            raise OutputError(f"{output_path}: with {OPTION}, a run writes one file's classified copy: give a folder "
-                              "(each job of an array writes its file there) or a .las/.laz file, not a .vpc. The "
-                              "folder of classified files is itself a survey input.")
-        out = output_path if _ext(output_path) in LAS_EXTENSIONS else os.path.join(output_path, name)
+            raise OutputError(f"{output_path}: a run of one file of the survey writes that file's classified copy: "
+                              "give a folder (each job of an array writes its file there), a path with {name} (the "
+                              "file's name), or a .las/.laz, not a .vpc. The folder of classified files is itself a "
+                              "survey input.")
+        ext = _ext(target) if _ext(target) in LAS_EXTENSIONS else ".laz"
+        out = output_path if _ext(output_path) in LAS_EXTENSIONS else os.path.join(output_path, stem + ext)
     if dtm_path:
-        dtm = dtm_path if _ext(dtm_path) in (".tif", ".tiff") else \
-            os.path.join(dtm_path, os.path.splitext(name)[0] + ".tif")
+        dtm_path = os.fspath(dtm_path).replace(NAME_FIELD, stem)
+        dtm = dtm_path if _ext(dtm_path) in (".tif", ".tiff") else os.path.join(dtm_path, stem + ".tif")
     return out, dtm
 
 
@@ -82,11 +87,33 @@ def make_output_folders(paths: Sequence[Optional[str]]) -> None:
             continue
         folder = os.path.dirname(os.path.abspath(path))
         if os.path.exists(folder) and not os.path.isdir(folder):
-            raise OutputError(f"{folder}: a file, not a folder: the outputs of {OPTION} go into a folder")
+            raise OutputError(f"{folder}: a file, not a folder: the outputs of one file of the survey go into a folder")
         try:
             os.makedirs(folder, exist_ok=True)
         except OSError as err:
             raise OutputError(f"{folder}: the output folder cannot be made ({err.strerror or err})") from err
+
+
+def fit_to_files(size: float, infos: Sequence[LasInfo], multiple_of: float = 1.0) -> float:
+    """The planned tile ``size`` of a run of one file fitted to the survey's files: at most their usual
+    side S (the median of their shorter sides, in whole 10 m), else the largest S / n not below half of
+    ``size``, so that on a delivery on multiples of S (1 km files on whole kilometres) a file is whole
+    tiles and its job filters its own area and the buffers only; tiles straddling its edges make it
+    filter its neighbours' points too (bench/one_file.py). From every file's header, so that each job of
+    the array plans the same tiles; a multiple of 10 m and of ``multiple_of`` (the DTM cell)."""
+    sides = sorted(min(i.maxs[0] - i.mins[0], i.maxs[1] - i.mins[1]) for i in infos if i.count)
+    side = max(10.0, round(sides[len(sides) // 2] / 10.0) * 10.0)  # (a 1 km file's points span 999.99 m)
+
+    def fits(s):
+        return abs(s / 10.0 - round(s / 10.0)) < 1e-9 and (multiple_of <= 0 or
+                                                            abs(s / multiple_of - round(s / multiple_of)) < 1e-9)
+    parts = [side] if size >= side else [side / n for n in range(2, int(side // 10) + 1) if side / n >= size / 2]
+    for part in parts:
+        if part <= size and fits(part):
+            return part
+    if size <= side:
+        return size
+    return math.ceil(side / multiple_of - 1e-9) * multiple_of if multiple_of > 0 else side
 
 
 def tile_range(info: LasInfo, size: float) -> Tuple[int, int, int, int]:

@@ -511,10 +511,10 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     inputs = expand_inputs(input_path)
     only = None  # one file of the survey, buffered by its neighbours (engine/one_file.py)
     if str(tiling.only) != "":
-        from .one_file import OPTION, only_index
+        from .one_file import only_index
         if not is_survey_input(input_path):
-            raise InvalidParameterError(f"{input_path}: {OPTION} picks one file of a survey (a folder or a .vpc); "
-                                        "this input is a single file")
+            raise InvalidParameterError(f"{input_path}: one file of a survey is chosen in a survey input (a folder or "
+                                        "a .vpc); this input is a single file")
         only = only_index(tiling.only, inputs, input_path)
     note = folder_note(input_path)
     if note and only is None:
@@ -647,6 +647,13 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
         log(f"Tiles planned for the Dask cluster's {threads} thread(s), each with {per_task / 2**30:.1f} GB or more "
             f"(its worker's memory limit over its threads): at most {tile_bytes / 2**20:,.0f} MB a tile.")
     size = plan_tile_size(infos, tiling, buffer_m, density, multiple_of=dtm.cell_size_m if dtm_path else 1.0)
+    if only is not None and not tiling.tile_size_m:  # (tiles across a file's edges: its job filters more)
+        from .one_file import fit_to_files
+        fitted = fit_to_files(size, infos, multiple_of=dtm.cell_size_m if dtm_path else 1.0)
+        if fitted != size:
+            log(f"Tiles of {fitted:g} instead of {size:g}: fitted to the survey's files, as every job of the array "
+                "fits them.")
+            size = fitted
     if dtm_path:
         size = fit_dtm_blocks(size, buffer_m, dtm.cell_size_m, tiling, log)
     if per_task and chosen:

@@ -45,6 +45,13 @@ def test_every_python_example_runs(tmp_path, monkeypatch):
     assert "input: missing.laz: no such file or folder" in text
     assert (tmp_path / "out" / "classified" / "west.laz").exists() and (tmp_path / "out" / "dtm.tif").exists()
     assert (tmp_path / "model.npz").exists() and (tmp_path / "tuned-smrf.json").exists()
+    # the job of one file of the survey: that file's copy and DTM, with the whole run's classes
+    import laspy
+    import numpy as np
+    assert sorted(p.name for p in (tmp_path / "out" / "jobs").iterdir()) == ["east.laz"]
+    assert (tmp_path / "out" / "jobs_dtm" / "east.tif").exists()
+    assert np.array_equal(laspy.read(tmp_path / "out" / "jobs" / "east.laz").classification,
+                          laspy.read(tmp_path / "out" / "classified" / "east.laz").classification)
 
 
 def test_the_page_names_every_filter_and_every_error():

@@ -11,6 +11,7 @@ scene's nor the octree's.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import struct
@@ -373,6 +374,34 @@ def test_copc_and_plain_laz_in_one_folder_and_vpc(tmp_path):
         assert [os.path.basename(f["assets"]["data"]["href"]) for f in features] == ["a_west.laz", "b_east.laz"]
     whole = classify_cloud(tile_cloud([read_cloud(p) for p in mixed]), SMRF()).classification
     assert np.mean(np.concatenate(list(want.values())) == whole) >= 0.999
+
+
+def test_one_file_of_a_survey_of_copc_and_plain_laz_is_classified_as_the_whole_survey(tmp_path):
+    """A job of an array (``only``) whose file is a COPC file, or a plain LAZ beside one: the COPC file
+    is read by bounds as the tiles' own points or as their buffer, and each file's classes are those of
+    the run of the whole survey."""
+    scene = make_scene(SMALL)
+    at_x = float(np.floor(np.median(scene.x))) + 0.5
+    west, east = scene.x < at_x, scene.x >= at_x
+    (tmp_path / "mixed").mkdir()
+    scene_las(scene, west).write(str(tmp_path / "mixed" / "a_west.laz"))
+    write_copc(tmp_path / "mixed" / "b_east.copc.laz", scene_las(scene, east), seed=3)
+    run_ground_filter(str(tmp_path / "mixed"), str(tmp_path / "whole.vpc"), SMRF(), options=tiled(),
+                      dtm_path=str(tmp_path / "whole.tif"), dtm=DTMOptions(cell_size_m=1.0))
+    from osgeo import gdal
+    whole = gdal.Open(str(tmp_path / "whole.tif"))
+    wg, wv = whole.GetGeoTransform(), whole.ReadAsArray()
+    for only, name in ((0, "a_west"), ("b_east.copc.laz", "b_east")):
+        options = FilterOptions(tiling=dataclasses.replace(tiled().tiling, only=only))
+        run = run_ground_filter(str(tmp_path / "mixed"), str(tmp_path / "jobs"), SMRF(), options=options,
+                                dtm_path=str(tmp_path / "dtm"), dtm=DTMOptions(cell_size_m=1.0))
+        assert run.outputs == [str(tmp_path / "jobs" / f"{name}.laz")]
+        assert np.array_equal(laspy.read(run.outputs[0]).classification,
+                              laspy.read(tmp_path / "whole" / f"{name}.laz").classification)
+        ds = gdal.Open(run.dtm_path)
+        g, v = ds.GetGeoTransform(), ds.ReadAsArray()
+        col, row = round((g[0] - wg[0]) / wg[1]), round((g[3] - wg[3]) / wg[5])
+        assert np.array_equal(v, wv[row:row + v.shape[0], col:col + v.shape[1]])
 
 
 def test_an_output_named_copc_laz_is_refused(files, tmp_path):

@@ -172,15 +172,15 @@ def test_bad_choices_of_the_one_file_are_refused_in_words(survey, tmp_path):
 
     def run(only, output=str(tmp_path / "o"), path=folder):
         return run_ground_filter(path, output, SMRF(), options=_options(only=only))
-    with pytest.raises(InvalidParameterError, match=r"--only 4: the survey has 4 file\(s\), numbered 0 to 3 "
+    with pytest.raises(InvalidParameterError, match=r"in: no file 4 in the survey: it has 4 file\(s\), numbered 0 to 3 "
                                                     r"\(for a job array: --array=0-3\)"):
         run(4)
-    with pytest.raises(InvalidParameterError, match=r"--only e\.laz: no file of the survey has that name \(its 4 "
+    with pytest.raises(InvalidParameterError, match=r"no file of the survey is named e\.laz \(its 4 "
                                                     r"file\(s\): a\.laz, b\.laz, c\.laz, \.\.\.\)"):
         run("e.laz")
-    with pytest.raises(InvalidParameterError, match=r"a\.laz: --only picks one file of a survey"):
+    with pytest.raises(InvalidParameterError, match=r"a\.laz: one file of a survey is chosen in a survey input"):
         run(0, path=os.path.join(folder, "a.laz"))
-    with pytest.raises(OutputError, match=r"classified\.vpc: with --only, a run writes one file's classified copy"):
+    with pytest.raises(OutputError, match=r"classified\.vpc: a run of one file of the survey writes that file's "):
         run(0, output=str(tmp_path / "classified.vpc"))
     with pytest.raises(InvalidParameterError, match="only must be one file of the survey"):
         TileOptions(only=-1)
@@ -206,3 +206,30 @@ def test_the_command_line_runs_one_file_of_a_survey(survey, tmp_path, capsys):
     assert doc["points"] == len(laspy.read(tmp_path / "cls" / "c.laz").points)
     assert np.array_equal(laspy.read(tmp_path / "cls" / "c.laz").classification,
                           laspy.read(os.path.join(survey["classified"], "c.laz")).classification)
+
+
+def test_the_outputs_paths_of_one_file():
+    from groundsieve.core.engine.one_file import only_outputs
+    assert only_outputs("/s/t1.laz", "out", "dtm") == ("out/t1.laz", "dtm/t1.tif")
+    assert only_outputs("/s/t1.las", "out/{name}.laz", "dtm/{name}_dtm.tif") == ("out/t1.laz", "dtm/t1_dtm.tif")
+    assert only_outputs("/s/t1.copc.laz", "out", None) == ("out/t1.laz", None)  # (a copy is plain LAZ)
+    assert only_outputs("/s/t1.laz", "one.las", "one.tif") == ("one.las", "one.tif")
+
+
+class _Header:
+    def __init__(self, side):
+        self.mins, self.maxs, self.count = (0.0, 0.0, 0.0), (side, side, 10.0), 1
+
+
+@pytest.mark.parametrize("planned, side, cell, fitted", [
+    (390.0, 1000.0, 1.0, 250.0),     # a divisor of the files' side: a file is whole tiles
+    (600.0, 999.99, 1.0, 500.0),     # (a 1 km file's points span 999.99 m)
+    (2000.0, 1000.0, 1.0, 1000.0),   # never wider than the files
+    (700.0, 122.0, 1.0, 120.0),
+    (390.0, 1230.0, 1.0, 390.0),     # no divisor of 1230 m between 195 and 390 m on whole 10 m: as planned
+    (50.0, 1000.0, 1.0, 50.0),
+    (390.0, 1000.0, 0.3, 390.0),     # 250 m is no multiple of the DTM's 0.3 m cell
+])
+def test_planned_tiles_are_fitted_to_the_files(planned, side, cell, fitted):
+    from groundsieve.core.engine.one_file import fit_to_files
+    assert fit_to_files(planned, [_Header(side)] * 3, multiple_of=cell) == pytest.approx(fitted)

@@ -123,3 +123,43 @@ def test_vpc_through_qgis_process(scene_laz, tmp_path):
     results = json.loads(proc.stdout)["results"]
     assert results["POINT_COUNT"] == len(classes_of(src))
     assert sorted(os.listdir(tmp_path / "classified")) == ["east.laz", "west.laz"]
+
+
+def test_one_file_of_a_survey_through_processing_with_name_fields(groundsieve_provider, scene_laz, tmp_path):
+    """ONLY (advanced): one job of a job array; {name} in the outputs' paths is the file's name, and the
+    run's results name its own files. Its classes are those of the run of the whole survey."""
+    import processing
+    src, _scene = scene_laz
+    _split(src, tmp_path / "in")
+    whole = tmp_path / "whole" / "classified.vpc"
+    whole.parent.mkdir()
+    common = {"INPUT": str(tmp_path / "in"), "TILE_SIZE": 50.0, "WORKERS": 1}
+    processing.run("groundsieve:smrf", dict(common, OUTPUT=str(whole), DTM=str(tmp_path / "whole" / "dtm.tif")))
+    for only in ("1", "east.laz"):  # (a folder's files by name: east is 0, west 1)
+        result = processing.run("groundsieve:smrf", dict(common, ONLY=only, OUTPUT=str(tmp_path / "jobs" / "{name}.laz"),
+                                                         DTM=str(tmp_path / "dtm" / "{name}.tif")))
+        name = "west" if only == "1" else "east"
+        assert result["OUTPUT"] == str(tmp_path / "jobs" / f"{name}.laz")
+        assert result["DTM"] == str(tmp_path / "dtm" / f"{name}.tif") and os.path.exists(result["DTM"])
+        assert result["POINT_COUNT"] == len(classes_of(result["OUTPUT"]))
+        assert np.array_equal(classes_of(result["OUTPUT"]), classes_of(tmp_path / "whole" / "classified" / f"{name}.laz"))
+    assert sorted(os.listdir(tmp_path / "jobs")) == ["east.laz", "west.laz"]
+
+
+def test_a_job_array_through_qgis_process(scene_laz, tmp_path):
+    """What a SLURM array's job runs: qgis_process with --ONLY=$SLURM_ARRAY_TASK_ID; a number beyond the
+    survey's files is refused in words."""
+    src, _scene = scene_laz
+    _split(src, tmp_path / "in")
+    for task in ("0", "1"):
+        proc = subprocess.run([str(WRAPPER), "--json", "run", "groundsieve:smrf", f"--INPUT={tmp_path / 'in'}",
+                               f"--OUTPUT={tmp_path / 'jobs' / '{name}.laz'}", "--TILE_SIZE=50", f"--ONLY={task}"],
+                              capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert sorted(os.listdir(tmp_path / "jobs")) == ["east.laz", "west.laz"]
+    proc = subprocess.run([str(WRAPPER), "run", "groundsieve:smrf", f"--INPUT={tmp_path / 'in'}",
+                           f"--OUTPUT={tmp_path / 'jobs' / '{name}.laz'}", "--ONLY=2"],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode != 0
+    assert "no file 2 in the survey: it has 2 file(s), numbered 0 to 1" in proc.stdout + proc.stderr
+    assert "Traceback" not in proc.stdout + proc.stderr
