@@ -79,6 +79,19 @@ def only_outputs(target: str, output_path: Optional[str], dtm_path: Optional[str
     return out, dtm
 
 
+def check_not_beside_inputs(output_path: Optional[str], inputs: Sequence[str]) -> None:
+    """Refuse a classified copy going into a folder that holds the survey's files: the next job of the
+    array lists the folder (or a .vpc's neighbours are there) and would take the copy for one of the
+    survey's files, its points twice."""
+    if not output_path:
+        return
+    from ..io.outputs import identities
+    folder = os.path.dirname(os.path.abspath(output_path))
+    if os.path.isdir(folder) and identities([folder]) & identities({os.path.dirname(os.path.abspath(p)) for p in inputs}):
+        raise OutputError(f"{output_path}: the classified copy would go into {folder}, which holds the survey's files: "
+                          "the array's other jobs would take it for one of them; choose another folder")
+
+
 def make_output_folders(paths: Sequence[Optional[str]]) -> None:
     """The folders of one file's outputs, made if missing (by any of the array's jobs: another may make
     one at the same time); they are not removed when the run fails, as other jobs write into them."""

@@ -565,8 +565,9 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     if only is None:
         outs = check_tiled_outputs(inputs, output_path, dtm_path, [i.point_format for i in infos], log)
     else:  # one file's copy, into a folder every job of an array shares, or a .las/.laz
-        from .one_file import make_output_folders, only_outputs
+        from .one_file import check_not_beside_inputs, make_output_folders, only_outputs
         output_path, dtm_path = only_outputs(inputs[only], output_path, dtm_path)
+        check_not_beside_inputs(output_path, inputs)
         make_output_folders([output_path, dtm_path])
         mine = check_tiled_outputs([inputs[only]], output_path, dtm_path, [infos[only].point_format], log)
         outs = [mine[0] if m == only else None for m in range(len(inputs))]

@@ -182,6 +182,10 @@ def test_bad_choices_of_the_one_file_are_refused_in_words(survey, tmp_path):
         run(0, path=os.path.join(folder, "a.laz"))
     with pytest.raises(OutputError, match=r"classified\.vpc: a run of one file of the survey writes that file's "):
         run(0, output=str(tmp_path / "classified.vpc"))
+    with pytest.raises(OutputError, match=r"a_c\.laz: the classified copy would go into .*in, which holds the "
+                                          r"survey's files: the array's other jobs would take it for one of them"):
+        run(0, output=os.path.join(folder, "{name}_c.laz"))
+    assert sorted(os.listdir(folder)) == [f"{n}.laz" for n in NAMES]
     with pytest.raises(InvalidParameterError, match="only must be one file of the survey"):
         TileOptions(only=-1)
     empty = tmp_path / "with_empty"
