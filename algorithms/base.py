@@ -734,8 +734,8 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
             QgsProcessingParameterString(self.SCHEDULER, "Dask scheduler address (empty = this machine; "
                                          "tcp://host:port, or local:N for N local worker processes)",
                                          defaultValue="", optional=True),
-            QgsProcessingParameterString(self.ONLY, "One file of the survey (a job array's: its number from 0, "
-                                         "its name or path; empty = every file)", defaultValue="", optional=True)]
+            QgsProcessingParameterString(self.ONLY, "One file of the survey only (job arrays: number from 0, name "
+                                         "or path)", defaultValue="", optional=True)]
         for param in advanced:
             param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
             self.addParameter(param)
