@@ -79,6 +79,21 @@ def only_outputs(target: str, output_path: Optional[str], dtm_path: Optional[str
     return out, dtm
 
 
+def fixed_names_warning(target: str, output_path: Optional[str], dtm_path: Optional[str]) -> str:
+    """A warning when an output of one file's run is a file path that does not name the file (no folder,
+    no ``{name}``, another name): the jobs of an array all given that path overwrite each other's outputs,
+    the last one's left. "" otherwise."""
+    from ..progress import WARNING_PREFIX
+    stem = re.sub(r"(\.copc)?\.la[sz]$", "", os.path.basename(target), flags=re.I)
+    fixed = [os.fspath(p) for p, exts in ((output_path, LAS_EXTENSIONS), (dtm_path, (".tif", ".tiff")))
+             if p and NAME_FIELD not in os.fspath(p) and _ext(p) in exts and stem not in os.path.basename(os.fspath(p))]
+    if not fixed:
+        return ""
+    return (f"{WARNING_PREFIX}{' and '.join(fixed)}: not named after {os.path.basename(target)}: the jobs of an array "
+            "given the same path overwrite each other's output, the last one's kept. Give a folder, or {name} in "
+            "the path, for each job's own file.")
+
+
 def check_not_beside_inputs(output_path: Optional[str], inputs: Sequence[str]) -> None:
     """Refuse a classified copy going into a folder that holds the survey's files: the next job of the
     array lists the folder (or a .vpc's neighbours are there) and would take the copy for one of the

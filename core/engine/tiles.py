@@ -565,7 +565,10 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     if only is None:
         outs = check_tiled_outputs(inputs, output_path, dtm_path, [i.point_format for i in infos], log)
     else:  # one file's copy, into a folder every job of an array shares, or a .las/.laz
-        from .one_file import check_not_beside_inputs, make_output_folders, only_outputs
+        from .one_file import check_not_beside_inputs, fixed_names_warning, make_output_folders, only_outputs
+        warning = fixed_names_warning(inputs[only], output_path, dtm_path)
+        if warning:
+            log(warning)
         output_path, dtm_path = only_outputs(inputs[only], output_path, dtm_path)
         check_not_beside_inputs(output_path, inputs)
         make_output_folders([output_path, dtm_path])

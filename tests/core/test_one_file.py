@@ -213,7 +213,13 @@ def test_the_command_line_runs_one_file_of_a_survey(survey, tmp_path, capsys):
 
 
 def test_the_outputs_paths_of_one_file():
-    from groundsieve.core.engine.one_file import only_outputs
+    from groundsieve.core.engine.one_file import fixed_names_warning, only_outputs
+    # a fixed file path, the same in every job of an array, is warned about; a folder or {name} is not
+    warning = fixed_names_warning("/s/t1.laz", "out/all.laz", "dtm/{name}.tif")
+    assert warning.startswith("Warning: out/all.laz: not named after t1.laz: the jobs of an array")
+    assert "and" not in warning.split(":")[0]
+    assert "out/all.laz and dtm.tif" in fixed_names_warning("/s/t1.laz", "out/all.laz", "dtm.tif")
+    assert not fixed_names_warning("/s/t1.laz", "out", "dtm") and not fixed_names_warning("/s/t1.laz", "t1_c.laz", None)
     assert only_outputs("/s/t1.laz", "out", "dtm") == ("out/t1.laz", "dtm/t1.tif")
     assert only_outputs("/s/t1.las", "out/{name}.laz", "dtm/{name}_dtm.tif") == ("out/t1.laz", "dtm/t1_dtm.tif")
     assert only_outputs("/s/t1.copc.laz", "out", None) == ("out/t1.laz", None)  # (a copy is plain LAZ)
