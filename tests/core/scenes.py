@@ -96,3 +96,23 @@ def die_once_in(marker, key, function, job):
         else:
             os.kill(os.getpid(), signal.SIGKILL)
     return function(job)
+
+
+def four_file_survey(root) -> str:
+    """A generated 120 m scene (seed 5, 2 points/m²) cut into 4 LAZ files of 60 x 60 m, a.laz (south-west),
+    b.laz (south-east), c.laz (north-west) and d.laz (north-east), in ``root``/in; its path."""
+    import laspy
+
+    from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+    whole = os.path.join(root, "whole.laz")
+    write_scene(make_scene(SceneSpec(size_m=120.0, density_per_m2=2.0, seed=5)), whole)
+    las = laspy.read(whole)
+    folder = os.path.join(root, "in")
+    os.makedirs(folder)
+    x0, y0 = las.header.mins[:2]
+    qx, qy = np.asarray(las.x) >= x0 + 60.0, np.asarray(las.y) >= y0 + 60.0
+    for name, sel in (("a", ~qx & ~qy), ("b", qx & ~qy), ("c", ~qx & qy), ("d", qx & qy)):
+        part = laspy.LasData(las.header)
+        part.points = las.points[sel]
+        part.write(os.path.join(folder, f"{name}.laz"))
+    return folder

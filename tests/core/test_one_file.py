@@ -16,6 +16,7 @@ from groundsieve.core.errors import InputError, InvalidParameterError, OutputErr
 from groundsieve.core.filters.smrf import SMRF
 from groundsieve.core.io.lasfiles import TileGrid, bin_file, scan_header, write_vpc
 from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+from groundsieve.tests.core.scenes import four_file_survey
 
 NAMES = "abcd"
 
@@ -25,17 +26,7 @@ def survey(tmp_path_factory):
     """A 120 m scene cut into 4 files of 60 x 60 m, and the run of the whole survey (tiles of 30 m with a
     10 m buffer cross the files' edges)."""
     root = tmp_path_factory.mktemp("one_file")
-    whole = root / "whole.laz"
-    write_scene(make_scene(SceneSpec(size_m=120.0, density_per_m2=2.0, seed=5)), whole)
-    las = laspy.read(whole)
-    folder = root / "in"
-    folder.mkdir()
-    x0, y0 = las.header.mins[:2]
-    qx, qy = np.asarray(las.x) >= x0 + 60.0, np.asarray(las.y) >= y0 + 60.0
-    for name, sel in zip(NAMES, (~qx & ~qy, qx & ~qy, ~qx & qy, qx & qy)):
-        part = laspy.LasData(las.header)
-        part.points = las.points[sel]
-        part.write(folder / f"{name}.laz")
+    folder = four_file_survey(str(root))
     out = root / "whole"
     out.mkdir()
     run_ground_filter(str(folder), str(out / "classified.vpc"), SMRF(), options=_options(),

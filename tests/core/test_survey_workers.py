@@ -15,24 +15,13 @@ from groundsieve.core.engine.workflow import DTMOptions, FilterOptions, run_grou
 from groundsieve.core.errors import InputError
 from groundsieve.core.filters.smrf import SMRF
 from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+from groundsieve.tests.core.scenes import four_file_survey
 
 
 @pytest.fixture(scope="module")
 def survey(tmp_path_factory):
     """A 120 m scene cut into 4 files of 60 x 60 m (tiles of 30 m with a 10 m buffer cross them)."""
-    root = tmp_path_factory.mktemp("survey")
-    whole = root / "whole.laz"
-    write_scene(make_scene(SceneSpec(size_m=120.0, density_per_m2=2.0, seed=5)), whole)
-    las = laspy.read(whole)
-    folder = root / "in"
-    folder.mkdir()
-    x0, y0 = las.header.mins[:2]
-    qx, qy = np.asarray(las.x) >= x0 + 60.0, np.asarray(las.y) >= y0 + 60.0
-    for name, sel in (("a", ~qx & ~qy), ("b", qx & ~qy), ("c", ~qx & qy), ("d", qx & qy)):
-        part = laspy.LasData(las.header)
-        part.points = las.points[sel]
-        part.write(folder / f"{name}.laz")
-    return str(folder)
+    return four_file_survey(str(tmp_path_factory.mktemp("survey")))
 
 
 def _digest(folder):
