@@ -517,7 +517,7 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
                                         "a .vpc); this input is a single file")
         only = only_index(tiling.only, inputs, input_path)
     note = folder_note(input_path)
-    if note and only is None:
+    if note:
         log(note)
     infos = [scan_header(p) for p in inputs]
     check_survey(infos)
@@ -1840,7 +1840,9 @@ def _tile_job(job) -> Optional[dict]:
                 xs, ys = cloud.x[mine], cloud.y[mine]
                 area_bounds = [float(xs.min()), float(ys.min()), float(xs.max()), float(ys.max())]
             in_dtm = workflow.dtm_points(cloud, ground, area, job["dtm"])
-            dtm_own = int(np.count_nonzero(in_dtm & own))
+            # (of every file in the tile: the DTM of one file whose own points hold no ground, a roof or a lake,
+            # is made from its neighbours' ground there, as the run of the whole survey makes it)
+            dtm_own = int(np.count_nonzero(in_dtm & in_tile))
             gaps = []  # [the smallest gap named, then each gap (area, x, y)]
             block = _dtm_block(cloud, in_dtm, job["dtm"], job["dtm_grid"], job["bounds"], job["buffer"], area, gaps)
             hull = _block_hull(block, job["dtm_grid"])  # (the whole run fills the ground's hull)

@@ -234,3 +234,26 @@ class _Header:
 def test_planned_tiles_are_fitted_to_the_files(planned, side, cell, fitted):
     from groundsieve.core.engine.one_file import fit_to_files
     assert fit_to_files(planned, [_Header(side)] * 3, multiple_of=cell) == pytest.approx(fitted)
+
+
+def test_a_file_without_ground_gets_the_dtm_its_neighbours_ground_makes(survey, tmp_path):
+    """A file all roofs (class 6): the DTM from classes of its job is made from its neighbours' ground
+    there, as the run of the whole survey makes it, not refused for want of ground of its own."""
+    from groundsieve.core.filters.classes import ClassGround
+    folder = tmp_path / "roofs"
+    folder.mkdir()
+    for name in NAMES:
+        las = laspy.read(os.path.join(survey["folder"], f"{name}.laz"))
+        if name == "b":
+            las.classification[:] = 6
+        las.write(folder / f"{name}.laz")
+    options = FilterOptions(keep_existing_classes=True, tiling=TileOptions(tile_size_m=30.0, buffer_m=10.0, workers=1))
+    run_ground_filter(str(folder), None, ClassGround("2"), options=options, dtm_path=str(tmp_path / "whole.tif"),
+                      dtm=DTMOptions(cell_size_m=1.0))
+    one = FilterOptions(keep_existing_classes=True,
+                        tiling=TileOptions(tile_size_m=30.0, buffer_m=10.0, workers=1, only="b.laz"))
+    run = run_ground_filter(str(folder), None, ClassGround("2"), options=one, dtm_path=str(tmp_path / "b.tif"),
+                            dtm=DTMOptions(cell_size_m=1.0))
+    assert run.ground_count == 0
+    cells = _same_cells(tmp_path / "b.tif", tmp_path / "whole.tif")
+    assert np.count_nonzero(cells != -9999) > 100
