@@ -159,7 +159,8 @@ def reach_box(tiles: Tuple[int, int, int, int], size: float, buffer: float) -> T
 
 def neighbours(infos: Sequence[LasInfo], k: int, box) -> List[int]:
     """The files (positions in ``infos``, in survey order, ``k`` among them) whose header bounds meet
-    ``box``: those the tiles of file ``k`` read their buffers from."""
+    ``box``: those the tiles of file ``k`` read their buffers from (``k`` -1: those the tiles of an area
+    read)."""
     x0, y0, x1, y1 = box
     return [m for m, info in enumerate(infos)
             if m == k or (info.count and info.mins[0] <= x1 and info.maxs[0] >= x0

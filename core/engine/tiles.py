@@ -594,6 +594,10 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
                                  "classified copy asked for")
             log(f"{WARNING_PREFIX}{inputs[only]}: the file lies outside the DTM's extent: no DTM is written for it.")
             dtm_path = None
+    elif dtm_grid is not None and dtm.extent is not None and not output_path:
+        # a DTM of an area alone (no classified copy): only the tiles making its cells are filtered, and
+        # only the files within their reach are read (_plan_and_run); the grid is the extent's cells
+        dtm_grid = grid_window(dtm_grid, dtm.extent) or dtm_grid
     # The reach rounded up to whole metres: the buffer's edges then sit on whole metres, where the
     # filters' grids (edges on multiples of their cell) put theirs without floating-point doubt.
     reach = filter_reach_m(algorithm)
@@ -695,6 +699,19 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
         log(f"{name}, file {only} of the survey's {files:,} (numbered from 0), alone: its tiles read their buffers "
             f"from {len(keep) - 1:,} neighbouring file(s); every file run so on the same tiles gets the classes and "
             "DTM of a run of the whole survey.")
+    elif dtm_path and dtm.extent is not None and not output_path:  # a DTM of an area alone: its tiles only
+        from .one_file import neighbours, reach_box
+        x0, y0 = dtm_grid.x0, dtm_grid.top - dtm_grid.nrows * dtm_grid.cell
+        x1, y1 = dtm_grid.x0 + dtm_grid.ncols * dtm_grid.cell, dtm_grid.top
+        tiles_of = (math.floor(x0 / size), math.floor(x1 / size), math.floor(y0 / size), math.floor(y1 / size))
+        box = reach_box(tiles_of, size, buffer_m)
+        keep = [m for m in neighbours(infos, -1, box) if infos[m].count]
+        files = len(inputs)
+        if keep:
+            inputs, infos, outs = [inputs[m] for m in keep], [infos[m] for m in keep], [outs[m] for m in keep]
+            one = dict(index=None, of=files, tiles=tiles_of, clip=box)
+            log(f"A DTM of its extent alone: the tiles making its cells are filtered, reading {len(keep):,} of the "
+                f"{files:,} file(s), those within their reach.")
     log(f"{len(inputs)} file(s), {total:,} points; tiles of {size:g} {unit} with a buffer of {buffer_m:g} {unit} "
         f"({'set' if tiling.buffer_m is not None else getattr(algorithm, 'reach_words', 'the filter reach')}); "
         f"{tiling.worker_count} worker(s)."
@@ -711,7 +728,9 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
     # crashed midway finds it again and skips the tiles already done.
     work = os.path.join(parent, WORK_PREFIX + _fingerprint(infos, grid, algorithm, options,
                                                                      dtm if dtm_path else None,
-                                                                     None if one is None else inputs[one["index"]]))
+                                                                     None if one is None else
+                                                                     "the DTM's extent" if one["index"] is None
+                                                                     else inputs[one["index"]]))
     if os.path.isdir(work):
         lock = _lock_working_folder(work)  # another run still using it is refused, its folder left alone
         log(f"Resuming the interrupted run in {work}.")
@@ -926,7 +945,8 @@ def _fingerprint(infos, grid, algorithm, options, dtm, only: Optional[str] = Non
     scheduler change where and when a tile runs, not its result: a reviewer's run killed on 2
     workers did not resume on 1), the DTM, and the code: a run resumed with another core/ (same
     version) mixed tiles of both versions, its classes and DTM those of neither. ``only``: the one file
-    of the survey the run classifies (the jobs of an array, each its file, in one folder at once)."""
+    of the survey the run classifies (the jobs of an array, each its file, in one folder at once), or
+    "the DTM's extent" for a run of a DTM's extent alone (its tiles' parts are cut to it)."""
     import dataclasses
     import hashlib
     import json as _json
@@ -937,7 +957,8 @@ def _fingerprint(infos, grid, algorithm, options, dtm, only: Optional[str] = Non
     dtm_results = dataclasses.replace(dtm, memory_budget_bytes=None) \
         if dataclasses.is_dataclass(dtm) and hasattr(dtm, "memory_budget_bytes") else dtm
     text = _json.dumps([files, grid.size, grid.buffer, repr(algorithm), repr(results), repr(dtm_results), WORK_FORMAT,
-                        _core_digest()] + ([os.path.realpath(only)] if only else []), default=str)
+                        _core_digest()] + ([only if only == "the DTM's extent" else os.path.realpath(only)]
+                                           if only else []), default=str)
     return hashlib.sha1(text.encode()).hexdigest()[:16]
 
 
@@ -954,7 +975,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     """The run (steps 1-4 of the module's docstring) in its held working folder. ``one``: the run of one
     file of the survey (engine/one_file.py): ``index``, its place in ``infos`` (the others are its
     neighbours, binned in ``clip`` only, of which nothing is written), and ``tiles``, the tiles its header
-    bounds touch."""
+    bounds touch; or, with ``index`` None, the run of a DTM's extent alone: ``tiles`` those its cells lie
+    in, every file binned in ``clip`` only and no classified copy written."""
     t_start = time.perf_counter()
     import json as _json
     from ..io.lasfiles import TilePart
@@ -991,7 +1013,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         for k, info in enumerate(infos):
             if not info.count or info.copc:  # a COPC file is read by bounds by its tiles
                 continue
-            alone = len(infos) == 1 or (one is not None and k == one["index"])
+            # (a file cut to a box is binned whole: its points are numbered among those in the box)
+            alone = (one is None and len(infos) == 1) or (one is not None and k == one["index"])
             pieces = min(tiling.worker_count, info.count // BIN_PIECE_POINTS) if alone else 1
             records = _records_path(work, k)
             if pieces <= 1:
@@ -1009,7 +1032,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                 tiles.setdefault(key, []).append(part)
         # (a neighbour of the one file run keeps no class: a stand-in of one)
         classes = [np.lib.format.open_memmap(os.path.join(work, f"f{k:05d}.cls.npy"), mode="w+", dtype=np.uint8,
-                                             shape=(max(info.count if one is None or k == one["index"] else 0, 1),))
+                                             shape=(max(info.count if one is None or one["index"] in (None, k)
+                                                        else 0, 1),))
                    for k, info in enumerate(infos)]
         for c in classes:
             c.flush()
@@ -1038,8 +1062,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     assigned = [0] * len(infos)
     crs_wkt = infos[0].crs_wkt
     # the points the run classifies, and what its messages name: one file's, or the survey's
-    mine = infos if one is None else [infos[one["index"]]]
-    total_points = sum(i.count for i in mine)
+    mine = infos if one is None or one["index"] is None else [infos[one["index"]]]
+    total_points = sum(i.count for i in mine)  # (a DTM's extent alone: those in its tiles, counted below)
     where = mine[0].path if len(mine) == 1 else f"{len(inputs)} input files"
     # 2. the DTM's block writer, on the grid run_tiled made from the headers
     dtm_writer = None
@@ -1191,6 +1215,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         if assigned[k] != info.count:
             raise InputError(f"{info.path}: {assigned[k]:,} of {info.count:,} points were classified; "
                              "the file's header and its points disagree")
+    if one is not None and one["index"] is None:
+        total_points = sum(assigned)
     log(f"{getattr(algorithm, 'tiles_done_words', 'Filtered')} {len(keys)} tile(s) in "
         f"{time.perf_counter() - t_tiles:.1f} s.")
     if getattr(algorithm, "ground_of_any_class", False):
@@ -1276,7 +1302,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         log(f"Wrote the DTM {dtm_path} ({g.ncols:,} x {g.nrows:,} cells of {g.cell:g} {unit}).")
     steps.report(1.0)
     log(f"Done in {time.perf_counter() - t_start:.1f} s.")
-    return TiledRun(inputs if one is None else [inputs[one["index"]]], [o for o in outs if o], total_points,
+    return TiledRun(inputs if one is None or one["index"] is None else [inputs[one["index"]]], [o for o in outs if o],
+                    total_points,
                     ground_total, crs_wkt,
                     grid.size, grid.buffer, len(tile_log), dtm_path, tile_log=tile_log,
                     copc_inputs=[i.path for i in infos if i.copc], algorithm=algorithm)

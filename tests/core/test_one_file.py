@@ -257,3 +257,35 @@ def test_a_file_without_ground_gets_the_dtm_its_neighbours_ground_makes(survey, 
     assert run.ground_count == 0
     cells = _same_cells(tmp_path / "b.tif", tmp_path / "whole.tif")
     assert np.count_nonzero(cells != -9999) > 100
+
+
+def test_a_dtm_of_an_extent_alone_filters_only_its_tiles_and_reads_only_the_files_within_reach(tmp_path):
+    """No classified copy, a DTM extent over part of a survey (a flood model's domain): only the tiles
+    making its cells are filtered, only the files within their reach are read (of them only the points
+    within reach), and the DTM is the one a run classifying every point makes."""
+    write_scene(make_scene(SceneSpec(size_m=180.0, density_per_m2=1.0, seed=3)), tmp_path / "whole.laz")
+    las = laspy.read(tmp_path / "whole.laz")
+    folder = tmp_path / "row"
+    folder.mkdir()
+    x = np.asarray(las.x)
+    x0 = float(np.floor(las.header.mins[0] / 30.0) * 30.0)
+    y0 = float(np.floor(las.header.mins[1]))
+    for k in range(3):
+        part = laspy.LasData(las.header)
+        part.points = las.points[(x >= x0 + 60 * k) & (x < x0 + 60 * (k + 1))]
+        part.write(folder / f"f{k}.laz")
+    # in file f0, in its second column of 30 m tiles, whose buffer reaches into f1, not f2
+    extent = (x0 + 35.0, y0 + 40.0, x0 + 55.0, y0 + 70.0)
+    options = _options()
+    dtm = DTMOptions(cell_size_m=1.0, extent=extent)
+    ref = run_ground_filter(str(folder), str(tmp_path / "ref.vpc"), SMRF(), options=options,
+                            dtm_path=str(tmp_path / "ref.tif"), dtm=dtm)
+    logs = []
+    run = run_ground_filter(str(folder), None, SMRF(), options=options, dtm_path=str(tmp_path / "area.tif"), dtm=dtm,
+                            log=logs.append)
+    assert any("reading 2 of the 3 file(s), those within their reach" in line for line in logs)
+    assert run.inputs == [str(folder / "f0.laz"), str(folder / "f1.laz")]
+    assert 0 < run.tiles < ref.tiles and 0 < run.point_count < ref.point_count
+    (_g, area, _c), (_rg, whole, _rc) = _raster(tmp_path / "area.tif"), _raster(tmp_path / "ref.tif")
+    assert area.shape == whole.shape == (30, 20) and np.count_nonzero(area != -9999) > 300
+    assert np.array_equal(area, whole)
