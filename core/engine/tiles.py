@@ -710,6 +710,7 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
         if keep:
             inputs, infos, outs = [inputs[m] for m in keep], [infos[m] for m in keep], [outs[m] for m in keep]
             one = dict(index=None, of=files, tiles=tiles_of, clip=box)
+            total = sum(i.count for i in infos)
             log(f"A DTM of its extent alone: the tiles making its cells are filtered, reading {len(keep):,} of the "
                 f"{files:,} file(s), those within their reach.")
     log(f"{len(inputs)} file(s), {total:,} points; tiles of {size:g} {unit} with a buffer of {buffer_m:g} {unit} "
