@@ -132,7 +132,8 @@ def _add_tiles(parser: argparse.ArgumentParser) -> None:
                        help="one file of a survey input (a folder or a .vpc): its number from 0 (a job array's task id, "
                             "e.g. $SLURM_ARRAY_TASK_ID), its name or its path; only its points are classified, on the "
                             "survey's tiles buffered by its neighbours' points. --output and --dtm are then folders "
-                            "(the file's copy and DTM there under its name) or a .las/.laz and a .tif")
+                            "(the file's copy and DTM there under its name), paths with {name} (the file's name), or "
+                            "a .las/.laz and a .tif")
     tiles.add_argument("--scheduler", default=to["scheduler"], metavar="ADDRESS",
                        help="Dask scheduler: empty = this machine, local:N = a local Dask cluster of N worker "
                             "processes, tcp://host:port = a running scheduler (needs dask[distributed]; the "
