@@ -2068,17 +2068,24 @@ def _dtm_block(cloud, ground, dtm, full, bounds, buffer_m, area=None, gaps=None)
     if cells is None or not ground.any():
         return None
     row0, row1, col0, col1 = cells
+    # the tile's whole block on the grid's lattice, where the grid holds part of it only (a survey's edge,
+    # one file's cells, an extent's): its surface is then the same whatever grid it is written into (cut to
+    # one file's cells, the block lost ground points beyond them, and the DTM beside a lake differed from
+    # the whole survey's by up to 19 mm: an HPC reviewer)
+    x0, y0, x1, y1 = bounds
+    tcol0, trow0 = int(round((x0 - full.x0) / c)), int(round((full.top - y1) / c))
+    tcol1, trow1 = int(round((x1 - full.x0) / c)), int(round((full.top - y0) / c))
     # one cell more than the buffer: a point on the buffer's outer edge still falls in the grid (the
     # thinning's one-pass kernel needs every point inside; same points kept, same surface)
     pad = int(math.ceil(buffer_m / c)) + 1
-    ext = GridSpec(full.x0 + (col0 - pad) * c, full.top - (row0 - pad) * c, c,
-                   row1 - row0 + 2 * pad, col1 - col0 + 2 * pad)
+    ext = GridSpec(full.x0 + (tcol0 - pad) * c, full.top - (trow0 - pad) * c, c,
+                   trow1 - trow0 + 2 * pad, tcol1 - tcol0 + 2 * pad)
     g = ground
     values = tin_dtm(cloud.x[g], cloud.y[g], cloud.z[g], ext, fill_outside=dtm.fill_outside_hull,
                      points_per_cell=dtm.points_per_cell, max_distance=dtm.max_distance_m)
     if gaps is not None and area is not None and not dtm.fill_outside_hull and not dtm.max_distance_m:
         from .workflow import data_gaps
         found, smallest = data_gaps(cloud.x[area], cloud.y[area], values, ext)
-        x0, y0, x1, y1 = bounds
         gaps.extend([smallest] + [list(gap) for gap in found if x0 <= gap[1] < x1 and y0 <= gap[2] < y1])
-    return row0, col0, np.ascontiguousarray(values[pad:pad + row1 - row0, pad:pad + col1 - col0])
+    r, k = pad + row0 - trow0, pad + col0 - tcol0
+    return row0, col0, np.ascontiguousarray(values[r:r + row1 - row0, k:k + col1 - col0])
