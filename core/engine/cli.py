@@ -31,7 +31,7 @@ import sys
 import time
 from typing import List, Optional
 
-from ..errors import GroundSieveError
+from ..errors import GroundSieveError, InvalidParameterError
 from . import parameters as P
 from .tiles import TileOptions
 from .workflow import DTMOptions, FilterOptions
@@ -128,7 +128,7 @@ def _add_tiles(parser: argparse.ArgumentParser) -> None:
     tiles.add_argument("--work-folder", metavar="PATH",
                        help="working folder for temporary tiles (default: beside the output); with a Dask "
                             "scheduler, on a file system every worker sees at the same path")
-    tiles.add_argument("--only", default="", metavar="FILE",
+    tiles.add_argument("--only", default=None, metavar="FILE",
                        help="one file of a survey input (a folder or a .vpc): its number from 0 (a job array's task id, "
                             "e.g. $SLURM_ARRAY_TASK_ID), its name or its path; only its points are classified, on the "
                             "survey's tiles buffered by its neighbours' points. --output and --dtm are then folders "
@@ -679,7 +679,15 @@ def dtm_options(args, classes: bool = True) -> DTMOptions:
 def _tiling(args) -> TileOptions:
     return TileOptions(tile_size_m=args.tile_size, buffer_m=None if args.tile_buffer < 0 else args.tile_buffer,
                        memory_budget_mb=args.memory_budget, workers=args.workers,
-                       work_dir=args.work_folder or None, scheduler=args.scheduler or "", only=args.only)
+                       work_dir=args.work_folder or None, scheduler=args.scheduler or "", only=_only(args.only))
+
+
+def _only(value) -> str:
+    """--only's file, refused when given empty: an array's task id unset would run every file."""
+    if value is not None and not value.strip():
+        raise InvalidParameterError("--only is empty: give one file of the survey (its number from 0, its name or its "
+                                    "path); in a job array, is $SLURM_ARRAY_TASK_ID set (sbatch --array)?")
+    return value or ""
 
 
 #: set once the run has ended (its outputs in place or its error said): a SIGTERM then changes nothing

@@ -18,14 +18,20 @@ import os
 import re
 from typing import List, Optional, Sequence, Tuple
 
-from ..errors import InvalidParameterError, OutputError
+from ..errors import InputError, InvalidParameterError, OutputError
 from ..io.lasfiles import LasInfo
 from ..io.outputs import LAS_EXTENSIONS, _ext
+
+def stem_of(path: str) -> str:
+    """A survey file's name without its extension (.las, .laz, .copc.laz): what ``{name}`` stands for."""
+    return re.sub(r"(\.copc)?\.la[sz]$", "", os.path.basename(os.fspath(path)), flags=re.I)
+
 
 def only_index(only, inputs: Sequence[str], input_path: str) -> int:
     """The position in ``inputs`` (the survey's files, in the order of the folder's sorted names or of
     the .vpc) of the file ``only`` names: its 0-based position (a whole number, as a job array's task id
-    gives it), its name, or its path."""
+    gives it), its name (with or without its extension), or its path (of that file: a file elsewhere of
+    the same name is refused)."""
     n = len(inputs)
     text = str(only).strip()
     if re.fullmatch(r"\d+", text):
@@ -35,11 +41,17 @@ def only_index(only, inputs: Sequence[str], input_path: str) -> int:
                 f"{input_path}: no file {k} in the survey: it has {n:,} file(s), numbered 0 to {n - 1:,} (for a job "
                 f"array: --array=0-{n - 1})")
         return k
-    real = os.path.realpath(text) if os.path.exists(text) else None
-    named = [k for k, p in enumerate(inputs)
-             if (real is not None and os.path.realpath(p) == real) or os.path.basename(p) == os.path.basename(text)]
-    if real is not None:  # a path given: that file, not another of the same name
-        named = [k for k in named if os.path.realpath(inputs[k]) == real] or named
+    if os.sep in text or (os.altsep and os.altsep in text):  # a path: that file, not another of its name
+        from ..io.outputs import identities
+        given = identities([text])
+        named = [k for k, p in enumerate(inputs) if identities([p]) & given]
+        if not named:
+            raise InvalidParameterError(f"{input_path}: {text} is not one of the survey's files"
+                                        + ("" if os.path.exists(text) else " (no such file)")
+                                        + "; give one of them, its name or its number")
+    else:
+        named = [k for k, p in enumerate(inputs) if os.path.basename(p) == text] \
+            or [k for k, p in enumerate(inputs) if stem_of(p) == text]
     if len(named) == 1:
         return named[0]
     if len(named) > 1:
@@ -56,13 +68,26 @@ def only_index(only, inputs: Sequence[str], input_path: str) -> int:
 NAME_FIELD = "{name}"
 
 
+def check_name_field(tiling, *paths) -> None:
+    """Refuse ``{name}`` in an output's path of a run of every file (``tiling`` without ``only``, or None):
+    it stands for the one file's name, and such a run wrote a file named "{name}.tif" (an HPC reviewer's
+    job array whose task id was unset)."""
+    if tiling is not None and str(getattr(tiling, "only", "")) != "":
+        return
+    for path in paths:
+        if path and NAME_FIELD in os.fspath(path):
+            raise InvalidParameterError(f"{os.fspath(path)}: {NAME_FIELD} stands for the name of the one file of a "
+                                        "survey that a run classifies (--only, One file of the survey), and this run "
+                                        "has none: give that file, or a path without " + NAME_FIELD)
+
+
 def only_outputs(target: str, output_path: Optional[str], dtm_path: Optional[str]) -> Tuple[Optional[str], Optional[str]]:
     """Where one file's outputs go: ``output_path`` a .las/.laz (its classified copy) or a folder
     (made if missing; the copy there under the file's name, a COPC file's as .laz), ``dtm_path`` a .tif
     or a folder (the DTM there as the file's name .tif); in either, ``{name}`` is the file's name without
     its extension. A folder, or a path with ``{name}``, is what every job of an array is given, each
     writing its own file."""
-    stem = re.sub(r"(\.copc)?\.la[sz]$", "", os.path.basename(target), flags=re.I)
+    stem = stem_of(target)
     out = dtm = None
     if output_path:
         output_path = os.fspath(output_path).replace(NAME_FIELD, stem)
@@ -84,7 +109,7 @@ def fixed_names_warning(target: str, output_path: Optional[str], dtm_path: Optio
     no ``{name}``, another name): the jobs of an array all given that path overwrite each other's outputs,
     the last one's left. "" otherwise."""
     from ..progress import WARNING_PREFIX
-    stem = re.sub(r"(\.copc)?\.la[sz]$", "", os.path.basename(target), flags=re.I)
+    stem = stem_of(target)
     fixed = [os.fspath(p) for p, exts in ((output_path, LAS_EXTENSIONS), (dtm_path, (".tif", ".tiff")))
              if p and NAME_FIELD not in os.fspath(p) and _ext(p) in exts and stem not in os.path.basename(os.fspath(p))]
     if not fixed:
@@ -92,6 +117,25 @@ def fixed_names_warning(target: str, output_path: Optional[str], dtm_path: Optio
     return (f"{WARNING_PREFIX}{' and '.join(fixed)}: not named after {os.path.basename(target)}: the jobs of an array "
             "given the same path overwrite each other's output, the last one's kept. Give a folder, or {name} in "
             "the path, for each job's own file.")
+
+
+def check_names_apart(inputs: Sequence[str], k: int, output_path: Optional[str], dtm_path: Optional[str]) -> None:
+    """Refuse outputs of file ``k`` that another file of the survey would have too, as a run of the whole
+    survey refuses them: two files of one name (a .vpc gathering several delivery folders), a.las beside
+    a.laz, b.copc.laz beside b.laz. Each job of an array would write the same file, the last one's kept,
+    without a word. A fixed path (neither a folder nor ``{name}``) is every file's: it is warned about
+    (:func:`fixed_names_warning`), not refused."""
+    mine = only_outputs(inputs[k], output_path, dtm_path)
+    fixed = (output_path and NAME_FIELD not in os.fspath(output_path) and _ext(output_path) in LAS_EXTENSIONS,
+             dtm_path and NAME_FIELD not in os.fspath(dtm_path) and _ext(dtm_path) in (".tif", ".tiff"))
+    for m, other in enumerate(inputs):
+        if m == k:
+            continue
+        theirs = only_outputs(other, output_path, dtm_path)
+        for what, a, b, same in zip(("classified copy", "DTM"), mine, theirs, fixed):
+            if a and not same and os.path.normcase(a) == os.path.normcase(b):
+                raise InputError(f"{inputs[k]} and {other} would both have the {what} {a}: each one's job would "
+                                 "overwrite the other's; rename one of them")
 
 
 def check_not_beside_inputs(output_path: Optional[str], inputs: Sequence[str]) -> None:
@@ -124,12 +168,13 @@ def make_output_folders(paths: Sequence[Optional[str]]) -> None:
 
 def fit_to_files(size: float, infos: Sequence[LasInfo], multiple_of: float = 1.0) -> float:
     """The planned tile ``size`` of a run of one file fitted to the survey's files: at most their usual
-    side S (the median of their shorter sides, in whole 10 m), else the largest S / n not below half of
+    side S (the median of their longer sides, in whole 10 m: a delivery's partial files on its edges
+    and along a corridor are slivers of the grid, one side whole), else the largest S / n not below half of
     ``size``, so that on a delivery on multiples of S (1 km files on whole kilometres) a file is whole
     tiles and its job filters its own area and the buffers only; tiles straddling its edges make it
     filter its neighbours' points too (bench/one_file.py). From every file's header, so that each job of
     the array plans the same tiles; a multiple of 10 m and of ``multiple_of`` (the DTM cell)."""
-    sides = sorted(min(i.maxs[0] - i.mins[0], i.maxs[1] - i.mins[1]) for i in infos if i.count)
+    sides = sorted(max(i.maxs[0] - i.mins[0], i.maxs[1] - i.mins[1]) for i in infos if i.count)
     side = max(10.0, round(sides[len(sides) // 2] / 10.0) * 10.0)  # (a 1 km file's points span 999.99 m)
 
     def fits(s):

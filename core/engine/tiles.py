@@ -516,15 +516,12 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
             raise InvalidParameterError(f"{input_path}: one file of a survey is chosen in a survey input (a folder or "
                                         "a .vpc); this input is a single file")
         only = only_index(tiling.only, inputs, input_path)
-    note = folder_note(input_path)
-    if note:
+    for note in folder_note(input_path).splitlines():
         log(note)
     infos = [scan_header(p) for p in inputs]
     check_survey(infos)
     if not any(i.count for i in infos):
         raise InputError(f"{input_path}: the input holds no points")
-    if only is not None and not infos[only].count:
-        raise InputError(f"{inputs[only]}: the file holds no points: nothing to classify")
     empty = [os.path.basename(i.path) for i in infos if not i.count]
     if empty and only is None:  # (a survey's empty file was taken without a word: an HPC reviewer)
         log(f"{len(empty):,} of the {len(infos):,} input files hold no points ({', '.join(empty[:3])}"
@@ -565,15 +562,19 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     if only is None:
         outs = check_tiled_outputs(inputs, output_path, dtm_path, [i.point_format for i in infos], log)
     else:  # one file's copy, into a folder every job of an array shares, or a .las/.laz
-        from .one_file import check_not_beside_inputs, fixed_names_warning, make_output_folders, only_outputs
+        from .one_file import (check_names_apart, check_not_beside_inputs, fixed_names_warning, make_output_folders,
+                               only_outputs)
         warning = fixed_names_warning(inputs[only], output_path, dtm_path)
         if warning:
             log(warning)
+        check_names_apart(inputs, only, output_path, dtm_path)
         output_path, dtm_path = only_outputs(inputs[only], output_path, dtm_path)
         check_not_beside_inputs(output_path, inputs)
         make_output_folders([output_path, dtm_path])
         mine = check_tiled_outputs([inputs[only]], output_path, dtm_path, [infos[only].point_format], log)
         outs = [mine[0] if m == only else None for m in range(len(inputs))]
+        if not infos[only].count:  # (as a run of the whole survey writes it: an empty copy, a note)
+            return _empty_file_run(inputs[only], outs[only], dtm_path, infos[only], log)
     # the DTM's grid from the headers: a DTM cell far too small for the survey is refused now
     if dtm_path and dtm.extent is not None:
         counted = [i for i in infos if i.count]
@@ -606,7 +607,7 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
         log(f"{WARNING_PREFIX}the tile buffer ({buffer_m:g} m) is less than the filter's reach ({reach:g} m): points "
             "near the tile edges may be classified otherwise than in a run of the whole cloud, and the DTM may show "
             "the tile lines; leave the buffer at -1 (the filter's reach) unless you mean it.")
-    density = sample_density(next(i.path for i in infos if i.count))
+    density = _survey_density(infos, log)
     cluster = None
     from .cluster import parse_scheduler
     if parse_scheduler(tiling.scheduler)[0] == "address":
@@ -621,6 +622,36 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
         if cluster is not None:
             cluster.close()
         raise
+
+
+def _survey_density(infos, log) -> float:
+    """The points per m² the tiles are planned for: the first file's with points (sample_density), or where
+    it cannot be read the next one's: one damaged file failed every job of an array that sampled it, the
+    jobs whose tiles never read it too (an HPC reviewer). The damaged file fails the runs that read it."""
+    first = None
+    for info in (i for i in infos if i.count):
+        try:
+            return sample_density(info.path)
+        except (Cancelled, MemoryError):
+            raise
+        except Exception as err:  # noqa: BLE001 - a damaged file (laspy, lazrs, or said already): the next one
+            first = first or err
+            said = str(err) if isinstance(err, GroundSieveError) else f"{info.path}: {type(err).__name__}: {err}"
+            log(f"{WARNING_PREFIX}{said}; the tiles are planned from the next file's points.")
+    if first is None:
+        return 1.0
+    raise first
+
+
+def _empty_file_run(path, out, dtm_path, info, log) -> "TiledRun":
+    """The run of one empty file of a survey: its copy (empty, as a run of the whole survey writes it), no
+    DTM; a job of an array for a delivery's empty tile (all water, beyond the flight) ends done."""
+    from ..io.lasfiles import write_classified_stream
+    log(f"{path}: the file holds no points: its classified copy is empty" + (", and no DTM is made for it."
+                                                                              if dtm_path else "."))
+    if out:
+        write_classified_stream(path, out, np.zeros(0, dtype=np.uint8))
+    return TiledRun([path], [out] if out else [], 0, 0, info.crs_wkt, 0.0, 0.0, 0, None)
 
 
 def _say_tiles_beyond_workers(size: float, buffer_m: float, density: float, per_task: int, tiling: TileOptions,
@@ -696,9 +727,9 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
         name, files = os.path.basename(inputs[only]), len(inputs)
         inputs, infos, outs = [inputs[m] for m in keep], [infos[m] for m in keep], [outs[m] for m in keep]
         one = dict(index=keep.index(only), of=files, tiles=tiles_of, clip=box)
-        log(f"{name}, file {only} of the survey's {files:,} (numbered from 0), alone: its tiles read their buffers "
-            f"from {len(keep) - 1:,} neighbouring file(s); every file run so on the same tiles gets the classes and "
-            "DTM of a run of the whole survey.")
+        log(f"{name}, file {only} of the survey's {files:,} (numbered from 0), is the one classified: its tiles read "
+            f"their buffers from {len(keep) - 1:,} neighbouring file(s); every file run so on the same tiles gets the "
+            "classes and DTM of a run of the whole survey.")
     elif dtm_path and dtm.extent is not None and not output_path:  # a DTM of an area alone: its tiles only
         from .one_file import neighbours, reach_box
         x0, y0 = dtm_grid.x0, dtm_grid.top - dtm_grid.nrows * dtm_grid.cell
@@ -717,8 +748,12 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
         f"({'set' if tiling.buffer_m is not None else getattr(algorithm, 'reach_words', 'the filter reach')}); "
         f"{tiling.worker_count} worker(s)."
         + ("" if tiling.tile_size_m or cluster is not None else
-           f" (The tile size is planned from the memory budget shared by the workers: set it, {size:g}, for the "
-           "same tiles and so the same classes and DTM with other workers or on another machine.)"))
+           " (The tile size is planned from the memory budget shared by the workers"
+           + (" and fitted to the survey's files: a run of the whole survey with this tile size set gives the same "
+              f"classes and DTM; set it, {size:g}, in every job for the same tiles on any machine.)" if one is not None
+              and one["index"] is not None else
+              f": set it, {size:g}, for the same tiles and so the same classes and DTM with other workers or on "
+              "another machine.)")))
     steps.check()
     parent = tiling.work_dir or os.path.dirname(os.path.abspath(output_path or dtm_path or inputs[0]))
     if os.path.exists(parent) and not os.path.isdir(parent):

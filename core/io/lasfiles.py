@@ -223,7 +223,9 @@ def read_vpc(path: str) -> List[str]:
 
 
 def expand_inputs(path: str) -> List[str]:
-    """The point-cloud files behind an input: itself, the LAS/LAZ files of a folder (sorted), or
+    """The point-cloud files behind an input: itself, the LAS/LAZ files of a folder (sorted; hidden
+    ones, named from a dot, left out: a killed run's temporary ``.NAME.laz.gs...part.laz`` beside its
+    classified files broke every later run on that folder, an HPC reviewer; macOS's ``._NAME.laz``), or
     the files a ``.vpc`` references."""
     path = os.fspath(path)
     if os.path.isdir(path):
@@ -236,7 +238,7 @@ def expand_inputs(path: str) -> List[str]:
                              + (f", as {len(broken) - 1:,} more in the folder" if len(broken) > 1 else "")
                              + "; mend or remove the link(s)")
         files = sorted(os.path.join(path, n) for n in names
-                       if _ext(n) in LAS_EXTENSIONS and os.path.isfile(os.path.join(path, n)))
+                       if _ext(n) in LAS_EXTENSIONS and not n.startswith(".") and os.path.isfile(os.path.join(path, n)))
         if not files:
             raise InputError(f"{path}: the folder holds no .las or .laz file")
         return files
@@ -248,15 +250,23 @@ def expand_inputs(path: str) -> List[str]:
 
 
 def folder_note(path: str) -> str:
-    """What a folder given as input holds that its run leaves out: sub-folders (not searched); "" otherwise."""
+    """What a folder given as input holds that its run leaves out: sub-folders (not searched), hidden
+    point clouds (a killed run's temporaries); "" otherwise."""
     if not os.path.isdir(path):
         return ""
-    subs = sorted(n for n in os.listdir(path) if os.path.isdir(os.path.join(path, n)) and not n.startswith("."))
-    if not subs:
-        return ""
-    shown = ", ".join(subs[:3]) + (", ..." if len(subs) > 3 else "")
-    return (f"{WARNING_PREFIX}{path}: {len(subs):,} sub-folder(s) not searched ({shown}): only the .las/.laz files "
-            "in the folder itself are the survey; give a .vpc (or one folder) to take the others too.")
+    names = os.listdir(path)
+    subs = sorted(n for n in names if os.path.isdir(os.path.join(path, n)) and not n.startswith("."))
+    hidden = sorted(n for n in names if n.startswith(".") and _ext(n) in LAS_EXTENSIONS)
+    notes = []
+    if subs:
+        shown = ", ".join(subs[:3]) + (", ..." if len(subs) > 3 else "")
+        notes.append(f"{WARNING_PREFIX}{path}: {len(subs):,} sub-folder(s) not searched ({shown}): only the .las/.laz "
+                     "files in the folder itself are the survey; give a .vpc (or one folder) to take the others too.")
+    if hidden:
+        notes.append(f"{path}: {len(hidden):,} hidden point cloud file(s) left out ({', '.join(hidden[:2])}"
+                     f"{', ...' if len(hidden) > 2 else ''}): names from a dot are a killed run's temporaries or a "
+                     "system's, not the survey's.")
+    return "\n".join(notes)
 
 
 def check_survey(infos: Sequence[LasInfo]) -> None:

@@ -179,15 +179,6 @@ def test_bad_choices_of_the_one_file_are_refused_in_words(survey, tmp_path):
     assert sorted(os.listdir(folder)) == [f"{n}.laz" for n in NAMES]
     with pytest.raises(InvalidParameterError, match="only must be one file of the survey"):
         TileOptions(only=-1)
-    empty = tmp_path / "with_empty"
-    empty.mkdir()
-    las = laspy.read(os.path.join(folder, "a.laz"))
-    las.write(empty / "a.laz")
-    none = laspy.LasData(las.header)
-    none.points = las.points[:0]
-    none.write(empty / "b.laz")
-    with pytest.raises(InputError, match=r"b\.laz: the file holds no points: nothing to classify"):
-        run("b.laz", path=str(empty))
     assert not (tmp_path / "o").exists() or not os.listdir(tmp_path / "o")
 
 
@@ -218,14 +209,15 @@ def test_the_outputs_paths_of_one_file():
 
 
 class _Header:
-    def __init__(self, side):
-        self.mins, self.maxs, self.count = (0.0, 0.0, 0.0), (side, side, 10.0), 1
+    def __init__(self, side, other=None):
+        self.mins, self.maxs, self.count = (0.0, 0.0, 0.0), (side, side if other is None else other, 10.0), 1
 
 
 @pytest.mark.parametrize("planned, side, cell, fitted", [
     (390.0, 1000.0, 1.0, 250.0),     # a divisor of the files' side: a file is whole tiles
     (600.0, 999.99, 1.0, 500.0),     # (a 1 km file's points span 999.99 m)
     (2000.0, 1000.0, 1.0, 1000.0),   # never wider than the files
+    (400.0, "slivers", 1.0, 110.0),  # a delivery of 110 m files with partial ones on its edges: their long side
     (700.0, 122.0, 1.0, 120.0),
     (390.0, 1230.0, 1.0, 390.0),     # no divisor of 1230 m between 195 and 390 m on whole 10 m: as planned
     (50.0, 1000.0, 1.0, 50.0),
@@ -233,7 +225,10 @@ class _Header:
 ])
 def test_planned_tiles_are_fitted_to_the_files(planned, side, cell, fitted):
     from groundsieve.core.engine.one_file import fit_to_files
-    assert fit_to_files(planned, [_Header(side)] * 3, multiple_of=cell) == pytest.approx(fitted)
+    headers = [_Header(side)] * 3
+    if side == "slivers":  # 4 whole files, 6 slivers of 110 x 8 m and 60 x 110 m
+        headers = [_Header(110.0)] * 4 + [_Header(110.0, 8.0)] * 3 + [_Header(60.0, 110.0)] * 3
+    assert fit_to_files(planned, headers, multiple_of=cell) == pytest.approx(fitted)
 
 
 def test_a_file_without_ground_gets_the_dtm_its_neighbours_ground_makes(survey, tmp_path):
@@ -313,3 +308,109 @@ def test_dtm_cells_beside_a_lake_across_the_files_are_the_whole_runs(survey, tmp
                                 dtm_path=str(tmp_path / "dtm"), dtm=DTMOptions(cell_size_m=1.0))
         parts[name] = _same_cells(run.dtm_path, tmp_path / "whole.tif")
     assert np.array_equal(parts["a"][:, -1], parts["b"][:, 0])  # (a's east column is b's west one)
+
+
+def test_files_whose_outputs_would_clash_are_refused_as_the_whole_run_refuses_them(survey, tmp_path):
+    """Two files of one name in a .vpc, a.las beside a.laz (one DTM name): every job would write the
+    other's output, the last one's kept, without a word (an HPC reviewer)."""
+    other = tmp_path / "second_delivery"
+    other.mkdir()
+    laspy.read(os.path.join(survey["folder"], "d.laz")).write(other / "a.laz")
+    files = [os.path.join(survey["folder"], f"{n}.laz") for n in "abc"] + [str(other / "a.laz")]
+    vpc = tmp_path / "two.vpc"
+    write_vpc(str(vpc), [scan_header(p) for p in files], files)
+    with pytest.raises(InputError, match=r"a\.laz and .*second_delivery/a\.laz would both have the classified copy "
+                                         r".*cls/a\.laz: each one's job would overwrite the other's"):
+        run_ground_filter(str(vpc), str(tmp_path / "cls"), SMRF(), options=_options(only=0))
+    pair = tmp_path / "pair"
+    pair.mkdir()
+    laspy.read(os.path.join(survey["folder"], "a.laz")).write(pair / "a.las")
+    laspy.read(os.path.join(survey["folder"], "b.laz")).write(pair / "a.laz")
+    with pytest.raises(InputError, match=r"a\.las and .*a\.laz would both have the DTM .*dtm/a\.tif"):
+        run_ground_filter(str(pair), str(tmp_path / "cls2"), SMRF(), options=_options(only="a.las"),
+                          dtm_path=str(tmp_path / "dtm"), dtm=DTMOptions(cell_size_m=1.0))
+    # their copies do not clash (a.las, a.laz): without a DTM the job runs
+    run = run_ground_filter(str(pair), str(tmp_path / "cls2"), SMRF(), options=_options(only="a.las"))
+    assert run.outputs == [str(tmp_path / "cls2" / "a.las")]
+
+
+def test_a_file_is_named_by_its_name_without_extension_and_a_path_elsewhere_is_refused(survey, tmp_path):
+    run = run_ground_filter(survey["folder"], str(tmp_path / "o"), SMRF(), options=_options(only="c"))
+    assert run.inputs == [os.path.join(survey["folder"], "c.laz")]
+    elsewhere = tmp_path / "copy"
+    elsewhere.mkdir()
+    laspy.read(os.path.join(survey["folder"], "c.laz")).write(elsewhere / "c.laz")
+    with pytest.raises(InvalidParameterError, match=r"copy/c\.laz is not one of the survey's files; give one of them"):
+        run_ground_filter(survey["folder"], str(tmp_path / "o2"), SMRF(), options=_options(only=str(elsewhere / "c.laz")))
+
+
+def test_name_fields_without_one_file_are_refused(survey, tmp_path):
+    with pytest.raises(InvalidParameterError, match=r"dtm/\{name\}\.tif: \{name\} stands for the name of the one file"):
+        run_ground_filter(survey["folder"], None, SMRF(), options=_options(), dtm_path=str(tmp_path / "dtm" / "{name}.tif"))
+    assert not os.path.exists(tmp_path / "dtm")
+
+
+def test_an_empty_file_of_the_survey_gets_its_empty_copy_and_no_dtm(survey, tmp_path):
+    folder = tmp_path / "with_empty"
+    folder.mkdir()
+    las = laspy.read(os.path.join(survey["folder"], "a.laz"))
+    las.write(folder / "a.laz")
+    none = laspy.read(os.path.join(survey["folder"], "b.laz"))
+    none.points = none.points[:0]
+    none.write(folder / "b.laz")
+    logs = []
+    run = run_ground_filter(str(folder), str(tmp_path / "cls"), SMRF(), options=_options(only="b.laz"),
+                            dtm_path=str(tmp_path / "dtm"), dtm=DTMOptions(cell_size_m=1.0), log=logs.append)
+    assert run.point_count == 0 and run.dtm_path is None and run.outputs == [str(tmp_path / "cls" / "b.laz")]
+    copy = laspy.read(tmp_path / "cls" / "b.laz")
+    assert len(copy.points) == 0 and copy.header.point_format.id == none.header.point_format.id
+    assert not os.path.exists(tmp_path / "dtm" / "b.tif")
+    assert any("b.laz: the file holds no points: its classified copy is empty, and no DTM is made for it" in line
+               for line in logs)
+
+
+def test_a_damaged_first_file_fails_only_the_jobs_that_read_it(tmp_path):
+    """The tiles are planned from the first file's density: a damaged first file failed every job of the
+    array; now the next file's plans them, and only the jobs reading the damaged file fail."""
+    write_scene(make_scene(SceneSpec(size_m=180.0, density_per_m2=1.0, seed=3)), tmp_path / "whole.laz")
+    las = laspy.read(tmp_path / "whole.laz")
+    folder = tmp_path / "row"
+    folder.mkdir()
+    x = np.asarray(las.x)
+    x0 = float(np.floor(las.header.mins[0] / 30.0) * 30.0)
+    for k in range(3):
+        part = laspy.LasData(las.header)
+        part.points = las.points[(x >= x0 + 60 * k) & (x < x0 + 60 * (k + 1))]
+        part.write(folder / f"f{k}.laz")
+    data = (folder / "f0.laz").read_bytes()
+    (folder / "f0.laz").write_bytes(data[:len(data) // 2])  # truncated: its header still says every point
+    logs = []
+    run = run_ground_filter(str(folder), str(tmp_path / "out"), SMRF(), options=_options(only=2), log=logs.append)
+    assert run.point_count == scan_header(str(folder / "f2.laz")).count
+    assert any("f0.laz" in line and "the tiles are planned from the next file's points" in line for line in logs)
+    with pytest.raises(InputError, match=r"f0\.laz"):
+        run_ground_filter(str(folder), str(tmp_path / "out"), SMRF(), options=_options(only=1))
+
+
+def test_hidden_point_clouds_in_a_survey_folder_are_left_out_and_said(survey, tmp_path):
+    """A job killed while writing leaves .NAME.laz.gs<host>.<pid>-<random>.part.laz beside the classified
+    files; that folder, a survey input, then failed every run on it (an HPC reviewer)."""
+    folder = tmp_path / "cls"
+    folder.mkdir()
+    for name in NAMES:
+        laspy.read(os.path.join(survey["folder"], f"{name}.laz")).write(folder / f"{name}.laz")
+    (folder / ".a.laz.gsnode17.4242-abc.part.laz").write_bytes(b"")
+    logs = []
+    run = run_ground_filter(str(folder), str(tmp_path / "o"), SMRF(), options=_options(only=0), log=logs.append)
+    assert run.inputs == [str(folder / "a.laz")]
+    assert any("1 hidden point cloud file(s) left out (.a.laz.gsnode17.4242-abc.part.laz)" in line for line in logs)
+
+
+def test_an_empty_only_on_the_command_line_is_refused(survey, tmp_path, capsys):
+    """An array's task id unset (--only "") had run every file of the survey."""
+    from groundsieve.core.engine.cli import main
+    code = main(["smrf", "--input", survey["folder"], "--output", str(tmp_path / "cls"), "--only", "", "--json"])
+    doc = json.loads(capsys.readouterr().out)
+    assert code == 1 and doc["kind"] == "parameter"
+    assert doc["error"].startswith("--only is empty: give one file of the survey") and "SLURM_ARRAY_TASK_ID" in doc["error"]
+    assert not (tmp_path / "cls").exists()
