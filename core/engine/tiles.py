@@ -1270,7 +1270,9 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             points = _dtm_extent(dtm_writer.grid, area_box, lambda _m: None)
             if points is not dtm_writer.grid:  # beyond the points' box nodata, as the whole run's DTM placed in it
                 dtm_writer.blank_outside(points)
-            workflow.say_extent(dtm_out, None if dtm_writer.has_values_in(dtm_out) else 0, unit, log)
+            workflow.say_extent(dtm_out, None if dtm_writer.has_values_in(dtm_out) else 0, unit, log,
+                                "the extent given" if one is None or one["index"] is None else
+                                f"the extent given over {os.path.basename(inputs[one['index']])}'s cells")
     if dtm_out is not None and not n_copc and one is None:  # (one file's neighbours hold a few tiles' points)
         _say_stray_tiles(tiles, grid, dtm_out, log)
     if dtm_writer is not None and not dtm_points:  # (as a whole run refuses it, not an empty DTM written)

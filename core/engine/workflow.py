@@ -768,11 +768,11 @@ def place_in(values: np.ndarray, grid: GridSpec, wanted: GridSpec) -> np.ndarray
     return out
 
 
-def say_extent(grid: GridSpec, valued: Optional[int], unit: str, log) -> None:
+def say_extent(grid: GridSpec, valued: Optional[int], unit: str, log, what: str = "the extent given") -> None:
     """The log's line on a DTM made for the extent given (``valued``: its cells with a value, None when not
-    counted), a warning when none has one."""
+    counted), a warning when none has one; ``what`` the grid is (one file's cells of it)."""
     x1, y0 = grid.x0 + grid.ncols * grid.cell, grid.top - grid.nrows * grid.cell
-    line = (f"DTM: the extent given, x {grid.x0:,.2f} to {x1:,.2f}, y {y0:,.2f} to {grid.top:,.2f} ({unit}, on "
+    line = (f"DTM: {what}, x {grid.x0:,.2f} to {x1:,.2f}, y {y0:,.2f} to {grid.top:,.2f} ({unit}, on "
             f"multiples of the cell): {grid.ncols:,} x {grid.nrows:,} cells"
             + (f", {valued:,} of them with a value." if valued is not None else "."))
     log(line if valued != 0 else f"{WARNING_PREFIX}{line} The extent holds no ground: is it in the cloud's CRS?")
