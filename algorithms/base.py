@@ -91,8 +91,9 @@ intermediate grids are not written in a tiled run.</p>
 <p><i>One file of the survey</i> (advanced; for a job array, one batch job per file): its number from 0 (a
 .vpc's files in its order, a folder's by name; e.g. <code>--ONLY=$SLURM_ARRAY_TASK_ID</code> in qgis_process),
 its name or its path. Only that file's points are classified, on the tiles of a run of the whole survey,
-each reading its buffer from the neighbouring files: with the same parameters in every job, the files'
-classes and DTM cells are those of one run of the whole survey. The outputs are that file's: in their
+each reading its buffer from the neighbouring files: with one <i>Tile size</i> set in every job, the files'
+classes and DTM cells are those of one run of the whole survey with that tile size (left at 0, each job fits
+its tiles to the files, and its log names their size). The outputs are that file's: in their
 paths <code>{name}</code> is its name without extension (<code>--OUTPUT=out/{name}.laz
 --DTM=dtm/{name}.tif</code>), so that every job writes its own.</p>
 """

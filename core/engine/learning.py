@@ -412,8 +412,8 @@ def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_pat
     refuse_in_a_workers_import()
     input_path, output_path, model_path = os.fspath(input_path), os.fspath(output_path), os.fspath(model_path)
     dtm_path = os.fspath(dtm_path) if dtm_path is not None else None
-    from .one_file import check_name_field
-    check_name_field(tiling, output_path, dtm_path)
+    from .one_file import check_only
+    check_only(tiling, input_path, output_path, dtm_path)
     if needs_tiling(input_path, tiling or TileOptions()):
         return classify_survey(input_path, output_path, model_path, dtm_path=dtm_path, dtm=dtm,
                                ignore_classes=ignore_classes, tiling=tiling, progress=progress,

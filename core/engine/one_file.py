@@ -36,6 +36,12 @@ def only_index(only, inputs: Sequence[str], input_path: str) -> int:
     text = str(only).strip()
     if re.fullmatch(r"\d+", text):
         k = int(text)
+        same = [m for m, p in enumerate(inputs) if stem_of(p) == text and m != k]
+        if same:  # (a delivery of tiles named by number: 1.laz, 2.laz, ...; a reviewer's --only 1 ran 2.laz)
+            raise InvalidParameterError(
+                f"{input_path}: {text} is both a file's number and a file's name ({os.path.basename(inputs[same[0]])}, "
+                f"number {same[0]}): give the name with its extension for that file, as in an array's "
+                f"--only \"$SLURM_ARRAY_TASK_ID.laz\"")
         if k >= n:
             raise InvalidParameterError(
                 f"{input_path}: no file {k} in the survey: it has {n:,} file(s), numbered 0 to {n - 1:,} (for a job "
@@ -68,11 +74,15 @@ def only_index(only, inputs: Sequence[str], input_path: str) -> int:
 NAME_FIELD = "{name}"
 
 
-def check_name_field(tiling, *paths) -> None:
-    """Refuse ``{name}`` in an output's path of a run of every file (``tiling`` without ``only``, or None):
-    it stands for the one file's name, and such a run wrote a file named "{name}.tif" (an HPC reviewer's
-    job array whose task id was unset)."""
+def check_only(tiling, input_path: str, *paths) -> None:
+    """Before any run: refuse ``only`` (``tiling``'s) on an input that is not a survey, where a file that
+    fits in memory ran whole, ``only`` unheard and "{name}" written as such (a code reviewer); and refuse
+    ``{name}`` in an output's path of a run of every file: such a run wrote a file named "{name}.tif" (an
+    HPC reviewer's job array whose task id was unset)."""
     if tiling is not None and str(getattr(tiling, "only", "")) != "":
+        if not (os.path.isdir(input_path) or _ext(input_path) == ".vpc"):
+            raise InvalidParameterError(f"{input_path}: one file of a survey is chosen in a survey input (a folder or "
+                                        "a .vpc); this input is a single file")
         return
     for path in paths:
         if path and NAME_FIELD in os.fspath(path):
@@ -110,8 +120,11 @@ def fixed_names_warning(target: str, output_path: Optional[str], dtm_path: Optio
     the last one's left. "" otherwise."""
     from ..progress import WARNING_PREFIX
     stem = stem_of(target)
+    def names_it(path):  # the file's name, then the end or a separator: t1.laz, t1_ground.laz; not data.laz for a
+        base = os.path.splitext(os.path.basename(path))[0]
+        return base.startswith(stem) and (len(base) == len(stem) or not base[len(stem)].isalnum())
     fixed = [os.fspath(p) for p, exts in ((output_path, LAS_EXTENSIONS), (dtm_path, (".tif", ".tiff")))
-             if p and NAME_FIELD not in os.fspath(p) and _ext(p) in exts and stem not in os.path.basename(os.fspath(p))]
+             if p and NAME_FIELD not in os.fspath(p) and _ext(p) in exts and not names_it(os.fspath(p))]
     if not fixed:
         return ""
     return (f"{WARNING_PREFIX}{' and '.join(fixed)}: not named after {os.path.basename(target)}: the jobs of an array "
@@ -186,13 +199,34 @@ def fit_to_files(size: float, infos: Sequence[LasInfo], multiple_of: float = 1.0
             return part
     if size <= side:
         return size
-    return math.ceil(side / multiple_of - 1e-9) * multiple_of if multiple_of > 0 else side
+    # (a cell that does not divide the side: the largest multiple of it within the side, never wider)
+    return max(math.floor(side / multiple_of + 1e-9), 1) * multiple_of if multiple_of > 0 else side
 
 
-def tile_range(info: LasInfo, size: float) -> Tuple[int, int, int, int]:
-    """(i0, i1, j0, j1): the tiles of ``size`` (on multiples of it) the file's header bounds touch."""
-    return (math.floor(info.mins[0] / size), math.floor(info.maxs[0] / size),
-            math.floor(info.mins[1] / size), math.floor(info.maxs[1] / size))
+def tile_range(box, size: float) -> Tuple[int, int, int, int]:
+    """(i0, i1, j0, j1): the tiles of ``size`` (on multiples of it) a box (xmin, ymin, xmax, ymax; a file's
+    header bounds, an extent) touches."""
+    return (math.floor(box[0] / size), math.floor(box[2] / size), math.floor(box[1] / size), math.floor(box[3] / size))
+
+
+def header_box(info: LasInfo) -> Tuple[float, float, float, float]:
+    return info.mins[0], info.mins[1], info.maxs[0], info.maxs[1]
+
+
+def clip_shares(infos: Sequence[LasInfo], keep_whole: Optional[int], box) -> List[float]:
+    """Each file's share of its points that the binning keeps: 1 for ``keep_whole`` (the one file), else
+    its header area within ``box`` (the points spread evenly): the working folder's disk is priced on them
+    (a job of an array had been priced its 8 neighbours whole)."""
+    shares = []
+    for k, info in enumerate(infos):
+        x0, y0, x1, y1 = header_box(info)
+        if k == keep_whole:
+            shares.append(1.0)
+            continue
+        w, h = max(x1 - x0, 1e-9), max(y1 - y0, 1e-9)
+        inside = max(0.0, min(x1, box[2]) - max(x0, box[0])) * max(0.0, min(y1, box[3]) - max(y0, box[1]))
+        shares.append(min(1.0, inside / (w * h)) if x1 > x0 and y1 > y0 else 1.0)
+    return shares
 
 
 def reach_box(tiles: Tuple[int, int, int, int], size: float, buffer: float) -> Tuple[float, float, float, float]:

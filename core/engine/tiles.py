@@ -32,6 +32,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import math
+import numbers
 import os
 import re
 import shutil
@@ -151,8 +152,8 @@ class TileOptions:
             raise InvalidParameterError(f"parallel must be auto, threads or processes (got {self.parallel!r})")
         if int(self.workers) != self.workers or self.workers < 0:
             raise InvalidParameterError(f"workers must be a whole number >= 0 (0 = every core; got {self.workers})")
-        if not isinstance(self.only, (str, int, os.PathLike)) or isinstance(self.only, bool) \
-                or (isinstance(self.only, int) and self.only < 0):
+        if not isinstance(self.only, (str, numbers.Integral, os.PathLike)) or isinstance(self.only, bool) \
+                or (isinstance(self.only, numbers.Integral) and self.only < 0):
             raise InvalidParameterError(f"only must be one file of the survey: its place from 0, its name or its path "
                                         f"(got {self.only!r})")
 
@@ -420,14 +421,16 @@ def _say_other_files(output_path: str, folder: str, outs: Sequence[str], log) ->
             "only this run's files. Delete them, or write into an empty folder, to keep only this run's.")
 
 
-def _check_disk(work_dir: str, infos: Sequence[LasInfo], buffer_m: float, size: float) -> None:
+def _check_disk(work_dir: str, infos: Sequence[LasInfo], buffer_m: float, size: float,
+                shares: Optional[Sequence[float]] = None) -> None:
     """Refuse before work when the working folder's disk cannot hold the temporary tiles: each
     input's records in file order (the tiles read their points from them, and the classified copy
     is written from them), the tile parts' indices (the buffer's points in several) and the
     classes; the classified copy's pieces (at most the records' size) come after the parts are
-    removed."""
+    removed. ``shares``: each file's share of its points binned (1 by default; less for a file cut to a box)."""
     overlap = ((size + 2 * buffer_m) / size) ** 2
-    need = sum(i.count * ((i.record_size or 40) * 2 + 8 * overlap + 1) for i in infos)
+    shares = [1.0] * len(infos) if shares is None else shares
+    need = sum(i.count * share * ((i.record_size or 40) * 2 + 8 * overlap + 1) for i, share in zip(infos, shares))
     free = shutil.disk_usage(work_dir).free
     if free < need:
         raise OutputError(f"{work_dir}: the working folder's disk has {free / 1e9:.1f} GB free, the temporary "
@@ -511,10 +514,8 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
     inputs = expand_inputs(input_path)
     only = None  # one file of the survey, buffered by its neighbours (engine/one_file.py)
     if str(tiling.only) != "":
-        from .one_file import only_index
-        if not is_survey_input(input_path):
-            raise InvalidParameterError(f"{input_path}: one file of a survey is chosen in a survey input (a folder or "
-                                        "a .vpc); this input is a single file")
+        from .one_file import check_only, only_index
+        check_only(tiling, input_path)
         only = only_index(tiling.only, inputs, input_path)
     for note in folder_note(input_path).splitlines():
         log(note)
@@ -719,28 +720,30 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
     from .workflow import length_label
     unit = length_label(metres_per_unit(infos[0].crs_wkt) or 1.0)  # (a survey in feet: feet)
     one = None  # the one file's run: its place among the files read, its tiles, the box its neighbours lend
+    survey_box = [min(i.mins[0] for i in infos if i.count), min(i.mins[1] for i in infos if i.count),
+                  max(i.maxs[0] for i in infos if i.count), max(i.maxs[1] for i in infos if i.count)]
     if only is not None:
-        from .one_file import neighbours, reach_box, tile_range
-        tiles_of = tile_range(infos[only], size)
+        from .one_file import header_box, neighbours, reach_box, tile_range
+        tiles_of = tile_range(header_box(infos[only]), size)
         box = reach_box(tiles_of, size, buffer_m)
         keep = neighbours(infos, only, box)
         name, files = os.path.basename(inputs[only]), len(inputs)
         inputs, infos, outs = [inputs[m] for m in keep], [infos[m] for m in keep], [outs[m] for m in keep]
-        one = dict(index=keep.index(only), of=files, tiles=tiles_of, clip=box)
+        one = dict(index=keep.index(only), of=files, tiles=tiles_of, clip=box, survey_box=survey_box)
         log(f"{name}, file {only} of the survey's {files:,} (numbered from 0), is the one classified: its tiles read "
             f"their buffers from {len(keep) - 1:,} neighbouring file(s); every file run so on the same tiles gets the "
             "classes and DTM of a run of the whole survey.")
     elif dtm_path and dtm.extent is not None and not output_path:  # a DTM of an area alone: its tiles only
-        from .one_file import neighbours, reach_box
-        x0, y0 = dtm_grid.x0, dtm_grid.top - dtm_grid.nrows * dtm_grid.cell
-        x1, y1 = dtm_grid.x0 + dtm_grid.ncols * dtm_grid.cell, dtm_grid.top
-        tiles_of = (math.floor(x0 / size), math.floor(x1 / size), math.floor(y0 / size), math.floor(y1 / size))
+        from .one_file import neighbours, reach_box, tile_range
+        g = dtm_grid
+        tiles_of = tile_range((g.x0, g.top - g.nrows * g.cell, g.x0 + g.ncols * g.cell, g.top), size)
         box = reach_box(tiles_of, size, buffer_m)
         keep = [m for m in neighbours(infos, -1, box) if infos[m].count]
         files = len(inputs)
-        if keep:
+        if 0 < len(keep) < sum(1 for i in infos if i.count):  # (only where files are left unread: a single
+            # big file, or an extent over the whole survey, runs as before, its binning in pieces)
             inputs, infos, outs = [inputs[m] for m in keep], [infos[m] for m in keep], [outs[m] for m in keep]
-            one = dict(index=None, of=files, tiles=tiles_of, clip=box)
+            one = dict(index=None, of=files, tiles=tiles_of, clip=box, survey_box=survey_box)
             total = sum(i.count for i in infos)
             log(f"A DTM of its extent alone: the tiles making its cells are filtered, reading {len(keep):,} of the "
                 f"{files:,} file(s), those within their reach.")
@@ -780,12 +783,17 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
                               "choose a folder where you may create files") from err
         lock = _lock_working_folder(work)
         try:
-            _check_disk(parent, [i for i in infos if not i.copc], buffer_m, size)  # COPC files are not binned
+            from .one_file import clip_shares
+            shares = [1.0] * len(infos) if one is None else clip_shares(infos, one["index"], one["clip"])
+            binned = [k for k, i in enumerate(infos) if not i.copc]  # (COPC files are not binned)
+            _check_disk(parent, [infos[k] for k in binned], buffer_m, size, [shares[k] for k in binned])
         except OutputError:
             lock.close()
             _remove_tree(work)
             raise
-    stale = _stale_working_folders(parent, work)
+    # (the jobs of an array share a working folder; where its locks do not reach across nodes, their live
+    # folders would look stale, and the warning invites deleting them: a code reviewer)
+    stale = _stale_working_folders(parent, work) if one is None or one["index"] is None else []
     if stale:
         log(f"{WARNING_PREFIX}{len(stale)} working folder(s) of earlier runs that were killed hold "
             f"{_gb(sum(b for _p, b in stale))} "
@@ -1253,6 +1261,12 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                              "the file's header and its points disagree")
     if one is not None and one["index"] is None:
         total_points = sum(assigned)
+    if one is not None and area_box is not None:
+        # (the box of the points that may enter the DTM, over the whole survey: the tiles this run filtered
+        # know theirs only; beyond them the headers tell: a DTM extent past the survey's edge lost 615 cells
+        # the whole run has, a code reviewer)
+        sb = one["survey_box"]
+        area_box = [min(area_box[0], sb[0]), min(area_box[1], sb[1]), max(area_box[2], sb[2]), max(area_box[3], sb[3])]
     log(f"{getattr(algorithm, 'tiles_done_words', 'Filtered')} {len(keys)} tile(s) in "
         f"{time.perf_counter() - t_tiles:.1f} s.")
     if getattr(algorithm, "ground_of_any_class", False):

@@ -986,8 +986,8 @@ def run_ground_filter(input_path: str, output_path: Optional[str], algorithm, *,
     input_path, output_path, dtm_path = _path(input_path, "input"), _path(output_path, "output"), _path(dtm_path, "DTM")
     options = FilterOptions() if options is None else options
     dtm = DTMOptions() if dtm is None else dtm
-    from .one_file import check_name_field
-    check_name_field(options.tiling, output_path, dtm_path, *(rasters or {}))
+    from .one_file import check_only
+    check_only(options.tiling, input_path, output_path, dtm_path, *(rasters or {}))
     algorithm = _filter_of(algorithm)
     steps = Steps(progress, is_cancelled)
     from ..progress import collecting_warnings

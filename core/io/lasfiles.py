@@ -263,7 +263,7 @@ def folder_note(path: str) -> str:
         notes.append(f"{WARNING_PREFIX}{path}: {len(subs):,} sub-folder(s) not searched ({shown}): only the .las/.laz "
                      "files in the folder itself are the survey; give a .vpc (or one folder) to take the others too.")
     if hidden:
-        notes.append(f"{path}: {len(hidden):,} hidden point cloud file(s) left out ({', '.join(hidden[:2])}"
+        notes.append(f"{WARNING_PREFIX}{path}: {len(hidden):,} hidden point cloud file(s) left out ({', '.join(hidden[:2])}"
                      f"{', ...' if len(hidden) > 2 else ''}): names from a dot are a killed run's temporaries or a "
                      "system's, not the survey's.")
     return "\n".join(notes)

@@ -171,6 +171,10 @@ def test_bad_choices_of_the_one_file_are_refused_in_words(survey, tmp_path):
         run("e.laz")
     with pytest.raises(InvalidParameterError, match=r"a\.laz: one file of a survey is chosen in a survey input"):
         run(0, path=os.path.join(folder, "a.laz"))
+    # a single file that fits in memory runs whole: only is refused there too, before "{name}" is written as such
+    with pytest.raises(InvalidParameterError, match=r"a\.laz: one file of a survey is chosen in a survey input"):
+        run_ground_filter(os.path.join(folder, "a.laz"), str(tmp_path / "o" / "{name}.laz"), SMRF(),
+                          options=FilterOptions(tiling=TileOptions(only=2)))
     with pytest.raises(OutputError, match=r"classified\.vpc: a run of one file of the survey writes that file's "):
         run(0, output=str(tmp_path / "classified.vpc"))
     with pytest.raises(OutputError, match=r"a_c\.laz: the classified copy would go into .*in, which holds the "
@@ -202,6 +206,7 @@ def test_the_outputs_paths_of_one_file():
     assert "and" not in warning.split(":")[0]
     assert "out/all.laz and dtm.tif" in fixed_names_warning("/s/t1.laz", "out/all.laz", "dtm.tif")
     assert not fixed_names_warning("/s/t1.laz", "out", "dtm") and not fixed_names_warning("/s/t1.laz", "t1_c.laz", None)
+    assert fixed_names_warning("/s/a.laz", "/out/data.laz", None)  # (a's name within another: not a's)
     assert only_outputs("/s/t1.laz", "out", "dtm") == ("out/t1.laz", "dtm/t1.tif")
     assert only_outputs("/s/t1.las", "out/{name}.laz", "dtm/{name}_dtm.tif") == ("out/t1.laz", "dtm/t1_dtm.tif")
     assert only_outputs("/s/t1.copc.laz", "out", None) == ("out/t1.laz", None)  # (a copy is plain LAZ)
@@ -217,6 +222,7 @@ class _Header:
     (390.0, 1000.0, 1.0, 250.0),     # a divisor of the files' side: a file is whole tiles
     (600.0, 999.99, 1.0, 500.0),     # (a 1 km file's points span 999.99 m)
     (2000.0, 1000.0, 1.0, 1000.0),   # never wider than the files
+    (2000.0, 1000.0, 3.0, 999.0),    # (a DTM cell that does not divide them: the largest multiple within)
     (400.0, "slivers", 1.0, 110.0),  # a delivery of 110 m files with partial ones on its edges: their long side
     (700.0, 122.0, 1.0, 120.0),
     (390.0, 1230.0, 1.0, 390.0),     # no divisor of 1230 m between 195 and 390 m on whole 10 m: as planned
@@ -414,3 +420,72 @@ def test_an_empty_only_on_the_command_line_is_refused(survey, tmp_path, capsys):
     assert code == 1 and doc["kind"] == "parameter"
     assert doc["error"].startswith("--only is empty: give one file of the survey") and "SLURM_ARRAY_TASK_ID" in doc["error"]
     assert not (tmp_path / "cls").exists()
+
+
+def test_a_file_named_by_a_number_is_not_taken_for_another_files_number(survey, tmp_path):
+    """A delivery of tiles named 1.laz, 2.laz, ...: --only 1 had run 2.laz (file number 1)."""
+    folder = tmp_path / "numbered"
+    folder.mkdir()
+    for k, name in enumerate("abc", 1):
+        laspy.read(os.path.join(survey["folder"], f"{name}.laz")).write(folder / f"{k}.laz")
+    with pytest.raises(InvalidParameterError, match=r"1 is both a file's number and a file's name \(1\.laz, number 0\)"):
+        run_ground_filter(str(folder), str(tmp_path / "o"), SMRF(), options=_options(only=1))
+    run = run_ground_filter(str(folder), str(tmp_path / "o"), SMRF(), options=_options(only="1.laz"))
+    assert run.inputs == [str(folder / "1.laz")]
+    assert TileOptions(only=np.int64(2)).only == 2  # (a task id from a numpy array)
+
+
+def test_a_dtm_extent_past_the_surveys_edge_is_the_whole_runs(survey, tmp_path):
+    """An extent reaching beyond the survey (a model's domain, two epochs on one grid), its DTM alone: the
+    cells beyond the points filtered are cut by the survey's box, not by the filtered tiles' (a code reviewer:
+    615 cells the whole run has were empty)."""
+    folder = tmp_path / "ragged"
+    folder.mkdir()
+    west = float(laspy.read(os.path.join(survey["folder"], "a.laz")).header.mins[0])
+    for name in NAMES:
+        las = laspy.read(os.path.join(survey["folder"], f"{name}.laz"))
+        if name == "c":  # (the survey's west edge uneven: c's points start 15 m further east)
+            las.points = las.points[np.asarray(las.x) >= west + 15.0]
+        las.write(folder / f"{name}.laz")
+    south = float(laspy.read(folder / "a.laz").header.mins[1])
+    x0, y0 = np.floor(west), np.floor(south)
+    extent = (x0 - 20.0, y0 + 70.0, x0 + 25.0, y0 + 110.0)  # north-west, past the west edge: a and c read
+    for fill in (False, True):
+        dtm = DTMOptions(cell_size_m=1.0, extent=extent, fill_outside_hull=fill)
+        run_ground_filter(str(folder), str(tmp_path / f"all{fill}.vpc"), SMRF(), options=_options(),
+                          dtm_path=str(tmp_path / f"whole{fill}.tif"), dtm=dtm)
+        logs = []
+        run_ground_filter(str(folder), None, SMRF(), options=_options(), dtm_path=str(tmp_path / f"area{fill}.tif"),
+                          dtm=dtm, log=logs.append)
+        assert any("A DTM of its extent alone" in line for line in logs)
+        (_g, area, _c), (_wg, whole, _wc) = _raster(tmp_path / f"area{fill}.tif"), _raster(tmp_path / f"whole{fill}.tif")
+        assert np.count_nonzero(whole != -9999) > 300 and np.array_equal(area, whole)
+
+
+def test_jobs_left_to_the_planner_match_a_whole_run_with_the_tile_size_their_log_names(survey, tmp_path):
+    """No tile size set: each job fits its tiles to the files (60 m here, the budget planning far larger
+    ones); a whole run given that size has the same classes."""
+    sizes = set()
+    for k, name in enumerate(NAMES):
+        logs = []
+        run_ground_filter(survey["folder"], str(tmp_path / "jobs"), SMRF(),
+                          options=FilterOptions(tiling=TileOptions(buffer_m=10.0, workers=1, only=k)), log=logs.append)
+        fitted = [line for line in logs if "fitted to the survey's files" in line]
+        assert fitted and fitted[0].startswith("Tiles of 60 instead of ")
+        sizes.add(fitted[0].split()[2])
+    assert sizes == {"60"}
+    run_ground_filter(survey["folder"], str(tmp_path / "whole.vpc"), SMRF(),
+                      options=FilterOptions(tiling=TileOptions(tile_size_m=60.0, buffer_m=10.0, workers=1)))
+    for name in NAMES:
+        assert np.array_equal(laspy.read(tmp_path / "jobs" / f"{name}.laz").classification,
+                              laspy.read(tmp_path / "whole" / f"{name}.laz").classification)
+
+
+def test_the_working_folders_disk_is_priced_on_the_points_binned():
+    """A job reads its neighbours within reach only: their share of points binned is their header's area
+    within the box (a job had been priced its 8 neighbours whole, and refused on a node's scratch disk)."""
+    from groundsieve.core.engine.one_file import clip_shares
+    inside, half, away = _Header(100.0), _Header(100.0), _Header(100.0)
+    half.mins, half.maxs = (100.0, 0.0, 0.0), (200.0, 100.0, 10.0)
+    away.mins, away.maxs = (1000.0, 0.0, 0.0), (1100.0, 100.0, 10.0)
+    assert clip_shares([inside, half, away], 0, (-10.0, -10.0, 150.0, 110.0)) == pytest.approx([1.0, 0.5, 0.0])
