@@ -12,7 +12,7 @@ import pytest
 
 from groundsieve.core.engine.tiles import TileOptions, _fingerprint
 from groundsieve.core.engine.workflow import DTMOptions, FilterOptions, run_ground_filter
-from groundsieve.core.errors import InputError, InvalidParameterError, OutputError
+from groundsieve.core.errors import GroundSieveError, InputError, InvalidParameterError, OutputError
 from groundsieve.core.filters.smrf import SMRF
 from groundsieve.core.io.lasfiles import TileGrid, bin_file, scan_header, write_vpc
 from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
@@ -151,10 +151,30 @@ def test_a_far_file_is_not_read_and_the_neighbours_are_binned_only_where_the_til
     assert clipped[key].count == full[key].count > 0 and clipped[key].own_count == full[key].own_count == 0
 
 
-def test_the_jobs_of_an_array_use_working_folders_of_their_own(survey):
+def test_the_jobs_of_an_array_use_working_folders_of_their_own(survey, tmp_path):
+    """Two jobs sharing a working folder: a stopped job's tiles are kept for it alone; another file's job
+    does not resume from them, and the stopped job run again does."""
+    from groundsieve.tests.core.scenes import flaky_smrf
+    Flaky = flaky_smrf(budget=1)
+    work = tmp_path / "work"
+    work.mkdir()
+
+    def options(only):
+        return FilterOptions(tiling=TileOptions(tile_size_m=30.0, buffer_m=10.0, workers=1, work_dir=str(work),
+                                                only=only))
+    with pytest.raises(GroundSieveError, match="killed"):
+        run_ground_filter(survey["folder"], str(tmp_path / "cls"), Flaky(), options=options(0))
+    assert len(os.listdir(work)) == 1
+    Flaky.failing = False
+    logs = []
+    run_ground_filter(survey["folder"], str(tmp_path / "cls"), Flaky(), options=options(1), log=logs.append)
+    assert not any("Resuming" in line for line in logs) and len(os.listdir(work)) == 1
+    run_ground_filter(survey["folder"], str(tmp_path / "cls"), Flaky(), options=options(0), log=logs.append)
+    assert any("Resuming the interrupted run" in line for line in logs) and os.listdir(work) == []
+    # (the name holds the one file: whatever the files read, a job's folder is its own)
     infos = [scan_header(os.path.join(survey["folder"], f"{n}.laz")) for n in NAMES]
-    grid, options = TileGrid(30.0, 10.0), _options()
-    prints = {_fingerprint(infos, grid, SMRF(), options, None, only) for only in [None] + [i.path for i in infos]}
+    prints = {_fingerprint(infos, TileGrid(30.0, 10.0), SMRF(), _options(), None, only)
+              for only in [None] + [i.path for i in infos]}
     assert len(prints) == 5
 
 
@@ -287,7 +307,7 @@ def test_a_dtm_of_an_extent_alone_filters_only_its_tiles_and_reads_only_the_file
     assert any("reading 2 of the 3 file(s), those within their reach" in line for line in logs)
     assert run.inputs == [str(folder / "f0.laz"), str(folder / "f1.laz")]
     assert 0 < run.tiles < ref.tiles and 0 < run.point_count < ref.point_count
-    (_g, area, _c), (_rg, whole, _rc) = _raster(tmp_path / "area.tif"), _raster(tmp_path / "ref.tif")
+    area, whole = _raster(tmp_path / "area.tif")[1], _raster(tmp_path / "ref.tif")[1]
     assert area.shape == whole.shape == (30, 20) and np.count_nonzero(area != -9999) > 300
     assert np.array_equal(area, whole)
 
@@ -458,7 +478,7 @@ def test_a_dtm_extent_past_the_surveys_edge_is_the_whole_runs(survey, tmp_path):
         run_ground_filter(str(folder), None, SMRF(), options=_options(), dtm_path=str(tmp_path / f"area{fill}.tif"),
                           dtm=dtm, log=logs.append)
         assert any("A DTM of its extent alone" in line for line in logs)
-        (_g, area, _c), (_wg, whole, _wc) = _raster(tmp_path / f"area{fill}.tif"), _raster(tmp_path / f"whole{fill}.tif")
+        area, whole = _raster(tmp_path / f"area{fill}.tif")[1], _raster(tmp_path / f"whole{fill}.tif")[1]
         assert np.count_nonzero(whole != -9999) > 300 and np.array_equal(area, whole)
 
 
