@@ -116,19 +116,27 @@ def test_a_dtm_extent_is_cut_to_the_file_and_a_file_outside_it_gets_no_dtm(surve
                           dtm=DTMOptions(cell_size_m=1.0, extent=extent))
 
 
-def test_a_far_file_is_not_read_and_the_neighbours_are_binned_only_where_the_tiles_reach(tmp_path):
-    """Three files in a row, 60 m each: the tiles of the first (30 m, buffer 10 m) reach into the second,
-    not into the third; of the second only the points within reach are binned."""
+def _row_survey(tmp_path):
+    """Three files in a row, 60 m each, their edges on multiples of 30 m (a 180 m generated scene at 1 point
+    a m²): the folder, and the south-west corner (x on 30 m, y on whole metres)."""
     write_scene(make_scene(SceneSpec(size_m=180.0, density_per_m2=1.0, seed=3)), tmp_path / "whole.laz")
     las = laspy.read(tmp_path / "whole.laz")
     folder = tmp_path / "row"
     folder.mkdir()
     x = np.asarray(las.x)
     x0 = float(np.floor(las.header.mins[0] / 30.0) * 30.0)  # (the files' edges on the tiles' edges)
+    y0 = float(np.floor(las.header.mins[1]))
     for k in range(3):
         part = laspy.LasData(las.header)
         part.points = las.points[(x >= x0 + 60 * k) & (x < x0 + 60 * (k + 1))]
         part.write(folder / f"f{k}.laz")
+    return folder, x0, y0
+
+
+def test_a_far_file_is_not_read_and_the_neighbours_are_binned_only_where_the_tiles_reach(tmp_path):
+    """Three files in a row, 60 m each: the tiles of the first (30 m, buffer 10 m) reach into the second,
+    not into the third; of the second only the points within reach are binned."""
+    folder, _x0, _y0 = _row_survey(tmp_path)
     logs = []
     run_ground_filter(str(folder), str(tmp_path / "out"), SMRF(), options=_options(only=0), log=logs.append)
     assert any("f0.laz, file 0 of the survey's 3" in line and "from 1 neighbouring file(s)" in line for line in logs)
@@ -284,17 +292,7 @@ def test_a_dtm_of_an_extent_alone_filters_only_its_tiles_and_reads_only_the_file
     """No classified copy, a DTM extent over part of a survey (a flood model's domain): only the tiles
     making its cells are filtered, only the files within their reach are read (of them only the points
     within reach), and the DTM is the one a run classifying every point makes."""
-    write_scene(make_scene(SceneSpec(size_m=180.0, density_per_m2=1.0, seed=3)), tmp_path / "whole.laz")
-    las = laspy.read(tmp_path / "whole.laz")
-    folder = tmp_path / "row"
-    folder.mkdir()
-    x = np.asarray(las.x)
-    x0 = float(np.floor(las.header.mins[0] / 30.0) * 30.0)
-    y0 = float(np.floor(las.header.mins[1]))
-    for k in range(3):
-        part = laspy.LasData(las.header)
-        part.points = las.points[(x >= x0 + 60 * k) & (x < x0 + 60 * (k + 1))]
-        part.write(folder / f"f{k}.laz")
+    folder, x0, y0 = _row_survey(tmp_path)
     # in file f0, in its second column of 30 m tiles, whose buffer reaches into f1, not f2
     extent = (x0 + 35.0, y0 + 40.0, x0 + 55.0, y0 + 70.0)
     options = _options()
@@ -398,16 +396,7 @@ def test_an_empty_file_of_the_survey_gets_its_empty_copy_and_no_dtm(survey, tmp_
 def test_a_damaged_first_file_fails_only_the_jobs_that_read_it(tmp_path):
     """The tiles are planned from the first file's density: a damaged first file failed every job of the
     array; now the next file's plans them, and only the jobs reading the damaged file fail."""
-    write_scene(make_scene(SceneSpec(size_m=180.0, density_per_m2=1.0, seed=3)), tmp_path / "whole.laz")
-    las = laspy.read(tmp_path / "whole.laz")
-    folder = tmp_path / "row"
-    folder.mkdir()
-    x = np.asarray(las.x)
-    x0 = float(np.floor(las.header.mins[0] / 30.0) * 30.0)
-    for k in range(3):
-        part = laspy.LasData(las.header)
-        part.points = las.points[(x >= x0 + 60 * k) & (x < x0 + 60 * (k + 1))]
-        part.write(folder / f"f{k}.laz")
+    folder, _x0, _y0 = _row_survey(tmp_path)
     data = (folder / "f0.laz").read_bytes()
     (folder / "f0.laz").write_bytes(data[:len(data) // 2])  # truncated: its header still says every point
     logs = []
