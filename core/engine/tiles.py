@@ -571,10 +571,12 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
         check_names_apart(inputs, only, output_path, dtm_path)
         output_path, dtm_path = only_outputs(inputs[only], output_path, dtm_path)
         check_not_beside_inputs(output_path, inputs)
-        make_output_folders([output_path, dtm_path])
-        mine = check_tiled_outputs([inputs[only]], output_path, dtm_path, [infos[only].point_format], log)
+        empty = not infos[only].count  # (its DTM's folder is not made: it has none)
+        make_output_folders([output_path, None if empty else dtm_path])
+        mine = check_tiled_outputs([inputs[only]], output_path, None if empty else dtm_path,
+                                   [infos[only].point_format], log)
         outs = [mine[0] if m == only else None for m in range(len(inputs))]
-        if not infos[only].count:  # (as a run of the whole survey writes it: an empty copy, a note)
+        if empty:  # (as a run of the whole survey writes it: an empty copy, a note)
             return _empty_file_run(inputs[only], outs[only], dtm_path, infos[only], log)
     # the DTM's grid from the headers: a DTM cell far too small for the survey is refused now
     if dtm_path and dtm.extent is not None:

@@ -388,7 +388,7 @@ def test_an_empty_file_of_the_survey_gets_its_empty_copy_and_no_dtm(survey, tmp_
     assert run.point_count == 0 and run.dtm_path is None and run.outputs == [str(tmp_path / "cls" / "b.laz")]
     copy = laspy.read(tmp_path / "cls" / "b.laz")
     assert len(copy.points) == 0 and copy.header.point_format.id == none.header.point_format.id
-    assert not os.path.exists(tmp_path / "dtm" / "b.tif")
+    assert not os.path.exists(tmp_path / "dtm")
     assert any("b.laz: the file holds no points: its classified copy is empty, and no DTM is made for it" in line
                for line in logs)
 
