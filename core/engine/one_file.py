@@ -22,6 +22,7 @@ from ..errors import InputError, InvalidParameterError, OutputError
 from ..io.lasfiles import LasInfo
 from ..io.outputs import LAS_EXTENSIONS, _ext
 
+
 def stem_of(path: str) -> str:
     """A survey file's name without its extension (.las, .laz, .copc.laz): what ``{name}`` stands for."""
     return re.sub(r"(\.copc)?\.la[sz]$", "", os.path.basename(os.fspath(path)), flags=re.I)
@@ -120,6 +121,7 @@ def fixed_names_warning(target: str, output_path: Optional[str], dtm_path: Optio
     the last one's left. "" otherwise."""
     from ..progress import WARNING_PREFIX
     stem = stem_of(target)
+
     def names_it(path):  # the file's name, then the end or a separator: t1.laz, t1_ground.laz; not data.laz for a
         base = os.path.splitext(os.path.basename(path))[0]
         return base.startswith(stem) and (len(base) == len(stem) or not base[len(stem)].isalnum())
