@@ -58,9 +58,9 @@ farther than this from any ground point empty</i> (advanced, 0 = no limit): data
 bridged by the triangulation. <i>DTM extent</i> (advanced): the DTM covers it, widened to whole cells on multiples of the cell size, nodata
 beyond the points' own DTM: two epochs' DTMs or a model's domain on one grid of one size. QGIS writes an
 extent xmin,xmax,ymin,ymax (an extent in another CRS is reprojected to the cloud's); one that misses the
-points, or is thousands of times their area where its numbers in the other order fit them, is refused. On a survey,
-a DTM with an extent and no classified point cloud filters only the tiles making the extent's cells and reads only
-the files within their reach. Heights of 32,768 or more (a geocentric export) make a
+points, or is thousands of times their area where its numbers in the other order fit them, is refused. (A DTM of
+an extent alone, without the classified cloud, is quicker on a survey: <i>DTM from classified points</i> on the
+classified survey, or the command line without --output, filters only the extent's tiles.) Heights of 32,768 or more (a geocentric export) make a
 Float64 DTM, others Float32.</p>
 <p><b>Ground points as a vector layer</b> (advanced, off by default): the ground points as a PointZ layer with return
 number and intensity; meant for small clouds.</p>

@@ -62,7 +62,10 @@ for a cloud in feet. <b>Fill cells outside the ground hull</b>: nearest value in
 are otherwise bridged by the triangulation. <i>DTM extent</i> (advanced): the DTM covers it, widened to whole cells on multiples of the cell size, nodata
 beyond the points' own DTM: two epochs' DTMs or a model's domain on one grid of one size. QGIS writes an
 extent xmin,xmax,ymin,ymax (an extent in another CRS is reprojected to the cloud's); one that misses the
-points, or is thousands of times their area where its numbers in the other order fit them, is refused.</p>
+points, or is thousands of times their area where its numbers in the other order fit them, is refused.
+On a survey, only the tiles making the extent's cells are read and triangulated, and only the files within
+their reach are read: a model domain's DTM from a county's survey takes the domain's time (its point and
+ground counts are then those of the tiles it read).</p>
 <h3>Surveys</h3>
 <p>A folder, a .vpc, a tile size or a cloud beyond the memory budget runs in square tiles, each
 triangulated with a buffer of 40 m around it (or <i>Tile buffer</i>): a gap in the ground up to that
