@@ -205,10 +205,14 @@ def fit_to_files(size: float, infos: Sequence[LasInfo], multiple_of: float = 1.0
     return max(math.floor(side / multiple_of + 1e-9), 1) * multiple_of if multiple_of > 0 else side
 
 
-def tile_range(box, size: float) -> Tuple[int, int, int, int]:
+def tile_range(box, size: float, closed: bool = False) -> Tuple[int, int, int, int]:
     """(i0, i1, j0, j1): the tiles of ``size`` (on multiples of it) a box (xmin, ymin, xmax, ymax; a file's
-    header bounds, an extent) touches."""
-    return (math.floor(box[0] / size), math.floor(box[2] / size), math.floor(box[1] / size), math.floor(box[3] / size))
+    header bounds, whose points on its east or north edge are in the next tile) touches; ``closed``: cells
+    ending at xmax, ymax (an extent's), which the tile beginning there does not hold."""
+    def last(v):
+        return math.ceil(v / size) - 1 if closed else math.floor(v / size)
+    i0, j0 = math.floor(box[0] / size), math.floor(box[1] / size)
+    return i0, max(i0, last(box[2])), j0, max(j0, last(box[3]))
 
 
 def header_box(info: LasInfo) -> Tuple[float, float, float, float]:

@@ -689,6 +689,9 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
         log(f"Tiles planned for the Dask cluster's {threads} thread(s), each with {per_task / 2**30:.1f} GB or more "
             f"(its worker's memory limit over its threads): at most {tile_bytes / 2**20:,.0f} MB a tile.")
     size = plan_tile_size(infos, tiling, buffer_m, density, multiple_of=dtm.cell_size_m if dtm_path else 1.0)
+    if tiling.tile_size_m and abs(size - tiling.tile_size_m) > 1e-9:  # (it had been changed without a word)
+        log(f"Tiles of {size:g} instead of the {tiling.tile_size_m:g} set: a multiple of the DTM cell "
+            f"({dtm.cell_size_m:g}), so that each tile makes whole cells.")
     if only is not None and not tiling.tile_size_m:  # (tiles across a file's edges: its job filters more)
         from .one_file import fit_to_files
         fitted = fit_to_files(size, infos, multiple_of=dtm.cell_size_m if dtm_path else 1.0)
@@ -738,17 +741,23 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
     elif dtm_path and dtm.extent is not None and not output_path:  # a DTM of an area alone: its tiles only
         from .one_file import neighbours, reach_box, tile_range
         g = dtm_grid
-        tiles_of = tile_range((g.x0, g.top - g.nrows * g.cell, g.x0 + g.ncols * g.cell, g.top), size)
+        # (the cells' edges: a tile beginning where they end makes none of them, and a domain on round numbers
+        # had read a row and a column of files more: a flood modeller)
+        tiles_of = tile_range((g.x0, g.top - g.nrows * g.cell, g.x0 + g.ncols * g.cell, g.top), size, closed=True)
         box = reach_box(tiles_of, size, buffer_m)
         keep = [m for m in neighbours(infos, -1, box) if infos[m].count]
         files = len(inputs)
-        if 0 < len(keep) < sum(1 for i in infos if i.count):  # (only where files are left unread: a single
-            # big file, or an extent over the whole survey, runs as before, its binning in pieces)
+        if keep:
+            # the files within reach, cut to it; where that is every file (a single big file, a small
+            # delivery), every file is binned whole, in pieces, and only the extent's tiles are filtered
+            every = len(keep) == sum(1 for i in infos if i.count)
             inputs, infos, outs = [inputs[m] for m in keep], [infos[m] for m in keep], [outs[m] for m in keep]
-            one = dict(index=None, of=files, tiles=tiles_of, clip=box, survey_box=survey_box)
+            one = dict(index=None, of=files, tiles=tiles_of, clip=None if every else box, survey_box=survey_box)
             total = sum(i.count for i in infos)
-            log(f"A DTM of its extent alone: the tiles making its cells are filtered, reading {len(keep):,} of the "
-                f"{files:,} file(s), those within their reach.")
+            log("A DTM of its extent alone: only the tiles making its cells are "
+                + ("read" if getattr(algorithm, "ground_of_any_class", False) else "filtered")
+                + (f", reading {len(keep):,} of the {files:,} file(s), those within their reach." if not every else
+                   f", in the {files:,} file(s), all within their reach."))
     log(f"{len(inputs)} file(s), {total:,} points; tiles of {size:g} {unit} with a buffer of {buffer_m:g} {unit} "
         f"({'set' if tiling.buffer_m is not None else getattr(algorithm, 'reach_words', 'the filter reach')}); "
         f"{tiling.worker_count} worker(s)."
@@ -786,7 +795,8 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
         lock = _lock_working_folder(work)
         try:
             from .one_file import clip_shares
-            shares = [1.0] * len(infos) if one is None else clip_shares(infos, one["index"], one["clip"])
+            shares = [1.0] * len(infos) if one is None or one["clip"] is None else \
+                clip_shares(infos, one["index"], one["clip"])
             binned = [k for k, i in enumerate(infos) if not i.copc]  # (COPC files are not binned)
             _check_disk(parent, [infos[k] for k in binned], buffer_m, size, [shares[k] for k in binned])
         except OutputError:
@@ -1060,7 +1070,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             if not info.count or info.copc:  # a COPC file is read by bounds by its tiles
                 continue
             # (a file cut to a box is binned whole: its points are numbered among those in the box)
-            alone = (one is None and len(infos) == 1) or (one is not None and k == one["index"])
+            alone = (len(infos) == 1 and (one is None or one["clip"] is None)) or (one is not None and k == one["index"])
             pieces = min(tiling.worker_count, info.count // BIN_PIECE_POINTS) if alone else 1
             records = _records_path(work, k)
             if pieces <= 1:
@@ -1110,7 +1120,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     # the points the run classifies, and what its messages name: one file's, or the survey's
     mine = infos if one is None or one["index"] is None else [infos[one["index"]]]
     total_points = sum(i.count for i in mine)  # (a DTM's extent alone: those in its tiles, counted below)
-    where = mine[0].path if len(mine) == 1 else f"{len(inputs)} input files"
+    where = mine[0].path if len(mine) == 1 else f"{len(inputs)} input files" if one is None else \
+        f"the {len(inputs)} input files within the DTM extent's reach"
     # 2. the DTM's block writer, on the grid run_tiled made from the headers
     dtm_writer = None
     if dtm_path:
@@ -1291,7 +1302,9 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                                 f"the extent given over {os.path.basename(inputs[one['index']])}'s cells")
     if dtm_out is not None and not n_copc and one is None:  # (one file's neighbours hold a few tiles' points)
         _say_stray_tiles(tiles, grid, dtm_out, log)
-    if dtm_writer is not None and not dtm_points:  # (as a whole run refuses it, not an empty DTM written)
+    # (as a whole run refuses it, not an empty DTM written; an extent's or a file's DTM in a gap of the data,
+    # made from the ground around it, has cells though no point of its own: a flood modeller's domain)
+    if dtm_writer is not None and not dtm_points and not (one is not None and dtm_writer.valued_cells):
         why = getattr(algorithm, "no_ground_in_survey", "")
         if why:  # (the DTM from classes filters nothing: its input lacks the classes; an HPC reviewer)
             raise InputError(f"{where}: no DTM can be made: {why}")

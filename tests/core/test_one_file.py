@@ -498,3 +498,43 @@ def test_the_working_folders_disk_is_priced_on_the_points_binned():
     half.mins, half.maxs = (100.0, 0.0, 0.0), (200.0, 100.0, 10.0)
     away.mins, away.maxs = (1000.0, 0.0, 0.0), (1100.0, 100.0, 10.0)
     assert clip_shares([inside, half, away], 0, (-10.0, -10.0, 150.0, 110.0)) == pytest.approx([1.0, 0.5, 0.0])
+
+
+def test_an_extent_on_the_tiles_edges_reads_no_files_beyond_its_cells(tmp_path):
+    """An extent ending on a tile's edge (a domain on round numbers): the tile beginning there makes none
+    of its cells, and its files are not read (a flood modeller's domain read a row and a column more)."""
+    folder, x0, y0 = _row_survey(tmp_path)
+    logs = []
+    run_ground_filter(str(folder), None, SMRF(), options=_options(), dtm_path=str(tmp_path / "d.tif"), log=logs.append,
+                      dtm=DTMOptions(cell_size_m=1.0, extent=(x0 + 65.0, y0 + 40.0, x0 + 90.0, y0 + 70.0)))
+    assert any("reading 2 of the 3 file(s)" in line for line in logs)
+
+
+def test_an_extent_in_a_gap_of_the_data_and_one_within_reach_of_every_file(survey, tmp_path):
+    """A domain inside a gap (a missing tile's corner): its DTM is made from the ground around it, as the
+    whole run's, not refused for want of points of its own; a domain whose tiles reach every file filters
+    its tiles only, every file binned whole."""
+    folder = tmp_path / "gap"
+    folder.mkdir()
+    west = float(laspy.read(os.path.join(survey["folder"], "a.laz")).header.mins[0])
+    south = float(laspy.read(os.path.join(survey["folder"], "a.laz")).header.mins[1])
+    x0, y0 = np.floor(west), np.floor(south)
+    tx, ty = np.ceil(west / 30.0) * 30.0, np.ceil(south / 30.0) * 30.0  # a whole 30 m tile of file a, emptied
+    for name in NAMES:
+        las = laspy.read(os.path.join(survey["folder"], f"{name}.laz"))
+        x, y = np.asarray(las.x), np.asarray(las.y)
+        las.points = las.points[~((x >= tx) & (x < tx + 30) & (y >= ty) & (y < ty + 30))]
+        las.write(folder / f"{name}.laz")
+    for extent in ((tx + 10.0, ty + 10.0, tx + 20.0, ty + 20.0), (x0 + 50.0, y0 + 50.0, x0 + 70.0, y0 + 70.0)):
+        dtm = DTMOptions(cell_size_m=1.0, extent=extent)
+        ref = run_ground_filter(str(folder), str(tmp_path / "all.vpc"), SMRF(), options=_options(),
+                                dtm_path=str(tmp_path / "whole.tif"), dtm=dtm)
+        logs = []
+        run = run_ground_filter(str(folder), None, SMRF(), options=_options(), dtm_path=str(tmp_path / "area.tif"),
+                                dtm=dtm, log=logs.append)
+        assert run.tiles < ref.tiles
+        whole, area = _raster(tmp_path / "whole.tif")[1], _raster(tmp_path / "area.tif")[1]
+        assert np.count_nonzero(whole != -9999) >= 100 and np.array_equal(area, whole)
+        os.remove(tmp_path / "whole.tif")
+        os.remove(tmp_path / "area.tif")
+    assert any("in the 4 file(s), all within their reach" in line for line in logs)
