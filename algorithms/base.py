@@ -58,9 +58,9 @@ farther than this from any ground point empty</i> (advanced, 0 = no limit): data
 bridged by the triangulation. <i>DTM extent</i> (advanced): the DTM covers it, widened to whole cells on multiples of the cell size, nodata
 beyond the points' own DTM: two epochs' DTMs or a model's domain on one grid of one size. QGIS writes an
 extent xmin,xmax,ymin,ymax (an extent in another CRS is reprojected to the cloud's); one that misses the
-points, or is thousands of times their area where its numbers in the other order fit them, is refused. (A DTM of
-an extent alone, without the classified cloud, is quicker on a survey: <i>DTM from classified points</i> on the
-classified survey, or the command line without --output, filters only the extent's tiles.) Heights of 32,768 or more (a geocentric export) make a
+points, or is thousands of times their area where its numbers in the other order fit them, is refused. On a survey,
+a DTM with an extent and no classified point cloud (skipped) filters only the tiles making the extent's cells and
+reads only the files within their reach: a model domain's DTM takes the domain's time. Heights of 32,768 or more (a geocentric export) make a
 Float64 DTM, others Float32.</p>
 <p><b>Ground points as a vector layer</b> (advanced, off by default): the ground points as a PointZ layer with return
 number and intensity; meant for small clouds.</p>
@@ -424,7 +424,8 @@ FILTER_PARAMETER_HELP = {
     "DTM_FILL": "Fill the cells outside the convex hull of the ground points with the nearest value, instead of "
                 "leaving them nodata.",
     "OUTPUT": "The classified LAS/LAZ (ground 2, other filtered points 1), every dimension, VLR and the CRS of the "
-              "input kept; a .vpc and a folder of files for several input files.",
+              "input kept; a .vpc and a folder of files for several input files. Skip it for the DTM alone (on a survey "
+              "with a DTM extent, only the extent's tiles are then filtered).",
     "DTM": "A cloud-optimised GeoTIFF of the ground points' triangulation; skip it to classify only.",
     "GROUND_POINTS": "The ground points as a point layer, for small clouds (a point layer of millions of points "
                      "is slow in QGIS).",
@@ -578,9 +579,11 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         after every input); the ground-point layer off by default and advanced; the filter's
         intermediate rasters (rasterOutputs) off by default."""
         self.addDtmParameters()
+        # optional, made by default: skipped, a run makes its DTM alone (a flood modeller's domains from a
+        # county's survey had each classified and written the whole survey)
         self.addParameter(QgsProcessingParameterFileDestination(
             self.OUTPUT, "Classified point cloud (a .vpc for several input files)",
-            fileFilter="LAZ (*.laz);;LAS (*.las);;Virtual point cloud (*.vpc)"))
+            fileFilter="LAZ (*.laz);;LAS (*.las);;Virtual point cloud (*.vpc)", optional=True, createByDefault=True))
         self.addParameter(QgsProcessingParameterRasterDestination(
             self.DTM, "DTM (ground surface)", optional=True, createByDefault=True))
         self.addExtraOutputParameters()
@@ -615,8 +618,12 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         self.checkGroundPointsDestination(parameters, context)
         from . import pointclouds, styles
         input_path = pointclouds.input_path(self, parameters, context, self.INPUT, self.INPUT_LAYER)
-        output_path = pointclouds.classified_output_path(self, parameters, context, self.OUTPUT, input_path)
+        output_path = pointclouds.classified_output_path(self, parameters, context, self.OUTPUT, input_path) or None
         dtm_path = self.parameterAsOutputLayer(parameters, self.DTM, context) or None
+        if not output_path and not dtm_path:
+            raise QgsProcessingException(f"{self.parameterDefinition(self.OUTPUT).description().split(' (')[0]} and "
+                                         f"{self.parameterDefinition(self.DTM).description().split(' (')[0]} are both "
+                                         "skipped: the run would write nothing; give one of them")
         try:
             algorithm = self.buildFilter(parameters, context, feedback.pushInfo)
             rasters = {name: (path, make) for name, (path, make) in self.rasterOutputs(parameters, context).items()
@@ -644,8 +651,9 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         if tiled and options.tiling.only != "":  # one file of the survey: its own outputs' paths
             output_path, dtm_path = (run.outputs or [None])[0], run.dtm_path
         # (the CRS's unit was said before the work, by the core's log: see feedback_callables)
-        results = {self.OUTPUT: output_path, self.GROUND_COUNT: run.ground_count,
-                   self.POINT_COUNT: run.point_count if tiled else len(run.cloud)}
+        results = {self.GROUND_COUNT: run.ground_count, self.POINT_COUNT: run.point_count if tiled else len(run.cloud)}
+        if output_path:
+            results[self.OUTPUT] = output_path
         if dtm_path:
             results[self.DTM] = dtm_path
         for name, (path, _make) in rasters.items():
@@ -659,8 +667,10 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
                                                    [output_path, dtm_path, *(p for p, _m in rasters.values())])
         if sink_id is not None:
             results[self.GROUND_POINTS] = sink_id
-        pointclouds.load_or_log(context, feedback, output_path, self.parameterDefinition(self.OUTPUT).description().split(" (")[0],
-                                self.OUTPUT, parameters.get(self.OUTPUT))
+        if output_path:
+            pointclouds.load_or_log(context, feedback, output_path,
+                                    self.parameterDefinition(self.OUTPUT).description().split(" (")[0], self.OUTPUT,
+                                    parameters.get(self.OUTPUT))
         styles.style_when_loaded(context, dtm_path, styles.DTM_STYLE)
         for name, (path, _make) in rasters.items():
             styles.style_when_loaded(context, path, self.rasterStyles(run).get(name))

@@ -163,3 +163,26 @@ def test_a_job_array_through_qgis_process(scene_laz, tmp_path):
     assert proc.returncode != 0
     assert "no file 2 in the survey: it has 2 file(s), numbered 0 to 1" in proc.stdout + proc.stderr
     assert "Traceback" not in proc.stdout + proc.stderr
+
+
+def test_the_classified_cloud_skipped_gives_the_dtm_of_an_extent_alone(groundsieve_provider, scene_laz, tmp_path):
+    """OUTPUT is optional (made by default): skipped, a survey's DTM of an extent filters the extent's tiles
+    only, and equals the DTM of a run that writes the classified cloud; both skipped is refused in words."""
+    import processing
+    from osgeo import gdal
+    from qgis.core import QgsProcessingException
+    src, _scene = scene_laz
+    files = _split(src, tmp_path / "in")
+    import laspy
+    west = laspy.read(files[0]).header
+    x0, y0 = float(np.floor(west.mins[0])), float(np.floor(west.mins[1]))
+    extent = f"{x0 + 5},{x0 + 25},{y0 + 5},{y0 + 25}"  # (QGIS's xmin,xmax,ymin,ymax)
+    common = {"INPUT": str(tmp_path / "in"), "TILE_SIZE": 20.0, "WORKERS": 1, "DTM_EXTENT": extent}
+    full = processing.run("groundsieve:smrf", dict(common, OUTPUT=str(tmp_path / "c.vpc"), DTM=str(tmp_path / "a.tif")))
+    alone = processing.run("groundsieve:smrf", dict(common, OUTPUT=None, DTM=str(tmp_path / "b.tif")))
+    assert "OUTPUT" not in alone and alone["DTM"] == str(tmp_path / "b.tif")
+    assert alone["POINT_COUNT"] < full["POINT_COUNT"]
+    a, b = (gdal.Open(str(tmp_path / n)).ReadAsArray() for n in ("a.tif", "b.tif"))
+    assert a.shape == (20, 20) and np.array_equal(a, b)
+    with pytest.raises(QgsProcessingException, match="Classified point cloud and DTM are both skipped"):
+        processing.run("groundsieve:smrf", dict(common, OUTPUT=None, DTM=None))
