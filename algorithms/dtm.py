@@ -121,7 +121,7 @@ with one of the ground filters.</p>""")
                 cell_set=dtm_cell_set(self, parameters, context, self.DTM_CELL),
                 fill_outside_hull=self.parameterAsBoolean(parameters, self.DTM_FILL, context),
                 max_distance_m=self.parameterAsDouble(parameters, self.DTM_MAX_DISTANCE, context),
-                extent=dtm_extent_value(self, parameters, self.DTM_EXTENT, context, input_path))
+                extent=dtm_extent_value(self, parameters, self.DTM_EXTENT, context, input_path, feedback))
             run = workflow.run_ground_filter(input_path, None, ground, options=options, dtm_path=dtm_path, dtm=dtm,
                                              **feedback_callables(feedback))
         except errors.GroundSieveError as err:

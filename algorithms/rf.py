@@ -308,7 +308,8 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
                              fill_outside_hull=self.parameterAsBoolean(parameters, self.DTM_FILL, context),
                              classes=self.parameterAsString(parameters, self.DTM_CLASSES, context) or "",
                              max_distance_m=self.parameterAsDouble(parameters, self.DTM_MAX_DISTANCE, context),
-                             extent=dtm_extent_value(self, parameters, self.DTM_EXTENT, context, input_path))
+                             extent=dtm_extent_value(self, parameters, self.DTM_EXTENT, context, input_path,
+                                                     feedback))
             ignored = self.parameterAsString(parameters, self.IGNORE_CLASSES, context) or ""
             run = learning.classify_file(input_path, output, self.parameterAsFile(parameters, self.MODEL, context),
                                          dtm_path=dtm_path, dtm=dtm, ignore_classes=ignored,

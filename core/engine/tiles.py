@@ -1280,8 +1280,9 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         # the whole run has, a code reviewer)
         sb = one["survey_box"]
         area_box = [min(area_box[0], sb[0]), min(area_box[1], sb[1]), max(area_box[2], sb[2]), max(area_box[3], sb[3])]
-    log(f"{getattr(algorithm, 'tiles_done_words', 'Filtered')} {len(keys)} tile(s) in "
-        f"{time.perf_counter() - t_tiles:.1f} s.")
+    resumed = sum(d is not None for d in done_before)  # (said apart: "Filtered 144" had counted 54 done before)
+    log(f"{getattr(algorithm, 'tiles_done_words', 'Filtered')} {len(keys) - resumed} tile(s) in "
+        f"{time.perf_counter() - t_tiles:.1f} s" + (f", and {resumed} done before." if resumed else "."))
     if getattr(algorithm, "ground_of_any_class", False):
         from .workflow import ground_classes_counts
         chosen = {c: ground_by_class.get(c, 0) for c in getattr(algorithm, "classes", ())}

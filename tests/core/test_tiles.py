@@ -655,6 +655,8 @@ def test_an_interrupted_run_resumes_and_skips_the_tiles_done(scene_laz, tmp_path
     run = run_ground_filter(scene_laz, str(out), Flaky(), options=options, dtm_path=str(dtm), log=messages.append)
     assert Flaky.calls == run.tiles - 3
     assert any("3 of" in m and "skipping" in m for m in messages)
+    assert any(m.startswith(f"Filtered {run.tiles - 3} tile(s) in ") and m.endswith(", and 3 done before.")
+               for m in messages)
     assert os.listdir(work) == []
     assert agreement(laspy.read(out).classification, whole_classes(scene_laz, SMRF())) >= 0.999
     from osgeo import gdal

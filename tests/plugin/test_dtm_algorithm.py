@@ -128,9 +128,17 @@ def test_a_dtm_extent_from_the_dialog_is_reprojected_to_the_cloud_s_crs(groundsi
     box = QgsCoordinateTransform(utm, wgs, QgsProject.instance()).transformBoundingBox(
         QgsRectangle(x0, y0, x0 + 50, y0 + 40))
     out = tmp_path / "dtm_wgs.tif"
+    from qgis.core import QgsProcessingFeedback
+    said = []
+
+    class Feedback(QgsProcessingFeedback):
+        def pushInfo(self, info):  # noqa: N802
+            said.append(info)
     processing.run("groundsieve:dtm", {"INPUT": str(src), "DTM": str(out), "DTM_CELL": 1.0,
                                        "DTM_EXTENT": f"{box.xMinimum()!r},{box.xMaximum()!r},{box.yMinimum()!r},"
-                                                     f"{box.yMaximum()!r} [EPSG:4326]"})
+                                                     f"{box.yMaximum()!r} [EPSG:4326]"}, feedback=Feedback())
+    assert any(line.startswith("DTM extent: given in EPSG:4326, reprojected to the cloud's EPSG:32632: the box "
+                               "around it, x ") for line in said), said
     values, transform, _crs = _dtm(out)
     assert abs(transform[0] - x0) < 3 and abs(transform[3] - (y0 + 40)) < 3  # (the box of the reprojected box)
     assert 48 <= values.shape[1] <= 54 and 39 <= values.shape[0] <= 45
