@@ -21,6 +21,7 @@ from typing import List, Optional, Sequence, Tuple
 from ..errors import InputError, InvalidParameterError, OutputError
 from ..io.lasfiles import LasInfo
 from ..io.outputs import LAS_EXTENSIONS, _ext
+from ..raster.geotiff import RASTER_EXTENSIONS
 
 
 def stem_of(path: str) -> str:
@@ -111,8 +112,14 @@ def only_outputs(target: str, output_path: Optional[str], dtm_path: Optional[str
         out = output_path if _ext(output_path) in LAS_EXTENSIONS else os.path.join(output_path, stem + ext)
     if dtm_path:
         dtm_path = os.fspath(dtm_path).replace(NAME_FIELD, stem)
-        dtm = dtm_path if _ext(dtm_path) in (".tif", ".tiff") else os.path.join(dtm_path, stem + ".tif")
+        dtm = dtm_path if _ext(dtm_path) in RASTER_EXTENSIONS else os.path.join(dtm_path, stem + ".tif")
     return out, dtm
+
+
+def _fixed(path: Optional[str], extensions) -> bool:
+    """Whether an output's path is one file, the same for every file of the survey: a file's path
+    (``extensions``) without ``{name}``, not a folder."""
+    return bool(path) and NAME_FIELD not in os.fspath(path) and _ext(path) in extensions
 
 
 def fixed_names_warning(target: str, output_path: Optional[str], dtm_path: Optional[str]) -> str:
@@ -125,8 +132,8 @@ def fixed_names_warning(target: str, output_path: Optional[str], dtm_path: Optio
     def names_it(path):  # the file's name, then the end or a separator: t1.laz, t1_ground.laz; not data.laz for a
         base = os.path.splitext(os.path.basename(path))[0]
         return base.startswith(stem) and (len(base) == len(stem) or not base[len(stem)].isalnum())
-    fixed = [os.fspath(p) for p, exts in ((output_path, LAS_EXTENSIONS), (dtm_path, (".tif", ".tiff")))
-             if p and NAME_FIELD not in os.fspath(p) and _ext(p) in exts and not names_it(os.fspath(p))]
+    fixed = [os.fspath(p) for p, exts in ((output_path, LAS_EXTENSIONS), (dtm_path, RASTER_EXTENSIONS))
+             if _fixed(p, exts) and not names_it(os.fspath(p))]
     if not fixed:
         return ""
     return (f"{WARNING_PREFIX}{' and '.join(fixed)}: not named after {os.path.basename(target)}: the jobs of an array "
@@ -141,8 +148,7 @@ def check_names_apart(inputs: Sequence[str], k: int, output_path: Optional[str],
     without a word. A fixed path (neither a folder nor ``{name}``) is every file's: it is warned about
     (:func:`fixed_names_warning`), not refused."""
     mine = only_outputs(inputs[k], output_path, dtm_path)
-    fixed = (output_path and NAME_FIELD not in os.fspath(output_path) and _ext(output_path) in LAS_EXTENSIONS,
-             dtm_path and NAME_FIELD not in os.fspath(dtm_path) and _ext(dtm_path) in (".tif", ".tiff"))
+    fixed = (_fixed(output_path, LAS_EXTENSIONS), _fixed(dtm_path, RASTER_EXTENSIONS))
     for m, other in enumerate(inputs):
         if m == k:
             continue

@@ -447,6 +447,13 @@ MAX_SURVEY_DTM_CELLS = 20_000_000_000
 SPARSE_SURVEY_PER_M2 = 0.01
 
 
+def survey_box(infos: Sequence[LasInfo]) -> tuple:
+    """(xmin, ymin, xmax, ymax) over the headers of the files holding points."""
+    counted = [i for i in infos if i.count]
+    return (min(i.mins[0] for i in counted), min(i.mins[1] for i in counted),
+            max(i.maxs[0] for i in counted), max(i.maxs[1] for i in counted))
+
+
 def survey_dtm_grid(infos: Sequence[LasInfo], cell: float, extent=None):
     """The survey DTM's grid over every file's header bounds (and the DTM's ``extent``, xmin, ymin, xmax,
     ymax, if given), refused (naming the cell size) when it would have more than
@@ -580,16 +587,14 @@ def run_tiled(input_path: str, output_path: Optional[str], algorithm, *, options
             return _empty_file_run(inputs[only], outs[only], dtm_path, infos[only], log)
     # the DTM's grid from the headers: a DTM cell far too small for the survey is refused now
     if dtm_path and dtm.extent is not None:
-        counted = [i for i in infos if i.count]
-        workflow.check_extent(dtm, min(i.mins[0] for i in counted), min(i.mins[1] for i in counted),
-                              max(i.maxs[0] for i in counted), max(i.maxs[1] for i in counted))
+        workflow.check_extent(dtm, *survey_box(infos))
         # (its cells counted now: a large extent was refused only after every tile, by the whole run's memory
         # rule, a code reviewer; a tiled DTM is written block by block)
         workflow.extent_grid(dtm, max_cells=MAX_SURVEY_DTM_CELLS, bytes_per_cell=0.0)
     dtm_grid = survey_dtm_grid(infos, dtm.cell_size_m, dtm.extent) if dtm_path else None
     if dtm_grid is not None and only is not None:  # the survey DTM's cells over the file's header bounds
-        target = infos[only]
-        dtm_grid = grid_window(dtm_grid, (target.mins[0], target.mins[1], target.maxs[0], target.maxs[1]))
+        from .one_file import header_box
+        dtm_grid = grid_window(dtm_grid, header_box(infos[only]))
         if dtm_grid is not None and dtm.extent is not None:
             dtm_grid = grid_window(dtm_grid, dtm.extent)
         if dtm_grid is None:
@@ -725,8 +730,7 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
     from .workflow import length_label
     unit = length_label(metres_per_unit(infos[0].crs_wkt) or 1.0)  # (a survey in feet: feet)
     one = None  # the one file's run: its place among the files read, its tiles, the box its neighbours lend
-    survey_box = [min(i.mins[0] for i in infos if i.count), min(i.mins[1] for i in infos if i.count),
-                  max(i.maxs[0] for i in infos if i.count), max(i.maxs[1] for i in infos if i.count)]
+    headers = survey_box(infos)  # (before the files are cut to those a subset of the tiles reads)
     if only is not None:
         from .one_file import header_box, neighbours, reach_box, tile_range
         tiles_of = tile_range(header_box(infos[only]), size)
@@ -734,7 +738,7 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
         keep = neighbours(infos, only, box)
         name, files = os.path.basename(inputs[only]), len(inputs)
         inputs, infos, outs = [inputs[m] for m in keep], [infos[m] for m in keep], [outs[m] for m in keep]
-        one = dict(index=keep.index(only), of=files, tiles=tiles_of, clip=box, survey_box=survey_box)
+        one = dict(index=keep.index(only), tiles=tiles_of, clip=box, survey_box=headers)
         log(f"{name}, file {only} of the survey's {files:,} (numbered from 0), is the one classified: its tiles read "
             f"their buffers from {len(keep) - 1:,} neighbouring file(s); every file run so on the same tiles gets the "
             "classes and DTM of a run of the whole survey.")
@@ -752,7 +756,7 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
             # delivery), every file is binned whole, in pieces, and only the extent's tiles are filtered
             every = len(keep) == sum(1 for i in infos if i.count)
             inputs, infos, outs = [inputs[m] for m in keep], [infos[m] for m in keep], [outs[m] for m in keep]
-            one = dict(index=None, of=files, tiles=tiles_of, clip=None if every else box, survey_box=survey_box)
+            one = dict(index=None, tiles=tiles_of, clip=None if every else box, survey_box=headers)
             total = sum(i.count for i in infos)
             log("A DTM of its extent alone: only the tiles making its cells are "
                 + ("read" if getattr(algorithm, "ground_of_any_class", False) else "filtered")
@@ -780,7 +784,7 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
                                                                      dtm if dtm_path else None,
                                                                      None if one is None else
                                                                      "the DTM's extent" if one["index"] is None
-                                                                     else inputs[one["index"]]))
+                                                                     else os.path.realpath(inputs[one["index"]])))
     if os.path.isdir(work):
         lock = _lock_working_folder(work)  # another run still using it is refused, its folder left alone
         log(f"Resuming the interrupted run in {work}.")
@@ -1000,9 +1004,9 @@ def _fingerprint(infos, grid, algorithm, options, dtm, only: Optional[str] = Non
     the options but how the tiles are run (workers, threads or processes, the memory budget and the
     scheduler change where and when a tile runs, not its result: a reviewer's run killed on 2
     workers did not resume on 1), the DTM, and the code: a run resumed with another core/ (same
-    version) mixed tiles of both versions, its classes and DTM those of neither. ``only``: the one file
-    of the survey the run classifies (the jobs of an array, each its file, in one folder at once), or
-    "the DTM's extent" for a run of a DTM's extent alone (its tiles' parts are cut to it)."""
+    version) mixed tiles of both versions, its classes and DTM those of neither. ``only``: the real path
+    of the one file of the survey the run classifies (the jobs of an array, each its file, in one folder
+    at once), or "the DTM's extent" for a run of a DTM's extent alone (its tiles' parts are cut to it)."""
     import dataclasses
     import hashlib
     import json as _json
@@ -1013,8 +1017,7 @@ def _fingerprint(infos, grid, algorithm, options, dtm, only: Optional[str] = Non
     dtm_results = dataclasses.replace(dtm, memory_budget_bytes=None) \
         if dataclasses.is_dataclass(dtm) and hasattr(dtm, "memory_budget_bytes") else dtm
     text = _json.dumps([files, grid.size, grid.buffer, repr(algorithm), repr(results), repr(dtm_results), WORK_FORMAT,
-                        _core_digest()] + ([only if only == "the DTM's extent" else os.path.realpath(only)]
-                                           if only else []), default=str)
+                        _core_digest()] + ([only] if only else []), default=str)
     return hashlib.sha1(text.encode()).hexdigest()[:16]
 
 
@@ -2032,15 +2035,21 @@ def _say_stray_tiles(tiles, grid, dtm_grid, log) -> None:
         f"{dtm_grid.nrows:,} cells, mostly empty. Class them as noise (7) to leave them out, or crop the cloud.")
 
 
-def _block_cells(full, bounds):
-    """(row0, row1, col0, col1): the cells of the DTM grid ``full`` a tile of ``bounds`` makes (cell
-    edges on multiples of the cell; tile edges on multiples of the cell too); None when it makes none."""
+def _tile_cells(full, bounds):
+    """(row0, row1, col0, col1): a tile of ``bounds``'s cells on the lattice of the DTM grid ``full``
+    (cell edges on multiples of the cell; tile edges on multiples of the cell too), whether or not the
+    grid holds them all."""
     c = full.cell
     x0, y0, x1, y1 = bounds
-    col0 = max(0, int(round((x0 - full.x0) / c)))
-    col1 = min(full.ncols, int(round((x1 - full.x0) / c)))
-    row0 = max(0, int(round((full.top - y1) / c)))
-    row1 = min(full.nrows, int(round((full.top - y0) / c)))
+    return (int(round((full.top - y1) / c)), int(round((full.top - y0) / c)),
+            int(round((x0 - full.x0) / c)), int(round((x1 - full.x0) / c)))
+
+
+def _block_cells(full, bounds):
+    """(row0, row1, col0, col1): the cells of the DTM grid ``full`` a tile of ``bounds`` makes
+    (:func:`_tile_cells` within the grid); None when it makes none."""
+    row0, row1, col0, col1 = _tile_cells(full, bounds)
+    row0, row1, col0, col1 = max(0, row0), min(full.nrows, row1), max(0, col0), min(full.ncols, col1)
     if col1 <= col0 or row1 <= row0:
         return None
     return row0, row1, col0, col1
@@ -2139,9 +2148,7 @@ def _dtm_block(cloud, ground, dtm, full, bounds, buffer_m, area=None, gaps=None)
     # one file's cells, an extent's): its surface is then the same whatever grid it is written into (cut to
     # one file's cells, the block lost ground points beyond them, and the DTM beside a lake differed from
     # the whole survey's by up to 19 mm: an HPC reviewer)
-    x0, y0, x1, y1 = bounds
-    tcol0, trow0 = int(round((x0 - full.x0) / c)), int(round((full.top - y1) / c))
-    tcol1, trow1 = int(round((x1 - full.x0) / c)), int(round((full.top - y0) / c))
+    trow0, trow1, tcol0, tcol1 = _tile_cells(full, bounds)
     # one cell more than the buffer: a point on the buffer's outer edge still falls in the grid (the
     # thinning's one-pass kernel needs every point inside; same points kept, same surface)
     pad = int(math.ceil(buffer_m / c)) + 1
@@ -2153,6 +2160,7 @@ def _dtm_block(cloud, ground, dtm, full, bounds, buffer_m, area=None, gaps=None)
     if gaps is not None and area is not None and not dtm.fill_outside_hull and not dtm.max_distance_m:
         from .workflow import data_gaps
         found, smallest = data_gaps(cloud.x[area], cloud.y[area], values, ext)
+        x0, y0, x1, y1 = bounds
         gaps.extend([smallest] + [list(gap) for gap in found if x0 <= gap[1] < x1 and y0 <= gap[2] < y1])
     r, k = pad + row0 - trow0, pad + col0 - tcol0
     return row0, col0, np.ascontiguousarray(values[r:r + row1 - row0, k:k + col1 - col0])
