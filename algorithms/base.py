@@ -438,7 +438,65 @@ FILTER_PARAMETER_HELP = {
 }
 
 
-class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
+class SurveyTiles:
+    """The advanced parameters of tiled runs (folders, .vpc, clouds beyond the memory budget), for
+    the ground filters and rfclassify alike: the same labels, the same TileOptions."""
+    TILE_SIZE = "TILE_SIZE"
+    TILE_BUFFER = "TILE_BUFFER"
+    MEMORY_BUDGET = "MEMORY_BUDGET"
+    WORKERS = "WORKERS"
+    WORK_FOLDER = "WORK_FOLDER"
+    SCHEDULER = "SCHEDULER"
+    ONLY = "ONLY"
+
+    def addTileParameters(self, reach="the filter's own reach"):  # noqa: N802
+        """Advanced parameters of tiled runs (folders, .vpc, clouds beyond the memory budget);
+        ``reach``: what the buffer's -1 stands for."""
+        advanced = [
+            QgsProcessingParameterNumber(self.TILE_SIZE, "Tile size (m; 0 = from the memory budget)",
+                                         type=QgsProcessingParameterNumber.Type.Double, defaultValue=0.0,
+                                         minValue=0.0),
+            QgsProcessingParameterNumber(self.TILE_BUFFER, f"Tile buffer (m; -1 = {reach})",
+                                         type=QgsProcessingParameterNumber.Type.Double, defaultValue=-1.0,
+                                         minValue=-1.0),
+            QgsProcessingParameterNumber(self.MEMORY_BUDGET, "Memory budget (MB; 0 = a quarter of the memory, "
+                                         "at most 2048)", type=QgsProcessingParameterNumber.Type.Integer,
+                                         defaultValue=0, minValue=0),
+            QgsProcessingParameterNumber(self.WORKERS, "Tiles at the same time (0 = every core it may use)",
+                                         type=QgsProcessingParameterNumber.Type.Integer, defaultValue=0, minValue=0),
+            QgsProcessingParameterFile(self.WORK_FOLDER, "Working folder for temporary tiles (default: beside "
+                                       "the output)", behavior=QgsProcessingParameterFile.Behavior.Folder,
+                                       optional=True),
+            QgsProcessingParameterString(self.SCHEDULER, "Dask scheduler address (empty = this machine; "
+                                         "tcp://host:port, or local:N for N local worker processes)",
+                                         defaultValue="", optional=True),
+            QgsProcessingParameterString(self.ONLY, "One file of the survey only (job arrays: number from 0, name "
+                                         "or path)", defaultValue="", optional=True)]
+        for param in advanced:
+            param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
+            self.addParameter(param)
+
+    def tileOptions(self, parameters, context):  # noqa: N802
+        from ..core.engine.tiles import TileOptions
+        buffer = self.parameterAsDouble(parameters, self.TILE_BUFFER, context)
+        return TileOptions(tile_size_m=self.parameterAsDouble(parameters, self.TILE_SIZE, context),
+                           buffer_m=None if buffer < 0 else buffer,
+                           memory_budget_mb=self.parameterAsInt(parameters, self.MEMORY_BUDGET, context),
+                           workers=self.parameterAsInt(parameters, self.WORKERS, context),
+                           work_dir=self.parameterAsFile(parameters, self.WORK_FOLDER, context) or None,
+                           scheduler=(self.parameterAsString(parameters, self.SCHEDULER, context) or "").strip(),
+                           only=(self.parameterAsString(parameters, self.ONLY, context) or "").strip())
+
+    def tiledOutputs(self, options, run, output_path, dtm_path):  # noqa: N802
+        """The outputs' paths a run wrote: one file of a survey (ONLY) names its own ({name}, or
+        under a folder); else those the dialog gave."""
+        from ..core.engine.tiles import TiledRun
+        if isinstance(run, TiledRun) and options.only != "":
+            return (run.outputs or [None])[0], run.dtm_path
+        return output_path, dtm_path
+
+
+class GroundFilterAlgorithm(SurveyTiles, Discoverable, QgsProcessingAlgorithm):
     """Base class of the ground filters. Subclasses declare their own parameters in
     ``initFilterParameters`` and build the core filter object in ``buildFilter``."""
 
@@ -627,9 +685,7 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         output_path = pointclouds.classified_output_path(self, parameters, context, self.OUTPUT, input_path) or None
         dtm_path = self.parameterAsOutputLayer(parameters, self.DTM, context) or None
         if not output_path and not dtm_path:
-            raise QgsProcessingException(f"{self.parameterDefinition(self.OUTPUT).description().split(' (')[0]} and "
-                                         f"{self.parameterDefinition(self.DTM).description().split(' (')[0]} are both "
-                                         "skipped: the run would write nothing; give one of them")
+            raise QgsProcessingException(pointclouds.nothing_to_write(self))
         try:
             algorithm = self.buildFilter(parameters, context, feedback.pushInfo)
             rasters = {name: (path, make) for name, (path, make) in self.rasterOutputs(parameters, context).items()
@@ -654,8 +710,7 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         except errors.GroundSieveError as err:
             raise QgsProcessingException(str(err)) from err
         tiled = run.cloud is None  # a tiled run (survey scale) holds no cloud in memory
-        if tiled and options.tiling.only != "":  # one file of the survey: its own outputs' paths
-            output_path, dtm_path = (run.outputs or [None])[0], run.dtm_path
+        output_path, dtm_path = self.tiledOutputs(options.tiling, run, output_path, dtm_path)
         # (the CRS's unit was said before the work, by the core's log: see feedback_callables)
         results = {self.GROUND_COUNT: run.ground_count, self.POINT_COUNT: run.point_count if tiled else len(run.cloud)}
         if output_path:
@@ -723,52 +778,6 @@ class GroundFilterAlgorithm(Discoverable, QgsProcessingAlgorithm):
         if not self.parameterAsBoolean(parameters, self.IGNORE_NOISE, context):
             codes = tuple(c for c in codes if c not in NOISE_CLASSES)
         return codes
-
-    # -- survey scale: tiles ----------------------------------------------------------------
-    TILE_SIZE = "TILE_SIZE"
-    TILE_BUFFER = "TILE_BUFFER"
-    MEMORY_BUDGET = "MEMORY_BUDGET"
-    WORKERS = "WORKERS"
-    WORK_FOLDER = "WORK_FOLDER"
-    SCHEDULER = "SCHEDULER"
-    ONLY = "ONLY"
-
-    def addTileParameters(self):  # noqa: N802
-        """Advanced parameters of tiled runs (folders, .vpc, clouds beyond the memory budget)."""
-        advanced = [
-            QgsProcessingParameterNumber(self.TILE_SIZE, "Tile size (m; 0 = from the memory budget)",
-                                         type=QgsProcessingParameterNumber.Type.Double, defaultValue=0.0,
-                                         minValue=0.0),
-            QgsProcessingParameterNumber(self.TILE_BUFFER, "Tile buffer (m; -1 = the filter's own reach)",
-                                         type=QgsProcessingParameterNumber.Type.Double, defaultValue=-1.0,
-                                         minValue=-1.0),
-            QgsProcessingParameterNumber(self.MEMORY_BUDGET, "Memory budget (MB; 0 = a quarter of the memory, "
-                                         "at most 2048)", type=QgsProcessingParameterNumber.Type.Integer,
-                                         defaultValue=0, minValue=0),
-            QgsProcessingParameterNumber(self.WORKERS, "Tiles at the same time (0 = every core it may use)",
-                                         type=QgsProcessingParameterNumber.Type.Integer, defaultValue=0, minValue=0),
-            QgsProcessingParameterFile(self.WORK_FOLDER, "Working folder for temporary tiles (default: beside "
-                                       "the output)", behavior=QgsProcessingParameterFile.Behavior.Folder,
-                                       optional=True),
-            QgsProcessingParameterString(self.SCHEDULER, "Dask scheduler address (empty = this machine; "
-                                         "tcp://host:port, or local:N for N local worker processes)",
-                                         defaultValue="", optional=True),
-            QgsProcessingParameterString(self.ONLY, "One file of the survey only (job arrays: number from 0, name "
-                                         "or path)", defaultValue="", optional=True)]
-        for param in advanced:
-            param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
-            self.addParameter(param)
-
-    def tileOptions(self, parameters, context):  # noqa: N802
-        from ..core.engine.tiles import TileOptions
-        buffer = self.parameterAsDouble(parameters, self.TILE_BUFFER, context)
-        return TileOptions(tile_size_m=self.parameterAsDouble(parameters, self.TILE_SIZE, context),
-                           buffer_m=None if buffer < 0 else buffer,
-                           memory_budget_mb=self.parameterAsInt(parameters, self.MEMORY_BUDGET, context),
-                           workers=self.parameterAsInt(parameters, self.WORKERS, context),
-                           work_dir=self.parameterAsFile(parameters, self.WORK_FOLDER, context) or None,
-                           scheduler=(self.parameterAsString(parameters, self.SCHEDULER, context) or "").strip(),
-                           only=(self.parameterAsString(parameters, self.ONLY, context) or "").strip())
 
     def writeGroundPointsOrUndo(self, parameters, context, feedback, run, written):  # noqa: N802
         """The ground-point layer, written by QGIS after the core has committed the other outputs:

@@ -172,6 +172,13 @@ def make_input_optional(param):
 
 
 # -- output ---------------------------------------------------------------------------------
+def nothing_to_write(algorithm, cloud="OUTPUT", dtm="DTM"):
+    """The refusal of a run whose classified cloud and DTM are both skipped, in the dialog's words."""
+    def label(name):
+        return algorithm.parameterDefinition(name).description().split(" (")[0]
+    return f"{label(cloud)} and {label(dtm)} are both skipped: the run would write nothing; give one of them"
+
+
 def load_or_log(context, feedback, path, layer_name, output_name, value=None):
     """Load the point cloud written at ``path`` when the run ends, where a provider of this QGIS
     opens it; else say in the log where it is and why it is not loaded, and warn when it is

@@ -10,8 +10,8 @@ from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException, QgsProces
 from qgis.PyQt.QtGui import QIcon
 
 from . import pointclouds
-from .base import (FILTER_PARAMETER_HELP, check_parameter_values, core_modules, dialog_help, dtm_classes_parameter,
-                   dtm_extent_parameter, dtm_extent_value, dtm_max_distance_parameter,
+from .base import (FILTER_PARAMETER_HELP, SurveyTiles, check_parameter_values, core_modules, dialog_help,
+                   dtm_classes_parameter, dtm_extent_parameter, dtm_extent_value, dtm_max_distance_parameter,
                    dtm_cell_set, feedback_callables)
 from .discovery import Discoverable
 
@@ -219,7 +219,7 @@ importances, timings) with the same figures in a CSV beside it.</p>""")
         return {self.MODEL: model_path, self.REPORT: report_path, self.TEST_ACCURACY: test.accuracy}
 
 
-class RFClassifyAlgorithm(_RFBase):
+class RFClassifyAlgorithm(SurveyTiles, _RFBase):
     PARAMETER_HELP = {
         "INPUT": "A LAS/LAZ file, a folder of them or a .vpc survey (a survey runs in buffered tiles with a "
                  "ground model). Only read, never changed.",
@@ -227,10 +227,15 @@ class RFClassifyAlgorithm(_RFBase):
         "IGNORE_CLASSES": "Points of these classes keep their class, are not predicted and stay out of the DTM "
                           "(7 and 18, noise, by default).",
         "OUTPUT": "The classified LAS/LAZ, every dimension and the CRS of the input kept; a .vpc and a folder of "
-                  "files for several input files.",
+                  "files for several input files. Skip it for the DTM alone (on a survey with a DTM extent, only "
+                  "the extent's tiles are then classified).",
         "DTM": "A cloud-optimised GeoTIFF of the predicted ground (class 2) points' triangulation.",
         "DTM_CELL": FILTER_PARAMETER_HELP["DTM_CELL"],
         "DTM_FILL": FILTER_PARAMETER_HELP["DTM_FILL"],
+        **{name: FILTER_PARAMETER_HELP[name] for name in ("TILE_SIZE", "MEMORY_BUDGET", "WORKERS", "WORK_FOLDER",
+                                                          "SCHEDULER", "ONLY")},
+        "TILE_BUFFER": "The margin read around each tile so that no seam shows; -1 = the reach of the model's "
+                       "features (38 m for the HYBRID preset's).",
     }
     INPUT = "INPUT"
     MODEL = "MODEL"
@@ -264,7 +269,10 @@ neighbourhoods, the prediction and the DTM, whose grid spans only the other poin
 <p><b>Surveys</b>: a folder of LAS/LAZ files, a virtual point cloud (.vpc) or a cloud larger than the memory is classified in
 buffered tiles, as the ground filters do (the buffer is the reach of the model's features); this works
 for ground models (classes 2 and 1) whose features come from x, y, z (the default HYBRID preset, or
-geometric features); other models are refused for surveys with the reason.</p>
+geometric features); other models are refused for surveys with the reason. The tiles, the workers, a Dask
+cluster and one file of a survey for a job array (<i>Advanced parameters</i>) are the ground filters'. Skip the
+<i>Classified point cloud</i> for the DTM alone: on a survey with a <i>DTM extent</i>, only the tiles that make the
+extent's cells are then classified.</p>
 <p>The model is refused with a clear message when the file was changed or is not a GroundSieve
 model, or when the cloud cannot give the model's features (e.g. colour in one and not the other).
 Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
@@ -279,9 +287,12 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
         self.addParameter(QgsProcessingParameterString(
             self.IGNORE_CLASSES, "Ignored classes: kept, not predicted, out of the DTM (e.g. 7,18,20-25)",
             defaultValue="7,18", optional=True))
+        self.addTileParameters(reach="the model's reach")
+        # optional, made by default, as the ground filters' (a DTM alone: on a survey with a DTM extent,
+        # only the extent's tiles are classified)
         self.addParameter(QgsProcessingParameterFileDestination(
             self.OUTPUT, "Classified point cloud (a .vpc for several input files)",
-            fileFilter="LAZ (*.laz);;LAS (*.las);;Virtual point cloud (*.vpc)"))
+            fileFilter="LAZ (*.laz);;LAS (*.las);;Virtual point cloud (*.vpc)", optional=True, createByDefault=True))
         self.addParameter(QgsProcessingParameterRasterDestination(
             self.DTM, "DTM (ground surface)", optional=True, createByDefault=False))
         self.addParameter(QgsProcessingParameterNumber(
@@ -300,8 +311,10 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
         errors, rf, learning = _rf(feedback=feedback)
         from ..core.engine.workflow import DTMOptions
         input_path = self.parameterAsFile(parameters, self.INPUT, context)
-        output = pointclouds.classified_output_path(self, parameters, context, self.OUTPUT, input_path)
+        output = pointclouds.classified_output_path(self, parameters, context, self.OUTPUT, input_path) or None
         dtm_path = self.parameterAsOutputLayer(parameters, self.DTM, context) or None
+        if not output and not dtm_path:
+            raise QgsProcessingException(pointclouds.nothing_to_write(self))
         try:
             dtm = DTMOptions(cell_size_m=self.parameterAsDouble(parameters, self.DTM_CELL, context),
                              cell_set=dtm_cell_set(self, parameters, context, self.DTM_CELL),
@@ -311,16 +324,21 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
                              extent=dtm_extent_value(self, parameters, self.DTM_EXTENT, context, input_path,
                                                      feedback))
             ignored = self.parameterAsString(parameters, self.IGNORE_CLASSES, context) or ""
+            tiling = self.tileOptions(parameters, context)
             run = learning.classify_file(input_path, output, self.parameterAsFile(parameters, self.MODEL, context),
-                                         dtm_path=dtm_path, dtm=dtm, ignore_classes=ignored,
+                                         dtm_path=dtm_path, dtm=dtm, ignore_classes=ignored, tiling=tiling,
                                          **feedback_callables(feedback))
             ground, points = learning.classified_counts(run, ignored)
         except errors.GroundSieveError as err:
             raise QgsProcessingException(str(err)) from err
-        results = {self.OUTPUT: output, self.GROUND_COUNT: ground, self.POINT_COUNT: points}
-        # loaded as the ground filters load theirs (the same rules for a model's intermediate step)
-        pointclouds.load_or_log(context, feedback, output, self.parameterDefinition(self.OUTPUT).description().split(" (")[0],
-                                self.OUTPUT, parameters.get(self.OUTPUT))
+        output, dtm_path = self.tiledOutputs(tiling, run, output, dtm_path)
+        results = {self.GROUND_COUNT: ground, self.POINT_COUNT: points}
+        if output:
+            results[self.OUTPUT] = output
+            # loaded as the ground filters load theirs (the same rules for a model's intermediate step)
+            pointclouds.load_or_log(context, feedback, output,
+                                    self.parameterDefinition(self.OUTPUT).description().split(" (")[0], self.OUTPUT,
+                                    parameters.get(self.OUTPUT))
         if dtm_path:
             from . import styles
             results[self.DTM] = dtm_path

@@ -145,7 +145,7 @@ JSON_KINDS = "usage, input, parameter, memory, output, cluster, cancelled, inter
 JSON_HELP = ("write one JSON document to stdout at the end, nothing else (the log stays on stderr): "
              "{\"status\": \"done\", %s}, or {\"status\": \"failed\" or \"interrupted\", \"kind\" ("
              + JSON_KINDS + "), \"error\": the one-line message} when the exit status is not 0")
-FILTER_JSON = ("\"input\", \"output\", \"outputs\" (the classified files), \"dtm\" (or null), \"points\", "
+FILTER_JSON = ("\"input\", \"output\" (or null), \"outputs\" (the classified files), \"dtm\" (or null), \"points\", "
                "\"ground\", \"seconds\", \"tiles\" (null without tiles), \"algorithm\", \"parameters\" (the "
                "filter's, as run), \"warnings\"")
 DTM_JSON = ("\"input\", \"dtm\", \"points\", \"ground\" (the points of the ground classes), \"seconds\", \"tiles\" "
@@ -160,7 +160,7 @@ TUNE_JSON = ("\"input\", \"filter\", \"metric\", \"parameters\" (chosen), \"sear
 
 RFTRAIN_JSON = ("\"input\", \"model\", \"report\", \"features\", \"classes\" (learnt), \"test_accuracy\", "
                 "\"seconds\", \"warnings\"")
-RFCLASSIFY_JSON = ("\"input\", \"output\", \"outputs\" (the classified files), \"model\", \"dtm\" (or null), "
+RFCLASSIFY_JSON = ("\"input\", \"output\" (or null), \"outputs\" (the classified files), \"model\", \"dtm\" (or null), "
                    "\"points\", \"ground\" (predicted 2), \"seconds\", \"tiles\" (null without tiles), \"warnings\"")
 
 
@@ -340,7 +340,8 @@ def _add_rfclassify(sub) -> None:
     io = parser.add_argument_group("input and outputs")
     io.add_argument("--input", required=True, metavar="PATH", help="LAS/LAZ (1.0-1.4), a folder of them, or a .vpc")
     io.add_argument("--model", required=True, metavar="PATH", help="the model file (.npz) from rftrain")
-    io.add_argument("--output", required=True, metavar="PATH", help="classified LAS/LAZ (a .vpc for several inputs)")
+    io.add_argument("--output", metavar="PATH", help="classified LAS/LAZ (a .vpc for several inputs); leave it out "
+                    "for the DTM alone")
     io.add_argument("--dtm", metavar="PATH", help="DTM GeoTIFF of the predicted ground (optional)")
     _add_json(io, RFCLASSIFY_JSON)
     io.add_argument("--ignore-classes", default="7,18", metavar="LIST",
@@ -353,6 +354,7 @@ def _add_rfclassify(sub) -> None:
 def run_rfclassify(args, out) -> dict:
     """Run ``rfclassify``; return its JSON document."""
     from .learning import classify_file
+    _check_outputs_named(args, out)
     warnings, log = _collecting_log(out)
     dtm = dtm_options(args)
     start = time.monotonic()
@@ -361,7 +363,7 @@ def run_rfclassify(args, out) -> dict:
                            progress=_progress_printer(out), is_cancelled=_interrupt_seen, log=log)
     if isinstance(result, tuple):  # one cloud in memory: (cloud, predicted classes)
         cloud, predicted = result
-        points, ground, tiles, outputs = len(cloud), int((predicted == 2).sum()), None, [args.output]
+        points, ground, tiles, outputs = len(cloud), int((predicted == 2).sum()), None, [p for p in [args.output] if p]
         dtm_path = args.dtm or None
     else:
         points, ground, tiles, outputs = result.point_count, result.ground_count, result.tiles, list(result.outputs)
@@ -531,8 +533,9 @@ def tune_document(args, result) -> dict:
             "preset": args.preset_out, "report": args.report, "warnings": [text for _t, text in result.warnings]}
 
 
-def run_filter(args, out) -> dict:
-    """Run a filter (or the hybrid); return its JSON document (the summary is also logged to ``out``)."""
+def _check_outputs_named(args, out) -> None:
+    """A filter's or rfclassify's outputs: at least one of --output and --dtm; the DTM's options
+    typed without a --dtm are said to do nothing."""
     if not args.output and not args.dtm:
         raise _Usage("give --output and/or --dtm")
     for flag, unset in (("--dtm-cell", not getattr(args, "dtm_cell_typed", False)),
@@ -540,6 +543,11 @@ def run_filter(args, out) -> dict:
                         ("--dtm-extent", not args.dtm_extent)):
         if not args.dtm and not unset:
             print(f"groundsieve: {flag} is set but no --dtm is named: no DTM is made", file=out)
+
+
+def run_filter(args, out) -> dict:
+    """Run a filter (or the hybrid); return its JSON document (the summary is also logged to ``out``)."""
+    _check_outputs_named(args, out)
     warnings, log = _collecting_log(out)
     algorithm, options, dtm = options_from(args, log)
     return _run_documented(args, out, algorithm, options, dtm, warnings, log, "ground")

@@ -346,7 +346,7 @@ def check_model_unit(model, model_path: str, input_path: str, crs_wkt: Optional[
                                        "in the training cloud's unit)"))
 
 
-def classify_survey(input_path: str, output_path: str, model_path: str, *, dtm_path: Optional[str] = None,
+def classify_survey(input_path: str, output_path: Optional[str], model_path: str, *, dtm_path: Optional[str] = None,
                     dtm=None, ignore_classes=(7, 18), tiling=None, progress=None, is_cancelled=None, log=None):
     """rfclassify on a survey (a folder, a .vpc, a tile size set or a cloud beyond the memory
     budget): the model runs as a ground filter in the buffered-tile engine (core/engine/tiles.py),
@@ -391,10 +391,13 @@ def classified_counts(run, ignore_classes=(7, 18)) -> tuple:
     return int(np.count_nonzero(predicted[may] == 2)), len(cloud)
 
 
-def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_path: Optional[str] = None,
+def classify_file(input_path: str, output_path: Optional[str], model_path: str, *, dtm_path: Optional[str] = None,
                   dtm=None, ignore_classes=(7, 18), tiling=None, progress=None, is_cancelled=None, log=None):
     """Apply a saved model to ``input_path``; write the classified cloud (the model's ASPRS codes)
-    and, optionally, a DTM from the points predicted as ground (class 2).
+    and, optionally, a DTM from the points predicted as ground (class 2). With ``output_path`` None
+    only the DTM is written (on a survey with a DTM extent, only the tiles that make the extent's
+    cells are classified, as the ground filters do); with neither, nothing is written and the
+    predictions are returned.
 
     The ground filters' rules on marked points hold here too: withheld points and points of
     ``ignore_classes`` (noise 7 and 18 by default; a list or text such as "7,18,20-25") keep their
@@ -410,7 +413,8 @@ def classify_file(input_path: str, output_path: str, model_path: str, *, dtm_pat
                            processable, write_outputs)
     from .tiles import TileOptions, needs_tiling, refuse_in_a_workers_import
     refuse_in_a_workers_import()
-    input_path, output_path, model_path = os.fspath(input_path), os.fspath(output_path), os.fspath(model_path)
+    input_path, model_path = os.fspath(input_path), os.fspath(model_path)
+    output_path = os.fspath(output_path) if output_path is not None else None
     dtm_path = os.fspath(dtm_path) if dtm_path is not None else None
     from .one_file import check_only
     check_only(tiling, input_path, output_path, dtm_path)

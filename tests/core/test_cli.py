@@ -15,7 +15,7 @@ import pytest
 
 from groundsieve.core.engine import parameters as P
 from groundsieve.core.engine.cli import build_parser, main, options_from
-from groundsieve.core.engine.workflow import FilterOptions, run_ground_filter
+from groundsieve.core.engine.workflow import run_ground_filter
 from groundsieve.core.filters.smrf import SMRF
 from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
 
@@ -552,6 +552,20 @@ def test_rftrain_and_rfclassify_run_from_the_shell_whole_and_tiled(scene, tmp_pa
                  str(tmp_path / "x.laz"), "--json"], out=out, stdout=stdout) == 1
     failed = json.loads(stdout.getvalue())
     assert failed["kind"] in ("input", "parameter") and "none.npz" in failed["error"]
+    # the DTM alone, as the filters make it (--output had been required); the same DTM as the run with the cloud
+    out, stdout = io.StringIO(), io.StringIO()
+    dtm = str(tmp_path / "alone.tif")
+    before = set(os.listdir(tmp_path))
+    assert main(["rfclassify", "--input", scene, "--model", model, "--dtm", dtm, "--json"], out=out,
+                stdout=stdout) == 0, out.getvalue()
+    done = json.loads(stdout.getvalue())
+    assert done["output"] is None and done["outputs"] == [] and done["dtm"] == dtm
+    assert set(os.listdir(tmp_path)) - before == {"alone.tif"}
+    from osgeo import gdal
+    assert np.array_equal(gdal.Open(dtm).ReadAsArray(), gdal.Open(str(tmp_path / "dFalse.tif")).ReadAsArray())
+    out = io.StringIO()
+    assert main(["rfclassify", "--input", scene, "--model", model], out=out) == 2
+    assert "give --output and/or --dtm" in out.getvalue()
 
 
 def _python_m_groundsieve_with(run_code: str, scene, output):

@@ -2,7 +2,6 @@
 tampered or foreign files, spatial blocks do not leak, reports are right."""
 import json
 import os
-import zipfile
 
 import numpy as np
 import pytest
@@ -321,6 +320,48 @@ def test_rfclassify_on_a_folder_and_in_tiles_equals_the_whole_run(tmp_path):
     assert any("Learning ground (2) against the other classes" in line for line in lines), lines
     run = learning.classify_file(str(folder), str(tmp_path / "ground.vpc"), str(tmp_path / "ground.npz"))
     assert isinstance(run, TiledRun) and run.ground_count > 0
+
+
+def test_rfclassify_makes_a_dtm_alone_whole_and_of_a_surveys_extent(tmp_path):
+    """rfclassify without a classified cloud (output None) writes its DTM alone: on one file, the DTM of the
+    run that writes the cloud; on a survey with a DTM extent, only the tiles that make the extent's cells are
+    classified (fewer points read), with the whole run's DTM cell for cell there."""
+    import laspy
+    from osgeo import gdal
+    from groundsieve.core.engine.tiles import TileOptions, TiledRun
+    from groundsieve.core.engine.workflow import DTMOptions
+    from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+    train = make_scene(SceneSpec(size_m=60.0, density_per_m2=4.0, seed=43))
+    train.classification[:] = np.where(train.classification == 2, 2, 1)
+    write_scene(train, str(tmp_path / "train.laz"))
+    model = str(tmp_path / "ground.npz")
+    learning.train_file(str(tmp_path / "train.laz"), model, None,
+                        learning.TrainOptions(params=rf.ForestParams(n_trees=4, max_depth=8), block_m=15.0))
+    scene = tmp_path / "scene.laz"
+    write_scene(make_scene(SceneSpec(size_m=160.0, density_per_m2=2.0, seed=6)), str(scene))
+    learning.classify_file(str(scene), str(tmp_path / "c.laz"), model, dtm_path=str(tmp_path / "a.tif"))
+    learning.classify_file(str(scene), None, model, dtm_path=str(tmp_path / "b.tif"))
+    assert sorted(os.listdir(tmp_path)) == ["a.tif", "b.tif", "c.laz", "ground.npz", "scene.laz", "train.laz"]
+    assert np.array_equal(gdal.Open(str(tmp_path / "a.tif")).ReadAsArray(), gdal.Open(str(tmp_path / "b.tif")).ReadAsArray())
+    las = laspy.read(scene)
+    folder = tmp_path / "survey"
+    folder.mkdir()
+    x = np.asarray(las.x)
+    x0, y0 = float(np.floor(x.min())), float(np.floor(np.asarray(las.y).min()))
+    for i in range(4):  # four strips of 40 m
+        piece = laspy.LasData(las.header)
+        piece.points = las.points[(x >= x0 + 40 * i) & (x < x0 + 40 * (i + 1))]
+        piece.write(folder / f"s{i}.laz")
+    tiling = TileOptions(tile_size_m=40.0, workers=1)
+    dtm = DTMOptions(extent=(x0 + 5, y0 + 50, x0 + 35, y0 + 90))
+    full = learning.classify_file(str(folder), str(tmp_path / "all.vpc"), model, dtm_path=str(tmp_path / "full.tif"),
+                                  dtm=dtm, tiling=tiling)
+    alone = learning.classify_file(str(folder), None, model, dtm_path=str(tmp_path / "alone.tif"), dtm=dtm,
+                                   tiling=tiling)
+    assert isinstance(alone, TiledRun) and alone.tiles < full.tiles and alone.point_count < full.point_count
+    assert not alone.outputs
+    a, b = (gdal.Open(str(tmp_path / n)).ReadAsArray() for n in ("full.tif", "alone.tif"))
+    assert a.shape == (40, 30) and np.array_equal(a, b)
 
 
 def test_gps_time_keeps_its_resolution_as_seconds_of_the_week(tmp_path):

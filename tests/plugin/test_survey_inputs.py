@@ -186,3 +186,46 @@ def test_the_classified_cloud_skipped_gives_the_dtm_of_an_extent_alone(groundsie
     assert a.shape == (20, 20) and np.array_equal(a, b)
     with pytest.raises(QgsProcessingException, match="Classified point cloud and DTM are both skipped"):
         processing.run("groundsieve:smrf", dict(common, OUTPUT=None, DTM=None))
+
+
+def test_rfclassify_offers_the_filters_tiles_a_job_array_and_the_dtm_alone(groundsieve_provider, scene_laz, tmp_path):
+    """rfclassify on a survey takes the ground filters' advanced tile parameters (it had none: a UAV surveyor
+    could not set its tiles, workers, memory or a job array's file in QGIS), and its classified cloud is optional
+    as theirs: skipped, a survey's DTM of an extent classifies the extent's tiles only, with the DTM of a run
+    that writes the cloud; ONLY runs one file with {name}; both skipped is refused in words."""
+    import processing
+    from osgeo import gdal
+    from qgis.core import QgsApplication, QgsProcessingException, QgsProcessingParameterDefinition
+    registry = QgsApplication.processingRegistry()
+    smrf, rfc = registry.algorithmById("groundsieve:smrf"), registry.algorithmById("groundsieve:rfclassify")
+    for name in ("TILE_SIZE", "TILE_BUFFER", "MEMORY_BUDGET", "WORKERS", "WORK_FOLDER", "SCHEDULER", "ONLY"):
+        ours, theirs = rfc.parameterDefinition(name), smrf.parameterDefinition(name)
+        assert ours is not None and ours.type() == theirs.type(), name
+        assert ours.flags() & QgsProcessingParameterDefinition.Flag.FlagAdvanced, name
+        assert ours.description() == theirs.description() or name == "TILE_BUFFER", name
+    assert "model" in rfc.parameterDefinition("TILE_BUFFER").description()
+    assert rfc.parameterDefinition("OUTPUT").flags() & QgsProcessingParameterDefinition.Flag.FlagOptional
+    src, _scene = scene_laz
+    model = tmp_path / "model.npz"
+    processing.run("groundsieve:rftrain", {"INPUT": str(src), "MODEL": str(model), "TREES": 4,
+                                           "REPORT": str(tmp_path / "r.html")})
+    files = _split(src, tmp_path / "in")
+    import laspy
+    west = laspy.read(files[0]).header
+    x0, y0 = float(np.floor(west.mins[0])), float(np.floor(west.mins[1]))
+    extent = f"{x0 + 5},{x0 + 25},{y0 + 5},{y0 + 25}"  # (QGIS's xmin,xmax,ymin,ymax)
+    common = {"INPUT": str(tmp_path / "in"), "MODEL": str(model), "TILE_SIZE": 20.0, "WORKERS": 1}
+    full = processing.run("groundsieve:rfclassify", dict(common, OUTPUT=str(tmp_path / "c.vpc"),
+                                                         DTM=str(tmp_path / "a.tif"), DTM_EXTENT=extent))
+    alone = processing.run("groundsieve:rfclassify", dict(common, OUTPUT=None, DTM=str(tmp_path / "b.tif"),
+                                                          DTM_EXTENT=extent))
+    assert "OUTPUT" not in alone and alone["DTM"] == str(tmp_path / "b.tif")
+    assert 0 < alone["POINT_COUNT"] < full["POINT_COUNT"]
+    a, b = (gdal.Open(str(tmp_path / n)).ReadAsArray() for n in ("a.tif", "b.tif"))
+    assert a.shape == (20, 20) and np.array_equal(a, b)
+    # one job of an array: the west file (a folder's files by name: east is 0, west 1), its classes the whole run's
+    job = processing.run("groundsieve:rfclassify", dict(common, ONLY="1", OUTPUT=str(tmp_path / "jobs" / "{name}.laz")))
+    assert job["OUTPUT"] == str(tmp_path / "jobs" / "west.laz")
+    assert np.array_equal(classes_of(job["OUTPUT"]), classes_of(tmp_path / "c" / "west.laz"))
+    with pytest.raises(QgsProcessingException, match="Classified point cloud and DTM are both skipped"):
+        processing.run("groundsieve:rfclassify", dict(common, OUTPUT=None, DTM=None))
