@@ -1,13 +1,15 @@
 """A survey run as a job array, one job per file (``--only``), against one run of the whole survey.
 
-    .venv/bin/python bench/one_file.py [--files 4] [--points 4000000] [--tile-size 0] [--workers 2]
+    .venv/bin/python bench/one_file.py [--files 4] [--points 4000000] [--tile-size 0] [--workers 2] [--copc]
 
 A generated scene (core/synthetic.py) of about ``--points`` points is cut into about ``--files`` x
 ``--files`` LAZ files on multiples of their side (as a vendor's delivery); the command line's SMRF with a
 1 m DTM, in tiles of ``--tile-size`` (the files' side by default), runs (1) on the whole survey (a folder), (2) on each
 file with ``--only K``, one after the other (a job array on one node; on a cluster the jobs run at
 once on nodes of their own), and (3) on each file alone, without its neighbours (what a job array
-without ``--only`` gives). Said: the wall times (the jobs' sum and their longest), the points each job
+without ``--only`` gives). With ``--copc`` the files are LAS 1.4 point format 6, and the jobs with
+``--only`` run twice: on them, and on the same points written as COPC (copclib, as in
+tests/core/test_copc.py; requirements-dev.txt), whose neighbours are read by bounds. Said: the wall times (the jobs' sum and their longest), the points each job
 read and filtered, and how the jobs' classes and DTM cells compare with the whole run's. The floor: a
 plain laspy read of every file, in the same run.
 """
@@ -43,8 +45,16 @@ def compare(folder_a, folder_b, names, dtm_a, dtms_b):
     from osgeo import gdal
     differ = 0
     for name in names:
-        a, b = laspy.read(os.path.join(folder_a, name)), laspy.read(os.path.join(folder_b, name))
-        differ += int(np.count_nonzero(np.asarray(a.classification) != np.asarray(b.classification)))
+        other = os.path.join(folder_b, name)
+        if not os.path.exists(other):  # a COPC input's copy: its own name, its points in the octree's order
+            other = os.path.join(folder_b, name[:-4] + ".copc.laz")
+        a, b = laspy.read(os.path.join(folder_a, name)), laspy.read(other)
+        if "gps_time" in a.point_format.dimension_names:  # (--copc: each point's number in gps_time)
+            a_cls = np.asarray(a.classification)[np.argsort(np.asarray(a.gps_time), kind="stable")]
+            b_cls = np.asarray(b.classification)[np.argsort(np.asarray(b.gps_time), kind="stable")]
+        else:
+            a_cls, b_cls = np.asarray(a.classification), np.asarray(b.classification)
+        differ += int(np.count_nonzero(a_cls != b_cls))
     whole = gdal.Open(dtm_a)
     wg, w = whole.GetGeoTransform(), whole.ReadAsArray()
     cells, worst = 0, 0.0
@@ -70,6 +80,8 @@ def main():
     parser.add_argument("--tile-size", type=float, default=0.0,
                         help="set for every run (0 = the files' side: one tile a file)")
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--copc", action="store_true",
+                        help="point format 6 files, and the jobs run on them as COPC too (needs copclib)")
     args = parser.parse_args()
     import laspy
     import numpy as np
@@ -78,6 +90,9 @@ def main():
     src = os.path.join(root, "scene.laz")
     write_scene(make_scene(SceneSpec.for_points(args.points, density_per_m2=14.0, seed=11)), src)
     las = laspy.read(src)
+    if args.copc:  # COPC's point formats are 6-8; each point's number in gps_time, to match the COPC copies' points
+        las = laspy.convert(las, point_format_id=6, file_version="1.4")
+        las.gps_time = np.arange(len(las.points), dtype=np.float64)
     survey = os.path.join(root, "survey")
     os.makedirs(survey)
     x, y = np.asarray(las.x), np.asarray(las.y)
@@ -98,6 +113,16 @@ def main():
     if not args.tile_size:
         args.tile_size = side
     del las, x, y
+    copc = None
+    if args.copc:
+        sys.path.insert(0, str(PLUGINS))
+        from groundsieve.tests.core.test_copc import write_copc
+        copc = os.path.join(root, "copc")
+        os.makedirs(copc)
+        start = time.perf_counter()
+        for name in names:
+            write_copc(os.path.join(copc, name[:-4] + ".copc.laz"), laspy.read(os.path.join(survey, name)))
+        print(f"COPC copies written in {time.perf_counter() - start:.1f} s, in {copc}")
     print(f"{args.points:,} points in {len(names)} files of about {side:.0f} m, in {survey}")
     start = time.perf_counter()
     for name in names:
@@ -109,12 +134,15 @@ def main():
     print(f"floor (laspy reads every file): {floor:.1f} s")
     print(f"whole survey: {whole_s:.1f} s, tiles of {whole['tile_size']:g} m, {whole['tiles']} tiles")
     rows = []
-    for label, extra in (("with --only (neighbours' buffers)", lambda k, n: ["--only", str(k)]),
-                         ("each file alone", lambda k, n: [])):
+    modes = [("with --only (neighbours' buffers)", lambda k, n: ["--only", str(k)], survey),
+             ("each file alone", lambda k, n: [], survey)]
+    if copc:
+        modes.insert(1, ("with --only on the COPC copies", lambda k, n: ["--only", str(k)], copc))
+    for label, extra, folder in modes:
         out = os.path.join(root, re.sub(r"\W+", "_", label))
         times, tiles, read = [], 0, 0
         for k, name in enumerate(names):
-            src_k = survey if label.startswith("with") else os.path.join(survey, name)
+            src_k = folder if label.startswith("with") else os.path.join(folder, name)
             dtm = os.path.join(out, "dtm") if label.startswith("with") else os.path.join(out, "dtm",
                                                                                         name[:-4] + ".tif")
             cls = os.path.join(out, "cls") if label.startswith("with") else os.path.join(out, "cls", name)
