@@ -16,12 +16,29 @@ from __future__ import annotations
 import math
 import os
 import re
+from dataclasses import dataclass
 from typing import List, Optional, Sequence, Tuple
 
 from ..errors import InputError, InvalidParameterError, OutputError
 from ..io.lasfiles import LasInfo
 from ..io.outputs import LAS_EXTENSIONS, _ext
 from ..raster.geotiff import RASTER_EXTENSIONS
+
+
+@dataclass(frozen=True)
+class Subset:
+    """The part of a survey a tiled run classifies when it is not the whole: one file of it (``index``, its
+    place among the files the run reads: itself and its neighbours), or the tiles making a DTM extent's cells
+    (``index`` None: a DTM of an extent alone)."""
+    index: Optional[int]
+    tiles: Tuple[int, int, int, int]     #: the tiles' range (i0, i1, j0, j1) over the file or the extent
+    clip: Optional[Tuple[float, float, float, float]]  #: the box the files' points are read in (None: whole)
+    survey_box: Tuple[float, float, float, float]      #: the whole survey's box, from its headers
+
+    @property
+    def one_file(self) -> bool:
+        """One file of the survey (else a DTM extent's tiles)."""
+        return self.index is not None
 
 
 def stem_of(path: str) -> str:

@@ -729,21 +729,21 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
     from ..raster.crs import metres_per_unit
     from .workflow import length_label
     unit = length_label(metres_per_unit(infos[0].crs_wkt) or 1.0)  # (a survey in feet: feet)
-    one = None  # the one file's run: its place among the files read, its tiles, the box its neighbours lend
+    one = None  # one_file.Subset: one file's run, or a DTM extent's alone (None: the whole survey)
     headers = survey_box(infos)  # (before the files are cut to those a subset of the tiles reads)
     if only is not None:
-        from .one_file import header_box, neighbours, reach_box, tile_range
+        from .one_file import Subset, header_box, neighbours, reach_box, tile_range
         tiles_of = tile_range(header_box(infos[only]), size)
         box = reach_box(tiles_of, size, buffer_m)
         keep = neighbours(infos, only, box)
         name, files = os.path.basename(inputs[only]), len(inputs)
         inputs, infos, outs = [inputs[m] for m in keep], [infos[m] for m in keep], [outs[m] for m in keep]
-        one = dict(index=keep.index(only), tiles=tiles_of, clip=box, survey_box=headers)
+        one = Subset(index=keep.index(only), tiles=tiles_of, clip=box, survey_box=headers)
         log(f"{name}, file {only} of the survey's {files:,} (numbered from 0), is the one classified: its tiles read "
             f"their buffers from {len(keep) - 1:,} neighbouring file(s); every file run so on the same tiles gets the "
             "classes and DTM of a run of the whole survey.")
     elif dtm_path and dtm.extent is not None and not output_path:  # a DTM of an area alone: its tiles only
-        from .one_file import neighbours, reach_box, tile_range
+        from .one_file import Subset, neighbours, reach_box, tile_range
         g = dtm_grid
         # (the cells' edges: a tile beginning where they end makes none of them, and a domain on round numbers
         # had read a row and a column of files more: a flood modeller)
@@ -756,7 +756,7 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
             # delivery), every file is binned whole, in pieces, and only the extent's tiles are filtered
             every = len(keep) == sum(1 for i in infos if i.count)
             inputs, infos, outs = [inputs[m] for m in keep], [infos[m] for m in keep], [outs[m] for m in keep]
-            one = dict(index=None, tiles=tiles_of, clip=None if every else box, survey_box=headers)
+            one = Subset(index=None, tiles=tiles_of, clip=None if every else box, survey_box=headers)
             total = sum(i.count for i in infos)
             log("A DTM of its extent alone: only the tiles making its cells are "
                 + ("read" if getattr(algorithm, "ground_of_any_class", False) else "filtered")
@@ -769,7 +769,7 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
            " (The tile size is planned from the memory budget shared by the workers"
            + (" and fitted to the survey's files: a run of the whole survey with this tile size set gives the same "
               f"classes and DTM; set it, {size:g}, in every job for the same tiles on any machine.)" if one is not None
-              and one["index"] is not None else
+              and one.one_file else
               f": set it, {size:g}, for the same tiles and so the same classes and DTM with other workers or on "
               "another machine.)")))
     steps.check()
@@ -783,8 +783,8 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
     work = os.path.join(parent, WORK_PREFIX + _fingerprint(infos, grid, algorithm, options,
                                                                      dtm if dtm_path else None,
                                                                      None if one is None else
-                                                                     "the DTM's extent" if one["index"] is None
-                                                                     else os.path.realpath(inputs[one["index"]])))
+                                                                     "the DTM's extent" if not one.one_file
+                                                                     else os.path.realpath(inputs[one.index])))
     if os.path.isdir(work):
         lock = _lock_working_folder(work)  # another run still using it is refused, its folder left alone
         log(f"Resuming the interrupted run in {work}.")
@@ -799,8 +799,8 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
         lock = _lock_working_folder(work)
         try:
             from .one_file import clip_shares
-            shares = [1.0] * len(infos) if one is None or one["clip"] is None else \
-                clip_shares(infos, one["index"], one["clip"])
+            shares = [1.0] * len(infos) if one is None or one.clip is None else \
+                clip_shares(infos, one.index, one.clip)
             binned = [k for k, i in enumerate(infos) if not i.copc]  # (COPC files are not binned)
             _check_disk(parent, [infos[k] for k in binned], buffer_m, size, [shares[k] for k in binned])
         except OutputError:
@@ -809,7 +809,7 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
             raise
     # (the jobs of an array share a working folder; where its locks do not reach across nodes, their live
     # folders would look stale, and the warning invites deleting them: a code reviewer)
-    stale = _stale_working_folders(parent, work) if one is None or one["index"] is None else []
+    stale = _stale_working_folders(parent, work) if one is None or not one.one_file else []
     if stale:
         log(f"{WARNING_PREFIX}{len(stale)} working folder(s) of earlier runs that were killed hold "
             f"{_gb(sum(b for _p, b in stale))} "
@@ -1073,12 +1073,12 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             if not info.count or info.copc:  # a COPC file is read by bounds by its tiles
                 continue
             # (a file cut to a box is binned whole: its points are numbered among those in the box)
-            alone = (len(infos) == 1 and (one is None or one["clip"] is None)) or (one is not None and k == one["index"])
+            alone = (len(infos) == 1 and (one is None or one.clip is None)) or (one is not None and k == one.index)
             pieces = min(tiling.worker_count, info.count // BIN_PIECE_POINTS) if alone else 1
             records = _records_path(work, k)
             if pieces <= 1:
                 bin_jobs.append(dict(key=("bin", k), path=info.path, file_index=k, grid=grid, work=work,
-                                     records=records, clip=None if alone or one is None else one["clip"]))
+                                     records=records, clip=None if alone or one is None else one.clip))
                 continue
             cuts = [info.count * p // pieces for p in range(pieces + 1)]
             bin_jobs += [dict(key=("bin", k, p), path=info.path, file_index=k, grid=grid, work=work, first=cuts[p],
@@ -1091,7 +1091,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                 tiles.setdefault(key, []).append(part)
         # (a neighbour of the one file run keeps no class: a stand-in of one)
         classes = [np.lib.format.open_memmap(os.path.join(work, f"f{k:05d}.cls.npy"), mode="w+", dtype=np.uint8,
-                                             shape=(max(info.count if one is None or one["index"] in (None, k)
+                                             shape=(max(info.count if one is None or one.index in (None, k)
                                                         else 0, 1),))
                    for k, info in enumerate(infos)]
         for c in classes:
@@ -1121,7 +1121,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     assigned = [0] * len(infos)
     crs_wkt = infos[0].crs_wkt
     # the points the run classifies, and what its messages name: one file's, or the survey's
-    mine = infos if one is None or one["index"] is None else [infos[one["index"]]]
+    mine = infos if one is None or not one.one_file else [infos[one.index]]
     total_points = sum(i.count for i in mine)  # (a DTM's extent alone: those in its tiles, counted below)
     where = mine[0].path if len(mine) == 1 else f"{len(inputs)} input files" if one is None else \
         f"the {len(inputs)} input files within the DTM extent's reach"
@@ -1177,7 +1177,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                  class_paths=class_paths, algorithm=algorithm, options=options, dtm=dtm if dtm_path else None,
                  dtm_grid=dtm_writer.grid if dtm_writer is not None else None,
                  is_cancelled=None if use_processes or tiling.scheduler else tile_cancelled,
-                 own_classes=bool(tiling.scheduler), only=None if one is None else one["index"])
+                 own_classes=bool(tiling.scheduler), only=None if one is None else one.index)
             for key, before in zip(keys, done_before) if before is None]
     if not tiling.scheduler:  # (a cluster run says where its tiles go)
         log(f"{len(keys)} tile(s) on {workers} worker(s) ({'processes' if use_processes else 'threads'}).")
@@ -1270,18 +1270,18 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                 failed.set()  # (worker processes are stopped by the run: stop_workers)
                 raise
     for k, info in enumerate(infos):
-        if one is not None and k != one["index"]:
+        if one is not None and k != one.index:
             continue  # (a neighbour lends its points to the tiles' buffers; none of them is classified)
         if assigned[k] != info.count:
             raise InputError(f"{info.path}: {assigned[k]:,} of {info.count:,} points were classified; "
                              "the file's header and its points disagree")
-    if one is not None and one["index"] is None:
+    if one is not None and not one.one_file:
         total_points = sum(assigned)
     if one is not None and area_box is not None:
         # (the box of the points that may enter the DTM, over the whole survey: the tiles this run filtered
         # know theirs only; beyond them the headers tell: a DTM extent past the survey's edge lost 615 cells
         # the whole run has, a code reviewer)
-        sb = one["survey_box"]
+        sb = one.survey_box
         area_box = [min(area_box[0], sb[0]), min(area_box[1], sb[1]), max(area_box[2], sb[2]), max(area_box[3], sb[3])]
     resumed = sum(d is not None for d in done_before)  # (said apart: "Filtered 144" had counted 54 done before)
     log(f"{getattr(algorithm, 'tiles_done_words', 'Filtered')} {len(keys) - resumed} tile(s) in "
@@ -1302,8 +1302,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             if points is not dtm_writer.grid:  # beyond the points' box nodata, as the whole run's DTM placed in it
                 dtm_writer.blank_outside(points)
             workflow.say_extent(dtm_out, None if dtm_writer.has_values_in(dtm_out) else 0, unit, log,
-                                "the extent given" if one is None or one["index"] is None else
-                                f"the extent given over {os.path.basename(inputs[one['index']])}'s cells")
+                                "the extent given" if one is None or not one.one_file else
+                                f"the extent given over {os.path.basename(inputs[one.index])}'s cells")
     if dtm_out is not None and not n_copc and one is None:  # (one file's neighbours hold a few tiles' points)
         _say_stray_tiles(tiles, grid, dtm_out, log)
     # (as a whole run refuses it, not an empty DTM written; an extent's or a file's DTM in a gap of the data,
@@ -1373,7 +1373,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         log(f"Wrote the DTM {dtm_path} ({g.ncols:,} x {g.nrows:,} cells of {g.cell:g} {unit}).")
     steps.report(1.0)
     log(f"Done in {time.perf_counter() - t_start:.1f} s.")
-    return TiledRun(inputs if one is None or one["index"] is None else [inputs[one["index"]]], [o for o in outs if o],
+    return TiledRun(inputs if one is None or not one.one_file else [inputs[one.index]], [o for o in outs if o],
                     total_points,
                     ground_total, crs_wkt,
                     grid.size, grid.buffer, len(tile_log), dtm_path, tile_log=tile_log,
@@ -1385,8 +1385,8 @@ def _one_files_tiles(keys, tiles, copc_tiles, one, grid, dtm_grid, infos, log) -
     DTM those making its cells (``dtm_grid``, the survey DTM's cells over its header bounds), whose
     values then come from the same points as in the run of the whole survey. A tile of its points beyond
     its header's bounds lies beyond the area its neighbours lent points for: said."""
-    k = one["index"]
-    i0, i1, j0, j1 = one["tiles"]
+    k = one.index
+    i0, i1, j0, j1 = one.tiles
     chosen, beyond = [], 0
     for key in keys:
         holds = any(p.file_index == k and p.own_count for p in tiles.get(key, ())) \
