@@ -464,13 +464,29 @@ def classify_file(input_path: str, output_path: Optional[str], model_path: str, 
                          "and not the other)")
     from ..learn.rf import GPS_TIME_MODES
     X = feature_matrix(part, names, steps.sub(0.0, 0.5), gps_time=GPS_TIME_MODES.get(model.meta.get("gps_time"), "raw"))
+    from ..learn.rf import COLOURS, colour_depth_factor
+    factor = colour_depth_factor(model, X)
+    if factor != 1.0:  # (a reviewer's 16-bit model on an 8-bit flight: every point class 5, no ground, "done")
+        columns = [j for j, name in enumerate(names) if name in COLOURS]
+        X[:, columns] *= factor
+        log(f"{WARNING_PREFIX}{input_path}: its colour is "
+            + ("8-bit (every value at most 255) and the model {m} learnt 16-bit colour: the colour is read "
+               "multiplied by 257 (255 becomes 65,535)" if factor > 1 else
+               "16-bit (values beyond 255) and the model {m} learnt 8-bit colour: the colour is read divided by "
+               "257 (65,535 becomes 255)").format(m=model_path) + ".")
     from ..learn.rf import out_of_range_features
     for name, part_out, (low, high), median in out_of_range_features(model, X):
-        if name in ("red", "green", "blue", "intensity"):
-            example = ("; e.g. 16-bit colour given to a model trained on 8-bit colour" if median > high else
-                       "; e.g. 8-bit colour given to a model trained on 16-bit colour")
+        if name in ("red", "green", "blue"):
+            example = "; e.g. colour of another camera, exposure or light"
+        elif name == "intensity":
+            example = "; e.g. intensity of another sensor, flying height or scaling"
         elif name == "gps_time":
-            example = "; e.g. a flight of another day, or GPS time of another encoding"
+            # (a patch cut from a flight learns a few seconds of it: the time stands for where the patch lies, and
+            # the rest of the same flight is beyond it; a reviewer's C3 model called 65 % of the objects ground)
+            example = ("; the time a point was measured stands for where the training patch lay: the rest of a "
+                       "flight, or a flight of another day, lies beyond it. Prefer a model without GPS time")
+        elif name == "scan_angle":
+            example = "; the scan angle stands for where in its strip the training patch lay"
         else:
             example = ""
         log(f"{WARNING_PREFIX}{input_path}: the feature '{name}' lies outside the range the model learnt it in on "
