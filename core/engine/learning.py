@@ -2,6 +2,7 @@
 HTML/CSV report) and classify a cloud with a saved model (classified cloud, optional DTM)."""
 from __future__ import annotations
 
+import math
 import os
 import time
 from dataclasses import dataclass
@@ -346,6 +347,36 @@ def check_model_unit(model, model_path: str, input_path: str, crs_wkt: Optional[
                                        "in the training cloud's unit)"))
 
 
+#: Memory a point costs rfclassify's whole run of a model that runs whole only (its colour, returns, GPS time
+#: or other classes), beyond a ground filter's point (core/engine/tiles.whole_run_bytes): the peaks of a
+#: reviewer's UAV flights, 3.5 M points (LAS point format 3) with C2 (colour and returns), C5 (and eigen
+#: features) and 9.5 M points with C2, were 131-190 bytes a point beyond the process's own 0.25 GB, where
+#: the ground filters' figure (330 bytes, core/engine/tiles.BYTES_PER_POINT) had tiled, and so refused,
+#: a file of 6.5 M points or more
+RF_EXTRA_BYTES_PER_POINT = 40
+
+
+class _WholeModelRun:
+    """What core/engine/tiles.whole_run_bytes prices for rfclassify's whole run of a model that does not
+    run in tiles: RF_EXTRA_BYTES_PER_POINT a point beyond a ground filter's, no grid of its own."""
+    extra_bytes_per_point = RF_EXTRA_BYTES_PER_POINT
+
+
+def untileable(model) -> str:
+    """Why a model cannot run tile by tile ("" when it can): the engine writes ground (2) and the rest
+    (1), and reads x, y, z (and the class) from its tiles."""
+    from ..learn.hybrid import unknown_features
+    classes = sorted(int(c) for c in model.classes)
+    if GROUND_CLASS not in classes or not set(classes) <= {1, GROUND_CLASS}:
+        return ("only a ground model (classes 2 and 1) runs tile by tile; this model has the classes "
+                f"{', '.join(map(str, classes))}")
+    other = unknown_features(model.features)
+    if other:
+        return ("a model runs tile by tile on features from x, y, z only (the HYBRID preset or geometric features); "
+                f"this model also uses {', '.join(other)}")
+    return ""
+
+
 def classify_survey(input_path: str, output_path: Optional[str], model_path: str, *, dtm_path: Optional[str] = None,
                     dtm=None, ignore_classes=(7, 18), tiling=None, progress=None, is_cancelled=None, log=None):
     """rfclassify on a survey (a folder, a .vpc, a tile size set or a cloud beyond the memory
@@ -354,7 +385,6 @@ def classify_survey(input_path: str, output_path: Optional[str], model_path: str
     its reach, from the model's features, is the tiles' buffer). This
     needs a ground model (classes 2 and 1 only) whose features come from x, y, z (the hybrid and
     geometric features); other models are refused with the reason."""
-    from ..learn.hybrid import unknown_features
     from .tiles import TileOptions
     from .workflow import DTMOptions, FilterOptions, run_ground_filter
     from ..io.lasfiles import expand_inputs, scan_header
@@ -362,17 +392,11 @@ def classify_survey(input_path: str, output_path: Optional[str], model_path: str
     files = expand_inputs(input_path)
     check_model_unit(model, model_path, input_path, scan_header(files[0]).crs_wkt if files else None,
                      log or (lambda _msg: None))
-    classes = sorted(int(c) for c in model.classes)
-    if GROUND_CLASS not in classes or not set(classes) <= {1, GROUND_CLASS}:
-        raise InputError(f"{model_path}: on a survey (a folder, a .vpc or a cloud larger than the memory), "
-                         f"only a ground model (classes 2 and 1) runs tile by tile; this model has the classes "
-                         f"{', '.join(map(str, classes))}: classify each file on its own, or train a ground model "
-                         "(the HYBRID features with no classes named learn ground against the rest)")
-    other = unknown_features(model.features)
-    if other:
-        raise InputError(f"{model_path}: on a survey, the model's features must come from x, y, z (the HYBRID "
-                         f"preset or geometric features); this model also uses {', '.join(other)}: classify "
-                         "each file on its own")
+    problem = untileable(model)
+    if problem:
+        raise InputError(f"{model_path}: on a survey (a folder or a .vpc), {problem}: classify each file on its own "
+                         "(in QGIS: Run as Batch Process, one row a file), or train a ground model (the HYBRID "
+                         "features with no classes named learn ground against the rest)")
     options = FilterOptions(ignore_classes=ignore_classes if ignore_classes is not None else (),
                             tiling=tiling or TileOptions())
     return run_ground_filter(input_path, output_path, ModelGround(model_path=model_path), options=options,
@@ -418,7 +442,27 @@ def classify_file(input_path: str, output_path: Optional[str], model_path: str, 
     dtm_path = os.fspath(dtm_path) if dtm_path is not None else None
     from .one_file import check_only
     check_only(tiling, input_path, output_path, dtm_path)
-    if needs_tiling(input_path, tiling or TileOptions()):
+    tiling = tiling or TileOptions()
+    model = load_model(model_path)
+    problem = untileable(model)
+    # the whole run priced as the model's: a ground model as the filter it runs as in tiles, another at its
+    # own measured cost
+    estimate = _WholeModelRun() if problem else ModelGround(model_path=model_path)
+    whole_dtm = (dtm or DTMOptions()) if dtm_path else None
+    if needs_tiling(input_path, tiling, algorithm=estimate, dtm=whole_dtm, log=None if problem else log):
+        from .tiles import is_survey_input, whole_run_bytes
+        if problem and not is_survey_input(input_path):  # one file, tiled for its size or a tile size set
+            from ..io.lasfiles import scan_header
+            if tiling.tile_size_m > 0 or tiling.scheduler:
+                why = "a tile size is set" if tiling.tile_size_m > 0 else "a Dask scheduler is set"
+                raise InputError(f"{input_path}: {why}, so it would run in buffered tiles, and {problem}: leave "
+                                 "the tile size at 0 and the scheduler empty to classify it whole")
+            need = whole_run_bytes(scan_header(input_path), estimate, whole_dtm) / 2 ** 20
+            raise InputError(f"{input_path}: run whole it would take about {need:,.0f} MB, more than the memory "
+                             f"budget ({tiling.budget_bytes / 2 ** 20:,.0f} MB), so it would run in buffered tiles, "
+                             f"and {problem}: raise the memory budget to {100 * math.ceil(need / 100):,.0f} MB or "
+                             "more (--memory-budget; Memory budget in the dialog's advanced parameters) to classify "
+                             "it whole, if the machine has it")
         return classify_survey(input_path, output_path, model_path, dtm_path=dtm_path, dtm=dtm,
                                ignore_classes=ignore_classes, tiling=tiling, progress=progress,
                                is_cancelled=is_cancelled, log=log)
@@ -427,7 +471,6 @@ def classify_file(input_path: str, output_path: Optional[str], model_path: str, 
     dtm = dtm or DTMOptions()
     options = FilterOptions(ignore_classes=ignore_classes if ignore_classes is not None else ())
     check_outputs(input_path, output_path, [dtm_path])
-    model = load_model(model_path)
     if dtm_path and CLASS_GROUND not in model.classes:  # found before any work, as groundsieve:hybrid does
         raise InputError(f"{model_path}: this model has no ground class (2) (its classes: "
                          f"{', '.join(map(str, model.classes))}): it cannot make a DTM; leave the DTM out or "

@@ -422,6 +422,41 @@ def test_adjusted_standard_gps_time_is_put_back_on_its_week(tmp_path):
                                atol=0.05)
 
 
+def test_a_model_that_runs_whole_only_is_priced_as_such_and_its_refusal_says_how_to_run_it(tmp_path):
+    """A colour model on one file of a UAV flight (9.5 M points) was refused as "a survey: classify each file on
+    its own", the file being priced at a ground filter's 330 bytes a point and so tiled: such a model's whole run is
+    now priced at its own measured cost, and when it does exceed the budget, or a tile size is set, the refusal
+    says why the file would be tiled and how to run it whole (a reviewer)."""
+    from groundsieve.core.engine.tiles import BYTES_PER_POINT, TileOptions, needs_tiling, whole_run_bytes
+    from groundsieve.core.io.lasfiles import scan_header
+    rng = np.random.default_rng(3)
+    n = 20000
+    x, y = rng.uniform(0, 60, n), rng.uniform(0, 60, n)
+    cls = np.where(rng.random(n) < 0.5, 2, 1).astype(np.uint8)
+    red = np.where(cls == 2, rng.uniform(20000, 40000, n), rng.uniform(40000, 65000, n)).astype(np.uint16)
+    path = str(tmp_path / "flight.las")
+    write_las(new_las(x, y, rng.normal(0, 0.1, n), point_format=3, classification=cls, red=red, green=red, blue=red),
+              path)
+    model = str(tmp_path / "c1.npz")
+    learning.train_file(path, model, None, learning.TrainOptions(features=("red", "green", "blue"),
+                                                                 params=rf.ForestParams(n_trees=2), block_m=10.0))
+    need = whole_run_bytes(scan_header(path), learning._WholeModelRun())
+    assert need < 0.7 * n * BYTES_PER_POINT
+    budget_mb = 1.2 * need / 2 ** 20  # between its own price and a ground filter's
+    assert not needs_tiling(path, TileOptions(memory_budget_mb=budget_mb), algorithm=learning._WholeModelRun())
+    _cloud, predicted = learning.classify_file(path, str(tmp_path / "whole.las"), model,
+                                               tiling=TileOptions(memory_budget_mb=budget_mb))
+    assert len(predicted) == n
+    with pytest.raises(InputError, match=r"run whole it would take about [\d.,]+ MB, more than the memory budget "
+                                         r"\([\d.,]+ MB\), so it would run in buffered tiles, and a model runs tile "
+                                         r"by tile on features from x, y, z only.*red, green, blue: raise the memory "
+                                         r"budget to [\d,]+ MB or more"):
+        learning.classify_file(path, str(tmp_path / "o.las"), model, tiling=TileOptions(memory_budget_mb=budget_mb / 4))
+    with pytest.raises(InputError, match="a tile size is set, so it would run in buffered tiles.*leave the tile size at 0"):
+        learning.classify_file(path, str(tmp_path / "o.las"), model, tiling=TileOptions(tile_size_m=20.0))
+    assert not (tmp_path / "o.las").exists()
+
+
 def test_colour_of_the_other_depth_is_rescaled_and_a_feature_outside_its_range_is_warned_about(tmp_path):
     """A model trained on 16-bit colour given 8-bit colour had predicted one class for every point, "done" (a
     reviewer's case): the colour is now read in the model's depth (x 257, or / 257 the other way), said in the
