@@ -164,6 +164,13 @@ def core_modules(extra=None, feedback=None, kernels_of=None):
 _SESSION = {"kernels_checked": set()}
 
 
+def kernels_compiled(name):
+    """After a run of algorithm ``name`` finished: its kernels are in numba's cache, and its next runs,
+    in this session or another, say nothing of compiling (core/engine/kernels.py ``remember_run``)."""
+    from ..core.engine.kernels import remember_run
+    remember_run(name)
+
+
 def say_if_compiling(feedback, name=None):
     """At the first run of algorithm ``name`` (None: any) in a session, say that its kernels are
     compiled now when numba's cache holds fewer than half of them or of the grids' (a new install, an
@@ -735,6 +742,7 @@ class GroundFilterAlgorithm(SurveyTiles, Discoverable, QgsProcessingAlgorithm):
         styles.style_when_loaded(context, dtm_path, styles.DTM_STYLE)
         for name, (path, _make) in rasters.items():
             styles.style_when_loaded(context, path, self.rasterStyles(run).get(name))
+        kernels_compiled(self.name())
         return results
 
     def rasterStyles(self, run=None):  # noqa: N802

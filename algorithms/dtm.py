@@ -4,7 +4,7 @@ from qgis.core import (QgsProcessingException, QgsProcessingOutputNumber, QgsPro
                        QgsProcessingParameterString)
 
 from .base import (FILTER_PARAMETER_HELP, INPUT_FILTER, GroundFilterAlgorithm, core_modules, dialog_help, dtm_cell_set,
-                   dtm_extent_value, feedback_callables)
+                   dtm_extent_value, feedback_callables, kernels_compiled)
 
 
 class DTMFromClassesAlgorithm(GroundFilterAlgorithm):
@@ -130,6 +130,7 @@ with one of the ground filters.</p>""")
         if tiled and options.tiling.only != "":  # one file of the survey: its DTM's path
             dtm_path = run.dtm_path
         styles.style_when_loaded(context, dtm_path, styles.DTM_STYLE)
+        kernels_compiled(self.name())
         return {self.DTM: dtm_path, self.GROUND_COUNT: run.ground_count,
                 self.POINT_COUNT: run.point_count if tiled else len(run.cloud)}
 

@@ -9,7 +9,7 @@ from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException,
 from qgis.PyQt.QtGui import QIcon
 
 from . import pointclouds
-from .base import core_modules, dialog_help, feedback_callables, warn_about_crs
+from .base import core_modules, dialog_help, feedback_callables, kernels_compiled, warn_about_crs
 from .discovery import Discoverable
 
 _ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
@@ -170,4 +170,5 @@ the cloud's CRS. The output is written under a temporary name and renamed when c
         except errors.GroundSieveError as err:
             raise QgsProcessingException(str(err)) from err
         warn_about_crs(feedback, input_path, run.cloud.crs_wkt, "every radius")
+        kernels_compiled("features")
         return {self.OUTPUT: output_path, self.FEATURES: ",".join(run.names)}

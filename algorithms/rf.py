@@ -12,7 +12,7 @@ from qgis.PyQt.QtGui import QIcon
 from . import pointclouds
 from .base import (FILTER_PARAMETER_HELP, SurveyTiles, check_parameter_values, core_modules, dialog_help,
                    dtm_classes_parameter, dtm_extent_parameter, dtm_extent_value, dtm_max_distance_parameter,
-                   dtm_cell_set, feedback_callables)
+                   dtm_cell_set, feedback_callables, kernels_compiled)
 from .discovery import Discoverable
 
 _ICONS = os.path.join(os.path.dirname(os.path.dirname(__file__)), "icons")
@@ -216,6 +216,7 @@ importances, timings) with the same figures in a CSV beside it.</p>""")
             raise QgsProcessingException(str(err)) from err
         test = run.evaluations["test set"]
         feedback.pushInfo("Test set:\n" + test.table())
+        kernels_compiled("rf")
         return {self.MODEL: model_path, self.REPORT: report_path, self.TEST_ACCURACY: test.accuracy}
 
 
@@ -343,4 +344,5 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
             from . import styles
             results[self.DTM] = dtm_path
             styles.style_when_loaded(context, dtm_path, styles.DTM_STYLE)
+        kernels_compiled("rf")
         return results

@@ -563,13 +563,14 @@ def _collecting_log(out):
 def _run_documented(args, out, algorithm, options, dtm, warnings, log, ground_words: str) -> dict:
     """Run ``algorithm`` on ``args.input`` as the filters and the DTM from classes run (the compile note,
     progress, interrupts); its JSON document, its summary logged to ``out``."""
-    from .kernels import COMPILING, about_to_compile
+    from .kernels import COMPILING, about_to_compile, remember_run
     from .workflow import run_ground_filter
     if about_to_compile(args.filter):  # (the progress then waits 20-60 s: a release engineer saw 8 s at 21.5 %)
         print(COMPILING, file=out, flush=True)
     start = time.monotonic()
     run = run_ground_filter(args.input, args.output, algorithm, options=options, dtm_path=args.dtm, dtm=dtm,
                             progress=_progress_printer(out), is_cancelled=_interrupt_seen, log=log)
+    remember_run(args.filter)
     document = filter_document(args, algorithm, run, time.monotonic() - start, warnings)
     print(f"{document['points']:,} points, {document['ground']:,} {ground_words}.", file=out)
     return document

@@ -85,3 +85,29 @@ def test_a_numba_cache_dir_that_cannot_be_written_is_treated_as_none():
     finally:
         os.chmod(readonly, 0o755)
         shutil.rmtree(readonly, ignore_errors=True)
+
+
+def test_the_compile_note_is_said_until_a_run_of_the_algorithm_finished(tmp_path):
+    """The note was said at every run of a fresh install (a new user: "First run ... compiling" three times),
+    a run compiling only its own path's kernels (SMRF with a DTM: 13 of the 39 shared). A finished run is
+    remembered beside numba's cache: its algorithm's next runs say nothing, another algorithm's first run still
+    does, and so does a run after the cache was cleared."""
+    from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+    src = tmp_path / "s.laz"
+    write_scene(make_scene(SceneSpec(size_m=30.0, density_per_m2=2.0, seed=1)), str(src))
+    cache = tmp_path / "cache"
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONPATH=PLUGINS)
+
+    def said(*args):
+        proc = subprocess.run([sys.executable, "-m", "groundsieve", *args], capture_output=True, text=True, env=env,
+                              timeout=600)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        return "First run of this algorithm" in proc.stdout + proc.stderr
+
+    smrf = ["smrf", "--input", str(src), "--output", str(tmp_path / "o.laz"), "--dtm", str(tmp_path / "d.tif")]
+    assert said(*smrf)
+    assert not said(*smrf) and not said(*smrf)
+    assert said("ptd", "--input", str(src), "--output", str(tmp_path / "p.laz"))
+    for index in cache.rglob("*.nbi"):  # numba's cache cleared (the stamp left)
+        index.unlink()
+    assert said(*smrf)

@@ -1,5 +1,5 @@
 """The first run of an algorithm after an install or upgrade compiles its numba kernels (20-60 s, the
-bar still): the log says so once a session, when numba's cache holds fewer than half of them
+bar still): the log says so once a session, until a run of it finished (remembered beside numba's cache), when numba's cache holds fewer than half of them
 (algorithms/base.py, core/engine/kernels.py)."""
 import uuid
 
@@ -63,6 +63,8 @@ def test_the_first_run_of_an_algorithm_in_a_session_says_it_compiles_when_the_ca
     monkeypatch.setitem(base._SESSION, "kernels_checked", set())  # a new QGIS session
     checks = []
     monkeypatch.setattr(kernels, "kernel_cache_state", lambda modules=None: checks.append(modules) or state)
+    stamp = tmp_path / "runs.json"  # (no algorithm run yet with these kernels: a new install)
+    monkeypatch.setattr(kernels, "_stamp_path", lambda: str(stamp))
     src, _scene = scene_laz
     runs = []
     for run, alg in enumerate(("smrf", "smrf", "pmf")):
@@ -76,3 +78,11 @@ def test_the_first_run_of_an_algorithm_in_a_session_says_it_compiles_when_the_ca
     assert [sorted({x.rsplit(".", 1)[1] for x in m}) for m in own] == [["_smrf_kernels"], ["_pmf_kernels"]]
     # its own, then the grids' unless its own already said it: once a session for each algorithm
     assert len(checks) == (2 if said else 4)
+    # each finished run is remembered: the next session says nothing for them while their kernels stay cached
+    import json
+    assert json.loads(stamp.read_text())["ran"] == ["pmf", "smrf"]
+    monkeypatch.setitem(base._SESSION, "kernels_checked", set())
+    feedback = _Feedback()
+    processing.run("groundsieve:smrf", {"INPUT": str(src), "OUTPUT": str(tmp_path / "again.laz"), "DTM": None},
+                   feedback=feedback)
+    assert (base.COMPILING in feedback.infos) == (state is not None and state[0] == 0)
