@@ -32,7 +32,7 @@ test-core: env
 test-desktop: env
 	$(PY) -m pytest -q -ra tests/desktop
 
-# docs/img/*.png: every algorithm's dialog, from the real QGIS dialogs (about 20 s)
+# docs/img/*.png: every algorithm's dialog, from the real QGIS dialogs (about 30 s)
 screenshots: env
 	scripts/screenshots
 

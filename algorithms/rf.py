@@ -59,6 +59,10 @@ class RFTrainAlgorithm(_RFBase):
         "CLASSES": "The ASPRS codes to learn, e.g. 2,1 or 2,11,5,6,14; empty = every class present but 0, 7 and 18 "
                    "(with the hybrid features: ground 2 against all the others).",
         "CUSTOM_FEATURES": "With 'custom list': features by name, e.g. intensity,return_number,planarity_r0p6.",
+        "GROUND_VS_REST": "Learn ground (2) against all the other classes (taken as 1), whatever the features: a "
+                          "ground model, for a DTM (with x, y, z features only it also runs tile by tile on surveys "
+                          "and in Ground filter (learned hybrid)). Off: the classes as they are, except with the "
+                          "hybrid features and no classes named, which learn ground against the rest.",
         "CRITERION": "How the trees split: gini or entropy.",
         "TREES": "How many trees the forest has.",
         "SCALER": "How the features are scaled before training: none, standard or robust (the paper's grid).",
@@ -88,6 +92,7 @@ class RFTrainAlgorithm(_RFBase):
     VALIDATION = "VALIDATION"
     TEST = "TEST"
     GRID = "GRID"
+    GROUND_VS_REST = "GROUND_VS_REST"
     MODEL = "MODEL"
     REPORT = "REPORT"
     TEST_ACCURACY = "TEST_ACCURACY"
@@ -135,6 +140,8 @@ importances, timings) with the same figures in a CSV beside it.</p>""")
         self.addParameter(QgsProcessingParameterString(
             self.CLASSES, "Classes to learn (ASPRS codes, comma-separated; empty = all present)",
             defaultValue="", optional=True))
+        self.addParameter(QgsProcessingParameterBoolean(
+            self.GROUND_VS_REST, "Learn ground (2) against all other classes (a ground model)", defaultValue=False))
         self.addParameter(QgsProcessingParameterEnum(
             self.PRESET, "Features", options=[
                 "C5H: C5 + height above ground minimum and density", "C1: RGB",
@@ -204,7 +211,9 @@ importances, timings) with the same figures in a CSV beside it.</p>""")
                 max_depth=depth or None, max_samples=samples or None)
             options = learning.TrainOptions(features=features, classes=classes, params=params,
                                             block_m=self.parameterAsDouble(parameters, self.BLOCK, context),
-                                            grid=self.parameterAsBoolean(parameters, self.GRID, context))
+                                            grid=self.parameterAsBoolean(parameters, self.GRID, context),
+                                            ground_vs_rest=self.parameterAsBoolean(parameters, self.GROUND_VS_REST,
+                                                                                   context) or None)
             model_path = self.parameterAsFileOutput(parameters, self.MODEL, context)
             report_path = self.parameterAsFileOutput(parameters, self.REPORT, context)
             run = learning.train_file(

@@ -88,7 +88,9 @@ non-ground, except noise 7 and 18 and withheld points, which are left out), or a
 points; a few hundred metres square of typical terrain is enough.</p>
 <p><b>Search</b>: the filter's defaults (or the <i>Starting preset</i>), then sets spread evenly over the
 ranges spanning the values the papers used or studied, then a local refinement around the best, until the <i>Search budget</i>
-(number of sets; each is one run of the filter on the patch) or the time limit is spent.</p>
+(runs of the filter on the patch) or the time limit is spent. A run is one set of parameters, except for
+SMRF, whose threshold and scalar are re-scored on each run's surface for free: its log counts more sets
+than runs (e.g. 788 sets in 60 runs).</p>
 <p><b>Honest figure</b>: the patch is cut into spatial blocks; each block is classified with the set
 chosen on the other blocks only (by a search of its own), and the errors of these held-out blocks give
 the <b>cross-validated error</b>, what to expect on similar data. The preset carries the set chosen on
@@ -171,8 +173,9 @@ sensitivity) and every set tried.</p>""")
         except errors.GroundSieveError as err:
             raise QgsProcessingException(str(err)) from err
         cv = result.cv
-        feedback.pushInfo(f"{len(result.trials)} sets in {result.seconds:.0f} s. Cross-validated: {cv.summary()}. "
-                          f"Chosen set on the whole patch: {result.best_accuracy.summary()}.")
+        feedback.pushInfo(f"{len(result.trials)} sets in {result.runs} filter runs, {result.seconds:.0f} s. "
+                          f"Cross-validated: {cv.summary()}. Chosen set on the whole patch: "
+                          f"{result.best_accuracy.summary()}.")
         for _title, text in result.warnings:
             feedback.pushWarning(text)
         return {self.OUTPUT_PRESET: preset_path, self.OUTPUT_HTML: report_path,

@@ -291,7 +291,19 @@ def _add_rftrain(sub) -> None:
     _add_json(io, RFTRAIN_JSON)
     forest = parser.add_argument_group("features and forest")
     forest.add_argument("--features", choices=list(PRESETS), default=DEFAULT_PRESET,
-                        help="the features (default %(default)s)")
+                        help="the features: HYBRID (x, y, z only: heights above SMRF's surface and 2, 6, 18 m "
+                             "openings; the model also runs in hybrid --model and on surveys), or matrone2024's C1 "
+                             "(RGB), C2 (+ return number), C3 (+ scan angle, GPS time), C4 (C3 + verticality, "
+                             "planarity, eigenentropy, surface variation), C5 (RGB, return number and the four), C5H "
+                             "(C5 + height above the ground minimum and density) (default %(default)s)")
+    forest.add_argument("--custom-features", default="", metavar="LIST",
+                        help="features by name instead, e.g. intensity,return_number,planarity_r0p6")
+    forest.add_argument("--ground-vs-rest", action="store_true",
+                        help="learn ground (2) against all other classes (a ground model, for a DTM), whatever the "
+                             "features (HYBRID with no --classes does so by default)")
+    forest.add_argument("--grid", action="store_true",
+                        help="train the paper's 18 combinations (criterion x trees x scaler) and keep the best on "
+                             "the validation set (18 times as long)")
     forest.add_argument("--classes", default="", metavar="LIST",
                         help="the ASPRS classes to learn, e.g. 2,3,5,6 ('' = every class present but 0, 7 and 18; "
                              "with HYBRID: ground against the rest)")
@@ -310,9 +322,12 @@ def run_rftrain(args, out) -> dict:
     """Run ``rftrain``; return its JSON document."""
     from ..io.clouds import parse_classes
     from ..learn.rf import PRESETS, ForestParams
+    from ..progress import warning_of
     from .learning import TrainOptions, train_file
     warnings, log = _collecting_log(out)
-    options = TrainOptions(features=PRESETS[args.features], classes=parse_classes(args.classes) or None,
+    custom = tuple(n.strip() for n in args.custom_features.split(",") if n.strip())
+    options = TrainOptions(features=custom or PRESETS[args.features], classes=parse_classes(args.classes) or None,
+                           grid=args.grid, ground_vs_rest=True if args.ground_vs_rest else None,
                            params=ForestParams(n_trees=args.trees, criterion=args.criterion, scaler=args.scaler,
                                                max_depth=args.max_depth or None,
                                                max_samples=args.samples_per_tree or None),
@@ -327,7 +342,8 @@ def run_rftrain(args, out) -> dict:
     return {"status": "done", "input": args.input, "model": args.model, "report": args.report,
             "features": list(run.features), "classes": [int(c) for c in run.model.classes],
             "test_accuracy": accuracy, "seconds": round(time.monotonic() - start, 3),
-            "warnings": list(warnings) + [w for w in (run.warnings or []) if w not in warnings]}
+            "warnings": list(warnings) + [w for w in (warning_of(w) or w for w in run.warnings or ())
+                                          if w not in warnings]}
 
 
 def _add_rfclassify(sub) -> None:
@@ -511,7 +527,7 @@ def run_tune(args, out) -> dict:
         write_report(args.report, result)
     table = P.by_name(args.tune_filter)
     best = ", ".join(f"{table[dim.name].option} {result.best_values[dim.field]}" for dim in result.dims)
-    print(f"{len(result.trials)} sets in {result.seconds:.0f} s; cross-validated total error "
+    print(f"{len(result.trials)} sets in {result.runs} filter runs, {result.seconds:.0f} s; cross-validated total error "
           f"{100 * result.cv.total:.2f} % (kappa {100 * result.cv.kappa:.2f} %); chosen: {best}", file=out)
     for _title, text in result.warnings:
         print(f"WARNING: {text}", file=out)

@@ -263,7 +263,8 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
     settings = None
     if report_path:
         settings = dict(input=input_path, features=", ".join(names), classes=", ".join(map(str, learnt)) + (
-                            f" (ground against {', '.join(map(str, classes))})" if learnt != classes else ""),
+                            " (ground (2) against " + ", ".join(str(c) for c in classes if c != GROUND_CLASS) + ")"
+                            if learnt != classes else ""),
                         criterion=model.meta["params"]["criterion"], trees=model.meta["params"]["n_trees"],
                         scaler=model.meta["params"]["scaler"], max_depth=model.meta["params"]["max_depth"],
                         samples_per_tree=model.meta["params"]["max_samples"],

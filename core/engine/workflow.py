@@ -646,8 +646,9 @@ def defaults_in_crs_unit(algorithm, dtm: Optional["DTMOptions"], crs_wkt: Option
                     f"whole {length_label(factor)})" if dtm.cell_size_m != DTMOptions.cell_size_m / factor
                     else f"DTM cell {dtm.cell_size_m:.4g}")
     if said:
-        log(f"{path}: the CRS's unit is {unit}: lengths in metres (the defaults, a preset's) are converted to it: "
-            + ", ".join(said) + f" ({unit}; 1 m = {1 / factor:.5g}). Values you set are read in {unit}.")
+        log(f"{path}: the CRS's unit is {unit}: lengths in metres (the defaults, a preset's) are converted to it, "
+            "and the run uses " + ", ".join(said) + f" ({unit}; 1 m = {1 / factor:.5g}). "
+            f"Values you set are read in {unit}.")
     return algorithm, dtm
 
 

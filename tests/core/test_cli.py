@@ -568,6 +568,24 @@ def test_rftrain_and_rfclassify_run_from_the_shell_whole_and_tiled(scene, tmp_pa
     assert "give --output and/or --dtm" in out.getvalue()
 
 
+def test_rftrain_takes_the_dialogs_custom_features_ground_against_the_rest_and_grid(scene, tmp_path):
+    """The command line's rftrain had neither the dialog's custom feature list nor its grid, and no route (in
+    either) to a ground model of other features than the hybrid's (a UAV surveyor relabelled a patch with laspy)."""
+    assert {"--custom-features", "--ground-vs-rest", "--grid"} <= set(help_of("rftrain").split()) | {
+        w.strip("[],") for w in help_of("rftrain").split()}
+    assert "C3 (+ scan angle, GPS time)" in " ".join(help_of("rftrain").split())
+    classes = set(np.unique(np.asarray(laspy.read(scene).classification)))
+    assert len(classes - {1, 2}) >= 1  # (other classes than ground and 1: what ground against the rest merges)
+    for extra, learnt in (([], sorted(c for c in classes if c not in (0, 7, 18))), (["--ground-vs-rest"], [1, 2])):
+        out, stdout = io.StringIO(), io.StringIO()
+        model = str(tmp_path / f"m{len(extra)}.npz")
+        assert main(["rftrain", "--input", scene, "--model", model, "--custom-features", "verticality_r0p6,intensity",
+                     "--trees", "3", "--json"] + extra, out=out, stdout=stdout) == 0, out.getvalue()
+        done = json.loads(stdout.getvalue())
+        assert done["features"] == ["verticality_r0p6", "intensity"] and done["classes"] == learnt, done
+        assert len(done["warnings"]) == len(set(done["warnings"]))
+
+
 def _python_m_groundsieve_with(run_code: str, scene, output):
     """``python -m groundsieve smrf`` on ``scene``, in a process of its own whose run_ground_filter is the function
     ``run`` that ``run_code`` defines."""

@@ -142,3 +142,17 @@ def test_rfclassify_on_a_vpc_equals_the_file_run(groundsieve_provider, labelled_
             assert np.mean(got == whole[part]) >= 0.999, (source, name)
             ground += int(np.sum(got == 2))
         assert counts["GROUND_COUNT"] == ground and counts["POINT_COUNT"] == len(whole), source
+
+
+def test_ground_against_the_rest_for_any_features(groundsieve_provider, scene_laz, tmp_path):
+    """GROUND_VS_REST trains a ground model (classes 2 and 1) on the paper's features too: the dialog had no
+    route to one but the hybrid features (a UAV surveyor relabelled a patch with laspy)."""
+    from groundsieve.core.learn.model_file import load_model
+    src, _scene = scene_laz
+    for ground, expected in ((False, None), (True, [1, 2])):
+        model = tmp_path / f"m{ground}.npz"
+        _run("rftrain", {"INPUT": str(src), "MODEL": str(model), "REPORT": str(tmp_path / f"r{ground}.html"),
+                         "PRESET": 6, "CUSTOM_FEATURES": "intensity,return_number", "TREES": 3,
+                         "GROUND_VS_REST": ground})
+        classes = sorted(int(c) for c in load_model(str(model)).classes)
+        assert classes == expected if expected else len(classes) > 2, classes
