@@ -203,11 +203,9 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
                          "sets as files.")
             log(notes[-1])
     Xt = sets["train"][0]
-    for j in np.flatnonzero((Xt.shape[0] > 1) & (np.nanmax(Xt, axis=0) == np.nanmin(Xt, axis=0))):
-        notes.append(f"{WARNING_PREFIX}the feature '{names[j]}' is {float(Xt[0, j]):g} on every training point: it "
-                     "carries no information (e.g. return_number on a cloud of single returns); leave it out, or "
-                     "train on a cloud where it varies.")
-        log(notes[-1])
+    for note in _feature_notes(Xt, names, cloud.crs_wkt):
+        notes.append(note)
+        log(note)
     for name, accuracy in leaking_features(*sets["train"], names, seed=options.params.seed):
         notes.append(f"{WARNING_PREFIX}the feature '{name}' alone predicts {accuracy:.1%} of the training labels. "
                      "Check that it does not carry the label itself (e.g. a converted reference cloud whose "
@@ -276,6 +274,41 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
         grid=grid_rows, notes=notes))
     steps.report(1.0)
     return TrainRun(model, evaluations, names, timings, grid_rows, notes)
+
+
+#: a feature without a value on this share of the training points or more is said to be mostly missing
+MISSING_SHARE = 0.5
+
+
+def _feature_notes(X: np.ndarray, names, crs_wkt) -> List[str]:
+    """Warnings on the training features that carry little: those without a value (NaN) on most points (a
+    neighbourhood holding too few points: the paper's 0.4-0.6 m spheres on a sparse airborne cloud, or in a
+    CRS in feet, where they are read as feet), and those of one value on every point (return_number on
+    single returns). (All-NaN columns had been missed, and a numpy RuntimeWarning printed: a reviewer.)"""
+    import re
+    from ..raster.crs import horizontal_unit
+    notes = []
+    if X.shape[0] < 2:
+        return notes
+    finite = np.isfinite(X)
+    unit = horizontal_unit(crs_wkt) or "metres"
+    for j, name in enumerate(names):
+        column = X[finite[:, j], j]
+        missing = 1.0 - column.size / X.shape[0]
+        if missing >= MISSING_SHARE:
+            radius = re.search(r"_r(\d+)p?(\d*)$", name)
+            why = (f": its neighbourhood, {radius.group(1)}.{radius.group(2) or '0'} {unit} around each point, holds too "
+                   "few points there (a sparse cloud, or a radius meant in metres read in feet). Leave it out, or "
+                   f"take a radius that holds a dozen points or more (a custom list, e.g. {name[:radius.start()]}_r2p0 "
+                   "for 2; Compute point features counts the spheres with too few)" if radius else
+                   ": leave it out, or train on a cloud that has it")
+            notes.append(f"{WARNING_PREFIX}the feature '{name}' has no value on {missing:.1%} of the training "
+                         f"points{why}.")
+        elif column.size > 1 and column.min() == column.max():
+            notes.append(f"{WARNING_PREFIX}the feature '{name}' is {float(column[0]):g} on every training point: it "
+                         "carries no information (e.g. return_number on a cloud of single returns); leave it out, or "
+                         "train on a cloud where it varies.")
+    return notes
 
 
 def _write_training_outputs(model, model_path: str, report_path: Optional[str], report: dict) -> None:
