@@ -58,6 +58,23 @@ class EchoGridResult:
     bypassed: int          #: kernels taken as ground without the height test
 
 
+def _say_raised_bypass(raised_bypass, bypass, x, y, x0, y0, size, nx, echo, log) -> None:
+    """Faithful mode: say how many of the kernels the single-return bypass makes ground whole stand above
+    their surroundings (flat roofs are single-return surfaces too: a UAV surveyor's farm had 99.4 % of its
+    roof points made ground, the DTM 4.9 m up, and the log spoke of 22 small spikes)."""
+    n_raised = int(raised_bypass.sum())
+    if not n_raised:
+        return
+    col = np.floor((x - x0) / size).astype(np.int64)
+    row = np.floor((y - y0) / size).astype(np.int64)
+    points = int(raised_bypass[row * nx + col].sum())
+    log(f"{WARNING_PREFIX}Echo grid: {n_raised:,} of the {int(bypass.sum()):,} kernels the single-return bypass makes "
+        f"ground whole ({points:,} points) stand more than {echo.dz_m:g} m above what a slope of {echo.slope:g} "
+        f"reaches from the kernels within {echo.neighbourhood_m:g} m: flat roofs, most likely, which are "
+        "single-return surfaces too. The paper's rule (mode 'faithful') keeps them ground, and the DTM on them; "
+        "mode 'evidence' keeps such raised kernels out.")
+
+
 @dataclass(frozen=True)
 class EchoGrid:
     """Parameters of the return-number grid filter (paper defaults: 5 m kernels, 2 m)."""
@@ -184,15 +201,18 @@ class EchoGrid:
         run_cancellable(_echo_grid_stats_kernel, x, y, z, rn, nr, x0, y0, size, nx, ny, zmin, zmax, only_first,
                         only_single, steps=steps.sub(0.0, 0.5), expected_s=3e-8 * n)
         occupied = np.isfinite(zmin)
+        # the kernels whose lowest point stands more than dz above what the slope reaches from the kernels
+        # around (evidence mode's test; in faithful mode only counted, for the log)
+        reachable = np.empty((ny, nx))
+        run_cancellable(_lower_envelope_kernel, zmin.reshape(ny, nx), int(math.ceil(self.neighbourhood_m / size)),
+                        size, float(self.slope), reachable, steps=steps.sub(0.5, 0.6))
+        reachable = reachable.ravel()
+        raised = occupied & (zmin > reachable + self.dz_m)  # empty kernels: inf > inf is False
         if self.mode == "faithful":
             reference = zmin
             bypass = only_first & occupied if has_returns else np.zeros_like(occupied)
+            _say_raised_bypass(bypass & raised, bypass, x, y, x0, y0, size, nx, self, log)
         else:
-            reachable = np.empty((ny, nx))
-            run_cancellable(_lower_envelope_kernel, zmin.reshape(ny, nx), int(math.ceil(self.neighbourhood_m / size)),
-                            size, float(self.slope), reachable, steps=steps.sub(0.5, 0.6))
-            reachable = reachable.ravel()
-            raised = occupied & (zmin > reachable + self.dz_m)  # empty kernels: inf > inf is False
             reference = np.where(raised, reachable, zmin)
             flat = (zmax - zmin) <= self.dz_m
             bypass = (only_single & flat & ~raised & occupied) if has_returns else np.zeros_like(occupied)

@@ -363,10 +363,25 @@ def test_no_return_information_means_height_test_everywhere(mode, how):
 
 @pytest.mark.parametrize("mode", MODES)
 def test_no_message_when_the_cloud_has_returns(mode):
-    xyz, rn, nr, _, _ = building_scene()
+    xyz, rn, nr, _, _ = building_scene(height=1.0)  # (a roof within dz of the ground around: nothing raised)
     messages = []
     res = EchoGrid(mode=mode).run(xyz, return_number=rn, number_of_returns=nr, log=messages.append)
     assert res.used_returns
+    assert messages == []
+
+
+def test_faithful_mode_says_how_many_bypassed_kernels_stand_above_their_surroundings():
+    """The paper's bypass makes a flat roof's kernels ground whole (a UAV surveyor's farm: 99.4 % of its roof
+    points, the DTM 4.9 m up, and nothing said but small spikes): faithful mode now counts the bypassed kernels
+    standing more than dz above what the slope reaches from their neighbours, and says so; evidence mode, which
+    keeps them out, says nothing."""
+    xyz, rn, nr, roof, _crown = building_scene()
+    messages = []
+    EchoGrid().run(xyz, return_number=rn, number_of_returns=nr, log=messages.append)
+    assert len(messages) == 1 and "4 of the" in messages[0] and "flat roofs" in messages[0], messages
+    assert f"({int(roof.sum()):,} points)" in messages[0]
+    messages = []
+    EchoGrid(mode="evidence").run(xyz, return_number=rn, number_of_returns=nr, log=messages.append)
     assert messages == []
 
 
