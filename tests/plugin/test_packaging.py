@@ -17,6 +17,12 @@ def test_zip_is_installable_and_lean(tmp_path):
     assert "groundsieve/core/filters/smrf.py" in names and "groundsieve/icons/groundsieve.svg" in names
     for dev in ("tests/", "bench/", "scripts/", ".ci/", "Makefile", "pytest.ini"):
         assert not [n for n in names if n.startswith("groundsieve/" + dev)], dev
+    # the README's links to the docs resolve inside the zip (they had been left out: a new user)
+    import re
+    readme = (REPO / "README.md").read_text()
+    links = {m.split("#")[0] for m in re.findall(r"\]\(([^)#:]+(?:#[^)]*)?)\)", readme)}
+    assert "docs/USER_GUIDE.md" in links
+    assert not [link for link in links if f"groundsieve/{link}" not in names], links
     plugins = tmp_path / "plugins"
     zipfile.ZipFile(archive).extractall(plugins)
     site = subprocess.run([str(REPO / ".venv" / "bin" / "python"), "-c",
