@@ -220,6 +220,8 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
     unit = horizontal_unit(cloud.crs_wkt)
     if unit:  # the unit its lengths (radii, heights) were read in
         meta["crs_unit"] = unit
+    if radius_features(names):  # what they count within their spheres depends on it
+        meta["points_per_unit2"] = round(point_density(cloud.x, cloud.y), 3)
     candidates = [options.params]
     if options.grid:
         candidates = [ForestParams(n_trees=t, criterion=c, scaler=s, max_depth=options.params.max_depth,
@@ -276,6 +278,26 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
     return TrainRun(model, evaluations, names, timings, grid_rows, notes)
 
 
+def radius_features(names) -> List[str]:
+    """The features computed within spheres of a fixed radius (the eigen features, density, height above
+    the minimum: ``name_r0p6``), whose values change with the point density; not the hybrid's openings."""
+    import re
+    return [n for n in names if re.search(r"_r\d+(p\d+)?$", n) and not n.startswith("above_opening")]
+
+
+def point_density(x, y, cell: float = 2.0) -> float:
+    """Points per square unit where there are points: the points over the area of the cells of ``cell``
+    holding at least one (a gap or a field's edge does not thin it)."""
+    if len(x) == 0:
+        return 0.0
+    col, row = (np.floor(np.asarray(v) / cell).astype(np.int64) for v in (x, y))
+    keys = col * 1_000_003 + row
+    return float(len(x) / (np.unique(keys).size * cell * cell))
+
+
+#: a cloud this many times denser or sparser than the model's training cloud is warned about
+DENSITY_RATIO = 3.0
+
 #: a feature without a value on this share of the training points or more is said to be mostly missing
 MISSING_SHARE = 0.5
 
@@ -297,7 +319,8 @@ def _feature_notes(X: np.ndarray, names, crs_wkt) -> List[str]:
         missing = 1.0 - column.size / X.shape[0]
         if missing >= MISSING_SHARE:
             radius = re.search(r"_r(\d+)p?(\d*)$", name)
-            why = (f": its neighbourhood, {radius.group(1)}.{radius.group(2) or '0'} {unit} around each point, holds too "
+            size = f"{radius.group(1)}.{radius.group(2) or '0'}"
+            why = (f": its neighbourhood, {size} {unit} around each point, holds too "
                    "few points there (a sparse cloud, or a radius meant in metres read in feet). Leave it out, or "
                    f"take a radius that holds a dozen points or more (a custom list, e.g. {name[:radius.start()]}_r2p0 "
                    "for 2; Compute point features counts the spheres with too few)" if radius else
@@ -535,6 +558,18 @@ def classify_file(input_path: str, output_path: Optional[str], model_path: str, 
     if dtm_path:  # a DTM too large for the memory is refused before the features' work
         check_dtm_memory(part.x, part.y, dtm)
     names = resolve_features(model.meta.get("preset_features", model.features), part, log)
+    trained = model.meta.get("points_per_unit2")
+    if trained and radius_features(names):
+        here = point_density(part.x, part.y)
+        if here > 0 and max(here / trained, trained / here) >= DENSITY_RATIO:
+            # (a reviewer's C5 model of 150 points/m² on a flight of 20: total error 5.1 -> 7.2 %, nothing said)
+            from ..raster.crs import horizontal_unit
+            unit = horizontal_unit(part.crs_wkt) or "metres"
+            per = "points/m²" if unit == "metres" else f"points per square {unit}"
+            log(f"{WARNING_PREFIX}{input_path}: {here:,.1f} {per} where it has points, the model "
+                f"{model_path} learnt from {trained:,.1f}: its features within fixed radii "
+                f"({', '.join(radius_features(names))}) count other neighbourhoods, and its predictions may be "
+                "worse. Train on a patch of this density, or a model on the HYBRID features, which depend on it less.")
     if names != list(model.features):
         raise InputError(f"{input_path}: this cloud gives the features {names} but the model "
                          f"{model_path} was trained on {list(model.features)} (e.g. colour present in one "
