@@ -160,6 +160,8 @@ TUNE_JSON = ("\"input\", \"filter\", \"metric\", \"parameters\" (chosen), \"sear
 
 RFTRAIN_JSON = ("\"input\", \"model\", \"report\", \"features\", \"classes\" (learnt), \"test_accuracy\", "
                 "\"seconds\", \"warnings\"")
+FEATURES_JSON = ("\"input\", \"output\", \"features\" (the names written), \"points\", \"seconds\", "
+                 "\"warnings\"")
 RFCLASSIFY_JSON = ("\"input\", \"output\" (or null), \"outputs\" (the classified files), \"model\", \"dtm\" (or null), "
                    "\"points\", \"ground\" (predicted 2), \"seconds\", \"tiles\" (null without tiles), \"warnings\"")
 
@@ -269,7 +271,48 @@ def build_parser() -> argparse.ArgumentParser:
     _add_accuracy(sub)
     _add_rftrain(sub)
     _add_rfclassify(sub)
+    _add_features(sub)
     return parser
+
+
+def _add_features(sub) -> None:
+    """``features``: groundsieve:features, point features written as extra bytes (core/engine/features_run.py)."""
+    from ..learn.features import FEATURES, PAPER_FEATURES
+    summary = "compute point features (matrone2024's eigen features and others) and write them as extra bytes"
+    parser = sub.add_parser("features", help=summary, description=f"{summary}, named FEATURE_rRADIUS with p as the "
+                            "decimal mark (verticality_r0p6): what rftrain's presets compute, to look at or to train "
+                            "on elsewhere. Radii in the cloud's CRS unit.")
+    io = parser.add_argument_group("input and output")
+    io.add_argument("--input", required=True, metavar="PATH", help="LAS/LAZ (1.0-1.4) or ISPRS text")
+    io.add_argument("--output", required=True, metavar="PATH", help="LAS/LAZ with the features as extra bytes")
+    io.add_argument("--features", default=",".join(f"{f}:{r:g}" for f, r in PAPER_FEATURES), metavar="LIST",
+                    help=f"FEATURE:RADIUS pairs, of {', '.join(FEATURES)} (default %(default)s, the paper's)")
+    io.add_argument("--ignore-classes", default="7,18", metavar="LIST",
+                    help="classes left out of the neighbourhoods, with no value (NaN); '' = none (default %(default)s)")
+    _add_json(io, FEATURES_JSON)
+    parser.set_defaults(filter="features")
+
+
+def run_features_command(args, out) -> dict:
+    """Run ``features``; return its JSON document."""
+    from ..learn.features import FeatureSpec
+    from .features_run import run_features
+    pairs = []
+    for item in (i.strip() for i in args.features.split(",") if i.strip()):
+        feature, _colon, radius = item.partition(":")
+        try:
+            pairs.append((feature.strip(), float(radius)))
+        except ValueError:
+            raise _Usage(f"--features: {item!r} is not FEATURE:RADIUS, e.g. planarity:0.6") from None
+    if not pairs:
+        raise _Usage("--features: name at least one FEATURE:RADIUS, e.g. planarity:0.6")
+    warnings, log = _collecting_log(out)
+    start = time.monotonic()
+    run = run_features(args.input, args.output, FeatureSpec(tuple(pairs)), ignore_classes=args.ignore_classes,
+                       progress=_progress_printer(out), is_cancelled=_interrupt_seen, log=log)
+    print(f"{len(run.cloud):,} points, features {', '.join(run.names)}.", file=out)
+    return {"status": "done", "input": args.input, "output": args.output, "features": list(run.names),
+            "points": len(run.cloud), "seconds": round(time.monotonic() - start, 3), "warnings": list(warnings)}
 
 
 def _add_rftrain(sub) -> None:
@@ -747,7 +790,7 @@ def _run(args, out):
     """(exit status, JSON document) of the command, the log and the one-line errors on ``out``."""
     try:
         run = {"tune": run_tune, "dtm": run_dtm, "accuracy": run_accuracy, "rftrain": run_rftrain,
-               "rfclassify": run_rfclassify}.get(args.filter, run_filter)
+               "rfclassify": run_rfclassify, "features": run_features_command}.get(args.filter, run_filter)
         return 0, run(args, out)
     except _Usage as err:
         print(f"groundsieve: {err}", file=out)

@@ -586,6 +586,30 @@ def test_rftrain_takes_the_dialogs_custom_features_ground_against_the_rest_and_g
         assert len(done["warnings"]) == len(set(done["warnings"]))
 
 
+def test_features_run_from_the_shell(scene, tmp_path):
+    """groundsieve:features had no command (a new user: 12 of the 14 algorithms): the paper's four by default,
+    FEATURE:RADIUS pairs otherwise, the values of the core's run."""
+    from groundsieve.core.engine.features_run import run_features
+    from groundsieve.core.learn.features import FeatureSpec
+    out, stdout = io.StringIO(), io.StringIO()
+    output = str(tmp_path / "f.laz")
+    assert main(["features", "--input", scene, "--output", output, "--json"], out=out, stdout=stdout) == 0, \
+        out.getvalue()
+    done = json.loads(stdout.getvalue())
+    assert done["features"] == ["verticality_r0p6", "planarity_r0p6", "eigenentropy_r0p4", "surface_variation_r0p6"]
+    out = io.StringIO()
+    assert main(["features", "--input", scene, "--output", str(tmp_path / "g.laz"), "--features",
+                 "height_above_min:2.5,planarity:1"], out=out) == 0, out.getvalue()
+    direct = run_features(scene, str(tmp_path / "h.laz"), FeatureSpec((("height_above_min", 2.5), ("planarity", 1.0))))
+    got = laspy.read(str(tmp_path / "g.laz"))
+    for name, values in direct.features.items():
+        np.testing.assert_array_equal(np.asarray(got[name]), values)
+    out = io.StringIO()
+    assert main(["features", "--input", scene, "--output", str(tmp_path / "x.laz"), "--features", "planarity"],
+                out=out) == 2 and "is not FEATURE:RADIUS" in out.getvalue()
+    assert not os.path.exists(tmp_path / "x.laz")
+
+
 def _python_m_groundsieve_with(run_code: str, scene, output):
     """``python -m groundsieve smrf`` on ``scene``, in a process of its own whose run_ground_filter is the function
     ``run`` that ``run_code`` defines."""
