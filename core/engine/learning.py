@@ -189,6 +189,18 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
                              f"(now {options.block_m:g} m) or give it as a file")
     log(", ".join(f"{label}: {len(v[0]):,} points" for label, v in sets.items()))
     notes = []
+    made = None
+    if not (validation_path or test_path):  # the blocks' shares as made, against the fractions planned
+        total = sum(len(v[0]) for v in sets.values())
+        made = tuple(len(sets[label][0]) / total for label in ("train", "validation", "test"))
+        short = [(label, got, planned) for label, got, planned in zip(("training", "validation", "test"), made,
+                                                                      options.fractions) if got < 0.5 * planned]
+        if short:  # (a reviewer's 60 m patch in 25 m blocks: 49/8/43 % for 60/20/20)
+            notes.append(f"{WARNING_PREFIX}the spatial split made " + ", ".join(
+                f"the {label} set {100 * got:.0f} % of the points (planned {100 * planned:.0f} %)"
+                for label, got, planned in short) + f": the patch is few blocks of {options.block_m:g} m across; "
+                "smaller blocks split it closer to the plan, or give the sets as files.")
+            log(notes[-1])
     # The paper split its data "to have the presence of all the classes in each dataset"; random
     # blocks may miss a rare class (a power line in a few blocks): say so.
     present = {label: set(np.unique(ys).tolist()) for label, (_Xs, ys) in sets.items()}
@@ -275,7 +287,10 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
                         criterion=model.meta["params"]["criterion"], trees=model.meta["params"]["n_trees"],
                         scaler=model.meta["params"]["scaler"], max_depth=model.meta["params"]["max_depth"],
                         samples_per_tree=model.meta["params"]["max_samples"],
-                        split=(f"spatial blocks of {options.block_m:g} m, fractions {options.fractions}"
+                        split=(f"spatial blocks of {options.block_m:g} m, planned "
+                               + "/".join(f"{100 * f:.0f}" for f in options.fractions) + " %"
+                               + (", made " + "/".join(f"{100 * f:.0f}" for f in made) + " % of the points"
+                                  if made else "")
                                if not (validation_path and test_path) else "separate files"))
     _write_training_outputs(model, model_path, report_path, dict(
         title="GroundSieve Random Forest training", evaluations=evaluations, features=names,
