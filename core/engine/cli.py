@@ -298,18 +298,23 @@ def run_features_command(args, out) -> dict:
     from ..learn.features import FeatureSpec
     from .features_run import run_features
     pairs = []
+    from ..learn.features import parse_feature_name
     for item in (i.strip() for i in args.features.split(",") if i.strip()):
-        feature, _colon, radius = item.partition(":")
+        feature, colon, radius = item.partition(":")
         try:
-            pairs.append((feature.strip(), float(radius)))
-        except ValueError:
-            raise _Usage(f"--features: {item!r} is not FEATURE:RADIUS, e.g. planarity:0.6") from None
+            pairs.append((feature.strip(), float(radius)) if colon else parse_feature_name(item))
+        except (ValueError, GroundSieveError):
+            raise _Usage(f"--features: {item!r} is not FEATURE:RADIUS (planarity:0.6) or a feature's name "
+                         "(planarity_r0p6)") from None
     if not pairs:
         raise _Usage("--features: name at least one FEATURE:RADIUS, e.g. planarity:0.6")
+    from .kernels import remember_run
+    _compile_note("features", out)
     warnings, log = _collecting_log(out)
     start = time.monotonic()
     run = run_features(args.input, args.output, FeatureSpec(tuple(pairs)), ignore_classes=args.ignore_classes,
                        progress=_progress_printer(out), is_cancelled=_interrupt_seen, log=log)
+    remember_run("features")
     print(f"{len(run.cloud):,} points, features {', '.join(run.names)}.", file=out)
     return {"status": "done", "input": args.input, "output": args.output, "features": list(run.names),
             "points": len(run.cloud), "seconds": round(time.monotonic() - start, 3), "warnings": list(warnings)}
@@ -375,9 +380,12 @@ def run_rftrain(args, out) -> dict:
                                                max_depth=args.max_depth or None,
                                                max_samples=args.samples_per_tree or None),
                            block_m=args.block)
+    from .kernels import remember_run
+    _compile_note("rf", out)
     start = time.monotonic()
     run = train_file(args.input, args.model, args.report, options, validation_path=args.validation,
                      test_path=args.test, progress=_progress_printer(out), is_cancelled=_interrupt_seen, log=log)
+    remember_run("rf")
     accuracy = run.model.meta.get("test_accuracy")
     print(f"Model {args.model}: {len(run.features)} features, classes "
           f"{', '.join(str(int(c)) for c in run.model.classes)}; test accuracy "
@@ -410,16 +418,26 @@ def _add_rfclassify(sub) -> None:
     parser.set_defaults(filter="rfclassify")
 
 
+def _compile_note(name: str, out) -> None:
+    """The note that a run is about to compile its kernels (core/engine/kernels.py), before the work."""
+    from .kernels import COMPILING, about_to_compile
+    if about_to_compile(name):  # (the progress then waits 20-60 s: a release engineer saw 8 s at 21.5 %)
+        print(COMPILING, file=out, flush=True)
+
+
 def run_rfclassify(args, out) -> dict:
     """Run ``rfclassify``; return its JSON document."""
+    from .kernels import remember_run
     from .learning import classify_file
     _check_outputs_named(args, out)
+    _compile_note("rf", out)
     warnings, log = _collecting_log(out)
     dtm = dtm_options(args)
     start = time.monotonic()
     result = classify_file(args.input, args.output, args.model, dtm_path=args.dtm, dtm=dtm,
                            ignore_classes=args.ignore_classes, tiling=_tiling(args),
                            progress=_progress_printer(out), is_cancelled=_interrupt_seen, log=log)
+    remember_run("rf")
     if isinstance(result, tuple):  # one cloud in memory: (cloud, predicted classes)
         cloud, predicted = result
         points, ground, tiles, outputs = len(cloud), int((predicted == 2).sum()), None, [p for p in [args.output] if p]
@@ -622,10 +640,9 @@ def _collecting_log(out):
 def _run_documented(args, out, algorithm, options, dtm, warnings, log, ground_words: str) -> dict:
     """Run ``algorithm`` on ``args.input`` as the filters and the DTM from classes run (the compile note,
     progress, interrupts); its JSON document, its summary logged to ``out``."""
-    from .kernels import COMPILING, about_to_compile, remember_run
+    from .kernels import remember_run
     from .workflow import run_ground_filter
-    if about_to_compile(args.filter):  # (the progress then waits 20-60 s: a release engineer saw 8 s at 21.5 %)
-        print(COMPILING, file=out, flush=True)
+    _compile_note(args.filter, out)
     start = time.monotonic()
     run = run_ground_filter(args.input, args.output, algorithm, options=options, dtm_path=args.dtm, dtm=dtm,
                             progress=_progress_printer(out), is_cancelled=_interrupt_seen, log=log)

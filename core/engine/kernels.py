@@ -83,7 +83,8 @@ STAMP_NAME = "groundsieve-runs.json"
 def remember_run(name: Optional[str]) -> None:
     """After a run of algorithm ``name`` finished: its kernels are compiled for these sources, so the
     next run says nothing of compiling (:func:`about_to_compile`). Silent where the cache cannot be
-    written (numba then compiles in memory each time anyway)."""
+    written (numba then compiles in memory each time anyway). Two runs finishing at once may keep one
+    of the two names: the other's next run then says the note once more."""
     path = _stamp_path()
     if not name or path is None:
         return
@@ -94,7 +95,8 @@ def remember_run(name: Optional[str]) -> None:
     if name in ran:
         return
     ran.add(name)
-    part = f"{path}.{os.getpid()}.part"
+    import threading  # (two runs of one QGIS process finish in threads of their own: a code reviewer)
+    part = f"{path}.{os.getpid()}-{threading.get_ident()}.part"
     try:
         with open(part, "w", encoding="utf-8") as f:
             json.dump({"sources": sources, "ran": sorted(ran)}, f)

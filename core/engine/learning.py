@@ -233,7 +233,8 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
     if unit:  # the unit its lengths (radii, heights) were read in
         meta["crs_unit"] = unit
     if radius_features(names):  # what they count within their spheres depends on it
-        meta["points_per_unit2"] = round(point_density(cloud.x, cloud.y), 3)
+        from .tiles import points_density  # (the labelled points', as those classified are measured)
+        meta["points_per_unit2"] = round(points_density(cloud.x[keep], cloud.y[keep]), 3)
     candidates = [options.params]
     if options.grid:
         candidates = [ForestParams(n_trees=t, criterion=c, scaler=s, max_depth=options.params.max_depth,
@@ -307,16 +308,6 @@ def radius_features(names) -> List[str]:
     return [n for n in names if re.search(r"_r\d+(p\d+)?$", n) and not n.startswith("above_opening")]
 
 
-def point_density(x, y, cell: float = 2.0) -> float:
-    """Points per square unit where there are points: the points over the area of the cells of ``cell``
-    holding at least one (a gap or a field's edge does not thin it)."""
-    if len(x) == 0:
-        return 0.0
-    col, row = (np.floor(np.asarray(v) / cell).astype(np.int64) for v in (x, y))
-    keys = col * 1_000_003 + row
-    return float(len(x) / (np.unique(keys).size * cell * cell))
-
-
 #: a cloud this many times denser or sparser than the model's training cloud is warned about
 DENSITY_RATIO = 3.0
 
@@ -344,7 +335,7 @@ def _feature_notes(X: np.ndarray, names, crs_wkt) -> List[str]:
             size = f"{radius.group(1)}.{radius.group(2) or '0'}"
             why = (f": its neighbourhood, {size} {unit} around each point, holds too "
                    "few points there (a sparse cloud, or a radius meant in metres read in feet). Leave it out, or "
-                   f"take a radius that holds a dozen points or more (a custom list, e.g. {name[:radius.start()]}_r2p0 "
+                   f"take a radius that holds a dozen points or more (a custom list, e.g. {name[:radius.start()]}_r2 "
                    "for 2; Compute point features counts the spheres with too few)" if radius else
                    ": leave it out, or train on a cloud that has it")
             notes.append(f"{WARNING_PREFIX}the feature '{name}' has no value on {missing:.1%} of the training "
@@ -436,9 +427,19 @@ RF_EXTRA_BYTES_PER_POINT = 40
 
 
 class _WholeModelRun:
-    """What core/engine/tiles.whole_run_bytes prices for rfclassify's whole run of a model that does not
-    run in tiles: RF_EXTRA_BYTES_PER_POINT a point beyond a ground filter's, no grid of its own."""
-    extra_bytes_per_point = RF_EXTRA_BYTES_PER_POINT
+    """What core/engine/tiles.whole_run_bytes prices for rfclassify's whole run of ``model`` (its own path:
+    the cloud read whole, the feature matrix, the forest): RF_EXTRA_BYTES_PER_POINT a point beyond a ground
+    filter's, and the grids of the hybrid's features where the model has them (its SMRF and PTD surfaces,
+    priced as the hybrid filter prices them), no grid otherwise."""
+
+    def __init__(self, model):
+        from ..learn.hybrid import CELL_KEY, GRID_FEATURES, PTD_FEATURES, opening_radius
+        grid = [n for n in model.features if n in GRID_FEATURES or n in PTD_FEATURES or opening_radius(n) is not None]
+        self.makes_grids = bool(grid)
+        if grid:  # (the hybrid features' grid, as Hybrid.cell_size_m reads it)
+            self.cell_size_m = float(model.meta.get(CELL_KEY, 1.0))
+        self.extra_bytes_per_point = RF_EXTRA_BYTES_PER_POINT + (
+            120 if any(n in PTD_FEATURES for n in model.features) else 0)  # (as Hybrid.extra_bytes_per_point)
 
 
 def untileable(model) -> str:
@@ -524,19 +525,24 @@ def classify_file(input_path: str, output_path: Optional[str], model_path: str, 
     tiling = tiling or TileOptions()
     model = load_model(model_path)
     problem = untileable(model)
-    # the whole run priced as the model's: a ground model as the filter it runs as in tiles, another at its
-    # own measured cost
-    estimate = _WholeModelRun() if problem else ModelGround(model_path=model_path)
+    # the whole run priced as its own path's (the model loaded once: a code reviewer)
+    estimate = _WholeModelRun(model)
     whole_dtm = (dtm or DTMOptions()) if dtm_path else None
     if needs_tiling(input_path, tiling, algorithm=estimate, dtm=whole_dtm, log=None if problem else log):
-        from .tiles import is_survey_input, whole_run_bytes
+        from .tiles import SPARSE_AREA_M2, is_survey_input, whole_run_bytes
         if problem and not is_survey_input(input_path):  # one file, tiled for its size or a tile size set
             from ..io.lasfiles import scan_header
             if tiling.tile_size_m > 0 or tiling.scheduler:
                 why = "a tile size is set" if tiling.tile_size_m > 0 else "a Dask scheduler is set"
                 raise InputError(f"{input_path}: {why}, so it would run in buffered tiles, and {problem}: leave "
                                  "the tile size at 0 and the scheduler empty to classify it whole")
-            need = whole_run_bytes(scan_header(input_path), estimate, whole_dtm) / 2 ** 20
+            info = scan_header(input_path)
+            if info.area_m2 > SPARSE_AREA_M2:  # (tiled for its extent, which no memory budget changes)
+                raise InputError(f"{input_path}: its header's extent spans {info.area_m2 / 1e6:,.0f} km² (a few "
+                                 "points far from the others, most likely), so it would run in buffered tiles, "
+                                 f"and {problem}: class the stray points as noise (7) or cut them off to "
+                                 "classify it whole")
+            need = whole_run_bytes(info, estimate, whole_dtm) / 2 ** 20
             raise InputError(f"{input_path}: run whole it would take about {need:,.0f} MB, more than the memory "
                              f"budget ({tiling.budget_bytes / 2 ** 20:,.0f} MB), so it would run in buffered tiles, "
                              f"and {problem}: raise the memory budget to {100 * math.ceil(need / 100):,.0f} MB or "
@@ -582,7 +588,8 @@ def classify_file(input_path: str, output_path: Optional[str], model_path: str, 
     names = resolve_features(model.meta.get("preset_features", model.features), part, log)
     trained = model.meta.get("points_per_unit2")
     if trained and radius_features(names):
-        here = point_density(part.x, part.y)
+        from .tiles import points_density
+        here = points_density(part.x, part.y)
         if here > 0 and max(here / trained, trained / here) >= DENSITY_RATIO:
             # (a reviewer's C5 model of 150 points/m² on a flight of 20: total error 5.1 -> 7.2 %, nothing said)
             from ..raster.crs import horizontal_unit

@@ -206,7 +206,8 @@ def whole_run_bytes(info: LasInfo, algorithm=None, dtm=None) -> int:
         return int(info.count * BYTES_PER_POINT)
     from ..grids.spec import FILL_BYTES_PER_EMPTY_CELL
     record = (info.record_size or 34) + extra
-    cells = info.area_m2 / finest_grid_m(algorithm) ** 2
+    # (an algorithm that makes no grid over the cloud says so: rfclassify's models of point attributes)
+    cells = info.area_m2 / finest_grid_m(algorithm) ** 2 if getattr(algorithm, "makes_grids", True) else 0.0
     # a filter that fills the empty cells of its grid (SMRF, PMF, the hybrid's surfaces): its points
     # leave about cells x exp(-points / cells) of them empty where spread evenly; many small holes
     # (more than 0.8 points a cell) go to the sparse LU solver (SMALL_HOLE_BYTES), fewer points make
@@ -272,6 +273,18 @@ def needs_tiling(input_path: str, tiling: TileOptions, algorithm=None, dtm=None,
     return False
 
 
+def occupied_cells(x, y, cell_m: float = 10.0) -> np.ndarray:
+    """The keys of the cells of ``cell_m`` that hold at least one of the points ``x, y``."""
+    x, y = np.asarray(x), np.asarray(y)
+    return np.unique(np.floor(x / cell_m).astype(np.int64) * (1 << 32) + np.floor(y / cell_m).astype(np.int64))
+
+
+def points_density(x, y, cell_m: float = 10.0) -> float:
+    """Points per square unit where the points are: the points over the area of the cells of ``cell_m`` they
+    occupy (a gap or a stray point does not thin it); 0 for no point."""
+    return len(x) / (occupied_cells(x, y, cell_m).size * cell_m * cell_m) if len(x) else 0.0
+
+
 def sample_density(path: str, chunk_points: int = CHUNK_POINTS, cell_m: float = 10.0) -> float:
     """Points per m² where the points are: the first chunk over the 10 m cells it occupies (a stray
     point far away does not dilute it, as the header's bounding box would). A file in no spatial
@@ -284,8 +297,7 @@ def sample_density(path: str, chunk_points: int = CHUNK_POINTS, cell_m: float = 
         return copc_density(path)
 
     def cells(chunk):
-        x, y = np.asarray(chunk.x), np.asarray(chunk.y)
-        return np.unique(np.floor(x / cell_m).astype(np.int64) * (1 << 32) + np.floor(y / cell_m).astype(np.int64))
+        return occupied_cells(chunk.x, chunk.y, cell_m)
     for chunk in iter_chunks(path, chunk_points):
         if len(chunk) == 0:
             break

@@ -71,8 +71,9 @@ def _say_raised_bypass(raised_bypass, bypass, x, y, x0, y0, size, nx, echo, log)
     log(f"{WARNING_PREFIX}Echo grid: {n_raised:,} of the {int(bypass.sum()):,} kernels the single-return bypass makes "
         f"ground whole ({points:,} points) stand more than {echo.dz_m:g} m above what a slope of {echo.slope:g} "
         f"reaches from the kernels within {echo.neighbourhood_m:g} m: flat roofs, most likely, which are "
-        "single-return surfaces too. The paper's rule (mode 'faithful') keeps them ground, and the DTM on them; "
-        "mode 'evidence' keeps such raised kernels out.")
+        "single-return surfaces too, and these are their edges at least (a wide roof's inner kernels, beside other "
+        "roof kernels, are not counted). The paper's rule (mode 'faithful') keeps them ground, and the DTM on them; "
+        "mode 'evidence' keeps such raised kernels out (a wide roof's middle may stay ground; SMRF knows roofs).")
 
 
 @dataclass(frozen=True)
@@ -201,18 +202,22 @@ class EchoGrid:
         run_cancellable(_echo_grid_stats_kernel, x, y, z, rn, nr, x0, y0, size, nx, ny, zmin, zmax, only_first,
                         only_single, steps=steps.sub(0.0, 0.5), expected_s=3e-8 * n)
         occupied = np.isfinite(zmin)
-        # the kernels whose lowest point stands more than dz above what the slope reaches from the kernels
-        # around (evidence mode's test; in faithful mode only counted, for the log)
-        reachable = np.empty((ny, nx))
-        run_cancellable(_lower_envelope_kernel, zmin.reshape(ny, nx), int(math.ceil(self.neighbourhood_m / size)),
-                        size, float(self.slope), reachable, steps=steps.sub(0.5, 0.6))
-        reachable = reachable.ravel()
-        raised = occupied & (zmin > reachable + self.dz_m)  # empty kernels: inf > inf is False
+
+        def raised_kernels():
+            """The kernels whose lowest point stands more than dz above what the slope reaches from the kernels
+            around (evidence mode's test; in faithful mode only counted, for the log)."""
+            reachable = np.empty((ny, nx))
+            run_cancellable(_lower_envelope_kernel, zmin.reshape(ny, nx), int(math.ceil(self.neighbourhood_m / size)),
+                            size, float(self.slope), reachable, steps=steps.sub(0.5, 0.6))
+            reachable = reachable.ravel()
+            return reachable, occupied & (zmin > reachable + self.dz_m)  # empty kernels: inf > inf is False
         if self.mode == "faithful":
             reference = zmin
             bypass = only_first & occupied if has_returns else np.zeros_like(occupied)
-            _say_raised_bypass(bypass & raised, bypass, x, y, x0, y0, size, nx, self, log)
+            if bypass.any():
+                _say_raised_bypass(bypass & raised_kernels()[1], bypass, x, y, x0, y0, size, nx, self, log)
         else:
+            reachable, raised = raised_kernels()
             reference = np.where(raised, reachable, zmin)
             flat = (zmax - zmin) <= self.dz_m
             bypass = (only_single & flat & ~raised & occupied) if has_returns else np.zeros_like(occupied)

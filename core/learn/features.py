@@ -105,6 +105,15 @@ def feature_name(feature: str, radius: float) -> str:
     return f"{feature}_r{radius_text(radius)}"
 
 
+def canonical_name(name: str) -> str:
+    """``name`` as :func:`feature_name` writes it when it names a feature of a radius (``planarity_r2p0`` ->
+    ``planarity_r2``), else as it is."""
+    try:
+        return feature_name(*parse_feature_name(name))
+    except InvalidParameterError:
+        return name
+
+
 def parse_feature_name(name: str) -> Tuple[str, float]:
     """(feature, radius) of a name made by :func:`feature_name`; InvalidParameterError otherwise."""
     match = _FEATURE_NAME_RE.match(str(name))

@@ -281,6 +281,8 @@ def colour_depth_factor(model, X: np.ndarray) -> float:
     columns = [j for j, name in enumerate(model.features) if name in COLOURS]
     if not ranges or not columns or any(ranges[j] is None for j in columns):
         return 1.0
+    if all(ranges[j][1] <= ranges[j][0] for j in columns):  # (no colour learnt: RGB fields of 0, a code reviewer)
+        return 1.0
     values = X[:, columns]
     values = values[np.isfinite(values)]
     if not values.size or values.max() <= 0:
@@ -347,9 +349,13 @@ def _has_colour(cloud) -> bool:
 
 
 def resolve_features(names: Sequence[str], cloud, log=None) -> List[str]:
-    """Expand ``radiometry`` for this cloud (RGB when it has colour, else intensity)."""
+    """Expand ``radiometry`` for this cloud (RGB when it has colour, else intensity); a feature of a radius
+    by its name as the features are computed under (``planarity_r2p0`` is ``planarity_r2``: the first had
+    crashed the training with a KeyError, a code reviewer)."""
+    from .features import canonical_name
     out: List[str] = []
     for name in names:
+        name = canonical_name(name)
         if name == RADIOMETRY:
             if _has_colour(cloud):
                 out += ["red", "green", "blue"]

@@ -440,10 +440,12 @@ def test_a_model_that_runs_whole_only_is_priced_as_such_and_its_refusal_says_how
     model = str(tmp_path / "c1.npz")
     learning.train_file(path, model, None, learning.TrainOptions(features=("red", "green", "blue"),
                                                                  params=rf.ForestParams(n_trees=2), block_m=10.0))
-    need = whole_run_bytes(scan_header(path), learning._WholeModelRun())
+    estimate = learning._WholeModelRun(model_file.load_model(model))
+    assert not estimate.makes_grids  # (colour alone: no grid, whatever the extent)
+    need = whole_run_bytes(scan_header(path), estimate)
     assert need < 0.7 * n * BYTES_PER_POINT
     budget_mb = 1.2 * need / 2 ** 20  # between its own price and a ground filter's
-    assert not needs_tiling(path, TileOptions(memory_budget_mb=budget_mb), algorithm=learning._WholeModelRun())
+    assert not needs_tiling(path, TileOptions(memory_budget_mb=budget_mb), algorithm=estimate)
     _cloud, predicted = learning.classify_file(path, str(tmp_path / "whole.las"), model,
                                                tiling=TileOptions(memory_budget_mb=budget_mb))
     assert len(predicted) == n
@@ -454,6 +456,14 @@ def test_a_model_that_runs_whole_only_is_priced_as_such_and_its_refusal_says_how
         learning.classify_file(path, str(tmp_path / "o.las"), model, tiling=TileOptions(memory_budget_mb=budget_mb / 4))
     with pytest.raises(InputError, match="a tile size is set, so it would run in buffered tiles.*leave the tile size at 0"):
         learning.classify_file(path, str(tmp_path / "o.las"), model, tiling=TileOptions(tile_size_m=20.0))
+    # one point 20 km away: tiled for its extent, which no memory budget changes (a code reviewer's "22,901 MB,
+    # more than the memory budget (30,000 MB)")
+    stray = str(tmp_path / "stray.las")
+    write_las(new_las(np.r_[x, 20000.0], np.r_[y, 20000.0], np.r_[rng.normal(0, 0.1, n), 0.0], point_format=3,
+                      classification=np.r_[cls, 1], red=np.r_[red, 30000], green=np.r_[red, 30000],
+                      blue=np.r_[red, 30000]), stray)
+    with pytest.raises(InputError, match=r"its header's extent spans [\d,]+ km² .*class the stray points as noise"):
+        learning.classify_file(stray, str(tmp_path / "o.las"), model, tiling=TileOptions(memory_budget_mb=30000))
     assert not (tmp_path / "o.las").exists()
 
 
@@ -531,6 +541,15 @@ def test_a_cloud_of_another_density_is_warned_about_for_a_model_of_radius_featur
         said = [line for line in lines if "points/m² where it has points" in line]
         assert bool(said) == warned, (name, lines)
     assert "planarity_r0p6" in said[0] and "HYBRID" in said[0]
+    # the measure holds on sparse clouds too (2 m cells had a floor of about 0.25 a m²: 0.1 read as 0.3, a code
+    # reviewer), and a stray point does not thin it
+    from groundsieve.core.engine.tiles import points_density
+    rng = np.random.default_rng(0)
+    for density in (0.1, 0.5, 4.0):
+        n = int(density * 500 * 500)
+        x, y = rng.uniform(0, 500, n), rng.uniform(0, 500, n)
+        assert abs(points_density(x, y) / density - 1) < 0.1, density
+        assert abs(points_density(np.r_[x, 20000.0], np.r_[y, 20000.0]) / density - 1) < 0.1, density
 
 
 def test_the_split_as_made_is_reported_and_a_set_far_below_its_share_is_warned_about(tmp_path):
@@ -547,3 +566,18 @@ def test_the_split_as_made_is_reported_and_a_set_far_below_its_share_is_warned_a
         said = [w for w in run.warnings if "the spatial split made" in w]
         assert bool(said) == warned, (block, run.warnings)
         assert "planned 60/20/20 %, made " in report.read_text()
+
+
+def test_a_feature_of_a_radius_is_taken_under_any_spelling_of_its_radius(tmp_path):
+    """'planarity_r2p0' (what rftrain's note once suggested) passed the name check and crashed the training with a
+    KeyError, the feature being computed as 'planarity_r2' (a code reviewer): names are taken as computed."""
+    from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+    scene = make_scene(SceneSpec(size_m=40.0, density_per_m2=4.0, seed=8))
+    scene.classification[:] = np.where(scene.classification == 2, 2, 1)
+    write_scene(scene, str(tmp_path / "p.laz"))
+    run = learning.train_file(str(tmp_path / "p.laz"), str(tmp_path / "m.npz"), None,
+                              learning.TrainOptions(features=("intensity", "planarity_r2p0"),
+                                                    params=rf.ForestParams(n_trees=2), block_m=10.0))
+    assert run.features == ["intensity", "planarity_r2"]
+    _cloud, predicted = learning.classify_file(str(tmp_path / "p.laz"), str(tmp_path / "o.laz"), str(tmp_path / "m.npz"))
+    assert set(np.unique(predicted)) <= {1, 2}
