@@ -523,13 +523,16 @@ def classify_file(input_path: str, output_path: Optional[str], model_path: str, 
     from .one_file import check_only
     check_only(tiling, input_path, output_path, dtm_path)
     tiling = tiling or TileOptions()
+    from .tiles import is_survey_input
+    if not is_survey_input(input_path):  # a wrong output is refused before the model is read, as before
+        check_outputs(input_path, output_path, [dtm_path])
     model = load_model(model_path)
     problem = untileable(model)
     # the whole run priced as its own path's (the model loaded once: a code reviewer)
     estimate = _WholeModelRun(model)
     whole_dtm = (dtm or DTMOptions()) if dtm_path else None
     if needs_tiling(input_path, tiling, algorithm=estimate, dtm=whole_dtm, log=None if problem else log):
-        from .tiles import SPARSE_AREA_M2, is_survey_input, whole_run_bytes
+        from .tiles import SPARSE_AREA_M2, whole_run_bytes
         if problem and not is_survey_input(input_path):  # one file, tiled for its size or a tile size set
             from ..io.lasfiles import scan_header
             if tiling.tile_size_m > 0 or tiling.scheduler:
@@ -555,7 +558,6 @@ def classify_file(input_path: str, output_path: Optional[str], model_path: str, 
     log = log or (lambda _msg: None)
     dtm = dtm or DTMOptions()
     options = FilterOptions(ignore_classes=ignore_classes if ignore_classes is not None else ())
-    check_outputs(input_path, output_path, [dtm_path])
     if dtm_path and CLASS_GROUND not in model.classes:  # found before any work, as groundsieve:hybrid does
         raise InputError(f"{model_path}: this model has no ground class (2) (its classes: "
                          f"{', '.join(map(str, model.classes))}): it cannot make a DTM; leave the DTM out or "
