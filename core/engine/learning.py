@@ -524,8 +524,9 @@ def classify_file(input_path: str, output_path: Optional[str], model_path: str, 
     check_only(tiling, input_path, output_path, dtm_path)
     tiling = tiling or TileOptions()
     from .tiles import is_survey_input
-    if not is_survey_input(input_path):  # a wrong output is refused before the model is read, as before
-        check_outputs(input_path, output_path, [dtm_path])
+    if not is_survey_input(input_path) and not (output_path or "").lower().endswith(".vpc"):
+        check_outputs(input_path, output_path, [dtm_path])  # a wrong output refused before the model is read
+        # (a .vpc output of one file tiled is the engine's to check, as the filters' is)
     model = load_model(model_path)
     problem = untileable(model)
     # the whole run priced as its own path's (the model loaded once: a code reviewer)
@@ -558,6 +559,7 @@ def classify_file(input_path: str, output_path: Optional[str], model_path: str, 
     log = log or (lambda _msg: None)
     dtm = dtm or DTMOptions()
     options = FilterOptions(ignore_classes=ignore_classes if ignore_classes is not None else ())
+    check_outputs(input_path, output_path, [dtm_path])
     if dtm_path and CLASS_GROUND not in model.classes:  # found before any work, as groundsieve:hybrid does
         raise InputError(f"{model_path}: this model has no ground class (2) (its classes: "
                          f"{', '.join(map(str, model.classes))}): it cannot make a DTM; leave the DTM out or "

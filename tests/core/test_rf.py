@@ -581,3 +581,24 @@ def test_a_feature_of_a_radius_is_taken_under_any_spelling_of_its_radius(tmp_pat
     assert run.features == ["intensity", "planarity_r2"]
     _cloud, predicted = learning.classify_file(str(tmp_path / "p.laz"), str(tmp_path / "o.laz"), str(tmp_path / "m.npz"))
     assert set(np.unique(predicted)) <= {1, 2}
+
+
+def test_one_file_in_tiles_may_write_a_vpc_and_a_wrong_output_is_refused_before_the_model_is_read(tmp_path):
+    """As the filters: one file in tiles takes a .vpc output (its classified file in the folder of its name); a run
+    whole refuses it; a wrong output is refused before the model is read (a missing model is not what is said)."""
+    from groundsieve.core.engine.tiles import TileOptions
+    from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+    scene = make_scene(SceneSpec(size_m=60.0, density_per_m2=2.0, seed=9))
+    scene.classification[:] = np.where(scene.classification == 2, 2, 1)
+    write_scene(scene, str(tmp_path / "s.laz"))
+    model = str(tmp_path / "m.npz")
+    learning.train_file(str(tmp_path / "s.laz"), model, None,
+                        learning.TrainOptions(params=rf.ForestParams(n_trees=2), block_m=15.0))
+    run = learning.classify_file(str(tmp_path / "s.laz"), str(tmp_path / "c.vpc"), model,
+                                 tiling=TileOptions(tile_size_m=30.0, workers=1))
+    assert run.outputs and os.path.exists(tmp_path / "c" / "s.laz")
+    from groundsieve.core.errors import OutputError
+    with pytest.raises(OutputError, match="must end in .las or .laz"):
+        learning.classify_file(str(tmp_path / "s.laz"), str(tmp_path / "w.vpc"), model)
+    with pytest.raises(OutputError, match="must end in .las or .laz"):
+        learning.classify_file(str(tmp_path / "s.laz"), str(tmp_path / "w.txt"), str(tmp_path / "none.npz"))
