@@ -25,8 +25,8 @@ CLOUD_FILTER = "Point clouds (*.las *.laz *.LAS *.LAZ)"
 SURVEY_FILTER = CLOUD_FILTER + ";;Virtual point clouds (*.vpc);;All files and folders (*)"
 
 
-def _rf(extra=None, feedback=None):
-    errors, _workflow = core_modules(extra, feedback, kernels_of="rf")
+def _rf(extra=None, feedback=None, name="rf"):
+    errors, _workflow = core_modules(extra, feedback, kernels_of=name)
     from ..core.engine import learning
     from ..core.learn import rf
     return errors, rf, learning
@@ -190,7 +190,7 @@ importances, timings) with the same figures in a CSV beside it.</p>""")
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         from ..dependencies import TRAINING
-        errors, rf, learning = _rf(TRAINING, feedback)
+        errors, rf, learning = _rf(TRAINING, feedback, "rftrain")
         try:
             preset = PRESET_NAMES[self.parameterAsEnum(parameters, self.PRESET, context)]
             if preset == "custom":
@@ -228,7 +228,7 @@ importances, timings) with the same figures in a CSV beside it.</p>""")
             raise QgsProcessingException(str(err)) from err
         test = run.evaluations["test set"]
         feedback.pushInfo("Test set:\n" + test.table())
-        kernels_compiled("rf")
+        kernels_compiled("rftrain")
         return {self.MODEL: model_path, self.REPORT: report_path, self.TEST_ACCURACY: test.accuracy}
 
 
@@ -321,7 +321,7 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
         self.addOutput(QgsProcessingOutputNumber(self.POINT_COUNT, "Points classified"))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        errors, rf, learning = _rf(feedback=feedback)
+        errors, rf, learning = _rf(feedback=feedback, name="rfclassify")
         from ..core.engine.workflow import DTMOptions
         input_path = self.parameterAsFile(parameters, self.INPUT, context)
         output = pointclouds.classified_output_path(self, parameters, context, self.OUTPUT, input_path) or None
@@ -356,5 +356,5 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
             from . import styles
             results[self.DTM] = dtm_path
             styles.style_when_loaded(context, dtm_path, styles.DTM_STYLE)
-        kernels_compiled("rf")
+        kernels_compiled("rfclassify")
         return results

@@ -381,11 +381,11 @@ def run_rftrain(args, out) -> dict:
                                                max_samples=args.samples_per_tree or None),
                            block_m=args.block)
     from .kernels import remember_run
-    _compile_note("rf", out)
+    _compile_note("rftrain", out)
     start = time.monotonic()
     run = train_file(args.input, args.model, args.report, options, validation_path=args.validation,
                      test_path=args.test, progress=_progress_printer(out), is_cancelled=_interrupt_seen, log=log)
-    remember_run("rf")
+    remember_run("rftrain")
     accuracy = run.model.meta.get("test_accuracy")
     print(f"Model {args.model}: {len(run.features)} features, classes "
           f"{', '.join(str(int(c)) for c in run.model.classes)}; test accuracy "
@@ -430,14 +430,14 @@ def run_rfclassify(args, out) -> dict:
     from .kernels import remember_run
     from .learning import classify_file
     _check_outputs_named(args, out)
-    _compile_note("rf", out)
+    _compile_note("rfclassify", out)
     warnings, log = _collecting_log(out)
     dtm = dtm_options(args)
     start = time.monotonic()
     result = classify_file(args.input, args.output, args.model, dtm_path=args.dtm, dtm=dtm,
                            ignore_classes=args.ignore_classes, tiling=_tiling(args),
                            progress=_progress_printer(out), is_cancelled=_interrupt_seen, log=log)
-    remember_run("rf")
+    remember_run("rfclassify")
     if isinstance(result, tuple):  # one cloud in memory: (cloud, predicted classes)
         cloud, predicted = result
         points, ground, tiles, outputs = len(cloud), int((predicted == 2).sum()), None, [p for p in [args.output] if p]
