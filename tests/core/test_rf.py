@@ -541,6 +541,17 @@ def test_a_cloud_of_another_density_is_warned_about_for_a_model_of_radius_featur
         said = [line for line in lines if "points/m² where it has points" in line]
         assert bool(said) == warned, (name, lines)
     assert "planarity_r0p6" in said[0] and "HYBRID" in said[0]
+    # a tiled run (a ground model of x, y, z features) says it once, from the first file's sample
+    from groundsieve.core.engine.tiles import TileOptions
+    geometric = str(tmp_path / "g.npz")
+    learning.train_file(str(tmp_path / "dense.laz"), geometric, None,
+                        learning.TrainOptions(features=("planarity_r0p6", "verticality_r0p6"),
+                                              params=rf.ForestParams(n_trees=2), block_m=10.0))
+    for name, warned in (("same", False), ("sparse", True)):
+        lines = []
+        learning.classify_file(str(tmp_path / f"{name}.laz"), str(tmp_path / f"tiled_{name}.laz"), geometric,
+                               tiling=TileOptions(tile_size_m=25.0, workers=1), log=lines.append)
+        assert len([line for line in lines if "points/m² where it has points" in line]) == warned, (name, lines)
     # the measure holds on sparse clouds too (2 m cells had a floor of about 0.25 a m²: 0.1 read as 0.3, a code
     # reviewer), and a stray point does not thin it
     from groundsieve.core.engine.tiles import points_density
