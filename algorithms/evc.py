@@ -3,7 +3,6 @@ groundsieve:evcrasters — the same with its intermediate rasters."""
 from qgis.core import QgsProcessingParameterRasterDestination
 
 from .base import COMMON_HELP, FILTER_PARAMETER_HELP, GroundFilterAlgorithm, dialog_help
-from .styles import EVC_CLASSES
 
 
 EVC_HELP = """<p>The multiscale elevation-variation-coefficient filter of Fan et al. (2023), made for
@@ -64,15 +63,15 @@ class EVCRastersAlgorithm(EVCAlgorithm):
     EVC_RASTER = "EVC_RASTER"
     CLASS_RASTER = "CLASS_RASTER"
 
-    #: output name -> (label, f(EVCResult) -> (values, grid))
-    RASTERS = {
-        SMALL_MEAN: ("Small-scale mean elevation", lambda d: (d.small_mean, d.small_grid)),
-        LARGE_MEAN: ("Large-scale mean elevation", lambda d: (d.large_mean, d.large_grid)),
-        DIFFERENCE_RASTER: ("Elevation difference", lambda d: (d.difference, d.small_grid)),
-        EVC_RASTER: ("Elevation variation coefficient (EVC)", lambda d: (d.evc, d.small_grid)),
-        CLASS_RASTER: ("EVC classes (1 ground, 2 vegetation area, 3 vegetation boundary)",
-                       lambda d: (d.classes, d.small_grid, _CLASS_RASTER_FORMAT)),
-    }
+    #: output name -> the core's raster (core/filters/evc.py EVC_RASTERS: label, f(EVCResult) -> (values, grid[,
+    #: format])), read when needed: the plugin loads without the core's packages
+    RASTER_KEYS = {SMALL_MEAN: "small_mean", LARGE_MEAN: "large_mean", DIFFERENCE_RASTER: "difference",
+                   EVC_RASTER: "evc", CLASS_RASTER: "classes"}
+
+    @property
+    def RASTERS(self):  # noqa: N802
+        from ..core.filters.evc import EVC_RASTERS
+        return {name: EVC_RASTERS[key] for name, key in self.RASTER_KEYS.items()}
 
     PARAMETER_HELP = dict(
         FILTER_PARAMETER_HELP,
@@ -129,8 +128,3 @@ photogrammetry reviewer's generated scene: most of the ground EVC lost lay along
                        lambda run, make=make: make(run.detail))
                 for name, (_label, make) in self.RASTERS.items()}
 
-
-#: The class raster as bytes, empty cells (0) as no data, its classes coloured (a palette) and named
-#: (the band's description and metadata) in the file; QGIS also names them in the legend when it
-#: loads it (algorithms/styles).
-_CLASS_RASTER_FORMAT = {"dtype": "uint8", "nodata": 0, "categories": EVC_CLASSES}

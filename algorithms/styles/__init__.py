@@ -11,15 +11,16 @@ from qgis.core import (Qgis, QgsColorRampShader, QgsPalettedRasterRenderer, QgsP
                        QgsStyle, QgsVectorLayer)
 from qgis.PyQt.QtGui import QColor
 
-#: the EVC filter's classes (Fan et al. 2023, Table 2): value, legend label, colour
-EVC_CLASSES = ((1, "Ground", "#b07d3c"),
-               (2, "Vegetation area", "#1a7f2e"),
-               (3, "Vegetation boundary", "#9bd35a"))
+#: the EVC filter's classes (Fan et al. 2023, Table 2): value, legend label, colour; the core's table
+#: (core/filters/evc.py EVC_CLASSES, which names them in the class raster too), read when a layer is styled
+def _evc_classes():
+    from ...core.filters.evc import EVC_CLASSES
+    return EVC_CLASSES
 
 
 def style_evc_classes(layer):
     """A paletted renderer with the three EVC classes named and coloured (nodata stays empty)."""
-    classes = [QgsPalettedRasterRenderer.Class(value, QColor(colour), label) for value, label, colour in EVC_CLASSES]
+    classes = [QgsPalettedRasterRenderer.Class(value, QColor(colour), label) for value, label, colour in _evc_classes()]
     layer.setRenderer(QgsPalettedRasterRenderer(layer.dataProvider(), 1, classes))
     layer.triggerRepaint()
 
@@ -29,7 +30,7 @@ def style_evc_values(layer, threshold):
     EVC <= 0, 0 < EVC <= threshold, EVC > threshold, coloured and labelled as the class raster. A
     stretch over the values would show grey: dividing by near-zero mean differences makes a few
     values of +-1e4 or more where most lie within a few units."""
-    colours = {label: colour for _value, label, colour in EVC_CLASSES}
+    colours = {label: colour for _value, label, colour in _evc_classes()}
     items = [QgsColorRampShader.ColorRampItem(0.0, QColor(colours["Vegetation area"]),
                                               "EVC <= 0: vegetation area"),
              QgsColorRampShader.ColorRampItem(threshold, QColor(colours["Ground"]),

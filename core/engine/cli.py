@@ -183,6 +183,12 @@ def _add_filter(sub, name: str) -> None:
         _add_param(group, name, p.field, p.option, p.title() + (
             " (" + " | ".join(f"{v} = {label}" for v, label in zip(p.choices, p.choice_labels)) + ")"
             if p.choices else "") + (f": {p.help}" if p.help else ""), p.choices)
+    if name == "evc":  # groundsieve:evcrasters's rasters (core/filters/evc.py EVC_RASTERS)
+        from ..filters.evc import EVC_RASTERS
+        rasters = parser.add_argument_group("evc rasters (groundsieve:evcrasters's; GeoTIFF, optional)")
+        for key, (label, _make) in EVC_RASTERS.items():  # (--class-raster, as the dialog's CLASS_RASTER)
+            option = "class" if key == "classes" else key.replace("_", "-")
+            rasters.add_argument(f"--{option}-raster", metavar="PATH", dest=f"raster_{key}", help=label)
     extra = P.core_only_fields(name)
     if extra:
         group = parser.add_argument_group(f"{name}: finer settings (core only, not in the dialog)")
@@ -610,11 +616,18 @@ def tune_document(args, result) -> dict:
             "preset": args.preset_out, "report": args.report, "warnings": [text for _t, text in result.warnings]}
 
 
+def _raster_outputs(args) -> dict:
+    """{path: f(run) -> (values, grid[, format])} of the evc rasters asked for (``--KEY-raster PATH``)."""
+    from ..filters.evc import EVC_RASTERS
+    return {getattr(args, f"raster_{key}"): (lambda run, make=make: make(run.detail))
+            for key, (_label, make) in EVC_RASTERS.items() if getattr(args, f"raster_{key}", None)}
+
+
 def _check_outputs_named(args, out) -> None:
-    """A filter's or rfclassify's outputs: at least one of --output and --dtm; the DTM's options
-    typed without a --dtm are said to do nothing."""
-    if not args.output and not args.dtm:
-        raise _Usage("give --output and/or --dtm")
+    """A filter's or rfclassify's outputs: at least one of --output and --dtm (or an evc raster); the DTM's
+    options typed without a --dtm are said to do nothing."""
+    if not args.output and not args.dtm and not _raster_outputs(args):
+        raise _Usage("give --output and/or --dtm" + (" (or an evc raster)" if args.filter == "evc" else ""))
     for flag, unset in (("--dtm-cell", not getattr(args, "dtm_cell_typed", False)),
                         ("--dtm-classes", not args.dtm_classes), ("--dtm-max-distance", not args.dtm_max_distance),
                         ("--dtm-extent", not args.dtm_extent)):
@@ -644,10 +657,14 @@ def _run_documented(args, out, algorithm, options, dtm, warnings, log, ground_wo
     from .workflow import run_ground_filter
     _compile_note(args.filter, out)
     start = time.monotonic()
+    rasters = _raster_outputs(args)
     run = run_ground_filter(args.input, args.output, algorithm, options=options, dtm_path=args.dtm, dtm=dtm,
-                            progress=_progress_printer(out), is_cancelled=_interrupt_seen, log=log)
+                            rasters=rasters or None, progress=_progress_printer(out), is_cancelled=_interrupt_seen,
+                            log=log)
     remember_run(args.filter)
     document = filter_document(args, algorithm, run, time.monotonic() - start, warnings)
+    if rasters:
+        document["rasters"] = list(rasters)
     print(f"{document['points']:,} points, {document['ground']:,} {ground_words}.", file=out)
     return document
 

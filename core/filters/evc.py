@@ -60,6 +60,25 @@ CELL_ORIGINS = ("grid", "cloud")
 EMPTY, GROUND, VEGETATION_AREA, VEGETATION_BOUNDARY = 0, 1, 2, 3
 
 
+#: the classes of the class raster (Fan et al. 2023, Table 2): value, legend label, colour
+EVC_CLASSES = ((GROUND, "Ground", "#b07d3c"),
+               (VEGETATION_AREA, "Vegetation area", "#1a7f2e"),
+               (VEGETATION_BOUNDARY, "Vegetation boundary", "#9bd35a"))
+
+#: the EVC workflow's rasters (groundsieve:evcrasters, and the command line's evc): name -> (label,
+#: f(EVCResult) -> (values, grid[, write_geotiff's options]))
+EVC_RASTERS = {
+    "small_mean": ("Small-scale mean elevation", lambda d: (d.small_mean, d.small_grid)),
+    "large_mean": ("Large-scale mean elevation", lambda d: (d.large_mean, d.large_grid)),
+    "difference": ("Elevation difference", lambda d: (d.difference, d.small_grid)),
+    "evc": ("Elevation variation coefficient (EVC)", lambda d: (d.evc, d.small_grid)),
+    # the class raster as bytes, empty cells (0) as no data, its classes coloured (a palette) and named (the
+    # band's description and metadata) in the file
+    "classes": ("EVC classes (1 ground, 2 vegetation area, 3 vegetation boundary)",
+                lambda d: (d.classes, d.small_grid, {"dtype": "uint8", "nodata": 0, "categories": EVC_CLASSES})),
+}
+
+
 @dataclass(frozen=True)
 class EVCResult:
     ground: np.ndarray              #: bool per point

@@ -610,6 +610,32 @@ def test_features_run_from_the_shell(scene, tmp_path):
     assert not os.path.exists(tmp_path / "x.laz")
 
 
+def test_evc_writes_the_evc_workflows_rasters_from_the_shell(scene, tmp_path):
+    """groundsieve:evcrasters had no command (a new user): evc takes its five rasters, the core's (the same
+    table as the dialog's), with or without a classified cloud."""
+    from osgeo import gdal
+    from groundsieve.core.engine.workflow import run_ground_filter
+    from groundsieve.core.filters.evc import EVC, EVC_RASTERS
+    out, stdout = io.StringIO(), io.StringIO()
+    paths = {key: str(tmp_path / f"{key}.tif") for key in EVC_RASTERS}
+    flags = {key: "--" + ("class" if key == "classes" else key.replace("_", "-")) + "-raster" for key in paths}
+    options = [a for key, path in paths.items() for a in (flags[key], path)]
+    assert main(["evc", "--input", scene, "--json"] + options, out=out, stdout=stdout) == 0, out.getvalue()
+    done = json.loads(stdout.getvalue())
+    assert sorted(done["rasters"]) == sorted(paths.values()) and done["output"] is None
+    direct = run_ground_filter(scene, None, EVC())
+    for key, (_label, make) in EVC_RASTERS.items():
+        values = make(direct.detail)[0]
+        got = gdal.Open(paths[key]).ReadAsArray()
+        if key == "classes":
+            np.testing.assert_array_equal(got, values)
+        else:
+            np.testing.assert_allclose(got, np.where(np.isfinite(values), values, got), rtol=1e-6)
+    assert gdal.Open(paths["classes"]).GetRasterBand(1).GetDescription().startswith("1 Ground")
+    out = io.StringIO()
+    assert main(["evc", "--input", scene], out=out) == 2 and "(or an evc raster)" in out.getvalue()
+
+
 def _python_m_groundsieve_with(run_code: str, scene, output):
     """``python -m groundsieve smrf`` on ``scene``, in a process of its own whose run_ground_filter is the function
     ``run`` that ``run_code`` defines."""
