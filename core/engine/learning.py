@@ -6,7 +6,7 @@ import math
 import os
 import time
 from dataclasses import dataclass
-from typing import List, Optional
+from typing import List, Optional, Tuple
 
 import numpy as np
 
@@ -140,7 +140,12 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
     t0 = time.perf_counter()
     cloud = _without_withheld(read_cloud(input_path), log)
     from ..raster.crs import unit_warning
-    warning = unit_warning(input_path, cloud.crs_wkt, "the features' radii and the blocks' size")
+    # (a training converts nothing: "a preset's lengths are converted" had stood before C5's radii read as 0.6 ft,
+    # all their features empty four lines on: a reviewer)
+    warning = unit_warning(input_path, cloud.crs_wkt, "the features' radii and the blocks' size",
+                           converted="nothing is converted: the paper's spheres of 0.4-0.6 m (C4, C5) are 0.4-0.6 "
+                                     "{unit} here; name larger radii in a custom list (e.g. planarity_r2) if they "
+                                     "hold too few points.")
     if warning and cloud.crs_wkt:
         log(WARNING_PREFIX + warning)
     keep, classes = _labelled(cloud, options.classes, log)
@@ -151,12 +156,22 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
                              f"and the file has no point of class 2 among those learnt ({', '.join(map(str, classes))})")
         others = [c for c in classes if c != CLASS_GROUND]
         if others != [1]:
+            from ..learn.hybrid import unknown_features
+            where = ("it runs in the learned hybrid filter and on surveys too" if not unknown_features(
+                resolve_features(options.features, cloud)) else "with features of x, y, z only (the HYBRID preset) it "
+                "would run in the learned hybrid filter and on surveys too; these run on whole files")
+            # (a reviewer's C5 ground model was told it ran in both, and both refused it)
             log(f"Learning ground (2) against the other classes ({', '.join(map(str, others))}, learnt as 1): a "
-                "ground model, as the HYBRID features are meant for (it runs in the learned hybrid filter and on "
-                "surveys); name the classes to learn them apart.")
+                f"ground model ({where}); name the classes to learn them apart.")
         target = lambda labels: np.where(labels == CLASS_GROUND, CLASS_GROUND, 1).astype(labels.dtype)  # noqa: E731
         learnt = (1, CLASS_GROUND)
     names = resolve_features(options.features, cloud, log)
+    where = [n for n in ("gps_time", "scan_angle") if n in names]
+    if where:  # (said before the training: a reviewer learnt it only from the classified flight)
+        log(f"{WARNING_PREFIX}the features {' and '.join(where)} stand for where the patch lies in the flight (when "
+            "and from where in its strip it was measured), not for what a point is: on the rest of the flight they "
+            "lie outside what the model learns, and mislead it (the paper's C3, with both, was its worst). Prefer "
+            "a model without them unless the patch spans the flight.")
     X = feature_matrix(cloud, names, steps.sub(0.0, 0.3))
     y = target(cloud.classification)
     timings["features (training cloud)"] = time.perf_counter() - t0
@@ -431,7 +446,8 @@ def check_model_unit(model, model_path: str, input_path: str, crs_wkt: Optional[
                          f"another unit. Reproject the cloud to a CRS in {trained} first")
     if not trained and unit and unit != "metres":
         log(WARNING_PREFIX + unit_warning(input_path, crs_wkt, "the model's features (radii and heights, learnt "
-                                       "in the training cloud's unit)"))
+                                       "in the training cloud's unit)",
+                                       converted="nothing is converted: they are read as the model learnt them."))
 
 
 #: Memory a point costs rfclassify's whole run of a model that runs whole only (its colour, returns, GPS time
@@ -459,19 +475,20 @@ class _WholeModelRun:
             120 if any(n in PTD_FEATURES for n in model.features) else 0)  # (as Hybrid.extra_bytes_per_point)
 
 
-def untileable(model) -> str:
-    """Why a model cannot run tile by tile ("" when it can): the engine writes ground (2) and the rest
-    (1), and reads x, y, z (and the class) from its tiles."""
+def untileable(model) -> Tuple[str, str]:
+    """(why a model cannot run tile by tile, what to train instead); ("", "") when it can: the engine
+    writes ground (2) and the rest (1), and reads x, y, z (and the class) from its tiles."""
     from ..learn.hybrid import unknown_features
     classes = sorted(int(c) for c in model.classes)
     if GROUND_CLASS not in classes or not set(classes) <= {1, GROUND_CLASS}:
-        return ("only a ground model (classes 2 and 1) runs tile by tile; this model has the classes "
-                f"{', '.join(map(str, classes))}")
+        return (f"only a ground model (classes 2 and 1) runs tile by tile; this model has the classes "
+                f"{', '.join(map(str, classes))}", "train a ground model (the HYBRID features with no classes "
+                "named, or ground against the rest) of x, y, z features")
     other = unknown_features(model.features)
-    if other:
+    if other:  # (a ground model already: a reviewer's C5 ground model was told to train a ground model)
         return ("a model runs tile by tile on features from x, y, z only (the HYBRID preset or geometric features); "
-                f"this model also uses {', '.join(other)}")
-    return ""
+                f"this model also uses {', '.join(other)}", "train one on x, y, z features")
+    return "", ""
 
 
 def classify_survey(input_path: str, output_path: Optional[str], model_path: str, *, dtm_path: Optional[str] = None,
@@ -489,11 +506,10 @@ def classify_survey(input_path: str, output_path: Optional[str], model_path: str
     files = expand_inputs(input_path)
     check_model_unit(model, model_path, input_path, scan_header(files[0]).crs_wkt if files else None,
                      log or (lambda _msg: None))
-    problem = untileable(model)
+    problem, instead = untileable(model)
     if problem:
-        raise InputError(f"{model_path}: on a survey (a folder or a .vpc), {problem}: classify each file on its own "
-                         "(in QGIS: Run as Batch Process, one row a file), or train a ground model (the HYBRID "
-                         "features with no classes named learn ground against the rest)")
+        raise InputError(f"{model_path}: on a survey (a folder or a .vpc), {problem}: {instead}, or classify each "
+                         "file on its own (in QGIS: Run as Batch Process, one row a file)")
     if files and model.meta.get("points_per_unit2") and radius_features(model.features):
         # (said once, from the first file's sample, as the tiles are planned: a tile's warnings stay in the tile)
         from .tiles import sample_density
@@ -552,7 +568,7 @@ def classify_file(input_path: str, output_path: Optional[str], model_path: str, 
         check_outputs(input_path, output_path, [dtm_path])  # a wrong output refused before the model is read
         # (a .vpc output of one file tiled is the engine's to check, as the filters' is)
     model = load_model(model_path)
-    problem = untileable(model)
+    problem, _instead = untileable(model)
     # the whole run priced as its own path's (the model loaded once: a code reviewer)
     estimate = _WholeModelRun(model)
     whole_dtm = (dtm or DTMOptions()) if dtm_path else None

@@ -158,8 +158,12 @@ def _keys_hold(crs_wkt: str, unit: str) -> bool:
         gdal.PopErrorHandler()
 
 
+#: what a ground filter's run does with lengths in metres in a CRS of another unit (unit_warning's last words)
+CONVERTED = "a ground filter's defaults and a preset's lengths, which are metres, are converted to it."
+
+
 def unit_warning(path: str, crs_wkt: Optional[str], lengths: str = "every length parameter",
-                 bounds: Optional[Tuple[float, float, float, float]] = None) -> Optional[str]:
+                 bounds: Optional[Tuple[float, float, float, float]] = None, converted: str = CONVERTED) -> Optional[str]:
     """What to tell the user when the cloud has no CRS, or one whose unit is not the metre (the
     filters read their lengths in the CRS's unit); None for a CRS in metres. With the points'
     ``bounds`` (x0, y0, x1, y1), a geographic CRS whose coordinates cannot be degrees is said to be
@@ -185,7 +189,7 @@ def unit_warning(path: str, crs_wkt: Optional[str], lengths: str = "every length
                 "latitudes: the CRS is likely wrong, and the lengths were read in the coordinates' own unit. "
                 "Assign the right CRS to the file (outputs keep the wrong one).")
     return (f"{path}: the CRS's unit is {unit}, not metres: {lengths} was read in that unit (where the parameters "
-            f"say m, read one {unit}); a ground filter's defaults and a preset's lengths, which are metres, are converted to it.")
+            f"say m, read one {unit}); {converted.format(unit=unit)}")
 
 
 #: the widest span (degrees) a cloud in longitudes and latitudes is taken to have: a local survey in

@@ -613,3 +613,41 @@ def test_one_file_in_tiles_may_write_a_vpc_and_a_wrong_output_is_refused_before_
         learning.classify_file(str(tmp_path / "s.laz"), str(tmp_path / "w.vpc"), model)
     with pytest.raises(OutputError, match="must end in .las or .laz"):
         learning.classify_file(str(tmp_path / "s.laz"), str(tmp_path / "w.txt"), str(tmp_path / "none.npz"))
+
+
+def test_rftrain_says_where_a_ground_model_runs_and_warns_of_features_that_stand_for_the_patch(tmp_path):
+    """A reviewer's C5 ground model was told it ran in the hybrid filter and on surveys, which both refused it,
+    and the survey's refusal told it to train a ground model; GPS time and scan angle were found misleading only
+    after classifying the flight; in feet, 'a preset's lengths are converted' stood before C5's radii read in feet."""
+    from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
+    scene = make_scene(SceneSpec(size_m=60.0, density_per_m2=3.0, seed=12))
+    assert len(set(np.unique(scene.classification)) - {1, 2}) >= 1
+    write_scene(scene, str(tmp_path / "patch.laz"))
+    said = {}
+    for name, features in (("hybrid", tuple(rf.PRESETS["HYBRID"])), ("attributes", ("intensity", "return_number"))):
+        lines = []
+        learning.train_file(str(tmp_path / "patch.laz"), str(tmp_path / f"{name}.npz"), None,
+                            learning.TrainOptions(features=features, params=rf.ForestParams(n_trees=2), block_m=15.0,
+                                                  ground_vs_rest=True), log=lines.append)
+        said[name] = [line for line in lines if line.startswith("Learning ground (2) against")]
+    assert "it runs in the learned hybrid filter and on surveys too" in said["hybrid"][0]
+    assert "these run on whole files" in said["attributes"][0]
+    (tmp_path / "survey").mkdir()
+    import shutil
+    shutil.copy(tmp_path / "patch.laz", tmp_path / "survey" / "a.laz")
+    with pytest.raises(InputError, match="this model also uses intensity, return_number: train one on x, y, z "
+                                         "features, or classify each file on its own"):
+        learning.classify_file(str(tmp_path / "survey"), str(tmp_path / "o.vpc"), str(tmp_path / "attributes.npz"))
+    # in feet, a training converts nothing, and says so (a filter's words had promised converted lengths)
+    import pyproj
+    write_scene(scene, str(tmp_path / "feet.laz"), crs_wkt=pyproj.CRS("EPSG:2249").to_wkt())
+    lines = []
+    learning.train_file(str(tmp_path / "feet.laz"), str(tmp_path / "f.npz"), None,
+                        learning.TrainOptions(params=rf.ForestParams(n_trees=2), block_m=15.0), log=lines.append)
+    unit = [line for line in lines if "the CRS's unit is US survey foot" in line]
+    assert unit and "nothing is converted" in unit[0] and "are converted to it" not in unit[0], lines
+    lines = []  # (the scene's LAS has GPS time; every format has a scan angle)
+    learning.train_file(str(tmp_path / "patch.laz"), str(tmp_path / "g.npz"), None,
+                        learning.TrainOptions(features=("intensity", "gps_time", "scan_angle"),
+                                              params=rf.ForestParams(n_trees=2), block_m=15.0), log=lines.append)
+    assert [line for line in lines if "gps_time and scan_angle stand for where the patch lies" in line], lines
