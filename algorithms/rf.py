@@ -25,7 +25,7 @@ CLOUD_FILTER = "Point clouds (*.las *.laz *.LAS *.LAZ)"
 SURVEY_FILTER = CLOUD_FILTER + ";;Virtual point clouds (*.vpc);;All files and folders (*)"
 
 
-def _rf(extra=None, feedback=None, name="rf"):
+def _rf(extra, feedback, name):
     errors, _workflow = core_modules(extra, feedback, kernels_of=name)
     from ..core.engine import learning
     from ..core.learn import rf
@@ -321,7 +321,7 @@ Loading a model never runs code from the file (plain arrays, no pickle).</p>""")
         self.addOutput(QgsProcessingOutputNumber(self.POINT_COUNT, "Points classified"))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        errors, rf, learning = _rf(feedback=feedback, name="rfclassify")
+        errors, rf, learning = _rf(None, feedback, "rfclassify")
         from ..core.engine.workflow import DTMOptions
         input_path = self.parameterAsFile(parameters, self.INPUT, context)
         output = pointclouds.classified_output_path(self, parameters, context, self.OUTPUT, input_path) or None

@@ -301,10 +301,9 @@ def _add_features(sub) -> None:
 
 def run_features_command(args, out) -> dict:
     """Run ``features``; return its JSON document."""
-    from ..learn.features import FeatureSpec
+    from ..learn.features import FeatureSpec, parse_feature_name
     from .features_run import run_features
     pairs = []
-    from ..learn.features import parse_feature_name
     for item in (i.strip() for i in args.features.split(",") if i.strip()):
         feature, colon, radius = item.partition(":")
         try:
@@ -314,13 +313,11 @@ def run_features_command(args, out) -> dict:
                          "(planarity_r0p6)") from None
     if not pairs:
         raise _Usage("--features: name at least one FEATURE:RADIUS, e.g. planarity:0.6")
-    from .kernels import remember_run
-    _compile_note("features", out)
     warnings, log = _collecting_log(out)
     start = time.monotonic()
-    run = run_features(args.input, args.output, FeatureSpec(tuple(pairs)), ignore_classes=args.ignore_classes,
-                       progress=_progress_printer(out), is_cancelled=_interrupt_seen, log=log)
-    remember_run("features")
+    with _kernels_of("features", out):
+        run = run_features(args.input, args.output, FeatureSpec(tuple(pairs)), ignore_classes=args.ignore_classes,
+                           progress=_progress_printer(out), is_cancelled=_interrupt_seen, log=log)
     print(f"{len(run.cloud):,} points, features {', '.join(run.names)}.", file=out)
     return {"status": "done", "input": args.input, "output": args.output, "features": list(run.names),
             "points": len(run.cloud), "seconds": round(time.monotonic() - start, 3), "warnings": list(warnings)}
@@ -386,12 +383,10 @@ def run_rftrain(args, out) -> dict:
                                                max_depth=args.max_depth or None,
                                                max_samples=args.samples_per_tree or None),
                            block_m=args.block)
-    from .kernels import remember_run
-    _compile_note("rftrain", out)
     start = time.monotonic()
-    run = train_file(args.input, args.model, args.report, options, validation_path=args.validation,
-                     test_path=args.test, progress=_progress_printer(out), is_cancelled=_interrupt_seen, log=log)
-    remember_run("rftrain")
+    with _kernels_of("rftrain", out):
+        run = train_file(args.input, args.model, args.report, options, validation_path=args.validation,
+                         test_path=args.test, progress=_progress_printer(out), is_cancelled=_interrupt_seen, log=log)
     accuracy = run.model.meta.get("test_accuracy")
     print(f"Model {args.model}: {len(run.features)} features, classes "
           f"{', '.join(str(int(c)) for c in run.model.classes)}; test accuracy "
@@ -424,26 +419,28 @@ def _add_rfclassify(sub) -> None:
     parser.set_defaults(filter="rfclassify")
 
 
-def _compile_note(name: str, out) -> None:
-    """The note that a run is about to compile its kernels (core/engine/kernels.py), before the work."""
-    from .kernels import COMPILING, about_to_compile
+@contextlib.contextmanager
+def _kernels_of(name: str, out):
+    """Around a run of algorithm ``name``: the note that it is about to compile its kernels, before the
+    work, and once it finished, that they are compiled (core/engine/kernels.py)."""
+    from .kernels import COMPILING, about_to_compile, remember_run
     if about_to_compile(name):  # (the progress then waits 20-60 s: a release engineer saw 8 s at 21.5 %)
         print(COMPILING, file=out, flush=True)
+    yield
+    remember_run(name)
 
 
 def run_rfclassify(args, out) -> dict:
     """Run ``rfclassify``; return its JSON document."""
-    from .kernels import remember_run
     from .learning import classify_file
     _check_outputs_named(args, out)
-    _compile_note("rfclassify", out)
     warnings, log = _collecting_log(out)
     dtm = dtm_options(args)
     start = time.monotonic()
-    result = classify_file(args.input, args.output, args.model, dtm_path=args.dtm, dtm=dtm,
-                           ignore_classes=args.ignore_classes, tiling=_tiling(args),
-                           progress=_progress_printer(out), is_cancelled=_interrupt_seen, log=log)
-    remember_run("rfclassify")
+    with _kernels_of("rfclassify", out):
+        result = classify_file(args.input, args.output, args.model, dtm_path=args.dtm, dtm=dtm,
+                               ignore_classes=args.ignore_classes, tiling=_tiling(args),
+                               progress=_progress_printer(out), is_cancelled=_interrupt_seen, log=log)
     if isinstance(result, tuple):  # one cloud in memory: (cloud, predicted classes)
         cloud, predicted = result
         points, ground, tiles, outputs = len(cloud), int((predicted == 2).sum()), None, [p for p in [args.output] if p]
@@ -653,15 +650,13 @@ def _collecting_log(out):
 def _run_documented(args, out, algorithm, options, dtm, warnings, log, ground_words: str) -> dict:
     """Run ``algorithm`` on ``args.input`` as the filters and the DTM from classes run (the compile note,
     progress, interrupts); its JSON document, its summary logged to ``out``."""
-    from .kernels import remember_run
     from .workflow import run_ground_filter
-    _compile_note(args.filter, out)
     start = time.monotonic()
     rasters = _raster_outputs(args)
-    run = run_ground_filter(args.input, args.output, algorithm, options=options, dtm_path=args.dtm, dtm=dtm,
-                            rasters=rasters or None, progress=_progress_printer(out), is_cancelled=_interrupt_seen,
-                            log=log)
-    remember_run(args.filter)
+    with _kernels_of(args.filter, out):
+        run = run_ground_filter(args.input, args.output, algorithm, options=options, dtm_path=args.dtm, dtm=dtm,
+                                rasters=rasters or None, progress=_progress_printer(out),
+                                is_cancelled=_interrupt_seen, log=log)
     document = filter_document(args, algorithm, run, time.monotonic() - start, warnings)
     if rasters:
         document["rasters"] = list(rasters)

@@ -21,7 +21,7 @@ _PACKAGE = __package__.rsplit(".", 1)[0]  # "groundsieve.core"
 #: the kernel modules of each filter beyond those named after it (core/filters/_<name>_*.py): the
 #: learned hybrid computes SMRF's and PTD's surfaces and the point features; the DTM from classes only the DTM's
 #: (rftrain and rfclassify apart: a classification with a DTM compiles the DTM's kernels a training does not)
-_ALSO = {"hybrid": ("filters._smrf", "filters._ptd", "learn."), "rf": ("learn.",), "rftrain": ("learn.",),
+_ALSO = {"hybrid": ("filters._smrf", "filters._ptd", "learn."), "rftrain": ("learn.",),
          "rfclassify": ("learn.",), "features": ("learn.",),
          "evcrasters": ("filters._evc",), "dtm": ("grids.",)}
 

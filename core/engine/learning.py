@@ -316,11 +316,26 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
     return TrainRun(model, evaluations, names, timings, grid_rows, notes)
 
 
+def _radius_of(name: str) -> Optional[tuple]:
+    """(feature, radius) of a feature computed within spheres of a fixed radius (the eigen features, density,
+    height above the minimum: ``planarity_r0p6``), as core/learn/features.py names them; None for any other
+    (an attribute, the hybrid's surfaces and openings)."""
+    from ..errors import InvalidParameterError
+    from ..learn.features import parse_feature_name
+    try:
+        return parse_feature_name(name)
+    except InvalidParameterError:
+        return None
+
+
 def radius_features(names) -> List[str]:
-    """The features computed within spheres of a fixed radius (the eigen features, density, height above
-    the minimum: ``name_r0p6``), whose values change with the point density; not the hybrid's openings."""
-    import re
-    return [n for n in names if re.search(r"_r\d+(p\d+)?$", n) and not n.startswith("above_opening")]
+    """The features of ``names`` computed within fixed radii, whose values change with the point density."""
+    return [n for n in names if _radius_of(n) is not None]
+
+
+def _density_matters(model) -> bool:
+    """Whether the model keeps its training density and has features that depend on it."""
+    return bool(model.meta.get("points_per_unit2")) and bool(radius_features(model.features))
 
 
 #: a cloud this many times denser or sparser than the model's training cloud is warned about
@@ -332,9 +347,9 @@ def _say_density(model, model_path: str, where: str, here: float, crs_wkt, log) 
     or as much below it, for a model of features within fixed radii (a reviewer's C5 model of 150 points/m²
     on a flight of 20: total error 5.1 -> 7.2 %, nothing said)."""
     trained = model.meta.get("points_per_unit2")
-    names = radius_features(model.features)
-    if not trained or not names or here <= 0 or max(here / trained, trained / here) < DENSITY_RATIO:
+    if not _density_matters(model) or here <= 0 or max(here / trained, trained / here) < DENSITY_RATIO:
         return
+    names = radius_features(model.features)
     from ..raster.crs import horizontal_unit
     unit = horizontal_unit(crs_wkt) or "metres"
     per = "points/m²" if unit == "metres" else f"points per square {unit}"
@@ -352,7 +367,7 @@ def _feature_notes(X: np.ndarray, names, crs_wkt) -> List[str]:
     neighbourhood holding too few points: the paper's 0.4-0.6 m spheres on a sparse airborne cloud, or in a
     CRS in feet, where they are read as feet), and those of one value on every point (return_number on
     single returns). (All-NaN columns had been missed, and a numpy RuntimeWarning printed: a reviewer.)"""
-    import re
+    from ..learn.features import feature_name
     from ..raster.crs import horizontal_unit
     notes = []
     if X.shape[0] < 2:
@@ -363,12 +378,11 @@ def _feature_notes(X: np.ndarray, names, crs_wkt) -> List[str]:
         column = X[finite[:, j], j]
         missing = 1.0 - column.size / X.shape[0]
         if missing >= MISSING_SHARE:
-            radius = re.search(r"_r(\d+)p?(\d*)$", name)
-            size = f"{radius.group(1)}.{radius.group(2) or '0'}"
-            why = (f": its neighbourhood, {size} {unit} around each point, holds too "
+            sphere = _radius_of(name)
+            why = (f": its neighbourhood, {sphere[1]:g} {unit} around each point, holds too "
                    "few points there (a sparse cloud, or a radius meant in metres read in feet). Leave it out, or "
-                   f"take a radius that holds a dozen points or more (a custom list, e.g. {name[:radius.start()]}_r2 "
-                   "for 2; Compute point features counts the spheres with too few)" if radius else
+                   f"take a radius that holds a dozen points or more (a custom list, e.g. {feature_name(sphere[0], 2)} "
+                   "for 2; Compute point features counts the spheres with too few)" if sphere else
                    ": leave it out, or train on a cloud that has it")
             notes.append(f"{WARNING_PREFIX}the feature '{name}' has no value on {missing:.1%} of the training "
                          f"points{why}.")
@@ -510,12 +524,12 @@ def classify_survey(input_path: str, output_path: Optional[str], model_path: str
     if problem:
         raise InputError(f"{model_path}: on a survey (a folder or a .vpc), {problem}: {instead}, or classify each "
                          "file on its own (in QGIS: Run as Batch Process, one row a file)")
-    if files and model.meta.get("points_per_unit2") and radius_features(model.features):
+    if _density_matters(model):
         # (said once, from the first file's sample, as the tiles are planned: a tile's warnings stay in the tile)
         from .tiles import sample_density
-        first = next((f for f in files if scan_header(f).count), None)
+        first = next((info for info in map(scan_header, files) if info.count), None)
         if first is not None:
-            _say_density(model, model_path, first, sample_density(first), scan_header(first).crs_wkt,
+            _say_density(model, model_path, first.path, sample_density(first.path), first.crs_wkt,
                          log or (lambda _msg: None))
     options = FilterOptions(ignore_classes=ignore_classes if ignore_classes is not None else (),
                             tiling=tiling or TileOptions())
@@ -630,7 +644,7 @@ def classify_file(input_path: str, output_path: Optional[str], model_path: str, 
     if dtm_path:  # a DTM too large for the memory is refused before the features' work
         check_dtm_memory(part.x, part.y, dtm)
     names = resolve_features(model.meta.get("preset_features", model.features), part, log)
-    if model.meta.get("points_per_unit2") and radius_features(names):
+    if _density_matters(model):
         from .tiles import points_density
         _say_density(model, model_path, input_path, points_density(part.x, part.y), part.crs_wkt, log)
     if names != list(model.features):
