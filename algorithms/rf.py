@@ -60,8 +60,8 @@ class RFTrainAlgorithm(_RFBase):
                    "(with the hybrid features: ground 2 against all the others).",
         "CUSTOM_FEATURES": "With 'custom list': features by name, e.g. intensity,return_number,planarity_r0p6.",
         "GROUND_VS_REST": "Learn ground (2) against all the other classes (taken as 1), whatever the features: a "
-                          "ground model, for a DTM (with x, y, z features only it also runs tile by tile on surveys "
-                          "and in Ground filter (learned hybrid)). Off: the classes as they are, except with the "
+                          "ground model, for a DTM (with x, y, z features only it also runs in Ground filter (learned "
+                          "hybrid)). Off: the classes as they are, except with the "
                           "hybrid features and no classes named, which learn ground against the rest.",
         "CRITERION": "How the trees split: gini or entropy.",
         "TREES": "How many trees the forest has.",
@@ -123,7 +123,7 @@ paper's small spheres hold few points. <i>custom</i>: a comma-separated list suc
 <i>Ground filter (learned hybrid)</i> (heights above SMRF's provisional surface and above the minimum
 surface opened with 2, 6 and 18 m windows, that surface's slope and curvature; x, y, z only): train
 ground (2) against the other classes on your own data (with <i>Classes to learn</i> empty, every class
-but 2 is learnt as 1: a ground model, which also runs on surveys) and use the model there or here. Geometric
+but 2 is learnt as 1: a ground model) and use the model there or here. Geometric
 features already in the file (from <i>Compute point features</i>) are used as they are.</p>
 <p><b>Split</b>: training / validation / test sets are square blocks of <i>Block size</i> drawn at
 random (60/20/20 %), so neighbouring points do not leak between sets; or give validation and test
@@ -234,8 +234,8 @@ importances, timings) with the same figures in a CSV beside it.</p>""")
 
 class RFClassifyAlgorithm(SurveyTiles, _RFBase):
     PARAMETER_HELP = {
-        "INPUT": "A LAS/LAZ file, a folder of them or a .vpc survey (a survey runs in buffered tiles with a "
-                 "ground model). Only read, never changed.",
+        "INPUT": "A LAS/LAZ file, a folder of them or a .vpc survey (a survey runs in buffered tiles). Only "
+                 "read, never changed.",
         "MODEL": "A model written by Train Random Forest classifier (.npz); a changed or foreign file is refused.",
         "IGNORE_CLASSES": "Points of these classes keep their class, are not predicted and stay out of the DTM "
                           "(7 and 18, noise, by default).",
@@ -248,7 +248,7 @@ class RFClassifyAlgorithm(SurveyTiles, _RFBase):
         **{name: FILTER_PARAMETER_HELP[name] for name in ("TILE_SIZE", "MEMORY_BUDGET", "WORKERS", "WORK_FOLDER",
                                                           "SCHEDULER", "ONLY")},
         "TILE_BUFFER": "The margin read around each tile so that no seam shows; -1 = the reach of the model's "
-                       "features (38 m for the HYBRID preset's).",
+                       "features, at least 30 m for the DTM (38 m for the HYBRID preset's).",
     }
     INPUT = "INPUT"
     MODEL = "MODEL"
@@ -280,9 +280,12 @@ points of the <b>Ignored classes</b> (default <code>7,18</code>, noise; a list o
 <code>7,18,20-25</code>; empty = none) keep their class and flags and are left out of the features'
 neighbourhoods, the prediction and the DTM, whose grid spans only the other points.</p>
 <p><b>Surveys</b>: a folder of LAS/LAZ files, a virtual point cloud (.vpc) or a cloud larger than the memory is classified in
-buffered tiles, as the ground filters do (the buffer is the reach of the model's features); this works
-for ground models (classes 2 and 1) whose features come from x, y, z (the default HYBRID preset, or
-geometric features); other models are refused for surveys with the reason. The tiles, the workers, a Dask
+buffered tiles, as the ground filters do (the buffer is the reach of the model's features, at least
+30 m for the DTM), with any model: its colour, returns, scan angle or GPS time are read from each tile's
+points as a run of the whole cloud reads them, and each point gets the model's class. Every file must
+have the model's attributes (a file without its colour is refused by name); colour of the other depth
+and features outside what the model learnt are judged once for the survey, from the first points of up
+to 16 of its files. The tiles, the workers, a Dask
 cluster and one file of a survey for a job array (<i>Advanced parameters</i>) are the ground filters'. Skip the
 <i>Classified point cloud</i> for the DTM alone: on a survey with a <i>DTM extent</i>, only the tiles that make the
 extent's cells are then classified.</p>

@@ -404,7 +404,8 @@ def _add_rfclassify(sub) -> None:
     summary = "classify a cloud with a model from rftrain (its ASPRS classes), and optionally make a DTM"
     parser = sub.add_parser("rfclassify", help=summary, description=f"{summary} from the points predicted as "
                             "ground (2). A folder, a .vpc, a tile size or a cloud beyond the memory budget runs in "
-                            "buffered tiles (models of ground against the rest only).")
+                            "buffered tiles (any model: its colour, returns, scan angle or GPS time are read from each tile's "
+                            "points).")
     io = parser.add_argument_group("input and outputs")
     io.add_argument("--input", required=True, metavar="PATH", help="LAS/LAZ (1.0-1.4), a folder of them, or a .vpc")
     io.add_argument("--model", required=True, metavar="PATH", help="the model file (.npz) from rftrain")

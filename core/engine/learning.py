@@ -2,7 +2,6 @@
 HTML/CSV report) and classify a cloud with a saved model (classified cloud, optional DTM)."""
 from __future__ import annotations
 
-import math
 import os
 import time
 from dataclasses import dataclass
@@ -13,7 +12,7 @@ import numpy as np
 from ..errors import InputError
 from ..io import CLASS_GROUND, atomic_path
 from ..progress import WARNING_PREFIX
-from ..learn.hybrid import GROUND_CLASS, Hybrid, HybridResult, hybrid_features
+from ..learn.hybrid import GROUND_CLASS, Hybrid, hybrid_features
 from ..learn.model_file import MODEL_EXTENSION, load_model, save_model
 from ..learn.rf import (CRITERIA, DEFAULT_PRESET, PRESETS, SCALERS, ForestParams, Model, feature_matrix,
                         permutation_importance, resolve_features, spatial_split, train_forest)
@@ -36,8 +35,8 @@ class TrainOptions:
     grid: bool = False                   #: run the paper's grid, keep the best on validation
     permutation_points: int = 20_000     #: test points used for permutation importance
     permutation_repeats: int = 2
-    #: train ground (2) against every other class learnt (as 1): a ground model, which runs in the
-    #: hybrid filter and tile by tile on surveys. None: when the features are the HYBRID preset's
+    #: train ground (2) against every other class learnt (as 1): a ground model, which with features of
+    #: x, y, z runs in the hybrid filter too. None: when the features are the HYBRID preset's
     #: and no classes are named (the default)
     ground_vs_rest: Optional[bool] = None
 
@@ -157,9 +156,9 @@ def train_file(input_path: str, model_path: str, report_path: Optional[str] = No
         others = [c for c in classes if c != CLASS_GROUND]
         if others != [1]:
             from ..learn.hybrid import unknown_features
-            where = ("it runs in the learned hybrid filter and on surveys too" if not unknown_features(
+            where = ("it runs in the learned hybrid filter too" if not unknown_features(
                 resolve_features(options.features, cloud)) else "with features of x, y, z only (the HYBRID preset) it "
-                "would run in the learned hybrid filter and on surveys too; these run on whole files")
+                "would run in the learned hybrid filter too; rfclassify runs these on files and surveys")
             # (a reviewer's C5 ground model was told it ran in both, and both refused it)
             log(f"Learning ground (2) against the other classes ({', '.join(map(str, others))}, learnt as 1): a "
                 f"ground model ({where}); name the classes to learn them apart.")
@@ -418,29 +417,124 @@ def _write_training_outputs(model, model_path: str, report_path: Optional[str], 
 
 
 @dataclass(frozen=True)
+class ModelResult:
+    """What :class:`ModelGround` gives a tile: ground (the predicted class is 2), the ground
+    probability, and each point's predicted class (core/engine/workflow.classify_cloud writes it)."""
+    ground: np.ndarray          #: bool per point
+    probability: np.ndarray     #: float32 probability of ground per point (0 for a model without ground)
+    point_classes: np.ndarray   #: uint8, the model's most probable class per point
+
+
+#: the least buffer (m) a model classifies tiles with: its DTM's surface near a tile's edge spans the ground
+#: beyond it (lidR's catalogue buffers 30 m for the same reason), even for a model of point attributes alone
+MODEL_MIN_REACH_M = 30.0
+
+
+@dataclass(frozen=True)
 class ModelGround(Hybrid):
-    """A ground model as a ground filter for the buffered-tile engine, with rfclassify's rule: the
-    predicted class (the model's ``predict``: the most probable, a tie to the first class, 1), not
-    the hybrid filter's threshold (ground at a probability of 0.5 or more), so that tiled and whole
-    runs of rfclassify agree on ties too."""
+    """A model of rfclassify in the buffered-tile engine, with rfclassify's rule: each point gets the
+    model's predicted class (the most probable, a tie to the first class), ground being class 2 (not
+    the hybrid filter's threshold on the ground probability), so that tiled and whole runs agree on
+    ties too. Its features of x, y, z are computed on the tile and its buffer (as the hybrid filter's);
+    the others (colour, intensity, returns, scan angle, GPS time, a dimension of the files) are read
+    from each tile's records as the whole run reads them from its file (:meth:`point_attributes`),
+    colour multiplied by ``colour_factor`` (decided once for the survey: a tile of dark colour must not
+    read as 8-bit)."""
+    colour_factor: float = 1.0
+
     name = "rfclassify"
     #: rfclassify gives every point a class of its model's: the log's advice on the input's other
     #: classes (workflow.replaced_note) names the hybrid filter, which can keep them
     keeps_classes = False
 
+    def __post_init__(self):
+        from ..errors import InvalidParameterError
+        from ..validate import check_number
+        if not isinstance(self.model_path, (str, os.PathLike)) or not os.fspath(self.model_path):
+            raise InvalidParameterError(f"model_path must be a model file (got {self.model_path!r})")
+        check_number(self, "colour_factor")
+        if not self.colour_factor > 0:
+            raise InvalidParameterError(f"colour_factor must be > 0 (got {self.colour_factor})")
+        object.__setattr__(self, "_model", load_model(os.fspath(self.model_path)))
+
+    @property
+    def attribute_names(self) -> List[str]:
+        """The model's features read from the points' records, not computed from x, y, z."""
+        from ..learn.hybrid import unknown_features
+        return unknown_features(self.features)
+
+    @property
+    def new_classes(self) -> Optional[str]:
+        """What the run gives the points (for the log's note on the input's classes it replaced), when
+        not ground (2) and non-ground (1)."""
+        classes = sorted(int(c) for c in self.model.classes)
+        return None if set(classes) <= {1, GROUND_CLASS} else f"the model's classes ({', '.join(map(str, classes))})"
+
+    @property
+    def keep_advice(self) -> Optional[str]:
+        """How to keep the input's classes, when this model cannot run in the hybrid filter (which can)."""
+        if self.new_classes is None and not self.attribute_names:
+            return None
+        return ("train a ground model of x, y, z features (the HYBRID preset) and run it in the learned hybrid "
+                "filter (groundsieve:hybrid, MODEL) with Keep existing classes other than 0, 1, 2: rfclassify gives "
+                "every point one of its model's classes")
+
+    @property
+    def point_fields(self) -> Tuple[str, ...]:
+        return tuple(self.attribute_names)
+
+    @property
+    def point_attributes(self):
+        """None for a model of x, y, z features; otherwise the function the tile engine gives each part's
+        cloud (its ``las`` holding the part's records, read by its file's header) and that returns
+        {feature: float32 values}, computed as rfclassify's whole run computes them (learn/rf.py)."""
+        return self._attributes_of if self.attribute_names else None
+
+    def _attributes_of(self, cloud) -> dict:
+        from ..learn.rf import COLOURS, GPS_TIME_MODES, attribute_values
+        mode = GPS_TIME_MODES.get(self.model.meta.get("gps_time"), "raw")
+        out = {}
+        for name in self.attribute_names:
+            values = attribute_values(cloud, name, mode)
+            if name in COLOURS and self.colour_factor != 1.0:
+                values = values * self.colour_factor  # (float32, as the whole run's X[:, colours] *= factor)
+            out[name] = values
+        return out
+
+    @property
+    def reach_m(self) -> float:
+        """The reach of the model's features of x, y, z (the hybrid filter's rule), and at least
+        :data:`MODEL_MIN_REACH_M` for the DTM."""
+        names = [n for n in self.features if n not in self.attribute_names]
+        return max(self.reach_of(names, self.cell_size_m), MODEL_MIN_REACH_M)
+
+    @property
+    def extra_bytes_per_point(self) -> Optional[int]:
+        return None  # (a tile is planned at the engine's BYTES_PER_POINT; a whole run is priced by _WholeModelRun)
+
     def describe(self) -> str:
         return (f"rfclassify in tiles: {self.model_path} ({len(self.features)} features: {', '.join(self.features)}); "
                 "each point gets the model's most probable class")
 
-    def run(self, xyz, steps=None):
+    def run(self, xyz, steps=None, **fields):
         from ..progress import Steps
         steps = steps or Steps()
-        X = hybrid_features(xyz, self.features, cell_size_m=self.cell_size_m, steps=steps.sub(0.0, 0.6))
+        names, read = self.features, set(self.attribute_names)
+        X = np.empty((len(xyz), len(names)), dtype=np.float32)
+        computed = [n for n in names if n not in read]
+        if computed:
+            values = hybrid_features(xyz, computed, cell_size_m=self.cell_size_m, steps=steps.sub(0.0, 0.6))
+            for j, n in enumerate(computed):
+                X[:, names.index(n)] = values[:, j]
+        for n in read:
+            X[:, names.index(n)] = fields[n]
         proba = self.model.predict_proba(X, steps=steps.sub(0.6, 1.0))
-        predicted = np.asarray(self.model.classes)[np.argmax(proba, axis=1)]  # as Model.predict
-        ground = proba[:, [int(c) for c in self.model.classes].index(GROUND_CLASS)]
+        classes = [int(c) for c in self.model.classes]
+        predicted = np.asarray(classes, dtype=np.uint8)[np.argmax(proba, axis=1)]  # as Model.predict
+        ground = (proba[:, classes.index(GROUND_CLASS)] if GROUND_CLASS in classes
+                  else np.zeros(len(xyz))).astype(np.float32)
         steps.report(1.0)
-        return HybridResult(predicted == GROUND_CLASS, ground.astype(np.float32))
+        return ModelResult(predicted == GROUND_CLASS, ground, predicted)
 
 
 def _value(v: float) -> str:
@@ -489,20 +583,98 @@ class _WholeModelRun:
             120 if any(n in PTD_FEATURES for n in model.features) else 0)  # (as Hybrid.extra_bytes_per_point)
 
 
-def untileable(model) -> Tuple[str, str]:
-    """(why a model cannot run tile by tile, what to train instead); ("", "") when it can: the engine
-    writes ground (2) and the rest (1), and reads x, y, z (and the class) from its tiles."""
-    from ..learn.hybrid import unknown_features
-    classes = sorted(int(c) for c in model.classes)
-    if GROUND_CLASS not in classes or not set(classes) <= {1, GROUND_CLASS}:
-        return (f"only a ground model (classes 2 and 1) runs tile by tile; this model has the classes "
-                f"{', '.join(map(str, classes))}", "train a ground model (the HYBRID features with no classes "
-                "named, or ground against the rest) of x, y, z features")
-    other = unknown_features(model.features)
-    if other:  # (a ground model already: a reviewer's C5 ground model was told to train a ground model)
-        return ("a model runs tile by tile on features from x, y, z only (the HYBRID preset or geometric features); "
-                f"this model also uses {', '.join(other)}", "train one on x, y, z features")
-    return "", ""
+def say_features_here(model, model_path: str, where: str, X: np.ndarray, log) -> float:
+    """Warn of what ``X`` (the features of the cloud ``where``, or of a survey's sample; NaN where not
+    known) holds that the model did not learn: colour of the other depth, which is then read in the
+    model's (``X``'s colour columns multiplied by the factor returned,
+    :func:`core.learn.rf.colour_depth_factor`), features outside their learnt range on half the points
+    or more, features of one value."""
+    from ..learn.rf import COLOURS, colour_depth_factor, constant_features, out_of_range_features
+    factor = colour_depth_factor(model, X)
+    if factor != 1.0:  # (a reviewer's 16-bit model on an 8-bit flight: every point class 5, no ground, "done")
+        X[:, [j for j, name in enumerate(model.features) if name in COLOURS]] *= factor
+        log(f"{WARNING_PREFIX}{where}: its colour is "
+            + ("8-bit (every value at most 255) and the model {m} learnt 16-bit colour: the colour is read "
+               "multiplied by 257 (255 becomes 65,535)" if factor > 1 else
+               "16-bit (values beyond 255) and the model {m} learnt 8-bit colour: the colour is read divided by "
+               "257 (65,535 becomes 255)").format(m=model_path) + ".")
+    for name, part_out, (low, high), median in out_of_range_features(model, X):
+        if name in ("red", "green", "blue"):
+            example = "; e.g. colour of another camera, exposure or light"
+        elif name == "intensity":
+            example = "; e.g. intensity of another sensor, flying height or scaling"
+        elif name == "gps_time":
+            # (a patch cut from a flight learns a few seconds of it: the time stands for where the patch lies, and
+            # the rest of the same flight is beyond it; a reviewer's C3 model called 65 % of the objects ground)
+            example = ("; the time a point was measured stands for where the training patch lay: the rest of a "
+                       "flight, or a flight of another day, lies beyond it. Prefer a model without GPS time")
+        elif name == "scan_angle":
+            example = "; the scan angle stands for where in its strip the training patch lay"
+        else:
+            example = ""
+        log(f"{WARNING_PREFIX}{where}: the feature '{name}' lies outside the range the model learnt it in on "
+            f"{part_out:.0%} of the points (learnt: {_value(low)} to {_value(high)}; here the median is "
+            f"{_value(median)}{example}): its predictions may mean little.")
+    for name, value, (low, high) in constant_features(model, X):
+        log(f"{WARNING_PREFIX}{where}: the feature '{name}' is {value:g} on every point (the model learnt it from "
+            f"{low:g} to {high:g}): it carries no information here, and the predictions lean on the other "
+            "features alone (e.g. a single-return cloud given a model trained on multi-return LiDAR).")
+    return factor
+
+
+#: a survey's attributes are sampled from the first points of at most this many of its files, spread over it
+SAMPLE_FILES = 16
+#: ... this many points of each (one LAZ chunk is 50,000)
+SAMPLE_POINTS = 50_000
+
+
+def _survey_attributes(ground: "ModelGround", model_path: str, input_path: str, files, log) -> float:
+    """Check that every file of a survey has the model's attributes (its colour, GPS time, a dimension);
+    warn as a whole run does (:func:`say_features_here`) from a sample: the first points of
+    :data:`SAMPLE_FILES` files spread over the survey. Returns the colour factor for the whole survey
+    (a whole run judges its file's depth by all its points; a tile must not judge dark colour 8-bit)."""
+    import types
+    import laspy
+    from ..learn.rf import COLOURS, GPS_TIME_MODES, attribute_values
+    names = ground.attribute_names
+    if not names:
+        return 1.0
+    need = {n: ("red", "green", "blue") if n in COLOURS else (n,) for n in names
+            if n not in ("intensity", "return_number", "number_of_returns", "scan_angle")}
+    for path in files:
+        with laspy.open(path) as reader:
+            dims = set(reader.header.point_format.dimension_names)
+        missing = sorted(n for n, wanted in need.items() if not set(wanted) <= dims)
+        if missing:
+            raise InputError(f"{path}: the model {model_path} reads {', '.join(missing)}, which this file does not "
+                             f"have (point format {reader.header.point_format.id}"
+                             + (", no colour" if any(n in COLOURS for n in missing) else "")
+                             + "): classify the files that have them, or train a model without them")
+    mode = GPS_TIME_MODES.get(ground.model.meta.get("gps_time"), "raw")
+    picked = sorted({files[int(k)] for k in np.linspace(0, len(files) - 1, min(SAMPLE_FILES, len(files)))})
+    rows = []
+    for path in picked:
+        with laspy.open(path) as reader:
+            count = min(SAMPLE_POINTS, int(reader.header.point_count))
+            if not count:
+                continue
+            las = laspy.LasData(header=reader.header, points=reader.read_points(count))
+        cloud = types.SimpleNamespace(path=path, las=las, return_number=np.asarray(las.return_number),
+                                      number_of_returns=np.asarray(las.number_of_returns))
+        X = np.full((count, len(ground.features)), np.nan, dtype=np.float32)
+        for name in names:
+            X[:, ground.features.index(name)] = attribute_values(cloud, name, mode)
+        colours = [ground.features.index(n) for n in names if n in COLOURS]
+        if colours and not np.any(X[:, colours]):  # (a whole run would have read the intensity: a mismatch)
+            raise InputError(f"{path}: its colour (RGB) is 0 on the {count:,} first points: the file has no colour, "
+                             f"and the model {model_path} learnt colour; classify the files that have it, or train "
+                             "a model without colour")
+        rows.append(X)
+    if not rows:
+        return 1.0
+    what = (f"{input_path} (the first points of {len(picked):,} of its {len(files):,} files)" if len(files) > 1
+            else input_path)
+    return say_features_here(ground.model, model_path, what, np.concatenate(rows), log)
 
 
 def classify_survey(input_path: str, output_path: Optional[str], model_path: str, *, dtm_path: Optional[str] = None,
@@ -520,10 +692,8 @@ def classify_survey(input_path: str, output_path: Optional[str], model_path: str
     files = expand_inputs(input_path)
     check_model_unit(model, model_path, input_path, scan_header(files[0]).crs_wkt if files else None,
                      log or (lambda _msg: None))
-    problem, instead = untileable(model)
-    if problem:
-        raise InputError(f"{model_path}: on a survey (a folder or a .vpc), {problem}: {instead}, or classify each "
-                         "file on its own (in QGIS: Run as Batch Process, one row a file)")
+    factor = _survey_attributes(ModelGround(model_path=model_path), model_path, input_path, files,
+                                log or (lambda _msg: None))
     if _density_matters(model):
         # (said once, from the first file's sample, as the tiles are planned: a tile's warnings stay in the tile)
         from .tiles import sample_density
@@ -533,7 +703,8 @@ def classify_survey(input_path: str, output_path: Optional[str], model_path: str
                          log or (lambda _msg: None))
     options = FilterOptions(ignore_classes=ignore_classes if ignore_classes is not None else (),
                             tiling=tiling or TileOptions())
-    return run_ground_filter(input_path, output_path, ModelGround(model_path=model_path), options=options,
+    return run_ground_filter(input_path, output_path, ModelGround(model_path=model_path, colour_factor=factor),
+                             options=options,
                              dtm_path=dtm_path, dtm=dtm or DTMOptions(), progress=progress,
                              is_cancelled=is_cancelled, log=log)
 
@@ -563,7 +734,8 @@ def classify_file(input_path: str, output_path: Optional[str], model_path: str, 
     whose grid spans only the other points.
 
     A survey (a folder or .vpc of LAS/LAZ, a ``tiling`` tile size, or a cloud beyond the memory
-    budget) is classified tile by tile by :func:`classify_survey` (ground models only); the
+    budget) is classified tile by tile by :func:`classify_survey` (any model: its attributes are read
+    from each tile's records); the
     result is then the engine's ``TiledRun``, not ``(cloud, predicted)``."""
     from ..io import CLASS_GROUND, read_cloud
     from ..progress import Steps
@@ -582,30 +754,14 @@ def classify_file(input_path: str, output_path: Optional[str], model_path: str, 
         check_outputs(input_path, output_path, [dtm_path])  # a wrong output refused before the model is read
         # (a .vpc output of one file tiled is the engine's to check, as the filters' is)
     model = load_model(model_path)
-    problem, _instead = untileable(model)
+    if dtm_path and CLASS_GROUND not in model.classes:  # found before any work, as groundsieve:hybrid does
+        raise InputError(f"{model_path}: this model has no ground class (2) (its classes: "
+                         f"{', '.join(map(str, model.classes))}): it cannot make a DTM; leave the DTM out or "
+                         "train a model with ground points")
     # the whole run priced as its own path's (the model loaded once: a code reviewer)
     estimate = _WholeModelRun(model)
     whole_dtm = (dtm or DTMOptions()) if dtm_path else None
-    if needs_tiling(input_path, tiling, algorithm=estimate, dtm=whole_dtm, log=None if problem else log):
-        from .tiles import SPARSE_AREA_M2, whole_run_bytes
-        if problem and not is_survey_input(input_path):  # one file, tiled for its size or a tile size set
-            from ..io.lasfiles import scan_header
-            if tiling.tile_size_m > 0 or tiling.scheduler:
-                why = "a tile size is set" if tiling.tile_size_m > 0 else "a Dask scheduler is set"
-                raise InputError(f"{input_path}: {why}, so it would run in buffered tiles, and {problem}: leave "
-                                 "the tile size at 0 and the scheduler empty to classify it whole")
-            info = scan_header(input_path)
-            if info.area_m2 > SPARSE_AREA_M2:  # (tiled for its extent, which no memory budget changes)
-                raise InputError(f"{input_path}: its header's extent spans {info.area_m2 / 1e6:,.0f} km² (a few "
-                                 "points far from the others, most likely), so it would run in buffered tiles, "
-                                 f"and {problem}: class the stray points as noise (7) or cut them off to "
-                                 "classify it whole")
-            need = whole_run_bytes(info, estimate, whole_dtm) / 2 ** 20
-            raise InputError(f"{input_path}: run whole it would take about {need:,.0f} MB, more than the memory "
-                             f"budget ({tiling.budget_bytes / 2 ** 20:,.0f} MB), so it would run in buffered tiles, "
-                             f"and {problem}: raise the memory budget to {100 * math.ceil(need / 100):,.0f} MB or "
-                             "more (--memory-budget; Memory budget in the dialog's advanced parameters) to classify "
-                             "it whole, if the machine has it")
+    if needs_tiling(input_path, tiling, algorithm=estimate, dtm=whole_dtm, log=log):
         return classify_survey(input_path, output_path, model_path, dtm_path=dtm_path, dtm=dtm,
                                ignore_classes=ignore_classes, tiling=tiling, progress=progress,
                                is_cancelled=is_cancelled, log=log)
@@ -614,10 +770,6 @@ def classify_file(input_path: str, output_path: Optional[str], model_path: str, 
     dtm = dtm or DTMOptions()
     options = FilterOptions(ignore_classes=ignore_classes if ignore_classes is not None else ())
     check_outputs(input_path, output_path, [dtm_path])
-    if dtm_path and CLASS_GROUND not in model.classes:  # found before any work, as groundsieve:hybrid does
-        raise InputError(f"{model_path}: this model has no ground class (2) (its classes: "
-                         f"{', '.join(map(str, model.classes))}): it cannot make a DTM; leave the DTM out or "
-                         "train a model with ground points")
     if input_path.lower().endswith((".las", ".laz")) and os.path.isfile(input_path):
         from ..io.lasfiles import scan_header  # before reading the points: a wrong unit is said at once
         from .workflow import defaults_in_crs_unit, warn_about_units
@@ -653,39 +805,7 @@ def classify_file(input_path: str, output_path: Optional[str], model_path: str, 
                          "and not the other)")
     from ..learn.rf import GPS_TIME_MODES
     X = feature_matrix(part, names, steps.sub(0.0, 0.5), gps_time=GPS_TIME_MODES.get(model.meta.get("gps_time"), "raw"))
-    from ..learn.rf import COLOURS, colour_depth_factor
-    factor = colour_depth_factor(model, X)
-    if factor != 1.0:  # (a reviewer's 16-bit model on an 8-bit flight: every point class 5, no ground, "done")
-        columns = [j for j, name in enumerate(names) if name in COLOURS]
-        X[:, columns] *= factor
-        log(f"{WARNING_PREFIX}{input_path}: its colour is "
-            + ("8-bit (every value at most 255) and the model {m} learnt 16-bit colour: the colour is read "
-               "multiplied by 257 (255 becomes 65,535)" if factor > 1 else
-               "16-bit (values beyond 255) and the model {m} learnt 8-bit colour: the colour is read divided by "
-               "257 (65,535 becomes 255)").format(m=model_path) + ".")
-    from ..learn.rf import out_of_range_features
-    for name, part_out, (low, high), median in out_of_range_features(model, X):
-        if name in ("red", "green", "blue"):
-            example = "; e.g. colour of another camera, exposure or light"
-        elif name == "intensity":
-            example = "; e.g. intensity of another sensor, flying height or scaling"
-        elif name == "gps_time":
-            # (a patch cut from a flight learns a few seconds of it: the time stands for where the patch lies, and
-            # the rest of the same flight is beyond it; a reviewer's C3 model called 65 % of the objects ground)
-            example = ("; the time a point was measured stands for where the training patch lay: the rest of a "
-                       "flight, or a flight of another day, lies beyond it. Prefer a model without GPS time")
-        elif name == "scan_angle":
-            example = "; the scan angle stands for where in its strip the training patch lay"
-        else:
-            example = ""
-        log(f"{WARNING_PREFIX}{input_path}: the feature '{name}' lies outside the range the model learnt it in on "
-            f"{part_out:.0%} of the points (learnt: {_value(low)} to {_value(high)}; here the median is "
-            f"{_value(median)}{example}): its predictions may mean little.")
-    from ..learn.rf import constant_features
-    for name, value, (low, high) in constant_features(model, X):
-        log(f"{WARNING_PREFIX}{input_path}: the feature '{name}' is {value:g} on every point (the model learnt it from "
-            f"{low:g} to {high:g}): it carries no information here, and the predictions lean on the other "
-            "features alone (e.g. a single-return cloud given a model trained on multi-return LiDAR).")
+    say_features_here(model, model_path, input_path, X, log)
     predicted_part = model.predict(X, steps=steps.sub(0.5, 0.7)).astype(np.uint8)
     predicted = cloud.classification.astype(np.uint8)  # a copy: withheld and ignored points as read
     predicted[may] = predicted_part

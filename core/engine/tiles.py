@@ -1186,6 +1186,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                  buffer=grid.buffer, done_dir=done_dir,
                  names=sorted({os.path.basename(inputs[p.file_index])
                                for p in tiles.get(key, []) + copc_tiles.get(key, [])}),
+                 paths={p.file_index: inputs[p.file_index] for p in tiles.get(key, [])},
                  class_paths=class_paths, algorithm=algorithm, options=options, dtm=dtm if dtm_path else None,
                  dtm_grid=dtm_writer.grid if dtm_writer is not None else None,
                  is_cancelled=None if use_processes or tiling.scheduler else tile_cancelled,
@@ -1891,10 +1892,17 @@ def _tile_job(job) -> Optional[dict]:
     try:
         from ..io.copc import tile_sources
         clouds, indices, files = [], [], []
-        sources, copc_read = tile_sources(job["parts"], job.get("copc", ()), read_part)  # in file order
+        # An algorithm that takes more of the points than a tile cloud's fields (a model's colour, scan angle,
+        # GPS time) is given each part's records, as the file's own header reads them, and keeps its values.
+        attributes = getattr(job["algorithm"], "point_attributes", None)
+        reader = read_part if attributes is None else _part_reader(job["paths"])
+        sources, copc_read = tile_sources(job["parts"], job.get("copc", ()), reader,  # in file order
+                                          records=attributes is not None)
         if not sources:  # a COPC tile whose area holds no point
             return None
         for file_index, c, idx in sources:
+            if attributes is not None:
+                c.attributes, c.las = attributes(c), None
             clouds.append(c)
             indices.append(idx)
             files.append(np.full(idx.size, file_index, dtype=np.int32))
@@ -1979,6 +1987,19 @@ def _tile_job(job) -> Optional[dict]:
         raise out_of_memory(where, err) from err
     except Exception as err:  # an unexpected failure still names the tile
         raise GroundSieveError(f"{where} failed: {type(err).__name__}: {err}") from err
+
+
+def _part_reader(paths: Dict[int, str]):
+    """``read_part`` with the records of each part, read by its input's header (opened once a tile)."""
+    import laspy
+    headers = {}
+
+    def read(part):
+        if part.file_index not in headers:
+            with laspy.open(paths[part.file_index]) as reader:
+                headers[part.file_index] = reader.header
+        return read_part(part, headers[part.file_index])
+    return read
 
 
 def _dtm_extent(full, box, log):

@@ -286,6 +286,14 @@ def _where(mask: np.ndarray, *arrays):
     return tuple(a[mask] for a in arrays)
 
 
+def _point_field(cloud: PointCloud, name: str) -> np.ndarray:
+    """A per-point field of ``cloud``: the values an algorithm took from a tile's records
+    (``cloud.attributes``) first, then the cloud's own fields."""
+    if cloud.attributes is not None and name in cloud.attributes:
+        return cloud.attributes[name]
+    return getattr(cloud, name)
+
+
 def call_filter(algorithm, cloud: PointCloud, idx: np.ndarray, steps: Steps, log):
     """Run one filter on the points ``idx`` of ``cloud``.
 
@@ -304,7 +312,7 @@ def call_filter(algorithm, cloud: PointCloud, idx: np.ndarray, steps: Steps, log
     # desktop, fresh memory): the bar moves past it.
     steps.report(0.05)
     steps = steps.sub(0.05, 1.0)
-    extra = {name: np.ascontiguousarray(getattr(cloud, name)[idx])
+    extra = {name: np.ascontiguousarray(_point_field(cloud, name)[idx])
              for name in getattr(algorithm, "point_fields", ())}
     if getattr(algorithm, "wants_log", False):
         def named(message: str) -> None:  # a filter's warning names the file it is about (it sees arrays)
@@ -373,6 +381,11 @@ def classify_cloud(cloud: PointCloud, algorithm, options: FilterOptions = Filter
         log(note)
     cls[touched] = CLASS_UNCLASSIFIED
     cls[ground & touched] = CLASS_GROUND  # (the ground of a kept class keeps it: ground_of_any_class)
+    predicted = getattr(detail, "point_classes", None)
+    if predicted is not None:  # a model's classes (rfclassify in tiles): each point its predicted class
+        every = np.full(len(cloud), CLASS_UNCLASSIFIED, dtype=np.uint8)
+        every[idx] = predicted
+        cls[touched] = every[touched]
     return Classified(cls.astype(np.uint8), ground, filtered, detail, may, touched)
 
 
@@ -449,6 +462,8 @@ def _keep_advice(algorithm) -> str:
     False: rfclassify), the filter that has."""
     if getattr(algorithm, "keeps_classes", True):
         return "tick Keep existing classes other than 0, 1, 2 (--keep-classes)"
+    if getattr(algorithm, "keep_advice", None):
+        return algorithm.keep_advice
     return ("run the model in the learned hybrid filter (groundsieve:hybrid, MODEL) with Keep existing classes "
             "other than 0, 1, 2")
 
@@ -460,7 +475,8 @@ def replaced_note(counts: dict, algorithm=None) -> str:
         return ""
     from ..io.clouds import class_counts_text
     parts = class_counts_text(counts)
-    return (f"Classes of the input replaced by ground (2) or non-ground (1): {parts}. To keep them, "
+    new = getattr(algorithm, "new_classes", None) or "ground (2) or non-ground (1)"  # (a model's own classes)
+    return (f"Classes of the input replaced by {new}: {parts}. To keep them, "
             f"{_keep_advice(algorithm)}; to add one to the DTM, name it in the DTM classes.")
 
 

@@ -131,6 +131,9 @@ class PointCloud:
     withheld: Optional[np.ndarray] = None
     scale: Optional[float] = None       #: text input: the LAS scale that keeps its decimals
     notes: list = field(default_factory=list)  #: what the reader had to say about the file (to log)
+    #: per-point values an algorithm took from a tile's records beyond the fields above (name -> array; e.g. a
+    #: model's colour, scan angle or GPS time, core/engine/learning.ModelGround.point_attributes); None = none
+    attributes: Optional[dict] = None
 
     def __len__(self) -> int:
         return int(self.x.shape[0])
@@ -154,7 +157,9 @@ class PointCloud:
                           number_of_returns=self.number_of_returns[mask], intensity=pick(self.intensity),
                           crs_wkt=self.crs_wkt, has_return_info=self.has_return_info, las=las,
                           reference_label=pick(self.reference_label), withheld=pick(self.withheld),
-                          scale=self.scale, notes=list(self.notes))
+                          scale=self.scale, notes=list(self.notes),
+                          attributes=None if self.attributes is None else {
+                              name: np.asarray(values)[mask] for name, values in self.attributes.items()})
 
     @property
     def xyz(self) -> np.ndarray:

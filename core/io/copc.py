@@ -316,9 +316,10 @@ def _read_nodes_cached(index: CopcIndex, sel: np.ndarray, layers, cache: _NodeCa
     return points, file_index, int(index.nodes["point_count"][missing].astype(np.int64).sum())
 
 
-def _cloud(index: CopcIndex, points) -> PointCloud:
+def _cloud(index: CopcIndex, points, records: bool = False) -> PointCloud:
     """A ``PointCloud`` of laspy records, with the fields ``read_cloud`` gives a LAS file (a test
-    compares them field by field, so that a field added there is not forgotten here)."""
+    compares them field by field, so that a field added there is not forgotten here); with
+    ``records``, its ``las`` holds the records, every dimension (as lasfiles.read_part's)."""
     withheld = np.asarray(points.withheld).astype(bool)
     return PointCloud(
         path=index.path, withheld=withheld if withheld.any() else None, notes=[],
@@ -327,7 +328,13 @@ def _cloud(index: CopcIndex, points) -> PointCloud:
         classification=np.asarray(points.classification, dtype=np.uint8),
         return_number=np.asarray(points.return_number, dtype=np.uint8),
         number_of_returns=np.asarray(points.number_of_returns, dtype=np.uint8),
-        intensity=np.asarray(points.intensity), crs_wkt=index.crs_wkt, has_return_info=True, las=None)
+        intensity=np.asarray(points.intensity), crs_wkt=index.crs_wkt, has_return_info=True,
+        las=_las(index, points) if records else None)
+
+
+def _las(index: CopcIndex, points):
+    import laspy
+    return laspy.LasData(header=index.header, points=laspy.PackedPointRecord(points.array, points.point_format))
 
 
 # -- tiles --------------------------------------------------------------------------------------
@@ -355,22 +362,24 @@ def _tile_selection(x, y, key, size: float, buffer: float):
     return keep, keep & (dx == 0) & (dy == 0)
 
 
-def read_tile(source: CopcSource) -> Tuple[PointCloud, np.ndarray, int]:
+def read_tile(source: CopcSource, records: bool = False) -> Tuple[PointCloud, np.ndarray, int]:
     """The points of ``source``'s tile and buffer (in file order), their indices in the file
     (``>= 0`` the tile's own, ``-1 - index`` a buffer point, as in a tile part) and how many points
-    were decompressed for them (the nodes in this process's cache are not decompressed again)."""
+    were decompressed for them (the nodes in this process's cache are not decompressed again). With
+    ``records``, every layer is decompressed and the cloud's ``las`` holds the records (an algorithm
+    that takes more of them than the tile cloud's fields)."""
     index = open_index(source.path)
     i, j = source.key
     s, b = source.size, source.buffer
     x0, y0, x1, y1 = i * s - b, j * s - b, (i + 1) * s + b, (j + 1) * s + b
     nx0, ny0, nx1, ny1 = index.node_boxes()
     sel = np.flatnonzero((nx0 <= x1) & (nx1 >= x0) & (ny0 <= y1) & (ny1 >= y0))
-    points, file_index, decompressed = _read_nodes_cached(index, sel, TILE_LAYERS, _CACHE)
+    points, file_index, decompressed = _read_nodes_cached(index, sel, None if records else TILE_LAYERS, _CACHE)
     x = np.asarray(points.x, dtype=np.float64)
     y = np.asarray(points.y, dtype=np.float64)
     keep, own = _tile_selection(x, y, source.key, s, b)
     idx = np.where(own, file_index, -1 - file_index)[keep]
-    return _cloud(index, points[keep]), idx, decompressed
+    return _cloud(index, points[keep], records), idx, decompressed
 
 
 def plan_tiles(infos: Sequence, size: float, buffer: float) -> Dict[Tuple[int, int], List[CopcSource]]:
@@ -428,16 +437,17 @@ def add_buffer_sources(tiles: Dict[Tuple[int, int], List[CopcSource]], infos: Se
                     sources.append(CopcSource(k, info.path, (i, j), float(size), float(buffer)))
 
 
-def tile_sources(parts: Sequence, copc: Sequence[CopcSource], read_part) -> Tuple[list, int]:
+def tile_sources(parts: Sequence, copc: Sequence[CopcSource], read_part, records: bool = False) -> Tuple[list, int]:
     """A tile's points, source by source in input-file order (a tile part of ``bin_file`` read by
     ``read_part``, or a COPC source read by bounds): [(file index, cloud, indices)], and how many
-    points the COPC sources decompressed."""
+    points the COPC sources decompressed. ``records``: the COPC clouds hold their records in ``las``
+    (``read_part`` is given the headers to do the same)."""
     out, decompressed = [], 0
     for p in parts:
         cloud, idx = read_part(p)
         out.append((p.file_index, cloud, idx))
     for src in copc:
-        cloud, idx, n = read_tile(src)
+        cloud, idx, n = read_tile(src, records)
         decompressed += n
         if idx.size:
             out.append((src.file_index, cloud, idx))

@@ -374,6 +374,11 @@ def tile_cloud(parts: Sequence[PointCloud], *, path: Optional[str] = None) -> Po
         arrays = [getattr(p, name) if getattr(p, name) is not None else
                   np.zeros((len(p),) + example.shape[1:], dtype=example.dtype) for p in parts]
         values[name] = np.concatenate(arrays) if len(arrays) > 1 else arrays[0]
+    if any(p.attributes is not None for p in parts):  # (an algorithm's values of each part: every part has them)
+        keys = set(parts[0].attributes or ())
+        if any(set(p.attributes or ()) != keys for p in parts):
+            raise InputError(f"{path or first.path}: the tile's parts carry different point attributes")
+        values["attributes"] = {k: np.concatenate([p.attributes[k] for p in parts]) for k in sorted(keys)}
     values["las"] = None
     if path is not None:
         values["path"] = path
@@ -385,6 +390,8 @@ def subset_cloud(cloud: PointCloud, idx) -> PointCloud:
     values = {f.name: getattr(cloud, f.name) for f in dataclasses.fields(PointCloud)}
     for name, array in _per_point(cloud):
         values[name] = array[idx]
+    if cloud.attributes is not None:
+        values["attributes"] = {name: array[idx] for name, array in cloud.attributes.items()}
     values["las"] = None
     return PointCloud(**values)
 
@@ -635,9 +642,11 @@ def _in_buffer(f: np.ndarray, d, grid: TileGrid) -> np.ndarray:
 READ_WINDOW_BYTES = 64 << 20
 
 
-def read_part(part: TilePart) -> Tuple[PointCloud, np.ndarray]:
+def read_part(part: TilePart, header=None) -> Tuple[PointCloud, np.ndarray]:
     """The cloud of one tile part (the fields a tile cloud has: x, y, z, classification, returns,
-    intensity, withheld; decoded as laspy decodes them) and its index array. The records are
+    intensity, withheld; decoded as laspy decodes them) and its index array; with ``header`` (the
+    input's laspy header), the cloud's ``las`` holds the part's records too, every dimension, for
+    an algorithm that takes more of them (:func:`records_las`). The records are
     gathered from the records file window by window (:data:`READ_WINDOW_BYTES`): fast where a
     tile's points lie in runs in file order (the order of acquisition, or any spatial sort); those
     of a part scattered over a file in no such order were copied at the binning
@@ -654,7 +663,7 @@ def read_part(part: TilePart) -> Tuple[PointCloud, np.ndarray]:
         if rec.size != at.size * size:
             raise InputError(f"{part.copy_path}: {rec.size // size:,} records, not the {at.size:,} points of "
                              f"{part.index_path}; the working folder was changed during the run")
-        return _part_cloud(part, rec.reshape(-1, size)), index
+        return _part_cloud(part, rec.reshape(-1, size), header), index
     rec = np.empty((at.size, size), dtype=np.uint8)
     per_window = max(1, READ_WINDOW_BYTES // size)
     buffer = np.empty(min(per_window, int(at[-1] - at[0]) + 1 if at.size else 0) * size, dtype=np.uint8)
@@ -669,11 +678,24 @@ def read_part(part: TilePart) -> Tuple[PointCloud, np.ndarray]:
             lo = hi
     finally:
         os.close(fd)
-    return _part_cloud(part, rec), index
+    return _part_cloud(part, rec, header), index
 
 
-def _part_cloud(part: TilePart, rec: np.ndarray) -> PointCloud:
-    """The tile cloud of a part's records (rows of ``record_size`` bytes)."""
+def records_las(header, rec: np.ndarray, path: str):
+    """A laspy ``LasData`` of raw point records ``rec`` (rows of ``header``'s point format size, as the
+    binning kept them; not copied), whose dimensions read as those of the file ``path`` read whole."""
+    import laspy
+    pf = header.point_format
+    if rec.ndim != 2 or rec.shape[1] != pf.size:
+        raise InputError(f"{path}: its records are {rec.shape[-1]} bytes, its header's point format {pf.id} "
+                         f"{pf.size}: the file changed during the run")
+    array = np.ascontiguousarray(rec).reshape(-1).view(pf.dtype())
+    return laspy.LasData(header=header, points=laspy.PackedPointRecord(array, pf))
+
+
+def _part_cloud(part: TilePart, rec: np.ndarray, header=None) -> PointCloud:
+    """The tile cloud of a part's records (rows of ``record_size`` bytes); with ``header``, its
+    ``las`` holds them (:func:`records_las`)."""
     n, size = rec.shape
 
     def field(offset, dtype):
@@ -692,7 +714,8 @@ def _part_cloud(part: TilePart, rec: np.ndarray) -> PointCloud:
     return PointCloud(path=part.index_path, x=xyz[0], y=xyz[1], z=xyz[2], classification=classification,
                       return_number=return_number, number_of_returns=number_of_returns,
                       intensity=field(12, "<u2").copy(), has_return_info=True,
-                      withheld=withheld if withheld.any() else None)
+                      withheld=withheld if withheld.any() else None,
+                      las=None if header is None else records_las(header, rec, part.records_path))
 
 
 # -- the classified copy --------------------------------------------------------------------------

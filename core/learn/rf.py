@@ -382,6 +382,19 @@ GPS_TIME_MOD_WEEK = "seconds of the GPS week"
 GPS_TIME_MODES = {GPS_TIME_OF_WEEK: "week", GPS_TIME_MOD_WEEK: "mod"}
 
 
+def attribute_values(cloud, name: str, gps_time: str = "week") -> np.ndarray:
+    """The float32 values of the attribute feature ``name`` (colour, intensity, returns, scan angle in
+    degrees, GPS time as :func:`feature_matrix` reads it, or a dimension of the file) of ``cloud``, from
+    its ``las`` (its records)."""
+    if name in ATTRIBUTE_FEATURES or name == "scan_angle":
+        return _attribute(cloud, name, gps_time)
+    dims = set(cloud.las.point_format.dimension_names) if cloud.las is not None else set()
+    if name not in dims:
+        raise InputError(f"{cloud.path}: the feature '{name}' is not in this file (dimensions: "
+                         f"{', '.join(sorted(dims))})")
+    return np.asarray(cloud.las[name], dtype=np.float32)
+
+
 def _attribute(cloud, name: str, gps_time: str = "week") -> np.ndarray:
     las = cloud.las
     if name in ("return_number", "number_of_returns"):

@@ -270,10 +270,9 @@ def test_classify_file_refuses_a_cloud_without_the_model_features(labelled_files
 def test_rfclassify_on_a_folder_and_in_tiles_equals_the_whole_run(tmp_path):
     """rfclassify on surveys (issue 12): a ground model of the HYBRID preset runs in the buffered-tile
     engine; a folder of two LAZ and one LAZ cut into 80 m tiles give the whole run's classes on
-    >= 99.9 % of the points. A model of other classes is refused for a survey, with the reason."""
+    >= 99.9 % of the points. So does a model of three classes."""
     import laspy
     from groundsieve.core.engine.tiles import TileOptions, TiledRun
-    from groundsieve.core.errors import InputError
     from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
     train = make_scene(SceneSpec(size_m=80.0, density_per_m2=4.0, seed=41))
     train.classification[:] = np.where(train.classification == 2, 2, 1)
@@ -301,15 +300,18 @@ def test_rfclassify_on_a_folder_and_in_tiles_equals_the_whole_run(tmp_path):
     for name, part in (("west.laz", west), ("east.laz", ~west)):
         got = np.asarray(laspy.read(tmp_path / "classified" / name).classification)
         assert np.mean(got == whole[part]) >= 0.999, name
-    # A model of three classes cannot run tile by tile (the engine writes ground and unclassified).
+    # A model of three classes runs tile by tile too, each point its predicted class (it had been refused).
     three = make_scene(SceneSpec(size_m=60.0, density_per_m2=4.0, seed=42))
     write_scene(three, str(tmp_path / "three.laz"))
     assert len(set(np.unique(three.classification))) >= 3
     learning.train_file(str(tmp_path / "three.laz"), str(tmp_path / "three.npz"), None,
                         learning.TrainOptions(params=rf.ForestParams(n_trees=3), block_m=15.0, ground_vs_rest=False))
-    with pytest.raises(InputError, match="only a ground model"):
-        learning.classify_file(str(folder), str(tmp_path / "again.vpc"), str(tmp_path / "three.npz"))
-    assert not (tmp_path / "again.vpc").exists()
+    _cloud, whole3 = learning.classify_file(str(scene), None, str(tmp_path / "three.npz"))
+    assert len(np.unique(whole3)) >= 3
+    learning.classify_file(str(folder), str(tmp_path / "again.vpc"), str(tmp_path / "three.npz"))
+    for name, part in (("west.laz", west), ("east.laz", ~west)):
+        got = np.asarray(laspy.read(tmp_path / "again" / name).classification)
+        assert np.mean(got == whole3[part]) >= 0.999, name
     # With the defaults (HYBRID features, no classes named) the same labels make a ground model:
     # ground against the rest, which runs on the survey (a reviewer's 2/3/5 labels were refused)
     lines = []
@@ -422,11 +424,11 @@ def test_adjusted_standard_gps_time_is_put_back_on_its_week(tmp_path):
                                atol=0.05)
 
 
-def test_a_model_that_runs_whole_only_is_priced_as_such_and_its_refusal_says_how_to_run_it(tmp_path):
+def test_a_colour_model_is_priced_as_its_whole_run_and_runs_in_tiles_beyond_the_budget(tmp_path):
     """A colour model on one file of a UAV flight (9.5 M points) was refused as "a survey: classify each file on
     its own", the file being priced at a ground filter's 330 bytes a point and so tiled: such a model's whole run is
-    now priced at its own measured cost, and when it does exceed the budget, or a tile size is set, the refusal
-    says why the file would be tiled and how to run it whole (a reviewer)."""
+    now priced at its own measured cost (a reviewer). Beyond the budget, with a tile size, or with a stray point
+    far away, the file runs in buffered tiles, which read the colour from their records: the whole run's classes."""
     from groundsieve.core.engine.tiles import BYTES_PER_POINT, TileOptions, needs_tiling, whole_run_bytes
     from groundsieve.core.io.lasfiles import scan_header
     rng = np.random.default_rng(3)
@@ -449,22 +451,23 @@ def test_a_model_that_runs_whole_only_is_priced_as_such_and_its_refusal_says_how
     _cloud, predicted = learning.classify_file(path, str(tmp_path / "whole.las"), model,
                                                tiling=TileOptions(memory_budget_mb=budget_mb))
     assert len(predicted) == n
-    with pytest.raises(InputError, match=r"run whole it would take about [\d.,]+ MB, more than the memory budget "
-                                         r"\([\d.,]+ MB\), so it would run in buffered tiles, and a model runs tile "
-                                         r"by tile on features from x, y, z only.*red, green, blue: raise the memory "
-                                         r"budget to [\d,]+ MB or more"):
-        learning.classify_file(path, str(tmp_path / "o.las"), model, tiling=TileOptions(memory_budget_mb=budget_mb / 4))
-    with pytest.raises(InputError, match="a tile size is set, so it would run in buffered tiles.*leave the tile size at 0"):
-        learning.classify_file(path, str(tmp_path / "o.las"), model, tiling=TileOptions(tile_size_m=20.0))
+    import laspy
+    from groundsieve.core.engine.tiles import TiledRun
+    for name, tiling in (("budget", TileOptions(memory_budget_mb=budget_mb / 4)), ("size", TileOptions(tile_size_m=20.0))):
+        run = learning.classify_file(path, str(tmp_path / f"{name}.las"), model, tiling=tiling)
+        assert isinstance(run, TiledRun), name
+        np.testing.assert_array_equal(np.asarray(laspy.read(tmp_path / f"{name}.las").classification), predicted)
     # one point 20 km away: tiled for its extent, which no memory budget changes (a code reviewer's "22,901 MB,
     # more than the memory budget (30,000 MB)")
     stray = str(tmp_path / "stray.las")
     write_las(new_las(np.r_[x, 20000.0], np.r_[y, 20000.0], np.r_[rng.normal(0, 0.1, n), 0.0], point_format=3,
                       classification=np.r_[cls, 1], red=np.r_[red, 30000], green=np.r_[red, 30000],
                       blue=np.r_[red, 30000]), stray)
-    with pytest.raises(InputError, match=r"its header's extent spans [\d,]+ km² .*class the stray points as noise"):
-        learning.classify_file(stray, str(tmp_path / "o.las"), model, tiling=TileOptions(memory_budget_mb=30000))
-    assert not (tmp_path / "o.las").exists()
+    run = learning.classify_file(stray, str(tmp_path / "stray_classified.las"), model,
+                                 tiling=TileOptions(memory_budget_mb=30000))
+    assert isinstance(run, TiledRun)
+    got = np.asarray(laspy.read(tmp_path / "stray_classified.las").classification)
+    np.testing.assert_array_equal(got[:n], predicted)
 
 
 def test_colour_of_the_other_depth_is_rescaled_and_a_feature_outside_its_range_is_warned_about(tmp_path):
@@ -517,6 +520,18 @@ def test_colour_of_the_other_depth_is_rescaled_and_a_feature_outside_its_range_i
     assert "(learnt: 20," in warned[0] and "e+0" not in warned[0]
     _p, warned, depth = run(("gps_time", "red"), "sixteen", "eight")  # half before the patch's time, half after
     assert [w for w in warned if "the feature 'gps_time'" in w and "the rest of a flight" in w], warned
+    # on a survey, once for the survey from a sample of its files' first points (the tiles' own logs go nowhere)
+    from groundsieve.core.engine.tiles import TileOptions
+    (tmp_path / "survey").mkdir()
+    import shutil
+    shutil.copy(tmp_path / "eight.las", tmp_path / "survey" / "eight.las")
+    lines = []
+    learning.classify_file(str(tmp_path / "survey"), str(tmp_path / "survey_out.vpc"), models[("gps_time", "red"),
+                                                                                            "sixteen"],
+                           tiling=TileOptions(workers=1), log=lines.append)
+    gps = [line for line in lines if "the feature 'gps_time'" in line]
+    assert len(gps) == 1 and str(tmp_path / "survey") in gps[0], lines
+    assert sum("multiplied by 257" in line for line in lines) == 1, lines
 
 
 def test_a_cloud_of_another_density_is_warned_about_for_a_model_of_radius_features(tmp_path):
@@ -630,14 +645,17 @@ def test_rftrain_says_where_a_ground_model_runs_and_warns_of_features_that_stand
                             learning.TrainOptions(features=features, params=rf.ForestParams(n_trees=2), block_m=15.0,
                                                   ground_vs_rest=True), log=lines.append)
         said[name] = [line for line in lines if line.startswith("Learning ground (2) against")]
-    assert "it runs in the learned hybrid filter and on surveys too" in said["hybrid"][0]
-    assert "these run on whole files" in said["attributes"][0]
+    assert "it runs in the learned hybrid filter too" in said["hybrid"][0]
+    assert "would run in the learned hybrid filter too; rfclassify runs these on files and surveys" in \
+        said["attributes"][0]
     (tmp_path / "survey").mkdir()
     import shutil
     shutil.copy(tmp_path / "patch.laz", tmp_path / "survey" / "a.laz")
-    with pytest.raises(InputError, match="this model also uses intensity, return_number: train one on x, y, z "
-                                         "features, or classify each file on its own"):
-        learning.classify_file(str(tmp_path / "survey"), str(tmp_path / "o.vpc"), str(tmp_path / "attributes.npz"))
+    run = learning.classify_file(str(tmp_path / "survey"), str(tmp_path / "o.vpc"), str(tmp_path / "attributes.npz"))
+    assert run.ground_count > 0  # (a model of intensity and returns on a survey had been refused)
+    from groundsieve.core.learn.hybrid import Hybrid
+    with pytest.raises(InputError, match="features the hybrid filter does not compute"):
+        Hybrid(model_path=str(tmp_path / "attributes.npz"))
     # in feet, a training converts nothing, and says so (a filter's words had promised converted lengths)
     import pyproj
     write_scene(scene, str(tmp_path / "feet.laz"), crs_wkt=pyproj.CRS("EPSG:2249").to_wkt())
@@ -651,3 +669,107 @@ def test_rftrain_says_where_a_ground_model_runs_and_warns_of_features_that_stand
                         learning.TrainOptions(features=("intensity", "gps_time", "scan_angle"),
                                               params=rf.ForestParams(n_trees=2), block_m=15.0), log=lines.append)
     assert [line for line in lines if "gps_time and scan_angle stand for where the patch lies" in line], lines
+
+
+def _coloured_scene(path, *, size_m=120.0, seed=21, density=3.0):
+    """A generated scene as LAS 1.4 with colour that tells the classes apart only roughly (ground brown,
+    vegetation green, buildings grey, with noise), scan angle and GPS time; its points and colours."""
+    from groundsieve.core.io import new_las
+    from groundsieve.core.synthetic import SceneSpec, make_scene, scene_crs_wkt
+    scene = make_scene(SceneSpec(size_m=size_m, density_per_m2=density, seed=seed))
+    rng = np.random.default_rng(seed)
+    cls = scene.classification
+    base = np.stack([np.where(cls == 2, v[0], np.where(np.isin(cls, (3, 4, 5)), v[1], v[2]))
+                     for v in ((140, 60, 120), (110, 130, 120), (70, 50, 125))], axis=1)
+    rgb = np.clip(base + rng.normal(0, 35, base.shape), 0, 255).astype(np.uint16) * 257
+    las = new_las(scene.x, scene.y, scene.z, point_format=7, version="1.4", scale=0.001,
+                  crs_wkt=scene_crs_wkt(), classification=cls, return_number=scene.return_number,
+                  number_of_returns=scene.number_of_returns, intensity=scene.intensity,
+                  gps_time=scene.gps_time, scan_angle=np.round(scene.x % 60 - 30).astype(np.int16) * 166,
+                  red=rgb[:, 0], green=rgb[:, 1], blue=rgb[:, 2])
+    las.write(str(path))
+    return las
+
+
+def test_rfclassify_runs_a_model_of_colour_and_several_classes_tile_by_tile(tmp_path):
+    """matrone2024's models (colour, returns, scan angle; ground, vegetation, buildings) on a survey: a
+    UAV surveyor's C2 model was refused on the tile folder ("only a ground model ... of x, y, z features"). The
+    tiles now read each model's attributes from their records as the whole run reads them from its file and
+    write the model's classes: a tiled run, a folder of two files and a COPC copy give the whole run's classes
+    and DTM exactly. A file without the model's colour is refused by name; 8-bit colour given to a 16-bit model
+    is read in the model's depth for the whole survey, as a whole run of the file reads it."""
+    import laspy
+    import shutil
+    from osgeo import gdal
+    from groundsieve.core.engine.tiles import TileOptions, TiledRun
+    from groundsieve.core.io import new_las
+    train = _coloured_scene(tmp_path / "train.las", seed=3)
+    model = str(tmp_path / "c2.npz")
+    learning.train_file(str(tmp_path / "train.las"), model, None,
+                        learning.TrainOptions(features=("radiometry", "return_number", "number_of_returns",
+                                                        "scan_angle", "planarity_r2"),
+                                              params=rf.ForestParams(n_trees=6, max_depth=12), block_m=20.0,
+                                              ground_vs_rest=False))
+    from groundsieve.core.learn.model_file import load_model
+    assert len(load_model(model).classes) >= 3 and len(train.points) > 20_000
+    las = _coloured_scene(tmp_path / "scene.laz", seed=8)
+    scene = str(tmp_path / "scene.laz")
+    _cloud, whole = learning.classify_file(scene, str(tmp_path / "whole.laz"), model,
+                                           dtm_path=str(tmp_path / "whole.tif"))
+    assert len(np.unique(whole)) >= 3
+
+    def dtm(name):
+        return gdal.Open(str(tmp_path / name)).ReadAsArray()
+    lines = []
+    run = learning.classify_file(scene, str(tmp_path / "tiled.laz"), model, dtm_path=str(tmp_path / "tiled.tif"),
+                                 tiling=TileOptions(tile_size_m=40.0, workers=2, parallel="threads"), log=lines.append)
+    assert isinstance(run, TiledRun) and run.tiles >= 9
+    np.testing.assert_array_equal(np.asarray(laspy.read(tmp_path / "tiled.laz").classification), whole)
+    np.testing.assert_array_equal(dtm("tiled.tif"), dtm("whole.tif"))
+    assert any("replaced by the model's classes" in line for line in lines), lines
+    # a folder of two files, with worker processes
+    folder = tmp_path / "survey"
+    folder.mkdir()
+    west = np.asarray(las.x) < np.median(np.asarray(las.x))
+    for name, part in (("west.laz", west), ("east.laz", ~west)):
+        piece = laspy.LasData(las.header)
+        piece.points = las.points[part]
+        piece.write(folder / name)
+    run = learning.classify_file(str(folder), str(tmp_path / "classified.vpc"), model,
+                                 tiling=TileOptions(workers=2, parallel="processes"))
+    for name, part in (("west.laz", west), ("east.laz", ~west)):
+        np.testing.assert_array_equal(np.asarray(laspy.read(tmp_path / "classified" / name).classification),
+                                      whole[part], err_msg=name)
+    # a COPC copy, read by bounds with every layer decompressed
+    from groundsieve.tests.core.test_copc import write_copc
+    write_copc(tmp_path / "scene.copc.laz", laspy.read(scene))
+    cloud, whole_copc = learning.classify_file(str(tmp_path / "scene.copc.laz"), None, model)
+    run = learning.classify_file(str(tmp_path / "scene.copc.laz"), str(tmp_path / "copc_tiled.laz"), model,
+                                 tiling=TileOptions(tile_size_m=40.0, workers=1))
+    np.testing.assert_array_equal(np.asarray(laspy.read(tmp_path / "copc_tiled.laz").classification), whole_copc)
+    # 8-bit colour: read in the model's depth for the whole survey, said once (not in every tile)
+    eight = new_las(las.x, las.y, las.z, point_format=7, version="1.4", scale=0.001, crs_wkt=las.header.parse_crs().to_wkt(),
+                    classification=las.classification, return_number=las.return_number,
+                    number_of_returns=las.number_of_returns, intensity=las.intensity, gps_time=las.gps_time,
+                    scan_angle=las.scan_angle, red=np.asarray(las.red) // 257, green=np.asarray(las.green) // 257,
+                    blue=np.asarray(las.blue) // 257)
+    eight.write(str(tmp_path / "eight.laz"))
+    said = []
+    _cloud, whole8 = learning.classify_file(str(tmp_path / "eight.laz"), None, model, log=said.append)
+    assert any("multiplied by 257" in line for line in said), said
+    said = []
+    learning.classify_file(str(tmp_path / "eight.laz"), str(tmp_path / "eight_tiled.laz"), model,
+                           tiling=TileOptions(tile_size_m=40.0, workers=1), log=said.append)
+    assert sum("multiplied by 257" in line for line in said) == 1, said
+    np.testing.assert_array_equal(np.asarray(laspy.read(tmp_path / "eight_tiled.laz").classification), whole8)
+    # a file of the survey without colour: refused by name before any tile, nothing written
+    plain = new_las(las.x[west], las.y[west], las.z[west], point_format=1, scale=0.001,
+                    crs_wkt=las.header.parse_crs().to_wkt(), classification=las.classification[west])
+    shutil.rmtree(folder)
+    folder.mkdir()
+    plain.write(str(folder / "a_plain.laz"))
+    shutil.copy(tmp_path / "scene.laz", folder / "b.laz")
+    with pytest.raises(InputError, match=r"a_plain.laz: the model .*c2.npz reads blue, green, red, which this file "
+                                         r"does not have \(point format 1, no colour\)"):
+        learning.classify_file(str(folder), str(tmp_path / "refused.vpc"), model)
+    assert not (tmp_path / "refused.vpc").exists() and not (tmp_path / "refused").exists()

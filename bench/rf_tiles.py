@@ -1,0 +1,83 @@
+"""rfclassify of a model of colour and returns (matrone2024's C2) in buffered tiles, against its whole run.
+
+    .venv/bin/python bench/rf_tiles.py [--points 4000000] [--tile-size 100] [--workers 2]
+
+A generated scene (core/synthetic.py) of about ``--points`` points at 20 points/m² is written as LAS 1.4
+point format 7 (LAZ) with colour that tells the classes apart only roughly, as in tests/core/test_rf.py. A
+model of the classes present (C2: colour and return number, 20 trees) is trained on a 60 m patch of another
+scene of the same kind. The command line's rfclassify then runs, each in a fresh process: (1) whole, (2) in
+tiles of ``--tile-size`` m, and, for the tiles' floor, (3) a model of x, y, z features alone (the HYBRID
+preset's ground model, which needs no attribute of the records) in the same tiles. Said: wall seconds, the
+peak resident memory of each process, and how the tiled classes compare with the whole run's.
+"""
+import argparse
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+
+from _checkout import PLUGINS  # noqa: E402 (puts this checkout's groundsieve on sys.path)
+
+
+def run(cmd):
+    """(wall seconds, peak RSS in MB of the process) of one command-line run."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    start = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "groundsieve"] + cmd, capture_output=True, text=True,
+                          env=dict(os.environ, PYTHONPATH=str(PLUGINS)), timeout=7200)
+    seconds = time.perf_counter() - start
+    if proc.returncode:
+        sys.exit(f"{' '.join(cmd)} failed ({proc.returncode}):\n{proc.stderr[-3000:]}")
+    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    return seconds, (peak if peak > before else float("nan")) / 1024.0
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--points", type=int, default=4_000_000)
+    parser.add_argument("--tile-size", type=float, default=100.0)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--folder", default=None, help="keep the files here (default: a temporary folder)")
+    args = parser.parse_args()
+    import laspy
+    import numpy as np
+    from groundsieve.core.engine import learning
+    from groundsieve.core.learn import rf
+    from groundsieve.tests.core.test_rf import _coloured_scene
+    work = args.folder or tempfile.mkdtemp(prefix="rf_tiles_")
+    os.makedirs(work, exist_ok=True)
+    scene = os.path.join(work, "scene.laz")
+    side = (args.points / 20.0) ** 0.5
+    _coloured_scene(scene, size_m=side, seed=8, density=20.0)
+    _coloured_scene(os.path.join(work, "patch.laz"), size_m=60.0, seed=3, density=20.0)
+    models = {}
+    for name, features, vs_rest in (("c2", ("radiometry", "return_number"), False), ("xyz", tuple(rf.PRESETS["HYBRID"]), True)):
+        models[name] = os.path.join(work, f"{name}.npz")
+        learning.train_file(os.path.join(work, "patch.laz"), models[name], None,
+                            learning.TrainOptions(features=features, params=rf.ForestParams(n_trees=20),
+                                                  block_m=15.0, ground_vs_rest=vs_rest))
+    points = int(laspy.open(scene).header.point_count)
+    print(f"{points:,} points, {side:.0f} m square, tiles of {args.tile_size:g} m, {args.workers} workers")
+    rows = []
+    common = ["--workers", str(args.workers), "--tile-size", str(args.tile_size)]
+    for label, model, out, tiled in (("C2 whole", "c2", "whole.laz", False), ("C2 tiles", "c2", "tiled.laz", True),
+                                     ("x, y, z ground model, tiles", "xyz", "xyz.laz", True)):
+        target = os.path.join(work, out)
+        if os.path.exists(target):
+            os.remove(target)
+        seconds, peak = run(["rfclassify", "--input", scene, "--model", models[model], "--output", target]
+                            + (common if tiled else []))
+        rows.append((label, seconds, peak))
+    whole = np.asarray(laspy.read(os.path.join(work, "whole.laz")).classification)
+    tiled = np.asarray(laspy.read(os.path.join(work, "tiled.laz")).classification)
+    print("| run | wall s | peak MB |\n|---|---:|---:|")
+    for label, seconds, peak in rows:
+        print(f"| {label} | {seconds:.1f} | {peak:,.0f} |")
+    print(f"C2 tiles against C2 whole: {np.mean(tiled == whole):.6%} of the points the same class "
+          f"(classes {sorted(int(c) for c in np.unique(whole))})")
+
+
+if __name__ == "__main__":
+    main()
