@@ -1915,6 +1915,9 @@ def _tile_job(job) -> Optional[dict]:
             return None
         cloud = tile_cloud(clouds, path=where)
         del clouds
+        if workflow.NEEDED in getattr(job["algorithm"], "optional_point_fields", ()) and job["dtm"] is None:
+            # (a model's prediction, most of its time, left out for the buffer, whose classes no DTM uses)
+            cloud.attributes = {**(cloud.attributes or {}), workflow.NEEDED: own.copy()}
         replaced, structures, demoted, ground_classes, not_last = {}, {}, (0, 0), [], (0, 0)
         if len(cloud) < getattr(job["algorithm"], "min_tile_points", MIN_TILE_POINTS):
             # Isolated points (a stray point far from the survey): too few for any filter's grid;

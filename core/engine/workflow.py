@@ -286,6 +286,11 @@ def _where(mask: np.ndarray, *arrays):
     return tuple(a[mask] for a in arrays)
 
 
+#: the optional point field a tile gives a filter that can leave points out (core/engine/learning.ModelGround):
+#: True for the points whose class is used (the tile's own, where no DTM needs the buffer's ground)
+NEEDED = "_needed"
+
+
 def _point_field(cloud: PointCloud, name: str) -> np.ndarray:
     """A per-point field of ``cloud``: the values an algorithm took from a tile's records
     (``cloud.attributes``) first, then the cloud's own fields."""
@@ -301,7 +306,8 @@ def call_filter(algorithm, cloud: PointCloud, idx: np.ndarray, steps: Steps, log
     a boolean ``ground`` (and whatever else the filter wants to show, e.g. grids); plain
     callables ``f(xyz, steps=...) -> ground`` work too. A filter that needs per-point
     attributes names them in ``point_fields`` (e.g. ``("return_number", "number_of_returns")``)
-    and gets them as keyword arrays; one that has something to tell the user sets
+    and gets them as keyword arrays (``optional_point_fields``: when the cloud has them, e.g. a tile's
+    ``NEEDED``); one that has something to tell the user sets
     ``wants_log = True`` and gets ``log``.
     """
     xyz = np.empty((idx.size, 3))
@@ -314,6 +320,9 @@ def call_filter(algorithm, cloud: PointCloud, idx: np.ndarray, steps: Steps, log
     steps = steps.sub(0.05, 1.0)
     extra = {name: np.ascontiguousarray(_point_field(cloud, name)[idx])
              for name in getattr(algorithm, "point_fields", ())}
+    for name in getattr(algorithm, "optional_point_fields", ()):  # given when the cloud has them
+        if cloud.attributes is not None and name in cloud.attributes:
+            extra[name] = np.ascontiguousarray(cloud.attributes[name][idx])
     if getattr(algorithm, "wants_log", False):
         def named(message: str) -> None:  # a filter's warning names the file it is about (it sees arrays)
             text = warning_of(message)
