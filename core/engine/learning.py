@@ -712,10 +712,12 @@ def classify_survey(input_path: str, output_path: Optional[str], model_path: str
                          log or (lambda _msg: None))
     options = FilterOptions(ignore_classes=ignore_classes if ignore_classes is not None else (),
                             tiling=tiling or TileOptions())
-    return run_ground_filter(input_path, output_path, ModelGround(model_path=model_path, colour_factor=factor),
-                             options=options,
-                             dtm_path=dtm_path, dtm=dtm or DTMOptions(), progress=progress,
-                             is_cancelled=is_cancelled, log=log)
+    run = run_ground_filter(input_path, output_path, ModelGround(model_path=model_path, colour_factor=factor),
+                            options=options, dtm_path=dtm_path, dtm=dtm or DTMOptions(), progress=progress,
+                            is_cancelled=is_cancelled, log=log)
+    if log and run.class_counts:  # (as the whole run says them)
+        log(", ".join(f"class {c}: {run.class_counts.get(int(c), 0):,}" for c in model.classes))
+    return run
 
 
 def classified_counts(run, ignore_classes=(7, 18)) -> tuple:

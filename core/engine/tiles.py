@@ -354,6 +354,8 @@ class TiledRun:
     algorithm: object = None
     #: the run's warnings (its log's "Warning: " lines, without the prefix; set by run_ground_filter)
     warnings: List[str] = field(default_factory=list)
+    #: {class: points} the filter gave the tiles' own points (a model's classes; not those kept as read)
+    class_counts: Dict[int, int] = field(default_factory=dict)
 
 
 def output_files(inputs: Sequence[str], output_path: Optional[str]) -> List[Optional[str]]:
@@ -1155,6 +1157,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                 "buffer.")
     tile_log = []
     ground_total = dtm_points = 0  # the tiles' own ground points; those that entered the DTM
+    classes_made: Dict[int, int] = {}  # {class: the tiles' own points given it by the filter}
     # the box of the points that may enter the DTM (neither withheld nor ignored), from the tiles: the
     # DTM is cut to it, as a whole run's grid spans those points only (None in a result: not known)
     area_box: Optional[list] = [math.inf, math.inf, -math.inf, -math.inf]
@@ -1218,6 +1221,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             replaced[int(code)] = replaced.get(int(code), 0) + int(count)
         for code, count in result.get("structures", ()):
             structures[int(code)] = structures.get(int(code), 0) + int(count)
+        for code, count in result.get("classes", ()):
+            classes_made[int(code)] = classes_made.get(int(code), 0) + int(count)
         ground_total += result["ground"]
         dtm_points += result["dtm_points"]
         if "hull" not in result:  # (a tile done by an earlier version, resumed)
@@ -1390,7 +1395,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                     total_points,
                     ground_total, crs_wkt,
                     grid.size, grid.buffer, len(tile_log), dtm_path, tile_log=tile_log,
-                    copc_inputs=[i.path for i in infos if i.copc], algorithm=algorithm)
+                    copc_inputs=[i.path for i in infos if i.copc], algorithm=algorithm,
+                    class_counts=dict(sorted(classes_made.items())))
 
 
 def _one_files_tiles(keys, tiles, copc_tiles, one, grid, dtm_grid, infos, log) -> list:
@@ -1918,7 +1924,7 @@ def _tile_job(job) -> Optional[dict]:
         if workflow.NEEDED in getattr(job["algorithm"], "optional_point_fields", ()) and job["dtm"] is None:
             # (a model's prediction, most of its time, left out for the buffer, whose classes no DTM uses)
             cloud.attributes = {**(cloud.attributes or {}), workflow.NEEDED: own.copy()}
-        replaced, structures, demoted, ground_classes, not_last = {}, {}, (0, 0), [], (0, 0)
+        replaced, structures, demoted, ground_classes, not_last, made = {}, {}, (0, 0), [], (0, 0), []
         if len(cloud) < getattr(job["algorithm"], "min_tile_points", MIN_TILE_POINTS):
             # Isolated points (a stray point far from the survey): too few for any filter's grid;
             # they keep their classes and are not ground.
@@ -1930,6 +1936,8 @@ def _tile_job(job) -> Optional[dict]:
                 from ..io.clouds import count_classes
                 ground_classes = sorted(count_classes(cloud.classification[ground & own]).items())
             demoted = workflow.demoted_ground(cloud.classification, ground, own & done.touched)
+            codes, counts = np.unique(cls[own & done.touched], return_counts=True)
+            made = [[int(c), int(n)] for c, n in zip(codes, counts)]
             not_last = workflow.ground_not_last(cloud, ground & own)
             if not options.keep_existing_classes:  # said once for the run (the tile's log goes nowhere)
                 replaced = workflow.replaced_classes(cloud.classification, own & done.processable)
@@ -1973,7 +1981,8 @@ def _tile_job(job) -> Optional[dict]:
                       dtm_points=dtm_own, assigned=assigned, block=block, class_parts=class_parts, copc_read=copc_read,
                       kept_out=sorted(kept_out.items()), replaced=sorted(replaced.items()),
                       structures=sorted(structures.items()), area_bounds=area_bounds, gaps=gaps, hull=hull,
-                      demoted=list(demoted), ground_classes=ground_classes, not_last=list(not_last))
+                      demoted=list(demoted), ground_classes=ground_classes, not_last=list(not_last),
+                      classes=made)
         _save_done(job["done_dir"], result)
         return result
     except Cancelled:

@@ -714,9 +714,11 @@ def test_rfclassify_runs_a_model_of_colour_and_several_classes_tile_by_tile(tmp_
     assert len(load_model(model).classes) >= 3 and len(train.points) > 20_000
     las = _coloured_scene(tmp_path / "scene.laz", seed=8)
     scene = str(tmp_path / "scene.laz")
+    said = []
     _cloud, whole = learning.classify_file(scene, str(tmp_path / "whole.laz"), model,
-                                           dtm_path=str(tmp_path / "whole.tif"))
+                                           dtm_path=str(tmp_path / "whole.tif"), log=said.append)
     assert len(np.unique(whole)) >= 3
+    counts = [line for line in said if line.startswith("class ")]
 
     def dtm(name):
         return gdal.Open(str(tmp_path / name)).ReadAsArray()
@@ -727,6 +729,7 @@ def test_rfclassify_runs_a_model_of_colour_and_several_classes_tile_by_tile(tmp_
     np.testing.assert_array_equal(np.asarray(laspy.read(tmp_path / "tiled.laz").classification), whole)
     np.testing.assert_array_equal(dtm("tiled.tif"), dtm("whole.tif"))
     assert any("replaced by the model's classes" in line for line in lines), lines
+    assert [line for line in lines if line.startswith("class ")] == counts and len(counts) == 1  # (as the whole run)
     # a folder of two files, with worker processes
     folder = tmp_path / "survey"
     folder.mkdir()

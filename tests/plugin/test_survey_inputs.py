@@ -229,3 +229,43 @@ def test_rfclassify_offers_the_filters_tiles_a_job_array_and_the_dtm_alone(groun
     assert np.array_equal(classes_of(job["OUTPUT"]), classes_of(tmp_path / "c" / "west.laz"))
     with pytest.raises(QgsProcessingException, match="Classified point cloud and DTM are both skipped"):
         processing.run("groundsieve:rfclassify", dict(common, OUTPUT=None, DTM=None))
+
+
+def test_rfclassify_runs_a_model_of_the_points_attributes_and_classes_on_a_survey(groundsieve_provider, scene_laz,
+                                                                                   tmp_path):
+    """matrone2024's models read the points' attributes (here C2 without colour: intensity and the return number)
+    and learn several classes; on a survey folder they had been refused ("only a ground model ... x, y, z"). Through
+    processing.run they now give each file the classes of the whole cloud's run, and the log counts them."""
+    import processing
+    from qgis.core import QgsProcessingContext, QgsProcessingFeedback
+    from groundsieve.algorithms.rf import PRESET_NAMES
+    src, _scene = scene_laz
+    model = tmp_path / "c2.npz"
+    processing.run("groundsieve:rftrain", {"INPUT": str(src), "MODEL": str(model), "TREES": 4,
+                                           "PRESET": PRESET_NAMES.index("C2"), "REPORT": str(tmp_path / "r.html")})
+    from groundsieve.core.learn.model_file import load_model
+    trained = load_model(str(model))
+    assert "intensity" in trained.features and len(trained.classes) >= 3
+    whole = processing.run("groundsieve:rfclassify", {"INPUT": str(src), "MODEL": str(model),
+                                                      "OUTPUT": str(tmp_path / "whole.laz")})
+    _split(src, tmp_path / "in")
+
+    class Said(QgsProcessingFeedback):
+        lines = []
+
+        def pushInfo(self, info):  # noqa: N802
+            self.lines.append(info)
+    said = Said()
+    survey = processing.run("groundsieve:rfclassify", {"INPUT": str(tmp_path / "in"), "MODEL": str(model),
+                                                       "OUTPUT": str(tmp_path / "c.vpc"), "WORKERS": 1},
+                            context=QgsProcessingContext(), feedback=said)
+    import laspy
+    las = laspy.read(str(src))
+    mid = float(np.median(las.x))
+    got = np.empty(len(las.points), dtype=np.uint8)
+    for name, keep in (("west.laz", las.x < mid), ("east.laz", las.x >= mid)):
+        got[np.asarray(keep)] = classes_of(tmp_path / "c" / name)
+    np.testing.assert_array_equal(got, classes_of(whole["OUTPUT"]))
+    assert survey["POINT_COUNT"] == whole["POINT_COUNT"]
+    assert any(line.startswith("class 2: ") and line.count("class ") == len(trained.classes) for line in said.lines), \
+        said.lines
