@@ -283,9 +283,9 @@ neighbourhoods, the prediction and the DTM, whose grid spans only the other poin
 buffered tiles, as the ground filters do (the buffer is the reach of the model's features, at least
 30 m for the DTM), with any model: its colour, returns, scan angle or GPS time are read from each tile's
 points as a run of the whole cloud reads them, and each point gets the model's class. Every file must
-have the model's attributes (a file without its colour is refused by name); colour of the other depth
-and features outside what the model learnt are judged once for the survey, from the first points of up
-to 16 of its files. The tiles, the workers, a Dask
+have the model's attributes (a file without its colour is refused by name); each file's colour depth is
+judged from all its points, as a run of the file alone judges it, and features outside what the model
+learnt are warned about once for the survey, from the first points of up to 16 of its files. The tiles, the workers, a Dask
 cluster and one file of a survey for a job array (<i>Advanced parameters</i>) are the ground filters'. Skip the
 <i>Classified point cloud</i> for the DTM alone: on a survey with a <i>DTM extent</i>, only the tiles that make the
 extent's cells are then classified.</p>

@@ -435,12 +435,15 @@ class ModelGround(Hybrid):
     """A model of rfclassify in the buffered-tile engine, with rfclassify's rule: each point gets the
     model's predicted class (the most probable, a tie to the first class), ground being class 2 (not
     the hybrid filter's threshold on the ground probability), so that tiled and whole runs agree on
-    ties too. Its features of x, y, z are computed on the tile and its buffer (as the hybrid filter's);
-    the others (colour, intensity, returns, scan angle, GPS time, a dimension of the files) are read
-    from each tile's records as the whole run reads them from its file (:meth:`point_attributes`),
-    colour multiplied by ``colour_factor`` (decided once for the survey: a tile of dark colour must not
-    read as 8-bit)."""
-    colour_factor: float = 1.0
+    ties too. Its features of x, y, z are computed on the tile and its buffer (as the hybrid filter's),
+    but for those every file stores (``stored``); the others (colour, intensity, returns, scan angle,
+    GPS time, a dimension of the files) are read from each tile's records as the whole run reads them
+    from its file (:meth:`point_attributes`), the colour of the files of ``colour_factors`` ((file,
+    factor), ...: judged file by file from all its points, :func:`survey_attributes`) multiplied by
+    their factor. ``metres_per_unit``: the CRS's, for the least buffer (:data:`MODEL_MIN_REACH_M`)."""
+    colour_factors: tuple = ()
+    stored: tuple = ()
+    metres_per_unit: float = 1.0
 
     name = "rfclassify"
     #: rfclassify gives every point a class of its model's: the log's advice on the input's other
@@ -452,16 +455,19 @@ class ModelGround(Hybrid):
         from ..validate import check_number
         if not isinstance(self.model_path, (str, os.PathLike)) or not os.fspath(self.model_path):
             raise InvalidParameterError(f"model_path must be a model file (got {self.model_path!r})")
-        check_number(self, "colour_factor")
-        if not self.colour_factor > 0:
-            raise InvalidParameterError(f"colour_factor must be > 0 (got {self.colour_factor})")
+        check_number(self, "metres_per_unit")
+        if not self.metres_per_unit > 0:
+            raise InvalidParameterError(f"metres_per_unit must be > 0 (got {self.metres_per_unit})")
+        if any(not (isinstance(f, float) and f > 0) for _path, f in self.colour_factors):
+            raise InvalidParameterError(f"colour_factors must be (file, factor > 0) pairs (got {self.colour_factors!r})")
         object.__setattr__(self, "_model", load_model(os.fspath(self.model_path)))
 
     @property
     def attribute_names(self) -> List[str]:
         """The model's features read from the points' records, not computed from x, y, z."""
         from ..learn.hybrid import unknown_features
-        return unknown_features(self.features)
+        read = unknown_features(self.features)
+        return read + [n for n in self.features if n in self.stored and n not in read]
 
     @property
     def new_classes(self) -> Optional[str]:
@@ -486,27 +492,29 @@ class ModelGround(Hybrid):
     @property
     def point_attributes(self):
         """None for a model of x, y, z features; otherwise the function the tile engine gives each part's
-        cloud (its ``las`` holding the part's records, read by its file's header) and that returns
-        {feature: float32 values}, computed as rfclassify's whole run computes them (learn/rf.py)."""
+        cloud (its ``las`` holding the part's records, read by its file's header) and its input file, and
+        that returns {feature: float32 values}, computed as rfclassify's whole run computes them
+        (learn/rf.py)."""
         return self._attributes_of if self.attribute_names else None
 
-    def _attributes_of(self, cloud) -> dict:
+    def _attributes_of(self, cloud, path: str) -> dict:
         from ..learn.rf import COLOURS, GPS_TIME_MODES, attribute_values
         mode = GPS_TIME_MODES.get(self.model.meta.get("gps_time"), "raw")
+        factor = dict(self.colour_factors).get(path, 1.0)
         out = {}
         for name in self.attribute_names:
             values = attribute_values(cloud, name, mode)
-            if name in COLOURS and self.colour_factor != 1.0:
-                values = values * self.colour_factor  # (float32, as the whole run's X[:, colours] *= factor)
+            if name in COLOURS and factor != 1.0:
+                values = values * factor  # (float32, as the whole run's X[:, colours] *= factor)
             out[name] = values
         return out
 
     @property
     def reach_m(self) -> float:
-        """The reach of the model's features of x, y, z (the hybrid filter's rule), and at least
-        :data:`MODEL_MIN_REACH_M` for the DTM."""
+        """The reach of the model's features computed from x, y, z (the hybrid filter's rule), and at least
+        :data:`MODEL_MIN_REACH_M` metres (in the CRS's unit) for the DTM."""
         names = [n for n in self.features if n not in self.attribute_names]
-        return max(self.reach_of(names, self.cell_size_m), MODEL_MIN_REACH_M)
+        return max(self.reach_of(names, self.cell_size_m), MODEL_MIN_REACH_M / self.metres_per_unit)
 
     @property
     def extra_bytes_per_point(self) -> Optional[int]:
@@ -592,14 +600,15 @@ class _WholeModelRun:
             120 if any(n in PTD_FEATURES for n in model.features) else 0)  # (as Hybrid.extra_bytes_per_point)
 
 
-def say_features_here(model, model_path: str, where: str, X: np.ndarray, log) -> float:
+def say_features_here(model, model_path: str, where: str, X: np.ndarray, log, depth: bool = True) -> float:
     """Warn of what ``X`` (the features of the cloud ``where``, or of a survey's sample; NaN where not
     known) holds that the model did not learn: colour of the other depth, which is then read in the
     model's (``X``'s colour columns multiplied by the factor returned,
     :func:`core.learn.rf.colour_depth_factor`), features outside their learnt range on half the points
-    or more, features of one value."""
+    or more, features of one value. ``depth`` False: the colour's depth is judged elsewhere (a survey's,
+    file by file)."""
     from ..learn.rf import COLOURS, colour_depth_factor, constant_features, out_of_range_features
-    factor = colour_depth_factor(model, X)
+    factor = colour_depth_factor(model, X) if depth else 1.0
     if factor != 1.0:  # (a reviewer's 16-bit model on an 8-bit flight: every point class 5, no ground, "done")
         X[:, [j for j, name in enumerate(model.features) if name in COLOURS]] *= factor
         log(f"{WARNING_PREFIX}{where}: its colour is "
@@ -637,31 +646,112 @@ SAMPLE_FILES = 16
 SAMPLE_POINTS = 50_000
 
 
-def _survey_attributes(ground: "ModelGround", model_path: str, input_path: str, files, log) -> float:
-    """Check that every file of a survey has the model's attributes (its colour, GPS time, a dimension);
-    warn as a whole run does (:func:`say_features_here`) from a sample: the first points of
-    :data:`SAMPLE_FILES` files spread over the survey. Returns the colour factor for the whole survey
-    (a whole run judges its file's depth by all its points; a tile must not judge dark colour 8-bit)."""
+def _colour_max(path: str, ignored, check=None) -> int:
+    """The largest red, green or blue value of a file's points that a run classifies (neither withheld nor of
+    an ``ignored`` class), every point read: as a whole run of the file judges its colour's depth and whether
+    it has colour at all (a first chunk had judged 16-bit colour whose first points were dark 8-bit, and
+    classified 62,436 of 142,315 points otherwise, and refused a file whose first points lay outside the
+    orthophoto: a code reviewer)."""
+    import laspy
+    from ..io.lasfiles import CHUNK_POINTS
+    top = 0
+    with laspy.open(path) as reader:
+        for chunk in reader.chunk_iterator(CHUNK_POINTS):
+            if check is not None:
+                check()
+            keep = ~np.asarray(chunk.withheld, dtype=bool) & ~np.isin(np.asarray(chunk.classification), ignored)
+            for name in ("red", "green", "blue"):
+                values = np.asarray(chunk[name])[keep]
+                if values.size:
+                    top = max(top, int(values.max()))
+    return top
+
+
+@dataclass(frozen=True)
+class SurveyAttributes:
+    """What :func:`survey_attributes` found for :class:`ModelGround`."""
+    colour_factors: tuple = ()   #: ((file, factor), ...) for the files whose colour is read in another depth
+    stored: tuple = ()           #: features of x, y, z that every file stores (read, as a whole run reads them)
+
+
+def survey_attributes(model, model_path: str, input_path: str, files, ignored=(), log=None,
+                      check=None) -> SurveyAttributes:
+    """Check that every file of a survey gives the model's features as a whole run of it would: its
+    attributes (colour, GPS time, a dimension) present; colour neither 0 on every point nor there where the
+    model learnt intensity instead (rftrain's radiometry on a file without colour). Each file's colour
+    depth is judged from all its points, as a whole run judges it (:func:`_colour_max`), and its colour
+    read in the model's depth; features of x, y, z that the files store (groundsieve:features) are read,
+    not computed, as a whole run reads them. Warns as a whole run does (:func:`say_features_here`), once
+    for the survey, from a sample: the first points of :data:`SAMPLE_FILES` files spread over it."""
     import types
     import laspy
-    from ..learn.rf import COLOURS, GPS_TIME_MODES, attribute_values
-    names = ground.attribute_names
-    if not names:
-        return 1.0
-    need = {n: ("red", "green", "blue") if n in COLOURS else (n,) for n in names
+    from ..learn.hybrid import GRID_FEATURES, opening_radius, unknown_features
+    from ..learn.rf import COLOURS, GPS_TIME_MODES, RADIOMETRY, attribute_values, colour_depth_factor
+    log = log or (lambda _msg: None)
+    features = list(model.features)
+    read = unknown_features(features)
+    # (a whole run reads a stored feature of a radius; the hybrid's grid features it computes whatever is stored)
+    computed = [n for n in features if n not in read and n not in GRID_FEATURES and opening_radius(n) is None]
+    need = {n: ("red", "green", "blue") if n in COLOURS else (n,) for n in read
             if n not in ("intensity", "return_number", "number_of_returns", "scan_angle")}
+    colour_model = any(n in COLOURS for n in features)
+    radiometry = RADIOMETRY in model.meta.get("preset_features", ())
+    stored_in: dict = {n: 0 for n in computed}
+    coloured = []
     for path in files:
         with laspy.open(path) as reader:
-            dims = set(reader.header.point_format.dimension_names)
+            pf = reader.header.point_format
+        dims = set(pf.dimension_names)
         missing = sorted(n for n, wanted in need.items() if not set(wanted) <= dims)
         if missing:
             raise InputError(f"{path}: the model {model_path} reads {', '.join(missing)}, which this file does not "
-                             f"have (point format {reader.header.point_format.id}"
-                             + (", no colour" if any(n in COLOURS for n in missing) else "")
+                             f"have (point format {pf.id}" + (", no colour" if any(n in COLOURS for n in missing)
+                                                              else "")
                              + "): classify the files that have them, or train a model without them")
-    mode = GPS_TIME_MODES.get(ground.model.meta.get("gps_time"), "raw")
+        for n in computed:
+            stored_in[n] += n in dims
+        if (colour_model or radiometry) and "red" in dims:
+            coloured.append(path)
+    stored = tuple(n for n in computed if stored_in[n] == len(files) and files)
+    partly = [n for n in computed if 0 < stored_in[n] < len(files)]
+    if partly:
+        log(f"{WARNING_PREFIX}{input_path}: {stored_in[partly[0]]:,} of its {len(files):,} files store the feature(s) "
+            f"{', '.join(partly)} (groundsieve:features), the others do not: they are computed for every file, where "
+            "a run of a file alone would read those stored.")
+    factors, depths = [], {}
+    if coloured:
+        t0 = time.perf_counter()
+        columns = [features.index(n) for n in COLOURS if n in features]
+        for path in coloured:
+            top = _colour_max(path, tuple(ignored), check)
+            if radiometry and not colour_model and top > 0:
+                raise InputError(f"{path}: the file has colour (RGB), and the model {model_path} learnt the intensity "
+                                 "in its place (its training cloud had none): a run of the file alone refuses it too; "
+                                 "train a model on a cloud with colour, or name intensity instead of radiometry")
+            if colour_model and top == 0:
+                raise InputError(f"{path}: its colour (RGB) is 0 on every point: the file has no colour, and the "
+                                 f"model {model_path} learnt colour; classify the files that have it, or train a "
+                                 "model without colour")
+            if colour_model:
+                probe = np.full((1, len(features)), np.nan, dtype=np.float32)
+                probe[0, columns] = top
+                factor = colour_depth_factor(model, probe)
+                if factor != 1.0:
+                    factors.append((path, factor))
+                    depths.setdefault(factor, []).append(path)
+        log(f"Read the colour of {len(coloured):,} file(s) in {time.perf_counter() - t0:.1f} s: each file's colour "
+            "depth is judged from all its points, as a run of the file alone judges it.")
+    for factor, paths in depths.items():
+        shown = ", ".join(os.path.basename(p) for p in paths[:3]) + (", ..." if len(paths) > 3 else "")
+        log(f"{WARNING_PREFIX}{len(paths):,} of the {len(files):,} files ({shown}): their colour is "
+            + ("8-bit (every value at most 255) and the model {m} learnt 16-bit colour: it is read multiplied by 257 "
+               "(255 becomes 65,535)" if factor > 1 else "16-bit (values beyond 255) and the model {m} learnt 8-bit "
+               "colour: it is read divided by 257 (65,535 becomes 255)").format(m=model_path) + ".")
+    if not read:
+        return SurveyAttributes((), stored)
+    mode = GPS_TIME_MODES.get(model.meta.get("gps_time"), "raw")
     picked = sorted({files[int(k)] for k in np.linspace(0, len(files) - 1, min(SAMPLE_FILES, len(files)))})
-    rows = []
+    rows, by_path = [], dict(factors)
     for path in picked:
         with laspy.open(path) as reader:
             count = min(SAMPLE_POINTS, int(reader.header.point_count))
@@ -670,30 +760,26 @@ def _survey_attributes(ground: "ModelGround", model_path: str, input_path: str, 
             las = laspy.LasData(header=reader.header, points=reader.read_points(count))
         cloud = types.SimpleNamespace(path=path, las=las, return_number=np.asarray(las.return_number),
                                       number_of_returns=np.asarray(las.number_of_returns))
-        X = np.full((count, len(ground.features)), np.nan, dtype=np.float32)
-        for name in names:
-            X[:, ground.features.index(name)] = attribute_values(cloud, name, mode)
-        colours = [ground.features.index(n) for n in names if n in COLOURS]
-        if colours and not np.any(X[:, colours]):  # (a whole run would have read the intensity: a mismatch)
-            raise InputError(f"{path}: its colour (RGB) is 0 on the {count:,} first points: the file has no colour, "
-                             f"and the model {model_path} learnt colour; classify the files that have it, or train "
-                             "a model without colour")
+        X = np.full((count, len(features)), np.nan, dtype=np.float32)
+        for name in read:
+            X[:, features.index(name)] = attribute_values(cloud, name, mode)
+            if name in COLOURS and path in by_path:
+                X[:, features.index(name)] *= by_path[path]
         rows.append(X)
-    if not rows:
-        return 1.0
-    what = (f"{input_path} (the first points of {len(picked):,} of its {len(files):,} files)" if len(files) > 1
-            else input_path)
-    return say_features_here(ground.model, model_path, what, np.concatenate(rows), log)
+    if rows:
+        what = (f"{input_path} (the first points of {len(picked):,} of its {len(files):,} files)" if len(files) > 1
+                else input_path)
+        say_features_here(model, model_path, what, np.concatenate(rows), log, depth=False)
+    return SurveyAttributes(tuple(factors), stored)
 
 
 def classify_survey(input_path: str, output_path: Optional[str], model_path: str, *, dtm_path: Optional[str] = None,
                     dtm=None, ignore_classes=(7, 18), tiling=None, progress=None, is_cancelled=None, log=None):
     """rfclassify on a survey (a folder, a .vpc, a tile size set or a cloud beyond the memory
     budget): the model runs as a ground filter in the buffered-tile engine (core/engine/tiles.py),
-    through :class:`ModelGround` (the hybrid filter with rfclassify's rule: the predicted class;
-    its reach, from the model's features, is the tiles' buffer). This
-    needs a ground model (classes 2 and 1 only) whose features come from x, y, z (the hybrid and
-    geometric features); other models are refused with the reason."""
+    through :class:`ModelGround` (rfclassify's rule: the predicted class; its reach, from the model's
+    features, is the tiles' buffer), any model: its attributes are read from each tile's records as a
+    whole run of each file reads them (:func:`survey_attributes`)."""
     from .tiles import TileOptions
     from .workflow import DTMOptions, FilterOptions, run_ground_filter
     from ..io.lasfiles import expand_inputs, scan_header
@@ -701,8 +787,12 @@ def classify_survey(input_path: str, output_path: Optional[str], model_path: str
     files = expand_inputs(input_path)
     check_model_unit(model, model_path, input_path, scan_header(files[0]).crs_wkt if files else None,
                      log or (lambda _msg: None))
-    factor = _survey_attributes(ModelGround(model_path=model_path), model_path, input_path, files,
-                                log or (lambda _msg: None))
+    from ..raster.crs import metres_per_unit
+    from ..progress import Steps
+    options = FilterOptions(ignore_classes=ignore_classes if ignore_classes is not None else (),
+                            tiling=tiling or TileOptions())
+    found = survey_attributes(model, model_path, input_path, files, options.ignored, log,
+                              Steps(None, is_cancelled).check)
     if _density_matters(model):
         # (said once, from the first file's sample, as the tiles are planned: a tile's warnings stay in the tile)
         from .tiles import sample_density
@@ -710,9 +800,9 @@ def classify_survey(input_path: str, output_path: Optional[str], model_path: str
         if first is not None:
             _say_density(model, model_path, first.path, sample_density(first.path), first.crs_wkt,
                          log or (lambda _msg: None))
-    options = FilterOptions(ignore_classes=ignore_classes if ignore_classes is not None else (),
-                            tiling=tiling or TileOptions())
-    run = run_ground_filter(input_path, output_path, ModelGround(model_path=model_path, colour_factor=factor),
+    ground = ModelGround(model_path=model_path, colour_factors=found.colour_factors, stored=found.stored,
+                         metres_per_unit=(metres_per_unit(scan_header(files[0]).crs_wkt) if files else None) or 1.0)
+    run = run_ground_filter(input_path, output_path, ground,
                             options=options, dtm_path=dtm_path, dtm=dtm or DTMOptions(), progress=progress,
                             is_cancelled=is_cancelled, log=log)
     if log and run.class_counts:  # (as the whole run says them)

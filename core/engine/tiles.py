@@ -1189,7 +1189,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                  buffer=grid.buffer, done_dir=done_dir,
                  names=sorted({os.path.basename(inputs[p.file_index])
                                for p in tiles.get(key, []) + copc_tiles.get(key, [])}),
-                 paths={p.file_index: inputs[p.file_index] for p in tiles.get(key, [])},
+                 paths={p.file_index: inputs[p.file_index] for p in tiles.get(key, []) + copc_tiles.get(key, [])},
                  class_paths=class_paths, algorithm=algorithm, options=options, dtm=dtm if dtm_path else None,
                  dtm_grid=dtm_writer.grid if dtm_writer is not None else None,
                  is_cancelled=None if use_processes or tiling.scheduler else tile_cancelled,
@@ -1908,7 +1908,7 @@ def _tile_job(job) -> Optional[dict]:
             return None
         for file_index, c, idx in sources:
             if attributes is not None:
-                c.attributes, c.las = attributes(c), None
+                c.attributes, c.las = attributes(c, job["paths"][file_index]), None
             clouds.append(c)
             indices.append(idx)
             files.append(np.full(idx.size, file_index, dtype=np.int32))

@@ -455,7 +455,11 @@ def feature_matrix(cloud, names: Sequence[str], steps=None, *, gps_time: str = "
         elif name in dims:
             columns[name] = np.asarray(cloud.las[name], dtype=np.float32)
         else:
-            parse_feature_name(name)  # a clear error for an unknown name
+            try:
+                parse_feature_name(name)
+            except InvalidParameterError as err:  # (a model's dimension missing from a file: "'amp' is not a feature name")
+                raise InputError(f"{cloud.path}: the feature '{name}' is neither a dimension of this file ("
+                                 f"{', '.join(sorted(dims)) or 'x, y, z only'}) nor computed: {err}") from None
             to_compute.append(name)
     if to_compute:
         computed = compute_features(cloud.xyz, FeatureSpec.from_names(to_compute), steps=steps)

@@ -697,7 +697,7 @@ def test_rfclassify_runs_a_model_of_colour_and_several_classes_tile_by_tile(tmp_
     tiles now read each model's attributes from their records as the whole run reads them from its file and
     write the model's classes: a tiled run, a folder of two files and a COPC copy give the whole run's classes
     and DTM exactly. A file without the model's colour is refused by name; 8-bit colour given to a 16-bit model
-    is read in the model's depth for the whole survey, as a whole run of the file reads it."""
+    is read in the model's depth, as a whole run of the file reads it."""
     import laspy
     import shutil
     from osgeo import gdal
@@ -750,7 +750,7 @@ def test_rfclassify_runs_a_model_of_colour_and_several_classes_tile_by_tile(tmp_
     run = learning.classify_file(str(tmp_path / "scene.copc.laz"), str(tmp_path / "copc_tiled.laz"), model,
                                  tiling=TileOptions(tile_size_m=40.0, workers=1))
     np.testing.assert_array_equal(np.asarray(laspy.read(tmp_path / "copc_tiled.laz").classification), whole_copc)
-    # 8-bit colour: read in the model's depth for the whole survey, said once (not in every tile)
+    # 8-bit colour: read in the model's depth, said once for the survey (not in every tile)
     eight = new_las(las.x, las.y, las.z, point_format=7, version="1.4", scale=0.001, crs_wkt=las.header.parse_crs().to_wkt(),
                     classification=las.classification, return_number=las.return_number,
                     number_of_returns=las.number_of_returns, intensity=las.intensity, gps_time=las.gps_time,
@@ -776,3 +776,75 @@ def test_rfclassify_runs_a_model_of_colour_and_several_classes_tile_by_tile(tmp_
                                          r"does not have \(point format 1, no colour\)"):
         learning.classify_file(str(folder), str(tmp_path / "refused.vpc"), model)
     assert not (tmp_path / "refused.vpc").exists() and not (tmp_path / "refused").exists()
+
+
+def test_a_surveys_files_give_the_features_of_their_own_whole_runs(tmp_path):
+    """A code reviewer broke the tiles' equality with whole runs: colour depth judged from each file's first
+    points (a 16-bit file starting dark read as 8-bit: 62,436 of 142,315 points otherwise), one depth for a folder
+    of 8-bit and 16-bit files, a file whose first points have no colour refused, stored features read whole and
+    computed in tiles (DTM cells 16 m apart), a model of intensity in place of colour refused whole and run in
+    tiles, and the DTM's 30 m buffer read as 30 ft in feet. Each file is now judged from all its points."""
+    import laspy
+    from groundsieve.core.engine.tiles import TileOptions
+    from groundsieve.core.io import new_las
+    las = _coloured_scene(tmp_path / "train.laz", seed=3)
+    model = str(tmp_path / "c.npz")
+    learning.train_file(str(tmp_path / "train.laz"), model, None,
+                        learning.TrainOptions(features=("radiometry", "return_number", "planarity_r2"),
+                                              params=rf.ForestParams(n_trees=4, max_depth=10), block_m=20.0,
+                                              ground_vs_rest=False))
+    scene = _coloured_scene(tmp_path / "scene.laz", seed=8)
+    n = len(scene.points)
+    rgb = {c: np.asarray(scene[c]) for c in ("red", "green", "blue")}
+
+    def variant(name, colour, stored=None):
+        out = new_las(scene.x, scene.y, scene.z, point_format=7, version="1.4", scale=0.001,
+                      crs_wkt=scene.header.parse_crs().to_wkt(), classification=scene.classification,
+                      return_number=scene.return_number, number_of_returns=scene.number_of_returns,
+                      intensity=scene.intensity, gps_time=scene.gps_time, scan_angle=scene.scan_angle,
+                      extra=None if stored is None else {"planarity_r2": stored}, **colour)
+        out.write(str(tmp_path / name))
+        return str(tmp_path / name)
+    dark = {c: np.r_[v[:-10] // 257, v[-10:]] for c, v in rgb.items()}  # 16-bit, dark but for its last points
+    eight = {c: v // 257 for c, v in rgb.items()}
+    zero = {c: np.r_[np.zeros(n - 10, dtype=np.uint16), v[-10:]] for c, v in rgb.items()}
+    stored = np.random.default_rng(0).random(n).astype(np.float32)
+    cases = {"dark.laz": variant("dark.laz", dark), "eight.laz": variant("eight.laz", eight),
+             "zero.laz": variant("zero.laz", zero), "stored.laz": variant("stored.laz", rgb, stored)}
+    wholes = {name: learning.classify_file(path, None, model)[1] for name, path in cases.items()}
+    for name, path in cases.items():
+        learning.classify_file(path, str(tmp_path / f"t_{name}"), model, tiling=TileOptions(tile_size_m=40.0, workers=1))
+        np.testing.assert_array_equal(np.asarray(laspy.read(tmp_path / f"t_{name}").classification), wholes[name],
+                                      err_msg=name)
+    # a folder of an 8-bit file (the west half) and a 16-bit one (the east): each read in its own depth
+    folder = tmp_path / "mixed"
+    folder.mkdir()
+    west = np.asarray(scene.x) < np.median(np.asarray(scene.x))
+    _c, sixteen = learning.classify_file(str(tmp_path / "scene.laz"), None, model)
+    for name, source, part in (("a.laz", cases["eight.laz"], west), ("b.laz", str(tmp_path / "scene.laz"), ~west)):
+        full = laspy.read(source)
+        piece = laspy.LasData(full.header)
+        piece.points = full.points[part]
+        piece.write(folder / name)
+    said = []
+    learning.classify_file(str(folder), str(tmp_path / "out.vpc"), model, tiling=TileOptions(workers=1),
+                           log=said.append)
+    for name, whole, part in (("a.laz", wholes["eight.laz"], west), ("b.laz", sixteen, ~west)):
+        np.testing.assert_array_equal(np.asarray(laspy.read(tmp_path / "out" / name).classification),
+                                      whole[part], err_msg=name)
+    assert [line for line in said if "1 of the 2 files (a.laz): their colour is 8-bit" in line], said
+    # a model that learnt intensity in place of colour (its training cloud had none): refused on a coloured file,
+    # whole and on a survey
+    plain = new_las(las.x, las.y, las.z, point_format=1, scale=0.001, classification=las.classification,
+                    intensity=las.intensity, return_number=las.return_number, number_of_returns=las.number_of_returns)
+    plain.write(str(tmp_path / "plain.laz"))
+    learning.train_file(str(tmp_path / "plain.laz"), str(tmp_path / "i.npz"), None,
+                        learning.TrainOptions(features=("radiometry", "return_number"),
+                                              params=rf.ForestParams(n_trees=2), block_m=20.0))
+    with pytest.raises(InputError, match="trained on"):
+        learning.classify_file(cases["eight.laz"], None, str(tmp_path / "i.npz"))
+    with pytest.raises(InputError, match="eight.laz: the file has colour .RGB., and the model .*learnt the intensity"):
+        learning.classify_file(cases["eight.laz"], str(tmp_path / "i.laz"), str(tmp_path / "i.npz"),
+                               tiling=TileOptions(tile_size_m=40.0))
+    # the DTM's least buffer is 30 m in the CRS's unit
+    assert learning.ModelGround(model_path=model, metres_per_unit=0.3048).reach_m >= 30 / 0.3048 - 1e-9
