@@ -518,7 +518,13 @@ class ModelGround(Hybrid):
 
     @property
     def extra_bytes_per_point(self) -> Optional[int]:
-        return None  # (a tile is planned at the engine's BYTES_PER_POINT; a whole run is priced by _WholeModelRun)
+        """As rfclassify's whole run is priced (:class:`_WholeModelRun`): one file's run says one figure (a
+        reviewer read 28 MB from rfclassify, then 45 MB from the engine, for the same file)."""
+        return _WholeModelRun(self.model).extra_bytes_per_point
+
+    @property
+    def makes_grids(self) -> bool:
+        return _WholeModelRun(self.model).makes_grids
 
     def describe(self) -> str:
         return (f"rfclassify in tiles: {self.model_path} ({len(self.features)} features: {', '.join(self.features)}); "
@@ -575,12 +581,12 @@ def check_model_unit(model, model_path: str, input_path: str, crs_wkt: Optional[
                                        converted="nothing is converted: they are read as the model learnt them."))
 
 
-#: Memory a point costs rfclassify's whole run of a model that runs whole only (its colour, returns, GPS time
-#: or other classes), beyond a ground filter's point (core/engine/tiles.whole_run_bytes): the peaks of a
-#: reviewer's UAV flights, 3.5 M points (LAS point format 3) with C2 (colour and returns), C5 (and eigen
-#: features) and 9.5 M points with C2, were 131-190 bytes a point beyond the process's own 0.25 GB, where
-#: the ground filters' figure (330 bytes, core/engine/tiles.BYTES_PER_POINT) had tiled, and so refused,
-#: a file of 6.5 M points or more
+#: Memory a point costs rfclassify's whole run (the cloud read whole, its feature matrix, the forest), beyond a
+#: ground filter's point (core/engine/tiles.whole_run_bytes): the peaks of a reviewer's UAV flights, 3.5 M
+#: points (LAS point format 3) with C2 (colour and returns), C5 (and eigen features) and 9.5 M points with C2,
+#: were 131-190 bytes a point beyond the process's own 0.25 GB, where the ground filters' figure (330 bytes,
+#: core/engine/tiles.BYTES_PER_POINT) had tiled a file of 6.5 M points or more (where such models were refused
+#: until 2026-11-26)
 RF_EXTRA_BYTES_PER_POINT = 40
 
 
@@ -765,7 +771,8 @@ def survey_attributes(model, model_path: str, input_path: str, files, ignored=()
             X[:, features.index(name)] = attribute_values(cloud, name, mode)
             if name in COLOURS and path in by_path:
                 X[:, features.index(name)] *= by_path[path]
-        rows.append(X)
+        # (the points a run classifies: as its whole run judges them)
+        rows.append(X[~np.asarray(las.withheld, dtype=bool) & ~np.isin(np.asarray(las.classification), ignored)])
     if rows:
         what = (f"{input_path} (the first points of {len(picked):,} of its {len(files):,} files)" if len(files) > 1
                 else input_path)
@@ -862,7 +869,7 @@ def classify_file(input_path: str, output_path: Optional[str], model_path: str, 
     # the whole run priced as its own path's (the model loaded once: a code reviewer)
     estimate = _WholeModelRun(model)
     whole_dtm = (dtm or DTMOptions()) if dtm_path else None
-    if needs_tiling(input_path, tiling, algorithm=estimate, dtm=whole_dtm, log=log):
+    if needs_tiling(input_path, tiling, algorithm=estimate, dtm=whole_dtm):  # (why: said by the engine's own check)
         return classify_survey(input_path, output_path, model_path, dtm_path=dtm_path, dtm=dtm,
                                ignore_classes=ignore_classes, tiling=tiling, progress=progress,
                                is_cancelled=is_cancelled, log=log)

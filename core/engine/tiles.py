@@ -215,7 +215,7 @@ def whole_run_bytes(info: LasInfo, algorithm=None, dtm=None) -> int:
     # so that a cloud whose grid it would refuse is tiled instead
     empty_bytes = 0.0
     cell = getattr(algorithm, "cell_size_m", None)
-    if isinstance(cell, (int, float)) and cell > 0:
+    if isinstance(cell, (int, float)) and cell > 0 and getattr(algorithm, "makes_grids", True):
         grid_cells = info.area_m2 / cell ** 2
         spread = grid_cells * math.exp(-info.count / max(grid_cells, 1.0))
         if info.count > 0.8 * grid_cells:

@@ -479,13 +479,13 @@ def _keep_advice(algorithm) -> str:
 
 def replaced_note(counts: dict, algorithm=None) -> str:
     """The log's line on the input's classes the run replaced ("" if none): a vendor's water (9)
-    silently became ground and entered a forester's DTM."""
-    if not counts:
+    silently became ground and entered a forester's DTM. None for a model of its own classes (rfclassify's
+    C1-C5: the input's 3, 5 and 6 "replaced" by the model's 3, 5 and 6, a code reviewer), as its whole run."""
+    if not counts or getattr(algorithm, "new_classes", None):
         return ""
     from ..io.clouds import class_counts_text
     parts = class_counts_text(counts)
-    new = getattr(algorithm, "new_classes", None) or "ground (2) or non-ground (1)"  # (a model's own classes)
-    return (f"Classes of the input replaced by {new}: {parts}. To keep them, "
+    return (f"Classes of the input replaced by ground (2) or non-ground (1): {parts}. To keep them, "
             f"{_keep_advice(algorithm)}; to add one to the DTM, name it in the DTM classes.")
 
 
