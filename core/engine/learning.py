@@ -2,6 +2,7 @@
 HTML/CSV report) and classify a cloud with a saved model (classified cloud, optional DTM)."""
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 from dataclasses import dataclass
@@ -444,11 +445,16 @@ class ModelGround(Hybrid):
     colour_factors: tuple = ()
     stored: tuple = ()
     metres_per_unit: float = 1.0
+    #: a DTM is made: the buffer is then at least MODEL_MIN_REACH_M (without, the features' reach alone)
+    dtm: bool = True
 
     name = "rfclassify"
-    #: rfclassify gives every point a class of its model's: the log's advice on the input's other
-    #: classes (workflow.replaced_note) names the hybrid filter, which can keep them
+    #: rfclassify gives every point a class of its model's, and its whole run says nothing of the input's
+    #: classes: the filters' notes on them (workflow.replaced_note, demoted_note, structures_warning,
+    #: canopy_ground_note) are not said in tiles either (a reviewer read a filter's advice, --last-returns,
+    #: which rfclassify does not have, in a tiled run only)
     keeps_classes = False
+    predicts_classes = True
 
     def __post_init__(self):
         from ..errors import InvalidParameterError
@@ -468,22 +474,6 @@ class ModelGround(Hybrid):
         from ..learn.hybrid import unknown_features
         read = unknown_features(self.features)
         return read + [n for n in self.features if n in self.stored and n not in read]
-
-    @property
-    def new_classes(self) -> Optional[str]:
-        """What the run gives the points (for the log's note on the input's classes it replaced), when
-        not ground (2) and non-ground (1)."""
-        classes = sorted(int(c) for c in self.model.classes)
-        return None if set(classes) <= {1, GROUND_CLASS} else f"the model's classes ({', '.join(map(str, classes))})"
-
-    @property
-    def keep_advice(self) -> Optional[str]:
-        """How to keep the input's classes, when this model cannot run in the hybrid filter (which can)."""
-        if self.new_classes is None and not self.attribute_names:
-            return None
-        return ("train a ground model of x, y, z features (the HYBRID preset) and run it in the learned hybrid "
-                "filter (groundsieve:hybrid, MODEL) with Keep existing classes other than 0, 1, 2: rfclassify gives "
-                "every point one of its model's classes")
 
     @property
     def point_fields(self) -> Tuple[str, ...]:
@@ -514,7 +504,16 @@ class ModelGround(Hybrid):
         """The reach of the model's features computed from x, y, z (the hybrid filter's rule), and at least
         :data:`MODEL_MIN_REACH_M` metres (in the CRS's unit) for the DTM."""
         names = [n for n in self.features if n not in self.attribute_names]
-        return max(self.reach_of(names, self.cell_size_m), MODEL_MIN_REACH_M / self.metres_per_unit)
+        reach = self.reach_of(names, self.cell_size_m) if names else 0.0  # (attributes alone: no neighbour)
+        return max(reach, MODEL_MIN_REACH_M / self.metres_per_unit) if self.dtm else reach
+
+    @property
+    def min_tile_points(self) -> int:
+        """A tile of fewer points keeps its classes (the engine's rule, for filters that need a grid): 1 for a
+        model of attributes alone, which classifies each point by itself (a reviewer's 18 points on the
+        survey's far edge, in tiles of their own with no buffer, kept their input class)."""
+        from .tiles import MIN_TILE_POINTS
+        return 1 if len(self.attribute_names) == len(self.features) else MIN_TILE_POINTS
 
     @property
     def extra_bytes_per_point(self) -> Optional[int]:
@@ -681,14 +680,16 @@ class SurveyAttributes:
 
 
 def survey_attributes(model, model_path: str, input_path: str, files, ignored=(), log=None,
-                      check=None) -> SurveyAttributes:
+                      check=None, colour_of=None) -> SurveyAttributes:
     """Check that every file of a survey gives the model's features as a whole run of it would: its
     attributes (colour, GPS time, a dimension) present; colour neither 0 on every point nor there where the
     model learnt intensity instead (rftrain's radiometry on a file without colour). Each file's colour
     depth is judged from all its points, as a whole run judges it (:func:`_colour_max`), and its colour
     read in the model's depth; features of x, y, z that the files store (groundsieve:features) are read,
     not computed, as a whole run reads them. Warns as a whole run does (:func:`say_features_here`), once
-    for the survey, from a sample: the first points of :data:`SAMPLE_FILES` files spread over it."""
+    for the survey, from a sample: the first points of :data:`SAMPLE_FILES` files spread over it.
+    ``colour_of``: the files whose colour is read (None: all; a job of an array, ``--only``: its file and
+    the neighbours that lend it points, not the whole survey in every job: a reviewer)."""
     import types
     import laspy
     from ..learn.hybrid import GRID_FEATURES, opening_radius, unknown_features
@@ -716,7 +717,7 @@ def survey_attributes(model, model_path: str, input_path: str, files, ignored=()
                              + "): classify the files that have them, or train a model without them")
         for n in computed:
             stored_in[n] += n in dims
-        if (colour_model or radiometry) and "red" in dims:
+        if (colour_model or radiometry) and "red" in dims and (colour_of is None or path in colour_of):
             coloured.append(path)
     stored = tuple(n for n in computed if stored_in[n] == len(files) and files)
     partly = [n for n in computed if 0 < stored_in[n] < len(files)]
@@ -798,8 +799,18 @@ def classify_survey(input_path: str, output_path: Optional[str], model_path: str
     from ..progress import Steps
     options = FilterOptions(ignore_classes=ignore_classes if ignore_classes is not None else (),
                             tiling=tiling or TileOptions())
+    mpu = (metres_per_unit(scan_header(files[0]).crs_wkt) if files else None) or 1.0
+    ground = ModelGround(model_path=model_path, metres_per_unit=mpu, dtm=bool(dtm_path))
+    colour_of = None
+    if options.tiling.only is not None and str(options.tiling.only).strip():  # (a job of an array: see colour_of)
+        from .one_file import header_box, neighbours, only_index
+        infos = [scan_header(f) for f in files]
+        k = only_index(options.tiling.only, files, input_path)
+        pad = ground.reach_m + max(float(options.tiling.tile_size_m), 0.0) + 1.0
+        x0, y0, x1, y1 = header_box(infos[k])
+        colour_of = {files[m] for m in neighbours(infos, k, (x0 - pad, y0 - pad, x1 + pad, y1 + pad))}
     found = survey_attributes(model, model_path, input_path, files, options.ignored, log,
-                              Steps(None, is_cancelled).check)
+                              Steps(None, is_cancelled).check, colour_of)
     if _density_matters(model):
         # (said once, from the first file's sample, as the tiles are planned: a tile's warnings stay in the tile)
         from .tiles import sample_density
@@ -807,8 +818,7 @@ def classify_survey(input_path: str, output_path: Optional[str], model_path: str
         if first is not None:
             _say_density(model, model_path, first.path, sample_density(first.path), first.crs_wkt,
                          log or (lambda _msg: None))
-    ground = ModelGround(model_path=model_path, colour_factors=found.colour_factors, stored=found.stored,
-                         metres_per_unit=(metres_per_unit(scan_header(files[0]).crs_wkt) if files else None) or 1.0)
+    ground = dataclasses.replace(ground, colour_factors=found.colour_factors, stored=found.stored)
     run = run_ground_filter(input_path, output_path, ground,
                             options=options, dtm_path=dtm_path, dtm=dtm or DTMOptions(), progress=progress,
                             is_cancelled=is_cancelled, log=log)
@@ -924,7 +934,8 @@ def classify_file(input_path: str, output_path: Optional[str], model_path: str, 
         ground = predicted_part == CLASS_GROUND
         if not ground.any():
             raise InputError(f"{input_path}: no point was predicted as ground (class 2): no DTM can be made")
-        grid, values = make_dtm(part.x, part.y, part.z, dtm_points(part, ground, np.ones(len(part), bool), dtm), dtm)
+        grid, values = make_dtm(part.x, part.y, part.z, dtm_points(part, ground, np.ones(len(part), bool), dtm), dtm,
+                                path=input_path, log=log)  # (its notes, as a tiled run's: a reviewer)
         rasters.append((dtm_path, values, grid, {"elevation": True}))
     write_outputs(cloud, predicted, output_path, rasters, steps.sub(0.7, 1.0))
     steps.report(1.0)

@@ -437,8 +437,8 @@ def canopy_ground_note(ground: int, not_last: int, algorithm=None) -> str:
     point was not stopped by the ground there, so such ground is canopy or a roof's edge (a forester's CSF
     DTM lay 11.7 m up on the crowns, and the log warned only of 'isolated pits'). "" otherwise, and for the
     DTM from classes (its ground is the input's)."""
-    if getattr(algorithm, "ground_of_any_class", False) or not ground or not_last < NOT_LAST_GROUND_MIN \
-            or not_last < NOT_LAST_GROUND_SHARE * ground:
+    if getattr(algorithm, "ground_of_any_class", False) or getattr(algorithm, "predicts_classes", False) \
+            or not ground or not_last < NOT_LAST_GROUND_MIN or not_last < NOT_LAST_GROUND_SHARE * ground:
         return ""
     return (f"{WARNING_PREFIX}{not_last:,} of the {ground:,} ground points ({100 * not_last / ground:.0f} %) are not "
             "the last return of their pulse: the pulse went on below them, so the ground there is likely canopy "
@@ -451,7 +451,8 @@ def demoted_note(had: int, demoted: int, algorithm=None) -> str:
     """The log's line when a filter made points the input had as ground (2) non-ground: a vendor's ground
     filtered again (a flood modeller's 35 embankment points went from 2 to 1 and the DTM there 1.9 m
     lower, without a word). "" when the input had none, or for the DTM from classes (its ground is theirs)."""
-    if not had or not demoted or getattr(algorithm, "ground_of_any_class", False):
+    if not had or not demoted or getattr(algorithm, "ground_of_any_class", False) \
+            or getattr(algorithm, "predicts_classes", False):
         return ""
     return (f"{demoted:,} of the {had:,} points the input had as ground (2) are not ground now: the filter decided "
             "again. To make a DTM from the input's ground as it is, use 'DTM from classified points' "
@@ -471,8 +472,6 @@ def _keep_advice(algorithm) -> str:
     False: rfclassify), the filter that has."""
     if getattr(algorithm, "keeps_classes", True):
         return "tick Keep existing classes other than 0, 1, 2 (--keep-classes)"
-    if getattr(algorithm, "keep_advice", None):
-        return algorithm.keep_advice
     return ("run the model in the learned hybrid filter (groundsieve:hybrid, MODEL) with Keep existing classes "
             "other than 0, 1, 2")
 
@@ -481,7 +480,7 @@ def replaced_note(counts: dict, algorithm=None) -> str:
     """The log's line on the input's classes the run replaced ("" if none): a vendor's water (9)
     silently became ground and entered a forester's DTM. None for a model of its own classes (rfclassify's
     C1-C5: the input's 3, 5 and 6 "replaced" by the model's 3, 5 and 6, a code reviewer), as its whole run."""
-    if not counts or getattr(algorithm, "new_classes", None):
+    if not counts or getattr(algorithm, "predicts_classes", False):
         return ""
     from ..io.clouds import class_counts_text
     parts = class_counts_text(counts)
@@ -505,7 +504,7 @@ def structures_warning(made_ground: dict, replaced: dict, where: str, algorithm=
     """The warning ("" if none) on the points of an input's structure classes that the run made
     ground: a vendor's bridge deck (17) whose points became ground put a 4 m dam across the river
     under it in a flood modeller's DTM, told only by the note on replaced classes."""
-    if not made_ground:
+    if not made_ground or getattr(algorithm, "predicts_classes", False):
         return ""
     from ..learn.report import ASPRS_NAMES
     parts = ", ".join(f"{n:,} of {replaced.get(c, n):,} {ASPRS_NAMES.get(c, 'class ' + str(c))} ({c})"

@@ -732,7 +732,12 @@ def test_rfclassify_runs_a_model_of_colour_and_several_classes_tile_by_tile(tmp_
     assert isinstance(run, TiledRun) and run.tiles >= 9
     np.testing.assert_array_equal(np.asarray(laspy.read(tmp_path / "tiled.laz").classification), whole)
     np.testing.assert_array_equal(dtm("tiled.tif"), dtm("whole.tif"))
-    assert not any("Classes of the input replaced" in line for line in lines), lines  # (as the whole run)
+    # the filters' notes on the input's classes, not said by the whole run, are not said in tiles (a reviewer read
+    # --last-returns advice there); the DTM's notes are said by both (the whole run had said none)
+    assert not any("Classes of the input replaced" in line or "--last-returns" in line or "became ground" in line
+                   for line in lines), lines
+    dtm_notes = [line for line in lines if "isolated spike" in line or "isolated pit" in line]
+    assert dtm_notes and [line for line in said if "isolated spike" in line or "isolated pit" in line] == dtm_notes
     assert [line for line in lines if line.startswith("class ")] == counts and len(counts) == 1  # (as the whole run)
     # a folder of two files, with worker processes
     folder = tmp_path / "survey"
@@ -850,5 +855,35 @@ def test_a_surveys_files_give_the_features_of_their_own_whole_runs(tmp_path):
     with pytest.raises(InputError, match="eight.laz: the file has colour .RGB., and the model .*learnt the intensity"):
         learning.classify_file(cases["eight.laz"], str(tmp_path / "i.laz"), str(tmp_path / "i.npz"),
                                tiling=TileOptions(tile_size_m=40.0))
-    # the DTM's least buffer is 30 m in the CRS's unit
+    # the DTM's least buffer is 30 m in the CRS's unit; without a DTM the features' reach alone (none for attributes)
     assert learning.ModelGround(model_path=model, metres_per_unit=0.3048).reach_m >= 30 / 0.3048 - 1e-9
+    assert learning.ModelGround(model_path=model, dtm=False).reach_m < 10
+    learning.train_file(str(tmp_path / "plain.laz"), str(tmp_path / "a.npz"), None,
+                        learning.TrainOptions(features=("intensity", "return_number"), params=rf.ForestParams(n_trees=2),
+                                              block_m=20.0, ground_vs_rest=False))
+    attributes = learning.ModelGround(model_path=str(tmp_path / "a.npz"), dtm=False)
+    assert attributes.reach_m == 0 and attributes.min_tile_points == 1
+    # a few points far off, in a tile of their own with no buffer: classified (they had kept their input class)
+    far = new_las(np.r_[las.x, las.x[:5] + 500], np.r_[las.y, las.y[:5]], np.r_[las.z, las.z[:5]], point_format=1,
+                  scale=0.001, classification=np.r_[las.classification, np.full(5, 9, np.uint8)],
+                  intensity=np.r_[las.intensity, las.intensity[:5]],
+                  return_number=np.r_[las.return_number, las.return_number[:5]],
+                  number_of_returns=np.r_[las.number_of_returns, las.number_of_returns[:5]])
+    far.write(str(tmp_path / "far.laz"))
+    _c, whole_far = learning.classify_file(str(tmp_path / "far.laz"), None, str(tmp_path / "a.npz"))
+    learning.classify_file(str(tmp_path / "far.laz"), str(tmp_path / "far_t.laz"), str(tmp_path / "a.npz"),
+                           tiling=TileOptions(tile_size_m=40.0, buffer_m=0.0, workers=1))
+    got = np.asarray(laspy.read(tmp_path / "far_t.laz").classification)
+    np.testing.assert_array_equal(got, whole_far)
+    assert not np.any(got[-5:] == 9)
+    # one job of an array reads its file's colour and its neighbours', not the survey's (a reviewer)
+    apart = tmp_path / "apart"
+    apart.mkdir()
+    for name, shift in (("a.laz", 0.0), ("b.laz", 5000.0)):
+        moved = laspy.read(str(tmp_path / "scene.laz"))
+        moved.x = np.asarray(moved.x) + shift
+        moved.write(str(apart / name))
+    said = []
+    learning.classify_file(str(apart), str(tmp_path / "job" / "{name}.laz"), model,
+                           tiling=TileOptions(only="a.laz", workers=1), log=said.append)
+    assert [line for line in said if line.startswith("Read the colour of 1 file(s)")], said
