@@ -1,6 +1,6 @@
 """rfclassify of a model of colour and returns (matrone2024's C2) in buffered tiles, against its whole run.
 
-    .venv/bin/python bench/rf_tiles.py [--points 4000000] [--tile-size 100] [--workers 2]
+    .venv/bin/python bench/rf_tiles.py [--points 4000000] [--tile-size 100] [--workers 2] [--dtm]
 
 A generated scene (core/synthetic.py) of about ``--points`` points at 20 points/m² is written as LAS 1.4
 point format 7 (LAZ) with colour that tells the classes apart only roughly, as in tests/core/test_rf.py. A
@@ -8,7 +8,8 @@ model of the classes present (C2: colour and return number, 20 trees) is trained
 scene of the same kind. The command line's rfclassify then runs, each in a fresh process: (1) whole, (2) in
 tiles of ``--tile-size`` m, and, for the tiles' floor, (3) a model of x, y, z features alone (the HYBRID
 preset's ground model, which needs no attribute of the records) in the same tiles. Said: wall seconds, the
-peak resident memory of each process, and how the tiled classes compare with the whole run's.
+peak resident memory of each process, and how the tiled classes compare with the whole run's. With ``--dtm`` every run also writes a 1 m DTM (the tiles then predict their buffers too,
+whose ground the DTM needs, and read at least 30 m around each tile).
 """
 import argparse
 import os
@@ -60,6 +61,7 @@ def main():
     parser.add_argument("--tile-size", type=float, default=100.0)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--folder", default=None, help="keep the files here (default: a temporary folder)")
+    parser.add_argument("--dtm", action="store_true", help="each run writes a 1 m DTM too")
     args = parser.parse_args()
     import laspy
     import numpy as np
@@ -86,10 +88,12 @@ def main():
                                      ("x, y, z ground model, whole", "xyz", "xyz_whole.laz", False),
                                      ("x, y, z ground model, tiles", "xyz", "xyz.laz", True)):
         target = os.path.join(work, out)
-        if os.path.exists(target):
-            os.remove(target)
+        dtm = ["--dtm", target[:-4] + ".tif"] if args.dtm else []
+        for old in [target] + dtm[1:]:
+            if os.path.exists(old):
+                os.remove(old)
         seconds, peak = run(["rfclassify", "--input", scene, "--model", models[model], "--output", target]
-                            + (common if tiled else []))
+                            + dtm + (common if tiled else []))
         rows.append((label, seconds, peak))
     whole = np.asarray(laspy.read(os.path.join(work, "whole.laz")).classification)
     tiled = np.asarray(laspy.read(os.path.join(work, "tiled.laz")).classification)
@@ -98,6 +102,11 @@ def main():
         print(f"| {label} | {seconds:.1f} | {peak:,.0f} |")
     print(f"C2 tiles against C2 whole: {np.mean(tiled == whole):.6%} of the points the same class "
           f"(classes {sorted(int(c) for c in np.unique(whole))})")
+    if args.dtm:
+        from osgeo import gdal
+        a, b = (gdal.Open(os.path.join(work, n)).ReadAsArray() for n in ("whole.tif", "tiled.tif"))
+        same = a.shape == b.shape and bool(np.array_equal(a, b, equal_nan=True))
+        print(f"C2 tiles' DTM against the whole run's: {'the same, cell for cell' if same else 'different'}")
 
 
 if __name__ == "__main__":

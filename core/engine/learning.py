@@ -449,12 +449,19 @@ class ModelGround(Hybrid):
     dtm: bool = True
 
     name = "rfclassify"
-    #: rfclassify gives every point a class of its model's, and its whole run says nothing of the input's
-    #: classes: the filters' notes on them (workflow.replaced_note, demoted_note, structures_warning,
-    #: canopy_ground_note) are not said in tiles either (a reviewer read a filter's advice, --last-returns,
-    #: which rfclassify does not have, in a tiled run only)
+    #: rfclassify gives every point a class of its model's: the log's advice on the input's other
+    #: classes (workflow.replaced_note) names the hybrid filter, which can keep them
     keeps_classes = False
-    predicts_classes = True
+    #: nor has it the filters' 'Filter only last returns' (workflow.canopy_ground_note's advice: a reviewer read
+    #: it in a tiled run)
+    offers_last_returns = False
+
+    @property
+    def predicts_classes(self) -> bool:
+        """A model of classes of its own (not ground and the rest): the filters' notes on the input's classes
+        (workflow.replaced_note, demoted_note, structures_warning) are not said, as its whole run says none
+        (a C2 model's 3, 5 and 6 were said to replace the input's 3, 5 and 6)."""
+        return not {int(c) for c in self.model.classes} <= {1, GROUND_CLASS}
 
     def __post_init__(self):
         from ..errors import InvalidParameterError
@@ -924,6 +931,12 @@ def classify_file(input_path: str, output_path: Optional[str], model_path: str, 
     from ..learn.rf import GPS_TIME_MODES
     X = feature_matrix(part, names, steps.sub(0.0, 0.5), gps_time=GPS_TIME_MODES.get(model.meta.get("gps_time"), "raw"))
     say_features_here(model, model_path, input_path, X, log)
+    if {int(c) for c in model.classes} <= {1, CLASS_GROUND}:  # (a ground model: as its tiled run says it)
+        import types
+        from .workflow import replaced_classes, replaced_note
+        note = replaced_note(replaced_classes(cloud.classification, may), types.SimpleNamespace(keeps_classes=False))
+        if note:
+            log(note)
     predicted_part = model.predict(X, steps=steps.sub(0.5, 0.7)).astype(np.uint8)
     predicted = cloud.classification.astype(np.uint8)  # a copy: withheld and ignored points as read
     predicted[may] = predicted_part

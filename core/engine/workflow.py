@@ -437,7 +437,7 @@ def canopy_ground_note(ground: int, not_last: int, algorithm=None) -> str:
     point was not stopped by the ground there, so such ground is canopy or a roof's edge (a forester's CSF
     DTM lay 11.7 m up on the crowns, and the log warned only of 'isolated pits'). "" otherwise, and for the
     DTM from classes (its ground is the input's)."""
-    if getattr(algorithm, "ground_of_any_class", False) or getattr(algorithm, "predicts_classes", False) \
+    if getattr(algorithm, "ground_of_any_class", False) or not getattr(algorithm, "offers_last_returns", True) \
             or not ground or not_last < NOT_LAST_GROUND_MIN or not_last < NOT_LAST_GROUND_SHARE * ground:
         return ""
     return (f"{WARNING_PREFIX}{not_last:,} of the {ground:,} ground points ({100 * not_last / ground:.0f} %) are not "

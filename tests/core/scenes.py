@@ -116,3 +116,16 @@ def four_file_survey(root) -> str:
         part.points = las.points[sel]
         part.write(os.path.join(folder, f"{name}.laz"))
     return folder
+
+
+def split_west_east(las, folder, names=("west.laz", "east.laz")):
+    """Write the points of ``las`` (a laspy LasData) west and east of their median x as two files of
+    ``folder`` (made), named ``names``; returns the west mask."""
+    import laspy
+    os.makedirs(folder, exist_ok=True)
+    west = np.asarray(las.x) < np.median(np.asarray(las.x))
+    for name, part in zip(names, (west, ~west)):
+        piece = laspy.LasData(las.header)
+        piece.points = las.points[part]
+        piece.write(os.path.join(folder, name))
+    return west

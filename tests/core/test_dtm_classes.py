@@ -169,6 +169,10 @@ def test_the_input_classes_a_run_replaces_are_said(river, tmp_path):
                            tiling=TileOptions(tile_size_m=50.0, workers=1, parallel="threads"))
     rf_said = [line for line in rf_lines if line.startswith("Classes of the input replaced")]
     assert len(rf_said) == 1 and "run the model in the learned hybrid filter (groundsieve:hybrid" in rf_said[0]
+    # ... and its whole run says the same (it had said nothing)
+    whole_lines = []
+    learning.classify_file(str(river), str(tmp_path / "rw.laz"), DEFAULT_MODEL, log=whole_lines.append)
+    assert [line for line in whole_lines if line.startswith("Classes of the input replaced")] == rf_said
 
 
 def test_a_bridge_deck_made_ground_is_warned_whole_and_tiled(tmp_path):

@@ -206,14 +206,9 @@ def test_tiled_runs_on_a_file_and_a_folder_equal_the_whole_run(tmp_path):
     got = np.asarray(laspy.read(tmp_path / "tiled.laz").classification)
     assert np.mean(got == whole) >= 0.999
     # A folder of two files (west and east halves), in worker processes.
-    las = laspy.read(path)
+    from groundsieve.tests.core.scenes import split_west_east
     folder = tmp_path / "survey"
-    folder.mkdir()
-    west = np.asarray(las.x) < np.median(np.asarray(las.x))
-    for name, part in (("west.laz", west), ("east.laz", ~west)):
-        piece = laspy.LasData(las.header)
-        piece.points = las.points[part]
-        piece.write(folder / name)
+    west = split_west_east(laspy.read(path), folder)
     run = run_ground_filter(str(folder), str(tmp_path / "classified.vpc"), hybrid, options=FilterOptions(
         tiling=TileOptions(tile_size_m=80.0, workers=2, parallel="processes")))
     assert isinstance(run, TiledRun)

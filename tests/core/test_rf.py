@@ -287,14 +287,9 @@ def test_rfclassify_on_a_folder_and_in_tiles_equals_the_whole_run(tmp_path):
                                  tiling=TileOptions(tile_size_m=80.0, workers=2, parallel="threads"))
     assert isinstance(run, TiledRun) and run.tiles >= 9
     assert np.mean(np.asarray(laspy.read(tmp_path / "tiled.laz").classification) == whole) >= 0.999
-    las = laspy.read(scene)
+    from groundsieve.tests.core.scenes import split_west_east
     folder = tmp_path / "survey"
-    folder.mkdir()
-    west = np.asarray(las.x) < np.median(np.asarray(las.x))
-    for name, part in (("west.laz", west), ("east.laz", ~west)):
-        piece = laspy.LasData(las.header)
-        piece.points = las.points[part]
-        piece.write(folder / name)
+    west = split_west_east(laspy.read(scene), folder)
     run = learning.classify_file(str(folder), str(tmp_path / "classified.vpc"), str(model))
     assert isinstance(run, TiledRun)
     for name, part in (("west.laz", west), ("east.laz", ~west)):
@@ -740,13 +735,9 @@ def test_rfclassify_runs_a_model_of_colour_and_several_classes_tile_by_tile(tmp_
     assert dtm_notes and [line for line in said if "isolated spike" in line or "isolated pit" in line] == dtm_notes
     assert [line for line in lines if line.startswith("class ")] == counts and len(counts) == 1  # (as the whole run)
     # a folder of two files, with worker processes
+    from groundsieve.tests.core.scenes import split_west_east
     folder = tmp_path / "survey"
-    folder.mkdir()
-    west = np.asarray(las.x) < np.median(np.asarray(las.x))
-    for name, part in (("west.laz", west), ("east.laz", ~west)):
-        piece = laspy.LasData(las.header)
-        piece.points = las.points[part]
-        piece.write(folder / name)
+    west = split_west_east(las, folder)
     run = learning.classify_file(str(folder), str(tmp_path / "classified.vpc"), model,
                                  tiling=TileOptions(workers=2, parallel="processes"))
     for name, part in (("west.laz", west), ("east.laz", ~west)):
