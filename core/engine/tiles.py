@@ -1783,8 +1783,16 @@ def _worker_pool(workers: int, use_processes: bool):
         ctx.set_executable(exe)
     from ..machine import usable_cpus
     share = max(1, usable_cpus() // workers)
-    return ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
                                initargs=(worker_thread_environ(share), os.getpid()))
+    # A pool whose workers died (killed for memory, or refusing a script without a main guard) hung the run for
+    # good when a job larger than a pipe's 64 kB (one with a model: the hybrid's 210 kB, a C2 forest's 2 MB) was
+    # being sent: Python 3.11's executor, breaking, joins the queue's feeder thread, which waits for a reader that
+    # is gone (CPython gh-107219). The run, not the feeder, is then what ends.
+    queue = getattr(pool, "_call_queue", None)
+    if queue is not None and hasattr(queue, "cancel_join_thread"):
+        queue.cancel_join_thread()
+    return pool
 
 
 def stop_workers(pool) -> None:

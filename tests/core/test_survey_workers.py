@@ -352,3 +352,35 @@ def test_a_broken_link_in_a_survey_folder_is_refused_and_sub_folders_are_said(su
     run = run_ground_filter(str(folder), str(tmp_path / "o.vpc"), SMRF(), log=lines.append)
     assert len(run.inputs) == 2
     assert any("links: 1 sub-folder(s) not searched (block2)" in w for w in run.warnings), run.warnings
+
+
+def test_a_pool_whose_worker_dies_while_a_large_job_is_sent_fails_and_does_not_hang(tmp_path):
+    """A tiled rfclassify in worker processes hung for good when its workers died (a script without a main
+    guard; the system's memory killer does the same): each tile's job carries the model (the hybrid's 210 kB, a
+    C2 forest's 2 MB), more than a pipe holds, and Python 3.11's breaking executor waited for the thread that was
+    sending it to a reader that was gone (CPython gh-107219). The engine's pool now fails as broken, at once."""
+    import subprocess
+    import sys
+    code = ("import os\n"
+            "from concurrent.futures.process import BrokenProcessPool\n"
+            "from groundsieve.core.engine.tiles import _worker_pool\n"
+            "if __name__ == '__main__':\n"
+            "    pool = _worker_pool(1, True)\n"
+            "    pool.submit(len, b'').result()\n"  # (the worker is up)
+            "    dies = pool.submit(os._exit, 1)\n"
+            "    big = [pool.submit(len, b'x' * 4_000_000) for _ in range(4)]\n"
+            "    try:\n"
+            "        dies.result()\n"
+            "    except BrokenProcessPool:\n"
+            "        print('broken')\n"
+            "    pool.shutdown(wait=True)\n"
+            "    print('shut down')\n")
+    script = tmp_path / "dies.py"
+    script.write_text(code)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+    try:
+        out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=env, timeout=60,
+                             cwd=tmp_path)
+    except subprocess.TimeoutExpired:
+        pytest.fail("the pool hung after its worker died")
+    assert out.stdout.split() == ["broken", "shut", "down"], out.stdout + out.stderr[-2000:]
