@@ -285,8 +285,9 @@ buffered tiles, as the ground filters do (the buffer is the reach of the model's
 points as a run of the whole cloud reads them, and each point gets the model's class. Every file must
 have the model's attributes (a file without its colour is refused by name); each file's colour depth is
 judged from all its points, as a run of the file alone judges it, and features outside what the model
-learnt are warned about once for the survey, from the first points of up to 16 of its files. The tiles, the workers, a Dask
-cluster and one file of a survey for a job array (<i>Advanced parameters</i>) are the ground filters'. Skip the
+learnt are warned about once for the survey, from 50,000 points spread over each of up to 16 of its
+files. The tiles, the workers, a Dask cluster and one file of a survey for a job array (<i>Advanced
+parameters</i>) are the ground filters'. Skip the
 <i>Classified point cloud</i> for the DTM alone: on a survey with a <i>DTM extent</i>, only the tiles that make the
 extent's cells are then classified.</p>
 <p>The model is refused with a clear message when the file was changed or is not a GroundSieve

@@ -652,10 +652,11 @@ def say_features_here(model, model_path: str, where: str, X: np.ndarray, log, de
     return factor
 
 
-#: a survey's attributes are sampled from the first points of at most this many of its files, spread over it
+#: a survey's attributes are sampled from at most this many of its files, spread over it
 SAMPLE_FILES = 16
-#: ... this many points of each (one LAZ chunk is 50,000)
+#: ... this many points of each, in SAMPLE_PIECES runs spread over the file (one LAZ chunk is 50,000 points)
 SAMPLE_POINTS = 50_000
+SAMPLE_PIECES = 4
 
 
 def _colour_max(path: str, ignored, check=None) -> int:
@@ -694,7 +695,8 @@ def survey_attributes(model, model_path: str, input_path: str, files, ignored=()
     depth is judged from all its points, as a whole run judges it (:func:`_colour_max`), and its colour
     read in the model's depth; features of x, y, z that the files store (groundsieve:features) are read,
     not computed, as a whole run reads them. Warns as a whole run does (:func:`say_features_here`), once
-    for the survey, from a sample: the first points of :data:`SAMPLE_FILES` files spread over it.
+    for the survey, from a sample: :data:`SAMPLE_POINTS` points in runs spread over each of
+    :data:`SAMPLE_FILES` files spread over the survey.
     ``colour_of``: the files whose colour is read (None: all; a job of an array, ``--only``: its file and
     the neighbours that lend it points, not the whole survey in every job: a reviewer)."""
     import types
@@ -768,21 +770,25 @@ def survey_attributes(model, model_path: str, input_path: str, files, ignored=()
     rows, by_path = [], dict(factors)
     for path in picked:
         with laspy.open(path) as reader:
-            count = min(SAMPLE_POINTS, int(reader.header.point_count))
-            if not count:
-                continue
-            las = laspy.LasData(header=reader.header, points=reader.read_points(count))
-        cloud = types.SimpleNamespace(path=path, las=las, return_number=np.asarray(las.return_number),
-                                      number_of_returns=np.asarray(las.number_of_returns))
-        X = np.full((count, len(features)), np.nan, dtype=np.float32)
-        for name in read:
-            X[:, features.index(name)] = attribute_values(cloud, name, mode)
-            if name in COLOURS and path in by_path:
-                X[:, features.index(name)] *= by_path[path]
-        # (the points a run classifies: as its whole run judges them)
-        rows.append(X[~np.asarray(las.withheld, dtype=bool) & ~np.isin(np.asarray(las.classification), ignored)])
+            total = int(reader.header.point_count)
+            per = min(SAMPLE_POINTS // SAMPLE_PIECES, total)
+            # runs spread over the file, not its first points: a flight's GPS time grows through a file (a
+            # reviewer's survey warning said 67 % out of range where the whole run said 89 %)
+            for start in sorted({int(s) for s in np.linspace(0, total - per, SAMPLE_PIECES)} if per else ()):
+                reader.seek(start)
+                las = laspy.LasData(header=reader.header, points=reader.read_points(per))
+                cloud = types.SimpleNamespace(path=path, las=las, return_number=np.asarray(las.return_number),
+                                              number_of_returns=np.asarray(las.number_of_returns))
+                X = np.full((len(las.points), len(features)), np.nan, dtype=np.float32)
+                for name in read:
+                    X[:, features.index(name)] = attribute_values(cloud, name, mode)
+                    if name in COLOURS and path in by_path:
+                        X[:, features.index(name)] *= by_path[path]
+                # (the points a run classifies: as its whole run judges them)
+                rows.append(X[~np.asarray(las.withheld, dtype=bool)
+                              & ~np.isin(np.asarray(las.classification), ignored)])
     if rows:
-        what = (f"{input_path} (the first points of {len(picked):,} of its {len(files):,} files)" if len(files) > 1
+        what = (f"{input_path} (a sample of {len(picked):,} of its {len(files):,} files)" if len(files) > 1
                 else input_path)
         say_features_here(model, model_path, what, np.concatenate(rows), log, depth=False)
     return SurveyAttributes(tuple(factors), stored)
