@@ -15,6 +15,7 @@ from ..io import CLASS_GROUND, atomic_path
 from ..progress import WARNING_PREFIX
 from ..learn.hybrid import GROUND_CLASS, Hybrid, hybrid_features
 from ..learn.model_file import MODEL_EXTENSION, load_model, save_model
+from .workflow import NEEDED
 from ..learn.rf import (CRITERIA, DEFAULT_PRESET, PRESETS, SCALERS, ForestParams, Model, feature_matrix,
                         permutation_importance, resolve_features, spatial_split, train_forest)
 
@@ -426,6 +427,11 @@ class ModelResult:
     point_classes: np.ndarray   #: uint8, the model's most probable class per point
 
 
+def _ground_model(model) -> bool:
+    """A model of ground (2) and the rest (1), which the filters' notes on the input's classes fit."""
+    return {int(c) for c in model.classes} <= {1, GROUND_CLASS}
+
+
 #: the least buffer (m) a model classifies tiles with: its DTM's surface near a tile's edge spans the ground
 #: beyond it (lidR's catalogue buffers 30 m for the same reason), even for a model of point attributes alone
 MODEL_MIN_REACH_M = 30.0
@@ -461,7 +467,7 @@ class ModelGround(Hybrid):
         """A model of classes of its own (not ground and the rest): the filters' notes on the input's classes
         (workflow.replaced_note, demoted_note, structures_warning) are not said, as its whole run says none
         (a C2 model's 3, 5 and 6 were said to replace the input's 3, 5 and 6)."""
-        return not {int(c) for c in self.model.classes} <= {1, GROUND_CLASS}
+        return not _ground_model(self.model)
 
     def __post_init__(self):
         from ..errors import InvalidParameterError
@@ -495,16 +501,7 @@ class ModelGround(Hybrid):
         return self._attributes_of if self.attribute_names else None
 
     def _attributes_of(self, cloud, path: str) -> dict:
-        from ..learn.rf import COLOURS, GPS_TIME_MODES, attribute_values
-        mode = GPS_TIME_MODES.get(self.model.meta.get("gps_time"), "raw")
-        factor = dict(self.colour_factors).get(path, 1.0)
-        out = {}
-        for name in self.attribute_names:
-            values = attribute_values(cloud, name, mode)
-            if name in COLOURS and factor != 1.0:
-                values = values * factor  # (float32, as the whole run's X[:, colours] *= factor)
-            out[name] = values
-        return out
+        return read_attributes(self.model, self.attribute_names, cloud, dict(self.colour_factors).get(path, 1.0))
 
     @property
     def reach_m(self) -> float:
@@ -539,11 +536,12 @@ class ModelGround(Hybrid):
     #: the tile engine says which points' classes are used (workflow.NEEDED: a tile's own points, without a
     #: DTM); the forest predicts those only (its prediction is most of a run: 8.6 s of 13 s in tiles of
     #: 100 m with 30 m buffers, docs/BENCHMARKS.md), the others are left not ground, of class 1
-    optional_point_fields = ("_needed",)
+    optional_point_fields = (NEEDED,)
 
-    def run(self, xyz, steps=None, _needed=None, **fields):
+    def run(self, xyz, steps=None, **fields):
         from ..progress import Steps
         steps = steps or Steps()
+        needed = fields.pop(NEEDED, None)
         names, read = self.features, set(self.attribute_names)
         X = np.empty((len(xyz), len(names)), dtype=np.float32)
         computed = [n for n in names if n not in read]
@@ -553,7 +551,7 @@ class ModelGround(Hybrid):
                 X[:, names.index(n)] = values[:, j]
         for n in read:
             X[:, names.index(n)] = fields[n]
-        rows = np.arange(len(xyz)) if _needed is None else np.flatnonzero(_needed)
+        rows = np.arange(len(xyz)) if needed is None else np.flatnonzero(needed)
         classes = [int(c) for c in self.model.classes]
         proba = (self.model.predict_proba(X[rows], steps=steps.sub(0.6, 1.0)) if rows.size
                  else np.zeros((0, len(classes))))
@@ -612,6 +610,29 @@ class _WholeModelRun:
             120 if any(n in PTD_FEATURES for n in model.features) else 0)  # (as Hybrid.extra_bytes_per_point)
 
 
+def _depth_words(factor: float, model_path: str) -> str:
+    """What the log says of colour of the other depth, read in the model's by ``factor``."""
+    if factor > 1:
+        return (f"8-bit (every value at most 255) and the model {model_path} learnt 16-bit colour: the colour is read "
+                "multiplied by 257 (255 becomes 65,535)")
+    return (f"16-bit (values beyond 255) and the model {model_path} learnt 8-bit colour: the colour is read divided "
+            "by 257 (65,535 becomes 255)")
+
+
+def read_attributes(model, names, cloud, colour_factor: float = 1.0) -> dict:
+    """{feature: float32 values} of the attribute features ``names`` of ``cloud`` (its ``las`` holding the
+    records: a tile's part, a survey's sample), read as rfclassify's whole run reads them from its file
+    (learn/rf.attribute_values, the model's GPS-time mode), colour multiplied by ``colour_factor`` (the whole
+    run's X[:, colours] *= factor, in float32)."""
+    from ..learn.rf import COLOURS, GPS_TIME_MODES, attribute_values
+    mode = GPS_TIME_MODES.get(model.meta.get("gps_time"), "raw")
+    out = {}
+    for name in names:
+        values = attribute_values(cloud, name, mode)
+        out[name] = values * colour_factor if name in COLOURS and colour_factor != 1.0 else values
+    return out
+
+
 def say_features_here(model, model_path: str, where: str, X: np.ndarray, log, depth: bool = True) -> float:
     """Warn of what ``X`` (the features of the cloud ``where``, or of a survey's sample; NaN where not
     known) holds that the model did not learn: colour of the other depth, which is then read in the
@@ -623,11 +644,7 @@ def say_features_here(model, model_path: str, where: str, X: np.ndarray, log, de
     factor = colour_depth_factor(model, X) if depth else 1.0
     if factor != 1.0:  # (a reviewer's 16-bit model on an 8-bit flight: every point class 5, no ground, "done")
         X[:, [j for j, name in enumerate(model.features) if name in COLOURS]] *= factor
-        log(f"{WARNING_PREFIX}{where}: its colour is "
-            + ("8-bit (every value at most 255) and the model {m} learnt 16-bit colour: the colour is read "
-               "multiplied by 257 (255 becomes 65,535)" if factor > 1 else
-               "16-bit (values beyond 255) and the model {m} learnt 8-bit colour: the colour is read divided by "
-               "257 (65,535 becomes 255)").format(m=model_path) + ".")
+        log(f"{WARNING_PREFIX}{where}: its colour is {_depth_words(factor, model_path)}.")
     for name, part_out, (low, high), median in out_of_range_features(model, X):
         if name in ("red", "green", "blue"):
             example = "; e.g. colour of another camera, exposure or light"
@@ -702,7 +719,7 @@ def survey_attributes(model, model_path: str, input_path: str, files, ignored=()
     import types
     import laspy
     from ..learn.hybrid import GRID_FEATURES, opening_radius, unknown_features
-    from ..learn.rf import COLOURS, GPS_TIME_MODES, RADIOMETRY, attribute_values, colour_depth_factor
+    from ..learn.rf import COLOURS, RADIOMETRY, colour_depth_factor
     log = log or (lambda _msg: None)
     features = list(model.features)
     read = unknown_features(features)
@@ -760,12 +777,9 @@ def survey_attributes(model, model_path: str, input_path: str, files, ignored=()
     for factor, paths in depths.items():
         shown = ", ".join(os.path.basename(p) for p in paths[:3]) + (", ..." if len(paths) > 3 else "")
         log(f"{WARNING_PREFIX}{len(paths):,} of the {len(files):,} files ({shown}): their colour is "
-            + ("8-bit (every value at most 255) and the model {m} learnt 16-bit colour: it is read multiplied by 257 "
-               "(255 becomes 65,535)" if factor > 1 else "16-bit (values beyond 255) and the model {m} learnt 8-bit "
-               "colour: it is read divided by 257 (65,535 becomes 255)").format(m=model_path) + ".")
+            f"{_depth_words(factor, model_path)}.")
     if not read:
         return SurveyAttributes((), stored)
-    mode = GPS_TIME_MODES.get(model.meta.get("gps_time"), "raw")
     picked = sorted({files[int(k)] for k in np.linspace(0, len(files) - 1, min(SAMPLE_FILES, len(files)))})
     rows, by_path = [], dict(factors)
     for path in picked:
@@ -780,10 +794,8 @@ def survey_attributes(model, model_path: str, input_path: str, files, ignored=()
                 cloud = types.SimpleNamespace(path=path, las=las, return_number=np.asarray(las.return_number),
                                               number_of_returns=np.asarray(las.number_of_returns))
                 X = np.full((len(las.points), len(features)), np.nan, dtype=np.float32)
-                for name in read:
-                    X[:, features.index(name)] = attribute_values(cloud, name, mode)
-                    if name in COLOURS and path in by_path:
-                        X[:, features.index(name)] *= by_path[path]
+                for name, values in read_attributes(model, read, cloud, by_path.get(path, 1.0)).items():
+                    X[:, features.index(name)] = values
                 # (the points a run classifies: as its whole run judges them)
                 rows.append(X[~np.asarray(las.withheld, dtype=bool)
                               & ~np.isin(np.asarray(las.classification), ignored)])
@@ -804,16 +816,16 @@ def classify_survey(input_path: str, output_path: Optional[str], model_path: str
     from .tiles import TileOptions
     from .workflow import DTMOptions, FilterOptions, run_ground_filter
     from ..io.lasfiles import expand_inputs, scan_header
-    model = load_model(model_path)
-    files = expand_inputs(input_path)
-    check_model_unit(model, model_path, input_path, scan_header(files[0]).crs_wkt if files else None,
-                     log or (lambda _msg: None))
     from ..raster.crs import metres_per_unit
     from ..progress import Steps
+    say = log or (lambda _msg: None)
+    files = expand_inputs(input_path)
+    crs_wkt = scan_header(files[0]).crs_wkt if files else None
+    ground = ModelGround(model_path=model_path, metres_per_unit=metres_per_unit(crs_wkt) or 1.0, dtm=bool(dtm_path))
+    model = ground.model
+    check_model_unit(model, model_path, input_path, crs_wkt, say)
     options = FilterOptions(ignore_classes=ignore_classes if ignore_classes is not None else (),
                             tiling=tiling or TileOptions())
-    mpu = (metres_per_unit(scan_header(files[0]).crs_wkt) if files else None) or 1.0
-    ground = ModelGround(model_path=model_path, metres_per_unit=mpu, dtm=bool(dtm_path))
     colour_of = None
     if options.tiling.only is not None and str(options.tiling.only).strip():  # (a job of an array: see colour_of)
         from .one_file import header_box, neighbours, only_index
@@ -822,21 +834,20 @@ def classify_survey(input_path: str, output_path: Optional[str], model_path: str
         pad = ground.reach_m + max(float(options.tiling.tile_size_m), 0.0) + 1.0
         x0, y0, x1, y1 = header_box(infos[k])
         colour_of = {files[m] for m in neighbours(infos, k, (x0 - pad, y0 - pad, x1 + pad, y1 + pad))}
-    found = survey_attributes(model, model_path, input_path, files, options.ignored, log,
+    found = survey_attributes(model, model_path, input_path, files, options.ignored, say,
                               Steps(None, is_cancelled).check, colour_of)
     if _density_matters(model):
         # (said once, from the first file's sample, as the tiles are planned: a tile's warnings stay in the tile)
         from .tiles import sample_density
         first = next((info for info in map(scan_header, files) if info.count), None)
         if first is not None:
-            _say_density(model, model_path, first.path, sample_density(first.path), first.crs_wkt,
-                         log or (lambda _msg: None))
+            _say_density(model, model_path, first.path, sample_density(first.path), first.crs_wkt, say)
     ground = dataclasses.replace(ground, colour_factors=found.colour_factors, stored=found.stored)
     run = run_ground_filter(input_path, output_path, ground,
                             options=options, dtm_path=dtm_path, dtm=dtm or DTMOptions(), progress=progress,
                             is_cancelled=is_cancelled, log=log)
-    if log and run.class_counts:  # (as the whole run says them)
-        log(", ".join(f"class {c}: {run.class_counts.get(int(c), 0):,}" for c in model.classes))
+    if run.class_counts:  # (as the whole run says them)
+        say(", ".join(f"class {c}: {run.class_counts.get(int(c), 0):,}" for c in model.classes))
     return run
 
 
@@ -937,7 +948,7 @@ def classify_file(input_path: str, output_path: Optional[str], model_path: str, 
     from ..learn.rf import GPS_TIME_MODES
     X = feature_matrix(part, names, steps.sub(0.0, 0.5), gps_time=GPS_TIME_MODES.get(model.meta.get("gps_time"), "raw"))
     say_features_here(model, model_path, input_path, X, log)
-    if {int(c) for c in model.classes} <= {1, CLASS_GROUND}:  # (a ground model: as its tiled run says it)
+    if _ground_model(model):  # (as its tiled run says it)
         import types
         from .workflow import replaced_classes, replaced_note
         note = replaced_note(replaced_classes(cloud.classification, may), types.SimpleNamespace(keeps_classes=False))

@@ -386,7 +386,7 @@ def attribute_values(cloud, name: str, gps_time: str = "week") -> np.ndarray:
     """The float32 values of the attribute feature ``name`` (colour, intensity, returns, scan angle in
     degrees, GPS time as :func:`feature_matrix` reads it, or a dimension of the file) of ``cloud``, from
     its ``las`` (its records)."""
-    if name in ATTRIBUTE_FEATURES or name == "scan_angle":
+    if name in ATTRIBUTE_FEATURES:
         return _attribute(cloud, name, gps_time)
     dims = set(cloud.las.point_format.dimension_names) if cloud.las is not None else set()
     if name not in dims:
@@ -450,10 +450,8 @@ def feature_matrix(cloud, names: Sequence[str], steps=None, *, gps_time: str = "
     for name in names:
         if name in columns:
             continue
-        if name in ATTRIBUTE_FEATURES or name in ("scan_angle",):
-            columns[name] = _attribute(cloud, name, gps_time)
-        elif name in dims:
-            columns[name] = np.asarray(cloud.las[name], dtype=np.float32)
+        if name in ATTRIBUTE_FEATURES or name in dims:  # (read from the file, as a tile reads them)
+            columns[name] = attribute_values(cloud, name, gps_time)
         else:
             try:
                 parse_feature_name(name)
