@@ -39,20 +39,25 @@ def _tree_rss_kb(pgid: int) -> int:
     return total
 
 
-def run(cmd):
-    """(wall seconds, peak resident MB of the run with its worker processes, sampled every 0.1 s)."""
+def run(cmd, keep_log=False):
+    """(wall seconds, peak resident MB of the run with its worker processes, sampled every 0.1 s), and its
+    log (stderr) with ``keep_log``. (The log goes to a file: a pipe left unread while the run goes on
+    stops it once 64 kB of tile lines fill it.)"""
     start = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-m", "groundsieve"] + cmd, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True, env=dict(os.environ, PYTHONPATH=str(PLUGINS)),
-                            start_new_session=True)
-    peak = 0
-    while proc.poll() is None:
-        peak = max(peak, _tree_rss_kb(proc.pid))
-        time.sleep(0.1)
-    seconds = time.perf_counter() - start
+    with tempfile.TemporaryFile("w+") as err:
+        proc = subprocess.Popen([sys.executable, "-m", "groundsieve"] + cmd, stdout=subprocess.DEVNULL,
+                                stderr=err, text=True, env=dict(os.environ, PYTHONPATH=str(PLUGINS)),
+                                start_new_session=True)
+        peak = 0
+        while proc.poll() is None:
+            peak = max(peak, _tree_rss_kb(proc.pid))
+            time.sleep(0.1)
+        seconds = time.perf_counter() - start
+        err.seek(0)
+        log = err.read()
     if proc.returncode:
-        sys.exit(f"{' '.join(cmd)} failed ({proc.returncode}):\n{proc.stderr.read()[-3000:]}")
-    return seconds, peak / 1024.0
+        sys.exit(f"{' '.join(cmd)} failed ({proc.returncode}):\n{log[-3000:]}")
+    return (seconds, peak / 1024.0) + ((log,) if keep_log else ())
 
 
 def main():

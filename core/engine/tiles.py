@@ -1185,12 +1185,16 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         return failed.is_set() or steps.is_cancelled()
     if any(d is not None for d in done_before):
         log(f"{sum(d is not None for d in done_before)} of {len(keys)} tile(s) were done before; skipping them.")
+    sent = algorithm
+    if use_processes or tiling.scheduler:  # (sent to each worker once, not with every job: sent_once.py)
+        from .sent_once import SentOnce
+        sent = SentOnce(algorithm, os.path.join(work, "algorithm.pickle"))
     jobs = [dict(key=key, parts=tiles.get(key, []), copc=copc_tiles.get(key, []), bounds=grid.bounds(key),
                  buffer=grid.buffer, done_dir=done_dir,
                  names=sorted({os.path.basename(inputs[p.file_index])
                                for p in tiles.get(key, []) + copc_tiles.get(key, [])}),
                  paths={p.file_index: inputs[p.file_index] for p in tiles.get(key, []) + copc_tiles.get(key, [])},
-                 class_paths=class_paths, algorithm=algorithm, options=options, dtm=dtm if dtm_path else None,
+                 class_paths=class_paths, algorithm=sent, options=options, dtm=dtm if dtm_path else None,
                  dtm_grid=dtm_writer.grid if dtm_writer is not None else None,
                  is_cancelled=None if use_processes or tiling.scheduler else tile_cancelled,
                  own_classes=bool(tiling.scheduler), only=None if one is None else one.index)
@@ -1905,10 +1909,12 @@ def _tile_job(job) -> Optional[dict]:
     options = job["options"]
     try:
         from ..io.copc import tile_sources
+        from .sent_once import resolve
+        algorithm = resolve(job["algorithm"])  # (in a worker, loaded once: a model's forest)
         clouds, indices, files = [], [], []
         # An algorithm that takes more of the points than a tile cloud's fields (a model's colour, scan angle,
         # GPS time) is given each part's records, as the file's own header reads them, and keeps its values.
-        attributes = getattr(job["algorithm"], "point_attributes", None)
+        attributes = getattr(algorithm, "point_attributes", None)
         reader = read_part if attributes is None else _part_reader(job["paths"])
         sources, copc_read = tile_sources(job["parts"], job.get("copc", ()), reader,  # in file order
                                           records=attributes is not None)
@@ -1929,18 +1935,18 @@ def _tile_job(job) -> Optional[dict]:
             return None
         cloud = tile_cloud(clouds, path=where)
         del clouds
-        if workflow.NEEDED in getattr(job["algorithm"], "optional_point_fields", ()) and job["dtm"] is None:
+        if workflow.NEEDED in getattr(algorithm, "optional_point_fields", ()) and job["dtm"] is None:
             # (a model's prediction, most of its time, left out for the buffer, whose classes no DTM uses)
             cloud.attributes = {**(cloud.attributes or {}), workflow.NEEDED: own.copy()}
         replaced, structures, demoted, ground_classes, not_last, made = {}, {}, (0, 0), [], (0, 0), []
-        if len(cloud) < getattr(job["algorithm"], "min_tile_points", MIN_TILE_POINTS):
+        if len(cloud) < getattr(algorithm, "min_tile_points", MIN_TILE_POINTS):
             # Isolated points (a stray point far from the survey): too few for any filter's grid;
             # they keep their classes and are not ground.
             cls, ground = cloud.classification, np.zeros(len(cloud), dtype=bool)
         elif workflow.select_points(cloud, options).any():
-            done = workflow.classify_cloud(cloud, job["algorithm"], options, Steps(is_cancelled=job["is_cancelled"]))
+            done = workflow.classify_cloud(cloud, algorithm, options, Steps(is_cancelled=job["is_cancelled"]))
             cls, ground = done.classification, done.ground
-            if getattr(job["algorithm"], "ground_of_any_class", False):
+            if getattr(algorithm, "ground_of_any_class", False):
                 from ..io.clouds import count_classes
                 ground_classes = sorted(count_classes(cloud.classification[ground & own]).items())
             demoted = workflow.demoted_ground(cloud.classification, ground, own & done.touched)
@@ -1984,7 +1990,7 @@ def _tile_job(job) -> Optional[dict]:
             block = _dtm_block(cloud, in_dtm, job["dtm"], job["dtm_grid"], job["bounds"], job["buffer"], area, gaps)
             hull = _block_hull(block, job["dtm_grid"])  # (the whole run fills the ground's hull)
             if options.keep_existing_classes:
-                kept_out = workflow.kept_out_of_dtm(cloud, cls, area & own & ~in_dtm, job["dtm"], job["algorithm"])
+                kept_out = workflow.kept_out_of_dtm(cloud, cls, area & own & ~in_dtm, job["dtm"], algorithm)
         result = dict(key=list(job["key"]), own=int(own.sum()), read=len(cloud), ground=int(ground[own].sum()),
                       dtm_points=dtm_own, assigned=assigned, block=block, class_parts=class_parts, copc_read=copc_read,
                       kept_out=sorted(kept_out.items()), replaced=sorted(replaced.items()),

@@ -84,6 +84,27 @@ def flaky_smrf(budget: int = 3):
     return Flaky
 
 
+class CountedSMRF:
+    """SMRF that appends its process id to ``log_path`` each time it is unpickled: how many times a
+    run sent it to its worker processes. (Here, in a module the worker processes can import.)"""
+
+    def __init__(self, log_path):
+        from groundsieve.core.filters.smrf import SMRF
+        self.log_path, self.reach_m = str(log_path), SMRF().reach_m
+
+    def __repr__(self):
+        return "CountedSMRF()"
+
+    def __call__(self, xyz, steps=None):
+        from groundsieve.core.filters.smrf import SMRF
+        return SMRF()(xyz, steps)
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        with open(self.log_path, "a") as f:
+            f.write(f"{os.getpid()}\n")
+
+
 def die_once_in(marker, key, function, job):
     """Run ``function(job)``, except the first time the job of tile ``key`` runs anywhere: then the
     worker process running it kills itself (SIGKILL), in the middle of the run. (For the Dask

@@ -15,7 +15,7 @@ from groundsieve.core.engine.workflow import DTMOptions, FilterOptions, run_grou
 from groundsieve.core.errors import InputError
 from groundsieve.core.filters.smrf import SMRF
 from groundsieve.core.synthetic import SceneSpec, make_scene, write_scene
-from groundsieve.tests.core.scenes import four_file_survey
+from groundsieve.tests.core.scenes import CountedSMRF, four_file_survey
 
 
 @pytest.fixture(scope="module")
@@ -384,3 +384,24 @@ def test_a_pool_whose_worker_dies_while_a_large_job_is_sent_fails_and_does_not_h
     except subprocess.TimeoutExpired:
         pytest.fail("the pool hung after its worker died")
     assert out.stdout.split() == ["broken", "shut", "down"], out.stdout + out.stderr[-2000:]
+
+
+def test_worker_processes_receive_the_algorithm_once_each_not_with_every_tile(survey, tmp_path):
+    """The run's algorithm (a model's forest: 29.6 MB pickled for a default rftrain model) is sent to
+    each worker process once (core/engine/sent_once.py), where every tile job carried it and was
+    unpickled with it; the classes and DTM are those of a run in this process."""
+    unpickled = tmp_path / "unpickled.txt"
+    outputs = {}
+    for workers in (1, 2):
+        out = tmp_path / f"w{workers}"
+        out.mkdir()
+        opts = FilterOptions(tiling=TileOptions(tile_size_m=30.0, buffer_m=10.0, workers=workers,
+                                                parallel="processes"))
+        run = run_ground_filter(survey, str(out / "classified.vpc"), CountedSMRF(unpickled), options=opts,
+                                dtm_path=str(out / "dtm.tif"), dtm=DTMOptions(cell_size_m=1.0))
+        from osgeo import gdal
+        ds = gdal.Open(str(out / "dtm.tif"))  # (held: a band outliving its dataset crashes GDAL)
+        outputs[workers] = (run.tiles, _digest(out / "classified"), ds.GetRasterBand(1).ReadAsArray().tobytes())
+    assert outputs[1] == outputs[2] and outputs[2][0] >= 16
+    processes = unpickled.read_text().split()
+    assert 1 <= len(processes) <= 2 and len(set(processes)) == len(processes)
