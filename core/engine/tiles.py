@@ -736,7 +736,8 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
             log(f"The memory budget ({tiling.budget_bytes / 2**20:,.0f} MB) is below what the smallest tiles "
                 f"need: tiles of {size:g} m and their buffer take about {need / 2**20:,.0f} MB on "
                 f"{tiling.worker_count} worker(s), which the run may use.")
-    grid = TileGrid(size, buffer_m)
+    headers = survey_box(infos)  # (before the files are cut to those a subset of the tiles reads)
+    grid = TileGrid.for_survey(size, buffer_m, headers)  # (the survey's far edge closes its last tiles)
     note = getattr(algorithm, "tiled_note", "")
     if note:
         log(note)
@@ -744,7 +745,6 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
     from .workflow import length_label
     unit = length_label(metres_per_unit(infos[0].crs_wkt) or 1.0)  # (a survey in feet: feet)
     one = None  # one_file.Subset: one file's run, or a DTM extent's alone (None: the whole survey)
-    headers = survey_box(infos)  # (before the files are cut to those a subset of the tiles reads)
     if only is not None:
         from .one_file import Subset, header_box, neighbours, reach_box, tile_range
         tiles_of = tile_range(header_box(infos[only]), size)
@@ -1030,7 +1030,7 @@ def _fingerprint(infos, grid, algorithm, options, dtm, only: Optional[str] = Non
         if dataclasses.is_dataclass(options) and hasattr(options, "tiling") else options
     dtm_results = dataclasses.replace(dtm, memory_budget_bytes=None) \
         if dataclasses.is_dataclass(dtm) and hasattr(dtm, "memory_budget_bytes") else dtm
-    text = _json.dumps([files, grid.size, grid.buffer, repr(algorithm), repr(results), repr(dtm_results), WORK_FORMAT,
+    text = _json.dumps([files, grid.size, grid.buffer, list(grid.edge), repr(algorithm), repr(results), repr(dtm_results), WORK_FORMAT,
                         _core_digest()] + ([only] if only else []), default=str)
     return hashlib.sha1(text.encode()).hexdigest()[:16]
 
@@ -1121,13 +1121,13 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                   if sum(p.own_count for p in parts)
                   or (dtm_grid is not None and _block_cells(dtm_grid, grid.bounds(k)) is not None))
     from ..io.copc import plan_tiles
-    copc_tiles = plan_tiles(infos, grid.size, grid.buffer)  # the tiles COPC inputs may have points in
+    copc_tiles = plan_tiles(infos, grid.size, grid.buffer, grid.edge)  # the tiles COPC inputs may have points in
     keys = sorted(set(keys) | set(copc_tiles))
     if one is not None:
         keys = _one_files_tiles(keys, tiles, copc_tiles, one, grid, dtm_grid, infos, log)
     if copc_tiles:  # ... and those whose buffer reaches into them
         from ..io.copc import add_buffer_sources
-        add_buffer_sources(copc_tiles, infos, keys, grid.size, grid.buffer)
+        add_buffer_sources(copc_tiles, infos, keys, grid.size, grid.buffer, grid.edge)
     n_copc = sum(1 for i in infos if i.copc)
     log(f"Binned into {len(keys)} tile(s) in {time.perf_counter() - t_start:.1f} s." if not n_copc else
         f"Planned {len(keys)} tile(s) in {time.perf_counter() - t_start:.1f} s ({n_copc} COPC file(s) read by "
@@ -2079,8 +2079,8 @@ def _say_stray_tiles(tiles, grid, dtm_grid, log) -> None:
     dx1, dy0 = dx0 + dtm_grid.ncols * dtm_grid.cell, dy1 - dtm_grid.nrows * dtm_grid.cell
 
     def outside(k):  # a tile beyond the box of the filtered tiles, not touching it: the DTM is stretched
-        # to reach it (the points on a survey's edge at a multiple of the tile size make a tile of their
-        # own touching the box: an HPC reviewer's 9 such points were called far from the others), unless
+        # to reach it (a few points beside the box are not far: an HPC reviewer's 9 points on the survey's
+        # edge, which made a tile of their own before that edge closed its tiles, were called so), unless
         # its points are all ignored or withheld (the DTM, cut to the others, does not reach it)
         bx0, by0, bx1, by1 = grid.bounds(k)
         reached = bx0 <= dx1 and bx1 >= dx0 and by0 <= dy1 and by1 >= dy0

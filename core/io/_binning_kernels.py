@@ -10,7 +10,7 @@ from numba import njit
 @njit(cache=True, nogil=True)
 def _reach(f, size, buffer, m):
     """The tile steps (lo, hi) along one axis whose buffers hold a point at ``f`` (its position
-    inside its own tile, [0, size)): ``lasfiles._in_buffer`` for every step from -m to m, which
+    inside its own tile, [0, size); ``size`` on the survey's far edge, which closes its tile): ``lasfiles._in_buffer`` for every step from -m to m, which
     holds on one run of steps around 0 (the test only loosens towards 0)."""
     lo = 0
     for d in range(1, m + 1):  # d tiles before: f + (d - 1) * size < buffer
@@ -28,11 +28,13 @@ def _reach(f, size, buffer, m):
 
 
 @njit(cache=True, nogil=True)
-def bin_chunk_kernel(X, Y, sx, ox, sy, oy, size, buffer, m, first):
+def bin_chunk_kernel(X, Y, sx, ox, sy, oy, size, buffer, m, first, edge_x, edge_y, edge_xmax, edge_ymax):
     """Every (tile, point) pair of one chunk: the point in the tile or in its buffer.
 
     ``X``, ``Y``: the records' integer coordinates (scaled as laspy does, ``X * sx + ox``);
-    ``first``: the chunk's first point in the file.
+    ``first``: the chunk's first point in the file; ``edge_x``, ``edge_y``: the tile index the survey's
+    far edge closes along each axis (``TileGrid.edge_keys``), a point there at most ``edge_xmax``,
+    ``edge_ymax`` (on the edge) going to the tile below (``TileGrid.key_of``).
 
     Returns (kx0, ky0, nky, bucket_start, out_idx, own_count): the pairs grouped by tile (bucket
     ``b`` is tile (kx0 + b // nky, ky0 + b % nky) and holds the pairs
@@ -53,6 +55,10 @@ def bin_chunk_kernel(X, Y, sx, ox, sy, oy, size, buffer, m, first):
         y = Y[i] * sy + oy
         a = np.int64(math.floor(x / size))
         b = np.int64(math.floor(y / size))
+        if a == edge_x and x <= edge_xmax:
+            a -= 1
+        if b == edge_y and y <= edge_ymax:
+            b -= 1
         kx[i] = a
         ky[i] = b
         lo, hi = _reach(x - a * size, size, buffer, m)

@@ -347,13 +347,14 @@ class CopcSource:
     key: Tuple[int, int]
     size: float       #: the tile grid's side (m)
     buffer: float     #: its buffer (m)
+    edge: Tuple[float, float] = (math.inf, math.inf)  #: the survey's far edges (``TileGrid.edge``)
 
 
-def _tile_selection(x, y, key, size: float, buffer: float):
+def _tile_selection(x, y, key, size: float, buffer: float, edge=(math.inf, math.inf)):
     """(in the tile or its buffer, the tile's own) for points at x, y: ``lasfiles.bin_file``'s
     test (``TileGrid.key_of`` and ``_in_buffer``), so that a tile holds the points its parts would."""
     from .lasfiles import TileGrid, _in_buffer
-    grid = TileGrid(size, buffer)
+    grid = TileGrid(size, buffer, tuple(edge))
     kx, ky = grid.key_of(x, y)
     m = int(math.ceil(buffer / size)) if buffer > 0 else 0
     dx, dy = key[0] - kx, key[1] - ky
@@ -377,17 +378,20 @@ def read_tile(source: CopcSource, records: bool = False) -> Tuple[PointCloud, np
     points, file_index, decompressed = _read_nodes_cached(index, sel, None if records else TILE_LAYERS, _CACHE)
     x = np.asarray(points.x, dtype=np.float64)
     y = np.asarray(points.y, dtype=np.float64)
-    keep, own = _tile_selection(x, y, source.key, s, b)
+    keep, own = _tile_selection(x, y, source.key, s, b, source.edge)
     idx = np.where(own, file_index, -1 - file_index)[keep]
     return _cloud(index, points[keep], records), idx, decompressed
 
 
-def plan_tiles(infos: Sequence, size: float, buffer: float) -> Dict[Tuple[int, int], List[CopcSource]]:
+def plan_tiles(infos: Sequence, size: float, buffer: float,
+               edge=(math.inf, math.inf)) -> Dict[Tuple[int, int], List[CopcSource]]:
     """The tiles the COPC inputs among ``infos`` (``LasInfo`` with ``copc`` set) may have points
     in, each with the sources it reads. From the hierarchy alone: a node no wider than
     :data:`COARSE_TILES` tiles names the tiles its cube covers; the points of the wider (coarse,
     upper) nodes, few, are read to name theirs. A tile named but holding no point of its own is
     skipped by the tile job."""
+    from .lasfiles import TileGrid
+    grid = TileGrid(size, buffer, tuple(edge))
     tiles: Dict[Tuple[int, int], List[CopcSource]] = {}
     for k, info in enumerate(infos):
         if not getattr(info, "copc", False) or not info.count:
@@ -400,24 +404,24 @@ def plan_tiles(infos: Sequence, size: float, buffer: float) -> Dict[Tuple[int, i
         lo_j, hi_j = np.floor(y0 / size).astype(np.int64), np.floor(y1 / size).astype(np.int64)
         # a node's cube clipped to the header's box (the octree's cube is wider than the points)
         (bx0, by0, _), (bx1, by1, _) = info.mins, info.maxs
+        (last_i,), (last_j,) = grid.key_of(np.array([bx1]), np.array([by1]))  # (the survey's far edge closes)
         lo_i = np.maximum(lo_i, math.floor(bx0 / size))
-        hi_i = np.minimum(hi_i, math.floor(bx1 / size))
+        hi_i = np.minimum(hi_i, int(last_i))
         lo_j = np.maximum(lo_j, math.floor(by0 / size))
-        hi_j = np.minimum(hi_j, math.floor(by1 / size))
+        hi_j = np.minimum(hi_j, int(last_j))
         for a, b, c, d in set(zip(lo_i.tolist(), hi_i.tolist(), lo_j.tolist(), hi_j.tolist())):
             keys.update((ii, jj) for ii in range(a, b + 1) for jj in range(c, d + 1))
         if coarse.any():
             points, _ = _read_nodes(index, np.flatnonzero(coarse), XY_LAYERS)
-            kx = np.floor(np.asarray(points.x, dtype=np.float64) / size).astype(np.int64)
-            ky = np.floor(np.asarray(points.y, dtype=np.float64) / size).astype(np.int64)
+            kx, ky = grid.key_of(np.asarray(points.x, dtype=np.float64), np.asarray(points.y, dtype=np.float64))
             keys.update(zip(kx.tolist(), ky.tolist()))
         for key in keys:
-            tiles.setdefault(key, []).append(CopcSource(k, info.path, key, float(size), float(buffer)))
+            tiles.setdefault(key, []).append(CopcSource(k, info.path, key, float(size), float(buffer), grid.edge))
     return tiles
 
 
 def add_buffer_sources(tiles: Dict[Tuple[int, int], List[CopcSource]], infos: Sequence, keys, size: float,
-                       buffer: float) -> None:
+                       buffer: float, edge=(math.inf, math.inf)) -> None:
     """Give each of the survey's tiles ``keys`` a source in every COPC input its buffer reaches, beside
     those in which it has points of its own (:func:`plan_tiles`): where the tiles lie on the files' edges
     (a delivery of 500 m files in 500 m tiles), a tile had none of its neighbours' points for its buffer,
@@ -434,7 +438,7 @@ def add_buffer_sources(tiles: Dict[Tuple[int, int], List[CopcSource]], infos: Se
                     continue
                 sources = tiles.setdefault((i, j), [])
                 if not any(src.file_index == k for src in sources):
-                    sources.append(CopcSource(k, info.path, (i, j), float(size), float(buffer)))
+                    sources.append(CopcSource(k, info.path, (i, j), float(size), float(buffer), tuple(edge)))
 
 
 def tile_sources(parts: Sequence, copc: Sequence[CopcSource], read_part, records: bool = False) -> Tuple[list, int]:

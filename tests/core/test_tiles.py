@@ -348,6 +348,61 @@ def test_points_on_the_eastern_and_southern_edges_add_no_column_or_row(tmp_path)
     np.testing.assert_allclose(mosaic, whole, atol=1e-3)
 
 
+def test_points_on_the_survey_s_far_edges_make_no_tiles_of_their_own(tmp_path):
+    """A delivery of 3 x 3 files of 50 m whose last files hold the points on the survey's east and north
+    edges, at multiples of the 50 m tiles: those points made a row and a column of tiles of their own,
+    each filtering its whole buffer (9 files of 100 m made 15 tiles: a UAV reviewer). They now go to the
+    tiles the edge closes: 9 tiles, in LAZ files or COPC, and the classes and DTM of a run of the whole
+    cloud; one file of the survey run alone (``only``) gets its classes too."""
+    from groundsieve.tests.core.test_copc import write_copc
+    scene = make_scene(SceneSpec(size_m=150.0, density_per_m2=2.0, seed=4))
+    x, y = scene.x - scene.x.min(), scene.y - scene.y.min()
+    x, y = x * (150.0 / x.max()), y * (150.0 / y.max())
+    x[x > 149.5], y[y > 149.5] = 150.0, 150.0  # (the last half metre on the edges themselves)
+    x, y, z = np.round(x + 500_000.0, 2), np.round(y + 5_400_000.0, 2), np.round(scene.z, 2)  # (as stored)
+    whole = new_las(x, y, z, classification=scene.classification, return_number=scene.return_number,
+                    number_of_returns=scene.number_of_returns, point_format=6, version="1.4")
+    write_las(whole, str(tmp_path / "whole.laz"))
+    cell = DTMOptions(cell_size_m=1.0)
+    run_ground_filter(str(tmp_path / "whole.laz"), str(tmp_path / "whole_out.laz"), SMRF(),
+                      dtm_path=str(tmp_path / "whole.tif"), dtm=cell)
+    expected = np.asarray(laspy.read(tmp_path / "whole_out.laz").classification)
+    on_edge = (x == 500_150.0) | (y == 5_400_150.0)
+    assert on_edge.sum() > 100
+    files = np.minimum(np.floor((x - 500_000.0) / 50.0), 2) * 3 + np.minimum(np.floor((y - 5_400_000.0) / 50.0), 2)
+    for kind in ("laz", "copc"):
+        folder = tmp_path / kind
+        folder.mkdir()
+        for f in range(9):
+            part = laspy.LasData(whole.header)
+            part.points = whole.points[files == f]
+            if kind == "laz":
+                part.write(str(folder / f"f{f}.laz"))
+            else:
+                write_copc(str(folder / f"f{f}.copc.laz"), part)
+        lines = []
+        run_ground_filter(str(folder), str(tmp_path / f"{kind}_out.vpc"), SMRF(), options=tiled(tile=50.0),
+                          dtm_path=str(tmp_path / f"{kind}.tif"), dtm=cell, log=lines.append)
+        assert any(line.startswith(("Binned into 9 tile(s)", "Planned 9 tile(s)")) for line in lines), lines
+        out = tmp_path / f"{kind}_out.vpc"
+        for f in range(9):
+            got = laspy.read(next(p for p in read_vpc(str(out)) if os.path.basename(p).startswith(f"f{f}.")))
+            # (COPC files hold their points in another order: matched by position)
+            order = np.lexsort((np.asarray(got.z), np.asarray(got.y), np.asarray(got.x)))
+            mine = files == f
+            ref = np.lexsort((z[mine], y[mine], x[mine]))
+            assert np.array_equal(np.asarray(got.classification)[order], expected[mine][ref]), (kind, f)
+        mosaic, gt = _dtm_values(tmp_path / f"{kind}.tif")
+        reference, gt_whole = _dtm_values(tmp_path / "whole.tif")
+        assert gt == gt_whole and mosaic.shape == reference.shape
+        np.testing.assert_allclose(mosaic, reference, atol=1e-3)
+    lines = []
+    run_ground_filter(str(tmp_path / "laz"), str(tmp_path / "one.laz"), SMRF(),
+                      options=tiled(tile=50.0, only="f8.laz"), log=lines.append)
+    mine = files == 8
+    assert np.array_equal(np.asarray(laspy.read(tmp_path / "one.laz").classification), expected[mine])
+
+
 def _split_files(scene_laz, folder, at_x):
     las = laspy.read(scene_laz)
     folder.mkdir()
