@@ -433,7 +433,7 @@ checkpoints.</p>""")
         datum = ("their heights are taken as they are: they must be in the DTM's vertical datum (geoid) "
                  "and unit")
         if not source_crs.isValid() or not dtm_crs.isValid():
-            self.warn(feedback, f"{'the checkpoints' if not source_crs.isValid() else 'the DTM'} have no CRS: the "
+            self.warn(feedback, f"{'the checkpoints have' if not source_crs.isValid() else 'the DTM has'} no CRS: the "
                                  f"checkpoints' x and y are taken as in the DTM's CRS; {datum}")
             return None
         if source_crs == dtm_crs:

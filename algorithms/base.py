@@ -220,7 +220,8 @@ def _file_extensions(file_filter):
 def explain_parameter(param, value, strictly_positive=(), largest=None):
     """What is wrong with ``value`` for ``param``, in the dialog's words (its label), or None.
     QGIS's own check only says "An error was encountered while checking parameter values"."""
-    label = param.description()
+    from .pointclouds import EITHER_INPUT
+    label = param.description().replace(EITHER_INPUT, "")  # (what the value is, not that one of two is needed)
     if value is None or (isinstance(value, str) and value == ""):
         return None
     if isinstance(param, QgsProcessingParameterNumber):
@@ -291,13 +292,85 @@ def sink_folder_problem(algorithm, parameters, name, context):
     return destination_folder_problem(algorithm.parameterDefinition(name).description(), value)
 
 
+def staged_sink(parameters, name, context):
+    """(the final path, the parameters with the feature sink ``name`` sent to a temporary file beside it)
+    for a destination that is a plain file with an extension (the driver follows it); (None, the
+    parameters as they are) for a temporary output, a database, a layer of a GeoPackage named with
+    options, or a path without an extension (QGIS completes it)."""
+    from qgis.core import QgsProcessingOutputLayerDefinition, QgsProperty
+    value = parameters.get(name)
+    definition = value if isinstance(value, QgsProcessingOutputLayerDefinition) else None
+    if definition is not None:
+        text = definition.sink.valueAsString(context.expressionContext(), "")
+        value = text[0] if isinstance(text, tuple) else text
+    if (not isinstance(value, str) or not value or value == QgsProcessing.TEMPORARY_OUTPUT or "|" in value
+            or _not_a_plain_file(value) or not os.path.splitext(value)[1]):
+        return None, parameters
+    from ..core.io.outputs import remove_stale_temporaries, temporary_beside
+    remove_stale_temporaries(value)
+    tmp = temporary_beside(value)
+    if definition is not None:
+        staged = QgsProcessingOutputLayerDefinition(QgsProperty.fromValue(tmp), definition.destinationProject)
+        staged.destinationName = definition.destinationName
+        staged.createOptions = definition.createOptions
+    else:
+        staged = tmp
+    return value, dict(parameters, **{name: staged})
+
+
+def _not_a_plain_file(destination: str) -> bool:
+    path = destination.split("|")[0]
+    return path.startswith(("memory:", "ogr:", "postgres:", "spatialite:")) or "://" in path or "dbname=" in path
+
+
+def _staged_path(staged) -> str:
+    from qgis.core import QgsProcessingOutputLayerDefinition
+    if isinstance(staged, QgsProcessingOutputLayerDefinition):
+        return staged.sink.staticValue()
+    return staged
+
+
+def _files_of(path: str):
+    """The file ``path`` and its sidecars (a shapefile's .shx, .dbf, .prj, .cpg; a GeoPackage's journal)."""
+    import glob
+    stem = os.path.splitext(path)[0]
+    return [p for p in glob.glob(glob.escape(stem) + ".*") + glob.glob(glob.escape(path) + "-*") if p != path]
+
+
+def commit_staged_sink(staged, final: str, sink_id: str, context) -> str:
+    """Rename the complete temporary of :func:`staged_sink` (and its sidecars) into place, the main file last;
+    the layer QGIS is to load when the run ends is the final one. Returns the sink id of the final path."""
+    tmp = _staged_path(staged)
+    tmp_stem, final_stem = os.path.splitext(tmp)[0], os.path.splitext(final)[0]
+    for side in _files_of(tmp):
+        if side.startswith(tmp + "-"):  # (a journal left open: nothing to keep)
+            os.remove(side)
+        else:
+            os.replace(side, final_stem + side[len(tmp_stem):])
+    os.replace(tmp, final)
+    loads = context.layersToLoadOnCompletion()
+    moved = {key.replace(tmp, final) if isinstance(key, str) else key: details for key, details in loads.items()}
+    if moved.keys() != loads.keys():
+        context.setLayersToLoadOnCompletion(moved)
+    return sink_id.replace(tmp, final) if isinstance(sink_id, str) else sink_id
+
+
+def discard_staged_sink(staged) -> None:
+    """Remove the temporary of :func:`staged_sink` and its sidecars (a failed or cancelled run)."""
+    import contextlib
+    tmp = _staged_path(staged)
+    for path in [tmp] + _files_of(tmp):
+        with contextlib.suppress(OSError):
+            os.remove(path)
+
+
 def destination_folder_problem(label, destination):
     """Why the file destination ``destination`` of the output ``label`` cannot be written (missing or
     read-only folder), or None; data sources that are not plain files (memory:, databases) pass."""
     if not destination or not isinstance(destination, str):
         return None
     path = destination.split("|")[0]
-    if path.startswith(("memory:", "ogr:", "postgres:", "spatialite:")) or "://" in path or "dbname=" in path:
+    if _not_a_plain_file(path):
         return None
     from ..core.errors import OutputError
     from ..core.io.outputs import check_folder_writable
@@ -789,37 +862,60 @@ class GroundFilterAlgorithm(SurveyTiles, Discoverable, QgsProcessingAlgorithm):
 
     def writeGroundPointsOrUndo(self, parameters, context, feedback, run, written):  # noqa: N802
         """The ground-point layer, written by QGIS after the core has committed the other outputs:
-        should it fail all the same (its folder was checked before the work), the outputs this run
-        wrote (``written``) are removed, so that the run leaves all its outputs or none."""
+        should it fail all the same (its folder was checked before the work), or the run be cancelled
+        meanwhile, the outputs this run wrote (``written``) are removed, so that the run leaves all its
+        outputs or none."""
+        from ..core.errors import Cancelled
         try:
             return self._write_ground_points(parameters, context, feedback, run)
-        except Exception as err:
+        except (Exception, Cancelled) as err:
             for path in written:
                 if path and os.path.isfile(path):
                     os.remove(path)
+            if isinstance(err, Cancelled):
+                raise QgsProcessingException(f"{err}; the run's outputs were removed") from err
             raise QgsProcessingException(f"{err}; the ground points could not be written, so the run's other "
                                          "outputs were removed") from err
 
     def _write_ground_points(self, parameters, context, feedback, run):
+        """The ground-point layer. A file destination is written beside it under a temporary name and
+        renamed into place once complete, as the core writes its outputs (QGIS writes a sink straight to
+        its destination: a cancelled run left a GeoPackage of 201,278 of its 2,496,477 points under the
+        final name, and the run said it was done; a killed one left a broken one: a modeller reviewer).
+        A cancel stops it with the run's other outputs removed (:meth:`writeGroundPointsOrUndo`)."""
         fields = QgsFields()
         fields.append(attribute_field("return_number"))
         fields.append(attribute_field("intensity"))
         # A cloud without a CRS: an undefined *Cartesian* CRS (a GeoPackage's srs_id -1), not QGIS's invalid
         # CRS, which OGR writes as "Undefined geographic SRS" (srs_id 0): metres taken for degrees
         crs = QgsCoordinateReferenceSystem.fromWkt(run.cloud.crs_wkt or UNDEFINED_CARTESIAN_WKT)
-        sink, sink_id = self.parameterAsSink(parameters, self.GROUND_POINTS, context, fields,
-                                             QgsWkbTypes.Type.PointZ, crs)
-        if sink is None:
-            return None
-        cloud = run.cloud
-        idx = run.ground.nonzero()[0]
-        intensity = cloud.intensity if cloud.intensity is not None else None
-        for k, i in enumerate(idx):
-            if feedback.isCanceled():
-                break
-            feature = QgsFeature(fields)
-            feature.setGeometry(QgsGeometry(QgsPoint(float(cloud.x[i]), float(cloud.y[i]), float(cloud.z[i]))))
-            feature.setAttributes([int(cloud.return_number[i]),
-                                   int(intensity[i]) if intensity is not None else None])
-            sink.addFeature(feature, QgsFeatureSink.Flag.FastInsert)
-        return sink_id
+        final, staged = staged_sink(parameters, self.GROUND_POINTS, context)
+        try:
+            sink, sink_id = self.parameterAsSink(staged, self.GROUND_POINTS, context, fields,
+                                                 QgsWkbTypes.Type.PointZ, crs)
+            if sink is None:
+                return None
+            cloud = run.cloud
+            idx = run.ground.nonzero()[0]
+            intensity = cloud.intensity if cloud.intensity is not None else None
+            feedback.setProgressText(f"Writing the ground points layer ({idx.size:,} points)…")
+            step = max(1, idx.size // 100)
+            for k, i in enumerate(idx):
+                if k % step == 0:
+                    if feedback.isCanceled():
+                        from ..core.errors import Cancelled
+                        raise Cancelled("cancelled by the user while the ground points layer was written")
+                    feedback.setProgress(100.0 * k / idx.size)
+                feature = QgsFeature(fields)
+                feature.setGeometry(QgsGeometry(QgsPoint(float(cloud.x[i]), float(cloud.y[i]), float(cloud.z[i]))))
+                feature.setAttributes([int(cloud.return_number[i]),
+                                       int(intensity[i]) if intensity is not None else None])
+                sink.addFeature(feature, QgsFeatureSink.Flag.FastInsert)
+            del sink  # (closes the file)
+            if final is None:
+                return sink_id
+            return commit_staged_sink(staged[self.GROUND_POINTS], final, sink_id, context)
+        except BaseException:
+            if final is not None:
+                discard_staged_sink(staged[self.GROUND_POINTS])
+            raise

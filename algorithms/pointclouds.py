@@ -168,7 +168,11 @@ def make_input_optional(param):
     two is needed (QGIS marks it "[optional]", and `qgis_process help` lists it optional: a modeler
     reviewer's model without an input passed validation on 3.40)."""
     param.setFlags(param.flags() | QgsProcessingParameterDefinition.Flag.FlagOptional)
-    param.setDescription(param.description() + ": this or a loaded layer below is needed")
+    param.setDescription(param.description() + EITHER_INPUT)
+
+
+#: what :func:`make_input_optional` adds to the file input's label (left out of the messages about its value)
+EITHER_INPUT = ": this or a loaded layer below is needed"
 
 
 # -- output ---------------------------------------------------------------------------------

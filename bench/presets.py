@@ -77,7 +77,8 @@ PRESETS = {
     "forest-smrf": ("smrf", "Forest ALS: dense canopy and undergrowth on hilly ground (generated scenes; "
                     "tuned on seed 100)", "scene:forest:100", ["scene:forest:1", "scene:forest:2", "scene:forest:3"]),
     "uav-photogrammetry-evc": ("evc", "UAV photogrammetry over low vegetation: surface points only, no returns "
-                               "(fan2023's setting; generated scenes; tuned on seed 100)", "scene:uav-photo:100",
+                               "(fan2023's kind of site; generated scenes; tuned on seed 100; the paper's own values are "
+                               "the filter's defaults)", "scene:uav-photo:100",
                                ["scene:uav-photo:1", "scene:uav-photo:2", "scene:uav-photo:3",
                                 "scene:uav-photo-mixed:1", "scene:uav-photo-mixed:2", "scene:uav-photo-mixed:3"]),
     # tuned on a site with buildings and trees besides the low vegetation (2026-11-25, sixth session): the

@@ -77,6 +77,17 @@ def _temp_beside(path: str):
                             dir=os.path.dirname(os.path.abspath(path)) or ".")
 
 
+def temporary_beside(path: str) -> str:
+    """A new temporary name for the output ``path`` (see the module's naming), for a writer that creates
+    the file itself (QGIS's feature sinks: an empty file there is not a GeoPackage); no file is left
+    under it. The writer renames it to ``path`` when complete (:func:`remove_stale_temporaries` removes
+    one a killed run left)."""
+    fd, tmp = _temp_beside(path)
+    os.close(fd)
+    os.remove(tmp)
+    return tmp
+
+
 def identities(paths) -> set:
     """Keys telling the files or folders ``paths`` apart by any path to them: each one's real path and,
     where it exists, its (device, inode), so that two paths share a key when they name one file or
