@@ -841,6 +841,32 @@ def laspy_reason(err: BaseException) -> str:
     return str(err) or type(err).__name__
 
 
+def other_format(path: str) -> Optional[str]:
+    """What a file given as LAS/LAZ whose signature is not "LASF" is, from its first bytes, and what to do,
+    in words; None when it is none of these (a damaged LAS then). A PLY or XYZ export renamed .las was
+    refused with laspy's "Invalid file signature b'ply\\n'" alone (a photogrammetry reviewer)."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(512)
+    except OSError:
+        return None
+    convert = "export LAS or LAZ from the software that made it, or convert it (e.g. PDAL's translate, CloudCompare)"
+    for magic, kind in ((b"ply", "a PLY file"), (b"ASTM-E57", "an E57 file"), (b"# .PCD", "a PCD file"),
+                        (b"VERSION .", "a PCD file"), (b"PK\x03\x04", "a zip archive"), (b"\x89HDF", "an HDF5 file")):
+        if head.startswith(magic):
+            return f"{path}: not a LAS/LAZ file but {kind}: {convert}"
+    try:
+        text = head.decode("ascii")
+    except UnicodeDecodeError:
+        return None
+    first = text.lstrip().splitlines()[0] if text.strip() else ""
+    fields = re.split(r"[\s,;]+", first.strip())
+    if len(fields) >= 3 and all(re.fullmatch(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?", v) for v in fields[:3]):
+        return (f"{path}: not a LAS/LAZ file but text, numbers per line (XYZ or CSV: its first line is "
+                f"'{first[:60]}'): {convert}; a text file of x y z [label] per line is read as such when named .txt")
+    return None
+
+
 def header_records_problem(path: str, err: BaseException) -> Optional[str]:
     """What laspy refuses in ``path``'s header records that is not damage, in words (None for any other
     error): two extra-bytes dimensions of one name (or one named as a dimension of the point format), or
@@ -898,7 +924,7 @@ def _read_las(path: str, steps: Steps) -> PointCloud:
         if problem:
             raise InputError(problem) from err
         if "signature" in msg.lower():
-            raise UnsupportedFormatError(f"{path}: not a LAS/LAZ file ({msg})") from err
+            raise UnsupportedFormatError(other_format(path) or f"{path}: not a LAS/LAZ file ({msg})") from err
         raise InputError(f"{path}: cannot be read; the file is damaged or truncated ({msg})") from err
     n = int(len(las.points))
     if n != int(las.header.point_count):

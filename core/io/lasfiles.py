@@ -19,7 +19,7 @@ import numpy as np
 
 from ..errors import GroundSieveError, InputError, OutputError, UnsupportedFormatError, out_of_memory
 from .clouds import (TEXT_ERRORS, PointCloud, check_las_layout, crs_records_conflict, finish_copy, header_crs_wkt,
-                     header_records_problem, laspy_reason, point_data_end, records_held, writable_evlrs)
+                     header_records_problem, laspy_reason, other_format, point_data_end, records_held, writable_evlrs)
 from ..progress import WARNING_PREFIX
 from .outputs import LAS_EXTENSIONS, _ext, _reason, atomic_path, check_classes_fit
 
@@ -98,6 +98,7 @@ def scan_header(path: str) -> LasInfo:
         raise
     except Exception as err:  # laspy raises many types for damaged files
         raise InputError(header_records_problem(path, err)
+                         or ("signature" in laspy_reason(err).lower() and other_format(path))
                          or f"{path}: cannot read its LAS header ({laspy_reason(err)})") from err
 
 
@@ -131,6 +132,20 @@ def _read_bounds(reader, chunk: int):
 
 #: what a complete LAZ without points holds after its header at most (the chunk table's offset and table)
 EMPTY_LAZ_TAIL = 65536
+
+
+def raised_by_the_reader(err: BaseException) -> bool:
+    """Whether ``err`` came out of laspy (or lazrs, which laspy calls) reading a file, not out of
+    GroundSieve's own code in the same ``try``: only the reader's errors mean a damaged file (a
+    mismatched call of the binning kernel was called "damaged or truncated": a photogrammetry
+    reviewer's sound file)."""
+    tb = err.__traceback__
+    while tb is not None:
+        parts = os.path.normpath(tb.tb_frame.f_code.co_filename).split(os.sep)
+        if "laspy" in parts or "lazrs" in parts:
+            return True
+        tb = tb.tb_next
+    return type(err).__module__.split(".")[0] in ("laspy", "lazrs")
 
 
 def points_error(path: str, err: BaseException) -> GroundSieveError:
@@ -603,6 +618,8 @@ def bin_file(path: str, file_index: int, grid: TileGrid, work_dir: str, *, chunk
     except GroundSieveError:
         raise
     except Exception as err:  # laspy / lazrs on a damaged or truncated file
+        if not (raised_by_the_reader(err) or isinstance(err, MemoryError)):  # (a fault of our own, not the file's)
+            raise
         raise points_error(path, err) from err
     finally:
         for f in index_files.values():
@@ -795,6 +812,8 @@ def write_classified_stream(src: str, dst: str, classification: np.ndarray, *,
     except GroundSieveError:
         raise
     except Exception as err:  # laspy / lazrs on a damaged or truncated input
+        if not (raised_by_the_reader(err) or isinstance(err, MemoryError)):  # (a fault of our own, not the file's)
+            raise
         raise points_error(src, err) from err
 
 
@@ -988,4 +1007,6 @@ def iter_chunks(path: str, chunk_points: int = CHUNK_POINTS, first: int = 0) -> 
     except GroundSieveError:
         raise
     except Exception as err:
+        if not (raised_by_the_reader(err) or isinstance(err, MemoryError)):  # (a fault of our own, not the file's)
+            raise
         raise points_error(path, err) from err

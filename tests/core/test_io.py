@@ -249,6 +249,24 @@ def test_text_named_las(tmp_path):
     assert_names_file(err, path)
 
 
+@pytest.mark.parametrize("content, kind", [
+    (b"ply\nformat binary_little_endian 1.0\nelement vertex 3\n", "but a PLY file: export LAS or LAZ"),
+    (b"500000.12 5400000.50 101.25 120 130 140\n500000.20 5400000.61 101.30 121 131 141\n",
+     "but text, numbers per line .*'500000.12 5400000.50 101.25 120 130 140'.* read as such when named .txt"),
+    (b"ASTM-E57\x00\x00\x01\x00", "but an E57 file: export LAS or LAZ"),
+], ids=["ply", "xyz", "e57"])
+def test_another_format_named_las_is_said_what_it_is(tmp_path, content, kind):
+    """A photogrammetry export renamed .las (PLY, XYZ text) was refused with laspy's "Invalid file signature
+    b'ply\\n'" alone: the message says what the file is and how to convert it, whole and in a survey."""
+    from groundsieve.core.io.lasfiles import scan_header
+    path = tmp_path / "export.las"
+    path.write_bytes(content)
+    with pytest.raises(UnsupportedFormatError, match=f"export.las: not a LAS/LAZ file {kind}"):
+        read_cloud(str(path))
+    with pytest.raises(InputError, match=f"export.las: not a LAS/LAZ file {kind}"):
+        scan_header(str(path))
+
+
 @pytest.mark.parametrize("ext", [".laz", ".las"])
 def test_truncated_file(tmp_path, ext):
     full = tmp_path / f"full{ext}"

@@ -1579,3 +1579,23 @@ def test_ground_that_is_not_its_pulse_s_last_return_is_warned_about(scene_laz, t
     assert said["smrf"] == []
     assert len(said["canopy"]) == 1 and said["canopy"][0].startswith(WARNING_PREFIX)
     assert "'Filter only last returns' (--last-returns) keeps such points out" in said["canopy"][0]
+
+
+def test_a_fault_of_the_binning_s_own_code_is_not_blamed_on_the_file(scene_laz, tmp_path, monkeypatch):
+    """The binning's ``try`` took any error for laspy's on a damaged file: a mismatched call of its own numba
+    kernel (a photogrammetry reviewer's run while the code changed) said "tile_00.las: cannot read its points
+    (TypeError: ...); the file is damaged or truncated" of a sound file. An error of the reader still names
+    the file so; one of GroundSieve's own code is raised as it is."""
+    import groundsieve.core.io._binning_kernels as kernels
+
+    def broken(*_args):
+        raise TypeError("too many arguments: expected 10, got 14")
+    monkeypatch.setattr(kernels, "bin_chunk_kernel", broken)
+    with pytest.raises(TypeError, match="too many arguments") as caught:
+        run_ground_filter(scene_laz, str(tmp_path / "o.laz"), SMRF(), options=tiled(parallel="threads"))
+    assert not isinstance(caught.value, GroundSieveError)
+    truncated = tmp_path / "truncated.laz"
+    truncated.write_bytes(open(scene_laz, "rb").read()[:-20_000])
+    monkeypatch.undo()
+    with pytest.raises(InputError, match="truncated.laz: cannot read its points .* damaged or truncated"):
+        run_ground_filter(str(truncated), str(tmp_path / "t.laz"), SMRF(), options=tiled(parallel="threads"))
