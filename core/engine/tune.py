@@ -326,7 +326,8 @@ class TuneResult:
             return ""
         items = [f"{d.name} ({_number(self.best_values[d.field])}) at the {end} end of its searched range "
                  f"({_number(d.low)} to {_number(d.high)})" for d, end in ends]
-        return ("; ".join(items) + ": the best value may lie beyond. The ranges span the values the papers used or studied; to "
+        return ("; ".join(items) + ": the best value may lie beyond. The ranges span the values the papers used or studied, "
+                "wider where a paper gives one setting or few (core/engine/parameters.py SEARCH); to "
                 "try beyond, run the filter with this preset and the value set by hand, and compare on the patch.")
 
 

@@ -224,7 +224,8 @@ f"; the starting set (filter defaults or starting preset): {_pct(start.total)}"}
         parts.append(f"<tr{' class=best' if i == result.best else ''}><td>{i + 1}</td>"
                      f"<td style='text-align:left'>{phase}</td>{cells}{res}<td>{t.seconds:.2f}</td></tr>")
     parts.append("</table><p class='small'>GroundSieve groundsieve:tune. Design: Halton points over ranges spanning "
-                 "the values the papers used or studied (core/engine/parameters.py SEARCH); refinement: pattern search.</p>"
+                 "the values the papers used or studied, wider where a paper gives one setting or few "
+                 "(core/engine/parameters.py SEARCH); refinement: pattern search.</p>"
                  "</body></html>\n")
     return "\n".join(parts)
 
