@@ -23,7 +23,10 @@ where a window holds fewer than <i>Minimum non-empty cells</i>, it grows up to <
 A cell still without an EVC is not ground.</p>
 <p><b>Difference</b>: the paper's vegetation values are negative, i.e. large minus small (default).
 <b>Ground offset</b> (0 = paper): added to the mean difference before the ratio, which is otherwise
-unstable on open ground far from vegetation (see <a href="https://github.com/groundsieve/groundsieve/blob/main/docs/BENCHMARKS.md">the benchmarks</a> for what each measured).</p>
+unstable on open ground far from vegetation (see <a href="https://github.com/groundsieve/groundsieve/blob/main/docs/BENCHMARKS.md">the benchmarks</a> for what each measured).
+<b>Point tolerance around the ground cells</b> (0 = paper, where a point takes its cell's class): a point of a
+ground cell is ground only within this height of its window's ground level, so that an image-matching blunder
+floating above the surface or sunk below it makes no spike or pit in the DTM (the EVC preset: 0.3 m).</p>
 """
 
 
@@ -36,6 +39,7 @@ class EVCAlgorithm(GroundFilterAlgorithm):
     AUTO_THRESHOLD = "AUTO_THRESHOLD"
     DIFFERENCE = "DIFFERENCE"
     GROUND_OFFSET = "GROUND_OFFSET"
+    POINT_TOLERANCE = "POINT_TOLERANCE"
     MIN_CELLS = "MIN_CELLS"
     MAX_RADIUS = "MAX_RADIUS"
 

@@ -150,6 +150,10 @@ FILTERS: Dict[str, Tuple[str, str, Sequence[Param]]] = {
         Param("ground_offset_m", "GROUND_OFFSET", "Ground offset added to the mean difference", "m", advanced=True,
               help="added to the mean difference before the ratio, which is unstable on open ground (0 = the "
                    "paper; the ground's roughness, e.g. 0.1 m, keeps open ground ground)"),
+        Param("point_tolerance_m", "POINT_TOLERANCE", "Point tolerance around the ground cells", "m", advanced=True,
+              help="a point of a ground cell is ground only within this height of the median of the ground cells' "
+                   "mean elevations in its window, so that a blunder floating above or sunk below the surface is not "
+                   "(0 = the paper: every point takes its cell's class; e.g. 0.3 m)"),
         Param("min_cells", "MIN_CELLS", "Minimum non-empty cells in a window", minimum=2, advanced=True,
               help="a window holding fewer non-empty small cells grows one cell at a time (3)"),
         Param("max_radius", "MAX_RADIUS", "Maximum radius when growing a window", "cells", minimum=1,

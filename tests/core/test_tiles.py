@@ -53,7 +53,9 @@ def agreement(a, b):
     return float(np.mean(np.asarray(a) == np.asarray(b)))
 
 
-@pytest.mark.parametrize("algorithm", [SMRF(), PMF(), EchoGrid(), EVC()], ids=["smrf", "pmf", "echogrid", "evc"])
+@pytest.mark.parametrize("algorithm", [SMRF(), PMF(), EchoGrid(), EVC(),
+                                       EVC(small_scale_m=0.5, ground_offset_m=0.1, point_tolerance_m=0.3)],
+                         ids=["smrf", "pmf", "echogrid", "evc", "evc-point-tolerance"])
 def test_tiled_run_classifies_as_the_whole_cloud(scene_laz, tmp_path, algorithm):
     out = tmp_path / "tiled.laz"
     run = run_ground_filter(scene_laz, str(out), algorithm, options=tiled())
