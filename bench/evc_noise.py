@@ -24,7 +24,6 @@ def main():
     args = parser.parse_args()
     import numpy as np
     from groundsieve.core.engine.presets import load_preset
-    from groundsieve.core.filters.evc import EVC
     from groundsieve.core.metrics import ground_accuracy
     from groundsieve.core.synthetic import SceneSpec, make_scene, photogrammetric, with_low_blunders
     import dataclasses
