@@ -405,6 +405,47 @@ def test_points_on_the_survey_s_far_edges_make_no_tiles_of_their_own(tmp_path):
     assert np.array_equal(np.asarray(laspy.read(tmp_path / "one.laz").classification), expected[mine])
 
 
+def test_a_survey_that_fits_whole_and_whose_tiles_would_read_it_all_runs_as_one_tile(tmp_path):
+    """A dense survey of 4 files that fits the memory budget whole, whose planned tiles of 50 m would each read
+    their buffer of SMRF's reach across most of it (a photogrammetry reviewer's 8.6 M points took 2.4 times
+    their whole file's time in 9 tiles): it runs as one tile, with the whole file's classes and DTM; set, the
+    tile size is kept; a budget the whole survey does not fit keeps the tiles."""
+    scene = make_scene(SceneSpec(size_m=100.0, density_per_m2=50.0, seed=6))
+    x, y = scene.x - scene.x.min() + 500_000.0, scene.y - scene.y.min() + 5_400_000.0
+    whole = new_las(np.round(x, 2), np.round(y, 2), np.round(scene.z, 2), classification=scene.classification,
+                    return_number=scene.return_number, number_of_returns=scene.number_of_returns)
+    write_las(whole, str(tmp_path / "whole.laz"))
+    folder = tmp_path / "files"
+    folder.mkdir()
+    files = (np.minimum((np.asarray(whole.x) - 500_000.0) // 50, 1) * 2
+             + np.minimum((np.asarray(whole.y) - 5_400_000.0) // 50, 1))
+    for f in range(4):
+        part = laspy.LasData(whole.header)
+        part.points = whole.points[files == f]
+        part.write(str(folder / f"f{f}.laz"))
+    cell = DTMOptions(cell_size_m=1.0)
+    run_ground_filter(str(tmp_path / "whole.laz"), str(tmp_path / "whole_out.laz"), SMRF(),
+                      dtm_path=str(tmp_path / "whole.tif"), dtm=cell)
+    expected = np.asarray(laspy.read(tmp_path / "whole_out.laz").classification)
+    runs = {}
+    for name, tiling in (("one", TileOptions(memory_budget_mb=150, workers=2, parallel="threads")),
+                         ("set", TileOptions(tile_size_m=50.0, workers=2, parallel="threads")),
+                         ("small", TileOptions(memory_budget_mb=60, workers=2, parallel="threads"))):
+        lines = []
+        runs[name] = run_ground_filter(str(folder), str(tmp_path / f"{name}.vpc"), SMRF(),
+                                       options=FilterOptions(tiling=tiling), dtm_path=str(tmp_path / f"{name}.tif"),
+                                       dtm=cell, log=lines.append)
+        said = [line for line in lines if line.startswith("The survey runs as one tile")]
+        assert bool(said) == (name == "one"), (name, lines)
+        got = np.concatenate([np.asarray(laspy.read(tmp_path / name / f"f{f}.laz").classification) for f in range(4)])
+        assert np.array_equal(got, np.concatenate([expected[files == f] for f in range(4)])), name
+        mosaic, gt = _dtm_values(tmp_path / f"{name}.tif")
+        reference, gt_whole = _dtm_values(tmp_path / "whole.tif")
+        assert gt == gt_whole
+        np.testing.assert_allclose(mosaic, reference, atol=1e-3)
+    assert runs["one"].tiles == 1 and runs["set"].tiles >= 4 and runs["small"].tiles >= 4
+
+
 def _split_files(scene_laz, folder, at_x):
     las = laspy.read(scene_laz)
     folder.mkdir()
