@@ -293,22 +293,25 @@ def sink_folder_problem(algorithm, parameters, name, context):
 
 
 def staged_sink(parameters, name, context):
-    """(the final path, the parameters with the feature sink ``name`` sent to a temporary file beside it)
-    for a destination that is a plain file with an extension (the driver follows it); (None, the
-    parameters as they are) for a temporary output, a database, a layer of a GeoPackage named with
-    options, or a path without an extension (QGIS completes it)."""
+    """(the final path, the parameters with the feature sink ``name`` sent to a file of the same name in a hidden
+    folder beside it: core.io.outputs.temporary_folder_beside) for a destination that is a plain file with an
+    extension (the driver follows it); (None, the parameters as they are) for a temporary output, a database, a
+    layer of a GeoPackage named with options, a path without an extension (QGIS completes it), and an append to
+    an existing layer (the dialog's "Append to Layer...": its features are kept, QGIS adds to them in place)."""
     from qgis.core import QgsProcessingOutputLayerDefinition, QgsProperty
     value = parameters.get(name)
     definition = value if isinstance(value, QgsProcessingOutputLayerDefinition) else None
     if definition is not None:
+        if hasattr(definition, "useRemapping") and definition.useRemapping():
+            return None, parameters
         text = definition.sink.valueAsString(context.expressionContext(), "")
         value = text[0] if isinstance(text, tuple) else text
     if (not isinstance(value, str) or not value or value == QgsProcessing.TEMPORARY_OUTPUT or "|" in value
             or _not_a_plain_file(value) or not os.path.splitext(value)[1]):
         return None, parameters
-    from ..core.io.outputs import remove_stale_temporaries, temporary_beside
-    remove_stale_temporaries(value)
-    tmp = temporary_beside(value)
+    from ..core.io.outputs import remove_stale_sink_folders, temporary_folder_beside
+    remove_stale_sink_folders(value)
+    tmp = os.path.join(temporary_folder_beside(value), os.path.basename(value))
     if definition is not None:
         staged = QgsProcessingOutputLayerDefinition(QgsProperty.fromValue(tmp), definition.destinationProject)
         staged.destinationName = definition.destinationName
@@ -330,24 +333,19 @@ def _staged_path(staged) -> str:
     return staged
 
 
-def _files_of(path: str):
-    """The file ``path`` and its sidecars (a shapefile's .shx, .dbf, .prj, .cpg; a GeoPackage's journal)."""
-    import glob
-    stem = os.path.splitext(path)[0]
-    return [p for p in glob.glob(glob.escape(stem) + ".*") + glob.glob(glob.escape(path) + "-*") if p != path]
-
-
 def commit_staged_sink(staged, final: str, sink_id: str, context) -> str:
-    """Rename the complete temporary of :func:`staged_sink` (and its sidecars) into place, the main file last;
-    the layer QGIS is to load when the run ends is the final one. Returns the sink id of the final path."""
+    """Move the complete files of :func:`staged_sink`'s folder (the layer and its sidecars, the main file last)
+    into place and remove the folder; the layer QGIS is to load when the run ends is the final one. Returns the
+    sink id of the final path."""
+    import shutil
     tmp = _staged_path(staged)
-    tmp_stem, final_stem = os.path.splitext(tmp)[0], os.path.splitext(final)[0]
-    for side in _files_of(tmp):
-        if side.startswith(tmp + "-"):  # (a journal left open: nothing to keep)
-            os.remove(side)
-        else:
-            os.replace(side, final_stem + side[len(tmp_stem):])
-    os.replace(tmp, final)
+    holder, target = os.path.dirname(tmp), os.path.dirname(os.path.abspath(final))
+    names = sorted(os.listdir(holder), key=lambda n: n == os.path.basename(tmp))
+    for name in names:
+        if name.endswith(("-journal", "-wal", "-shm")):  # (a database's open journal: nothing to keep)
+            continue
+        os.replace(os.path.join(holder, name), os.path.join(target, name))
+    shutil.rmtree(holder, ignore_errors=True)
     loads = context.layersToLoadOnCompletion()
     moved = {key.replace(tmp, final) if isinstance(key, str) else key: details for key, details in loads.items()}
     if moved.keys() != loads.keys():
@@ -356,12 +354,9 @@ def commit_staged_sink(staged, final: str, sink_id: str, context) -> str:
 
 
 def discard_staged_sink(staged) -> None:
-    """Remove the temporary of :func:`staged_sink` and its sidecars (a failed or cancelled run)."""
-    import contextlib
-    tmp = _staged_path(staged)
-    for path in [tmp] + _files_of(tmp):
-        with contextlib.suppress(OSError):
-            os.remove(path)
+    """Remove :func:`staged_sink`'s folder and what it holds (a failed or cancelled run)."""
+    import shutil
+    shutil.rmtree(os.path.dirname(_staged_path(staged)), ignore_errors=True)
 
 
 def destination_folder_problem(label, destination):

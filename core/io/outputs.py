@@ -77,15 +77,36 @@ def _temp_beside(path: str):
                             dir=os.path.dirname(os.path.abspath(path)) or ".")
 
 
-def temporary_beside(path: str) -> str:
-    """A new temporary name for the output ``path`` (see the module's naming), for a writer that creates
-    the file itself (QGIS's feature sinks: an empty file there is not a GeoPackage); no file is left
-    under it. The writer renames it to ``path`` when complete (:func:`remove_stale_temporaries` removes
-    one a killed run left)."""
-    fd, tmp = _temp_beside(path)
-    os.close(fd)
-    os.remove(tmp)
-    return tmp
+def temporary_folder_beside(path: str) -> str:
+    """A new hidden folder beside the output ``path`` (the module's naming, ending in ``.sink``) for a writer
+    that creates the file itself under its final name there (QGIS's feature sinks: a GeoPackage's layer is
+    named after its file, and a temporary name gave it an empty one), with its sidecars (a shapefile's
+    .shx, .dbf, .prj); its files are moved into place when complete. :func:`remove_stale_sink_folders`
+    removes one a killed run left."""
+    return tempfile.mkdtemp(prefix=_temp_prefix(path), suffix=".sink", dir=os.path.dirname(os.path.abspath(path)) or ".")
+
+
+def remove_stale_sink_folders(path: str, *, max_age_s: float = 86400.0) -> list:
+    """Delete the folders of :func:`temporary_folder_beside` a killed run left for the output ``path``: those of
+    a process of this machine no longer running, and those of another machine older than ``max_age_s``."""
+    import shutil
+    folder = os.path.dirname(os.path.abspath(os.fspath(path)))
+    base = _short(os.path.basename(os.fspath(path)))
+    named = re.compile(re.escape(f".{base}.gs") + r"(?:([A-Za-z0-9-]*)\.)?(\d+)-[^/]*\.sink$")
+    removed = []
+    for holder in glob.glob(os.path.join(glob.escape(folder), glob.escape(f".{base}.gs") + "*.sink")):
+        m = named.match(os.path.basename(holder))
+        try:
+            if m and m.group(1) in (None, _host()):
+                stale = int(m.group(2)) != os.getpid() and not _process_alive(int(m.group(2)))
+            else:
+                stale = time.time() - os.path.getmtime(holder) > max_age_s
+            if stale and os.path.isdir(holder):
+                shutil.rmtree(holder)
+                removed.append(holder)
+        except OSError:
+            continue
+    return removed
 
 
 def identities(paths) -> set:

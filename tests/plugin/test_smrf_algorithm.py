@@ -229,7 +229,7 @@ def test_the_ground_points_layer_is_written_under_a_temporary_name_then_moved(gr
         "INPUT": str(src), "OUTPUT": str(out / "c.laz"),
         "GROUND_POINTS": QgsProcessingOutputLayerDefinition(str(out / name), QgsProject.instance())},
         feedback=_Watching(lambda _f: seen.extend(os.listdir(out))), context=context)
-    assert name not in seen and any(n.startswith(f".{name}.") and ".part" in n for n in seen), seen
+    assert name not in seen and any(n.startswith(f".{name}.") and n.endswith(".sink") for n in seen), seen
     assert result["GROUND_POINTS"].split("|")[0] == str(out / name)
     layer = QgsVectorLayer(result["GROUND_POINTS"], "ground", "ogr")
     assert layer.isValid() and layer.featureCount() == result["GROUND_COUNT"] > 0
@@ -237,5 +237,67 @@ def test_the_ground_points_layer_is_written_under_a_temporary_name_then_moved(gr
     assert not [n for n in left if n.startswith(".")], left
     if name.endswith(".shp"):
         assert {"g.shp", "g.shx", "g.dbf", "g.prj"} <= set(left), left
+    else:  # the layer is named after the file, as QGIS names it (a temporary name had left it empty: a reviewer)
+        import sqlite3
+        with sqlite3.connect(str(out / name)) as db:
+            assert db.execute("select table_name from gpkg_contents").fetchall() == [("g",)]
     loads = [str(k) for k in context.layersToLoadOnCompletion()]
     assert any(k.split("|")[0] == str(out / name) for k in loads) and not any(".part" in k for k in loads), loads
+
+
+def test_a_killed_run_s_ground_points_folder_is_removed_by_the_next_run(groundsieve_provider, scene_laz, tmp_path):
+    """A run killed while it wrote the layer leaves its hidden folder beside the destination (the layer and its
+    sidecars, never under the final name); the next run writing that layer removes it."""
+    import socket
+    import re as _re
+    from groundsieve.core.io.outputs import temporary_folder_beside
+    src, _scene = scene_laz
+    out = tmp_path / "out"
+    out.mkdir()
+    live = temporary_folder_beside(str(out / "g.shp"))  # (this process's: alive, kept)
+    host = _re.sub(r"[^A-Za-z0-9-]", "", socket.gethostname())[:24] or "host"
+    dead = out / f".g.shp.gs{host}.999999999-abcd.sink"
+    dead.mkdir()
+    for side in ("g.shp", "g.shx", "g.dbf"):
+        (dead / side).write_bytes(b"half")
+    _run({"INPUT": str(src), "OUTPUT": str(out / "c.laz"), "GROUND_POINTS": str(out / "g.shp")})
+    assert not dead.exists() and os.path.isdir(live)
+    os.rmdir(live)
+
+
+def test_appending_the_ground_points_to_an_existing_layer_keeps_its_features(groundsieve_provider, scene_laz,
+                                                                              tmp_path):
+    """The dialog's "Append to Layer..." (a remapping definition): QGIS adds to the existing layer in place. A
+    layer staged in a folder and moved into place had replaced it, its features lost (a code reviewer)."""
+    import processing
+    from qgis.core import (QgsCoordinateReferenceSystem, QgsCoordinateTransformContext, QgsFeature, QgsField,
+                           QgsFields, QgsGeometry, QgsPoint, QgsProcessingOutputLayerDefinition, QgsProperty,
+                           QgsRemappingSinkDefinition, QgsVectorFileWriter, QgsVectorLayer, QgsWkbTypes)
+    from qgis.PyQt.QtCore import QVariant
+    src, _scene = scene_laz
+    dest = str(tmp_path / "existing.shp")
+    fields = QgsFields()
+    for name in ("return_number", "intensity"):
+        fields.append(QgsField(name, QVariant.Int))
+    crs = QgsCoordinateReferenceSystem("EPSG:32632")
+    options = QgsVectorFileWriter.SaveVectorOptions()
+    options.driverName = "ESRI Shapefile"
+    writer = QgsVectorFileWriter.create(dest, fields, QgsWkbTypes.PointZ, crs, QgsCoordinateTransformContext(), options)
+    for i in range(5):
+        feature = QgsFeature(fields)
+        feature.setGeometry(QgsGeometry(QgsPoint(500000.0 + i, 5400000.0, 100.0)))
+        feature.setAttributes([9, 9])
+        writer.addFeature(feature)
+    del writer
+    remap = QgsRemappingSinkDefinition()
+    remap.setDestinationFields(fields)
+    remap.setDestinationWkbType(QgsWkbTypes.PointZ)
+    remap.setDestinationCrs(crs)
+    remap.setSourceCrs(crs)
+    remap.setFieldMap({name: QgsProperty.fromField(name) for name in ("return_number", "intensity")})
+    target = QgsProcessingOutputLayerDefinition(dest)
+    target.setRemappingDefinition(remap)
+    result = _run({"INPUT": str(src), "OUTPUT": str(tmp_path / "c.laz"), "GROUND_POINTS": target})
+    layer = QgsVectorLayer(dest, "existing", "ogr")
+    assert layer.featureCount() == 5 + result["GROUND_COUNT"]
+    assert sum(1 for f in layer.getFeatures() if f.attributes()[0] == 9) == 5
