@@ -284,11 +284,15 @@ class TuneResult:
         or "upper": the best value may lie beyond what was searched."""
         out = []
         values = self.best_values
+        bounds = P.by_name(self.filter)
         for d in self.dims:
             if d.values or d.span <= 0:
                 continue
             v = float(values[d.field])
+            floor = bounds[d.name].minimum if d.name in bounds else None
             if v <= d.low + 1e-6 * d.span:
+                if floor is not None and d.low <= floor:  # (the lowest value the filter takes: nothing beyond, e.g.
+                    continue                              # EVC's ground offset at the paper's 0: a code reviewer)
                 out.append((d, "lower"))
             elif v >= d.high - 1e-6 * d.span:
                 out.append((d, "upper"))

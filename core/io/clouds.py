@@ -856,14 +856,15 @@ def other_format(path: str) -> Optional[str]:
         if head.startswith(magic):
             return f"{path}: not a LAS/LAZ file but {kind}: {convert}"
     try:
-        text = head.decode("ascii")
+        text = head.decode("utf-8-sig")  # (a byte-order mark first: Windows' exports)
     except UnicodeDecodeError:
         return None
-    first = text.lstrip().splitlines()[0] if text.strip() else ""
-    fields = re.split(r"[\s,;]+", first.strip())
-    if len(fields) >= 3 and all(re.fullmatch(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?", v) for v in fields[:3]):
-        return (f"{path}: not a LAS/LAZ file but text, numbers per line (XYZ or CSV: its first line is "
-                f"'{first[:60]}'): {convert}; a text file of x y z [label] per line is read as such when named .txt")
+    # the first line of numbers among the first lines: after a header line ("X,Y,Z", CloudCompare's "//X Y Z")
+    for line in [line.strip() for line in text.splitlines()[:6] if line.strip()]:
+        fields = re.split(r"[\s,;]+", line)
+        if len(fields) >= 3 and all(re.fullmatch(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?", v) for v in fields[:3]):
+            return (f"{path}: not a LAS/LAZ file but text, numbers per line (XYZ or CSV: a line is '{line[:60]}'): "
+                    f"{convert}; a text file of x y z [label] per line is read as such when named .txt")
     return None
 
 

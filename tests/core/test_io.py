@@ -254,7 +254,10 @@ def test_text_named_las(tmp_path):
     (b"500000.12 5400000.50 101.25 120 130 140\n500000.20 5400000.61 101.30 121 131 141\n",
      "but text, numbers per line .*'500000.12 5400000.50 101.25 120 130 140'.* read as such when named .txt"),
     (b"ASTM-E57\x00\x00\x01\x00", "but an E57 file: export LAS or LAZ"),
-], ids=["ply", "xyz", "e57"])
+    (b"X,Y,Z,R,G,B\n500000.1,5400000.2,101.3,12,13,14\n", "but text, numbers per line .*'500000.1,5400000.2,101.3"),
+    (b"//X Y Z\n500000.1 5400000.2 101.3\n", "but text, numbers per line .*'500000.1 5400000.2 101.3'"),
+    (b"\xef\xbb\xbf500000.1 5400000.2 101.3\n", "but text, numbers per line .*'500000.1 5400000.2 101.3'"),
+], ids=["ply", "xyz", "e57", "csv-header", "cloudcompare", "bom"])
 def test_another_format_named_las_is_said_what_it_is(tmp_path, content, kind):
     """A photogrammetry export renamed .las (PLY, XYZ text) was refused with laspy's "Invalid file signature
     b'ply\\n'" alone: the message says what the file is and how to convert it, whole and in a survey."""

@@ -332,6 +332,12 @@ def test_evc_s_search_takes_in_the_ground_offset_from_the_paper_s_zero():
                        return_number=ones, number_of_returns=ones.copy(),
                        reference_label=(scene.classification != 2).astype(np.uint8))
     r = T.tune(cloud, "evc", T.TuneOptions(budget=6, blocks=2))
+    # 0 is the lowest offset the filter takes: no "the best value may lie beyond" for it (a code reviewer)
+    import dataclasses
+    at_zero = dataclasses.replace(r, best=0)  # (the start, the paper's 0, taken as the best)
+    assert at_zero.best_values["ground_offset_m"] == 0.0
+    assert "GROUND_OFFSET" not in {d.name for d, _end in at_zero.at_range_ends}
+    assert "GROUND_OFFSET" not in at_zero.range_end_note()
     offsets = [t.values["ground_offset_m"] for t in r.trials]
     assert offsets[0] == 0.0 and r.trials[0].phase == "start"
     assert 0.0 <= min(offsets) < max(offsets) <= 0.3
