@@ -1226,6 +1226,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     kept_out: Dict[int, int] = {}  # points kept in classes of their own, left out of the DTM
     replaced: Dict[int, int] = {}  # points of the input's other classes given 1 or 2
     demoted = [0, 0]  # points the input had as ground (2), and of them not ground now
+    agreement = [0, 0, 0, 0, 0]  # the run's ground against the input's classes (workflow.agreement_counts)
     not_last = [0, 0]  # ground points, and of them not their pulse's last return
     ground_by_class: Dict[int, int] = {}  # the DTM from classes: the tiles' own ground, by class
     structures: Dict[int, int] = {}  # those of its structure classes made ground
@@ -1278,6 +1279,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             ground_by_class[int(code)] = ground_by_class.get(int(code), 0) + int(count)
         for k, count in enumerate(result.get("demoted", (0, 0))):
             demoted[k] += int(count)
+        for k, count in enumerate(result.get("agreement", (0, 0, 0, 0))[:4]):
+            agreement[k] += int(count)
         for k, count in enumerate(result.get("not_last", (0, 0))):
             not_last[k] += int(count)
         for code, count in result.get("replaced", ()):
@@ -1417,8 +1420,9 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
         if output_path and _ext(output_path) == VPC_EXTENSION:
             from ..raster.crs import lonlat_box
             write_vpc(staging.stage(output_path), [scan_header(o) for o in staged], outs, lonlat=lonlat_box)
-        from .workflow import canopy_ground_note, demoted_note, replaced_note, structures_warning
-        for note in (demoted_note(*demoted, algorithm), canopy_ground_note(*not_last, algorithm)):
+        from .workflow import agreement_note, canopy_ground_note, demoted_note, replaced_note, structures_warning
+        for note in (demoted_note(*demoted, algorithm), canopy_ground_note(*not_last, algorithm),
+                     agreement_note(agreement, algorithm, options)):
             if note:
                 log(note)
         note = replaced_note(replaced, algorithm)
@@ -1998,6 +2002,7 @@ def _tile_job(job) -> Optional[dict]:
             # (a model's prediction, most of its time, left out for the buffer, whose classes no DTM uses)
             cloud.attributes = {**(cloud.attributes or {}), workflow.NEEDED: own.copy()}
         replaced, structures, demoted, ground_classes, not_last, made = {}, {}, (0, 0), [], (0, 0), []
+        agreement = [0, 0, 0, 0, 0]
         if len(cloud) < getattr(algorithm, "min_tile_points", MIN_TILE_POINTS):
             # Isolated points (a stray point far from the survey): too few for any filter's grid;
             # they keep their classes and are not ground.
@@ -2009,6 +2014,7 @@ def _tile_job(job) -> Optional[dict]:
                 from ..io.clouds import count_classes
                 ground_classes = sorted(count_classes(cloud.classification[ground & own]).items())
             demoted = workflow.demoted_ground(cloud.classification, ground, own & done.touched)
+            agreement = workflow.agreement_counts(cloud, ground, own & done.touched)
             codes, counts = np.unique(cls[own & done.touched], return_counts=True)
             made = [[int(c), int(n)] for c, n in zip(codes, counts)]
             not_last = workflow.ground_not_last(cloud, ground & own)
@@ -2054,7 +2060,8 @@ def _tile_job(job) -> Optional[dict]:
                       dtm_points=dtm_own, assigned=assigned, block=block, class_parts=class_parts, copc_read=copc_read,
                       kept_out=sorted(kept_out.items()), replaced=sorted(replaced.items()),
                       structures=sorted(structures.items()), area_bounds=area_bounds, gaps=gaps, hull=hull,
-                      demoted=list(demoted), ground_classes=ground_classes, not_last=list(not_last),
+                      demoted=list(demoted), agreement=list(agreement), ground_classes=ground_classes,
+                      not_last=list(not_last),
                       classes=made)
         _save_done(job["done_dir"], result)
         return result

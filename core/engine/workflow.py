@@ -388,6 +388,9 @@ def classify_cloud(cloud: PointCloud, algorithm, options: FilterOptions = Filter
     note = canopy_ground_note(*ground_not_last(cloud, ground), algorithm)
     if note:
         log(note)
+    note = agreement_note(agreement_counts(cloud, ground, touched), algorithm, options)
+    if note:
+        log(note)
     cls[touched] = CLASS_UNCLASSIFIED
     cls[ground & touched] = CLASS_GROUND  # (the ground of a kept class keeps it: ground_of_any_class)
     predicted = getattr(detail, "point_classes", None)
@@ -412,6 +415,40 @@ def demoted_ground(classification: np.ndarray, ground: np.ndarray, touched: np.n
     """(points the input had as ground (2) among those given a class, those of them not ground now)."""
     had = touched & (classification == CLASS_GROUND)
     return int(np.count_nonzero(had)), int(np.count_nonzero(had & ~ground))
+
+
+def agreement_counts(cloud, ground: np.ndarray, touched: np.ndarray) -> list:
+    """[tp, fn, fp, tn, by labels (1) or classes (0)]: the run's ground against the input's own, over the points
+    given a class: an ISPRS text's reference labels (0 ground), or a LAS's classes (2 ground, every other class
+    not: 0 too, which the ISPRS samples as LAZ give their objects); zeros when the input holds no ground or
+    nothing else."""
+    if cloud.reference_label is not None:
+        labelled, ref, kind = touched, np.asarray(cloud.reference_label) == 0, 1
+    else:
+        labelled, ref, kind = touched, cloud.classification == CLASS_GROUND, 0
+    tp = int(np.count_nonzero(labelled & ref & ground))
+    fn = int(np.count_nonzero(labelled & ref & ~ground))
+    fp = int(np.count_nonzero(labelled & ~ref & ground))
+    tn = int(np.count_nonzero(labelled & ~ref & ~ground))
+    return [tp, fn, fp, tn, kind] if tp + fn and fp + tn else [0, 0, 0, 0, kind]
+
+
+def agreement_note(counts, algorithm=None, options=None) -> str:
+    """The log's line of the run's ground against the input's labels or classes (:func:`agreement_counts`), in
+    the ISPRS measures fan2023 and matrone2024 compare filters by (Sithole & Vosselman 2004): a labelled patch
+    run through a filter says its errors, where a user had to script them (a photogrammetry reviewer). "" when
+    the input holds no ground or nothing else, the classes are kept, or the ground is the input's own."""
+    tp, fn, fp, tn, kind = (list(counts) + [0] * 5)[:5]
+    if not (tp + fn and fp + tn) or getattr(algorithm, "ground_of_any_class", False) \
+            or getattr(algorithm, "predicts_classes", False) or (options is not None and options.keep_existing_classes):
+        return ""
+    from ..metrics import GroundAccuracy
+    acc = GroundAccuracy(tp, fn, fp, tn)
+    what = ("the file's reference labels (0 ground, 1 object)" if kind else
+            "the input's classes (2 ground, the others not)")
+    return (f"Against {what}, over {acc.n:,} points: Type I {100 * acc.type1:.2f} % (ground called not ground), "
+            f"Type II {100 * acc.type2:.2f} % (the rest called ground), total error {100 * acc.total:.2f} %, "
+            f"kappa {100 * acc.kappa:.2f} % (ISPRS measures; the input unchanged).")
 
 
 #: above this share of ground points that are not their pulse's last return, the ground is said to hold canopy:

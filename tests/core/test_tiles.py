@@ -1642,3 +1642,33 @@ def test_a_fault_of_the_binning_s_own_code_is_not_blamed_on_the_file(scene_laz, 
     monkeypatch.undo()
     with pytest.raises(InputError, match="truncated.laz: cannot read its points .* damaged or truncated"):
         run_ground_filter(str(truncated), str(tmp_path / "t.laz"), SMRF(), options=tiled(parallel="threads"))
+
+
+def test_a_run_on_labelled_points_says_its_isprs_errors_whole_and_tiled(scene_laz, tmp_path):
+    """A labelled patch (a LAS whose classes are the truth: 2 ground, the others not; an ISPRS text's labels)
+    run through a filter says its Type I, Type II, total error and kappa against them, as fan2023's tables
+    compare filters: a photogrammetry reviewer had to script them. The same line whole and in tiles; none
+    where the classes are kept."""
+    from groundsieve.core.metrics import ground_accuracy
+    truth = np.asarray(laspy.read(scene_laz).classification)
+    keep = ~np.isin(truth, (7, 18))
+    lines = {}
+    for name, options in (("whole", FilterOptions()), ("tiled", tiled()),
+                          ("kept", FilterOptions(keep_existing_classes=True))):
+        got = []
+        run_ground_filter(scene_laz, str(tmp_path / f"{name}.laz"), SMRF(), options=options, log=got.append)
+        lines[name] = [line for line in got if line.startswith("Against the input's classes")]
+        if name != "kept":
+            ground = np.asarray(laspy.read(tmp_path / f"{name}.laz").classification) == 2
+            acc = ground_accuracy((truth == 2)[keep], ground[keep])
+            (line,) = lines[name]
+            assert (f"over {acc.n:,} points: Type I {100 * acc.type1:.2f} %" in line
+                    and f"Type II {100 * acc.type2:.2f} %" in line and f"total error {100 * acc.total:.2f} %" in line
+                    and f"kappa {100 * acc.kappa:.2f} %" in line), (line, acc)
+    assert lines["whole"] == lines["tiled"] and lines["kept"] == []
+    txt = tmp_path / "patch.txt"
+    las = laspy.read(scene_laz)
+    np.savetxt(txt, np.c_[las.x, las.y, las.z, (truth != 2).astype(int)][keep], fmt="%.2f %.2f %.2f %d")
+    got = []
+    run_ground_filter(str(txt), str(tmp_path / "txt.laz"), SMRF(), log=got.append)
+    assert [line for line in got if line.startswith("Against the file's reference labels (0 ground, 1 object)")]
