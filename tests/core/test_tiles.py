@@ -1672,3 +1672,12 @@ def test_a_run_on_labelled_points_says_its_isprs_errors_whole_and_tiled(scene_la
     got = []
     run_ground_filter(str(txt), str(tmp_path / "txt.laz"), SMRF(), log=got.append)
     assert [line for line in got if line.startswith("Against the file's reference labels (0 ground, 1 object)")]
+
+
+def test_the_time_left_counts_the_tiles_running_beside_the_first_ones():
+    """The first tile of 2 workers said about 3 times the time the run then took (a UAV reviewer): until as many
+    tiles as workers are done, the others ran beside them."""
+    from groundsieve.core.engine.tiles import time_left
+    assert time_left(10.0, 1, 2, 9) == 45.0  # (not 90: the second worker's tile is about done too)
+    assert time_left(10.0, 1, 1, 9) == 90.0
+    assert time_left(30.0, 6, 2, 4) == 20.0  # (the pace of the tiles done, once more than the workers)
