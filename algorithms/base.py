@@ -873,8 +873,8 @@ class GroundFilterAlgorithm(SurveyTiles, Discoverable, QgsProcessingAlgorithm):
                                          "outputs were removed") from err
 
     def _write_ground_points(self, parameters, context, feedback, run):
-        """The ground-point layer. A file destination is written beside it under a temporary name and
-        renamed into place once complete, as the core writes its outputs (QGIS writes a sink straight to
+        """The ground-point layer. A file destination is written under its own name in a hidden folder beside
+        it and moved into place once complete (:func:`staged_sink`), as the core writes its outputs (QGIS writes a sink straight to
         its destination: a cancelled run left a GeoPackage of 201,278 of its 2,496,477 points under the
         final name, and the run said it was done; a killed one left a broken one: a modeller reviewer).
         A cancel stops it with the run's other outputs removed (:meth:`writeGroundPointsOrUndo`)."""
