@@ -710,15 +710,21 @@ def survey_as_one_tile(infos: Sequence[LasInfo], size: float, buffer_m: float, t
     kx, ky = planned.key_of(np.array([x0, x1]), np.array([y0, y1]))
     tiles = int(kx[1] - kx[0] + 1) * int(ky[1] - ky[0] + 1)
     # the points the tiles read with their buffers against the survey's (an upper bound: each tile's buffered
-    # square cut to the survey's box)
-    repeated = tiles * min(reach, w) * min(reach, h) / max(w * h, 1.0)
-    if tiles < 2 or repeated <= max(tiling.worker_count, 1):
-        return None
+    # square cut to the survey's box), against the tiles the budget lets run at once (not the workers asked
+    # for: 4 workers on a 2 GB budget run 1 such tile at a time, and 4 tiles each reading the whole survey
+    # took 2.2 times one tile's time, a dense-UAV reviewer)
     total = sum(i.count for i in infos)
+    repeated = tiles * min(reach, w) * min(reach, h) / max(w * h, 1.0)
+    per_tile = min(min(reach, w) * min(reach, h) * total / max(w * h, 1.0), float(total)) * BYTES_PER_POINT
+    at_once = max(1, min(tiling.worker_count, int(tiling.budget_bytes // max(per_tile, 1.0))))
+    if tiles < 2 or repeated <= at_once:
+        return None
     merged = dataclasses.replace(infos[0], count=total, mins=(x0, y0, infos[0].mins[2]), maxs=(x1, y1, infos[0].maxs[2]),
                                  record_size=max(i.record_size for i in infos))
     need = whole_run_bytes(merged, algorithm, dtm)
-    if need > tiling.budget_bytes:
+    # (within the budget; or a budget the planned tiles exceed as well: one just below the whole run's 696 MB
+    # made 4 tiles each holding the whole survey, about 874 MB each, a dense-UAV reviewer)
+    if need > max(tiling.budget_bytes, per_tile):
         return None
     cell = dtm.cell_size_m if dtm is not None else 1.0
     side = max(w, h, 10.0)
@@ -734,10 +740,12 @@ def survey_as_one_tile(infos: Sequence[LasInfo], size: float, buffer_m: float, t
                         return None
                 except GroundSieveError:
                     return None
-            log(f"The survey runs as one tile of {s:g} m: run whole it takes about {need / 2**20:,.0f} MB, within the "
-                f"memory budget ({tiling.budget_bytes / 2**20:,.0f} MB), and its tiles of {size:g} m would each read their "
-                f"{buffer_m:g} m buffer: {tiles} tiles reading about {repeated:.1f} times the survey's points, more than "
-                f"the {tiling.worker_count} worker(s) gain.")
+            log(f"The survey runs as one tile of {s:g} m: run whole it takes about {need / 2**20:,.0f} MB"
+                + (f", within the memory budget ({tiling.budget_bytes / 2**20:,.0f} MB)" if need <= tiling.budget_bytes
+                   else f", less than each of its planned tiles ({per_tile / 2**20:,.0f} MB)")
+                + f", and its tiles of {size:g} m would each read their {buffer_m:g} m buffer: {tiles} tiles reading "
+                f"about {repeated:.1f} times the survey's points, more than the {at_once} tile(s) the budget runs at "
+                "once gain.")
             return s
         one += 10.0
     return None

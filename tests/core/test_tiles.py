@@ -408,8 +408,9 @@ def test_points_on_the_survey_s_far_edges_make_no_tiles_of_their_own(tmp_path):
 def test_a_survey_that_fits_whole_and_whose_tiles_would_read_it_all_runs_as_one_tile(tmp_path):
     """A dense survey of 4 files that fits the memory budget whole, whose planned tiles of 50 m would each read
     their buffer of SMRF's reach across most of it (a photogrammetry reviewer's 8.6 M points took 2.4 times
-    their whole file's time in 9 tiles): it runs as one tile, with the whole file's classes and DTM; set, the
-    tile size is kept; a budget the whole survey does not fit keeps the tiles."""
+    their whole file's time in 9 tiles): it runs as one tile, with the whole file's classes and DTM; also with a
+    budget below the whole run's estimate that each planned tile exceeds as well (a dense-UAV reviewer's 4 tiles
+    each held the whole survey). Set, the tile size is kept; a survey much larger than its tiles keeps them."""
     scene = make_scene(SceneSpec(size_m=100.0, density_per_m2=50.0, seed=6))
     x, y = scene.x - scene.x.min() + 500_000.0, scene.y - scene.y.min() + 5_400_000.0
     whole = new_las(np.round(x, 2), np.round(y, 2), np.round(scene.z, 2), classification=scene.classification,
@@ -430,20 +431,31 @@ def test_a_survey_that_fits_whole_and_whose_tiles_would_read_it_all_runs_as_one_
     runs = {}
     for name, tiling in (("one", TileOptions(memory_budget_mb=150, workers=2, parallel="threads")),
                          ("set", TileOptions(tile_size_m=50.0, workers=2, parallel="threads")),
-                         ("small", TileOptions(memory_budget_mb=60, workers=2, parallel="threads"))):
+                         ("under", TileOptions(memory_budget_mb=60, workers=4, parallel="threads"))):
         lines = []
         runs[name] = run_ground_filter(str(folder), str(tmp_path / f"{name}.vpc"), SMRF(),
                                        options=FilterOptions(tiling=tiling), dtm_path=str(tmp_path / f"{name}.tif"),
                                        dtm=cell, log=lines.append)
         said = [line for line in lines if line.startswith("The survey runs as one tile")]
-        assert bool(said) == (name == "one"), (name, lines)
+        assert bool(said) == (name != "set"), (name, lines)
         got = np.concatenate([np.asarray(laspy.read(tmp_path / name / f"f{f}.laz").classification) for f in range(4)])
         assert np.array_equal(got, np.concatenate([expected[files == f] for f in range(4)])), name
         mosaic, gt = _dtm_values(tmp_path / f"{name}.tif")
         reference, gt_whole = _dtm_values(tmp_path / "whole.tif")
         assert gt == gt_whole
         np.testing.assert_allclose(mosaic, reference, atol=1e-3)
-    assert runs["one"].tiles == 1 and runs["set"].tiles >= 4 and runs["small"].tiles >= 4
+    assert runs["one"].tiles == runs["under"].tiles == 1 and runs["set"].tiles >= 4
+    big = tmp_path / "big"
+    big.mkdir()
+    wide = make_scene(SceneSpec(size_m=300.0, density_per_m2=5.0, seed=7))
+    for f, keep in enumerate((wide.x < np.median(wide.x), wide.x >= np.median(wide.x))):
+        write_las(new_las(wide.x[keep], wide.y[keep], wide.z[keep], classification=wide.classification[keep]),
+                  str(big / f"w{f}.laz"))
+    lines = []
+    run = run_ground_filter(str(big), str(tmp_path / "big_out.vpc"), SMRF(), log=lines.append,
+                            options=FilterOptions(tiling=TileOptions(memory_budget_mb=60, workers=2,
+                                                                     parallel="threads")))
+    assert run.tiles >= 9 and not [line for line in lines if line.startswith("The survey runs as one tile")]
 
 
 def _split_files(scene_laz, folder, at_x):
