@@ -333,6 +333,14 @@ def _staged_path(staged) -> str:
     return staged
 
 
+#: layer files that hold no geometry: the ground points get their coordinates as columns there
+TABLE_EXTENSIONS = (".csv", ".xlsx", ".ods", ".dbf")
+
+#: a shapefile's sidecars besides its .shp (its style and metadata, .qml and .qmd, are the user's: kept)
+SHAPEFILE_SIDECARS = (".shx", ".dbf", ".prj", ".cpg", ".qix", ".sbn", ".sbx", ".fbn", ".fbx", ".ain", ".aih", ".atx",
+                      ".idm", ".ind", ".qpj")
+
+
 def commit_staged_sink(staged, final: str, sink_id: str, context) -> str:
     """Move the complete files of :func:`staged_sink`'s folder (the layer and its sidecars, the main file last)
     into place and remove the folder; the layer QGIS is to load when the run ends is the final one. Returns the
@@ -341,6 +349,13 @@ def commit_staged_sink(staged, final: str, sink_id: str, context) -> str:
     tmp = _staged_path(staged)
     holder, target = os.path.dirname(tmp), os.path.dirname(os.path.abspath(final))
     names = sorted(os.listdir(holder), key=lambda n: n == os.path.basename(tmp))
+    stem, ext = os.path.splitext(os.path.abspath(final))
+    if ext.lower() == ".shp":  # an old shapefile's sidecars the new one has not (its spatial index answered
+        # extent queries on the new layer with none of its features: a dense-UAV reviewer), as QGIS's writer does
+        for side in SHAPEFILE_SIDECARS:
+            for old in (stem + side, stem + side.upper()):
+                if os.path.basename(old) not in names and os.path.isfile(old):
+                    os.remove(old)
     for name in names:
         if name.endswith(("-journal", "-wal", "-shm")):  # (a database's open journal: nothing to keep)
             continue
@@ -878,13 +893,18 @@ class GroundFilterAlgorithm(SurveyTiles, Discoverable, QgsProcessingAlgorithm):
         its destination: a cancelled run left a GeoPackage of 201,278 of its 2,496,477 points under the
         final name, and the run said it was done; a killed one left a broken one: a modeller reviewer).
         A cancel stops it with the run's other outputs removed (:meth:`writeGroundPointsOrUndo`)."""
+        final, staged = staged_sink(parameters, self.GROUND_POINTS, context)
+        # a table without geometry (CSV, a spreadsheet) gets the coordinates as columns: a CSV had the return
+        # number and intensity alone, and the run said it was done (a dense-UAV reviewer)
+        table = final is not None and os.path.splitext(final)[1].lower() in TABLE_EXTENSIONS
         fields = QgsFields()
+        for name in ("x", "y", "z") if table else ():
+            fields.append(attribute_field(name, "Double"))
         fields.append(attribute_field("return_number"))
         fields.append(attribute_field("intensity"))
         # A cloud without a CRS: an undefined *Cartesian* CRS (a GeoPackage's srs_id -1), not QGIS's invalid
         # CRS, which OGR writes as "Undefined geographic SRS" (srs_id 0): metres taken for degrees
         crs = QgsCoordinateReferenceSystem.fromWkt(run.cloud.crs_wkt or UNDEFINED_CARTESIAN_WKT)
-        final, staged = staged_sink(parameters, self.GROUND_POINTS, context)
         try:
             sink, sink_id = self.parameterAsSink(staged, self.GROUND_POINTS, context, fields,
                                                  QgsWkbTypes.Type.PointZ, crs)
@@ -903,8 +923,9 @@ class GroundFilterAlgorithm(SurveyTiles, Discoverable, QgsProcessingAlgorithm):
                     feedback.setProgress(100.0 * k / idx.size)
                 feature = QgsFeature(fields)
                 feature.setGeometry(QgsGeometry(QgsPoint(float(cloud.x[i]), float(cloud.y[i]), float(cloud.z[i]))))
-                feature.setAttributes([int(cloud.return_number[i]),
-                                       int(intensity[i]) if intensity is not None else None])
+                feature.setAttributes(([float(cloud.x[i]), float(cloud.y[i]), float(cloud.z[i])] if table else [])
+                                      + [int(cloud.return_number[i]),
+                                         int(intensity[i]) if intensity is not None else None])
                 sink.addFeature(feature, QgsFeatureSink.Flag.FastInsert)
             del sink  # (closes the file)
             if final is None:

@@ -223,6 +223,9 @@ def test_the_ground_points_layer_is_written_under_a_temporary_name_then_moved(gr
     out = tmp_path / "out"
     out.mkdir()
     seen = []
+    if name.endswith(".shp"):  # an older layer's spatial index and style beside it (the index answered extent
+        (out / "g.qix").write_bytes(b"old index")  # queries on the new layer with none of its features)
+        (out / "g.qml").write_text("<qgis/>")
     context = QgsProcessingContext()
     context.setProject(QgsProject.instance())
     result = processing.run("groundsieve:smrf", {
@@ -236,7 +239,7 @@ def test_the_ground_points_layer_is_written_under_a_temporary_name_then_moved(gr
     left = sorted(os.listdir(out))
     assert not [n for n in left if n.startswith(".")], left
     if name.endswith(".shp"):
-        assert {"g.shp", "g.shx", "g.dbf", "g.prj"} <= set(left), left
+        assert {"g.shp", "g.shx", "g.dbf", "g.prj", "g.qml"} <= set(left) and "g.qix" not in left, left
     else:  # the layer is named after the file, as QGIS names it (a temporary name had left it empty: a reviewer)
         import sqlite3
         with sqlite3.connect(str(out / name)) as db:
@@ -301,3 +304,19 @@ def test_appending_the_ground_points_to_an_existing_layer_keeps_its_features(gro
     layer = QgsVectorLayer(dest, "existing", "ogr")
     assert layer.featureCount() == 5 + result["GROUND_COUNT"]
     assert sum(1 for f in layer.getFeatures() if f.attributes()[0] == 9) == 5
+
+
+def test_ground_points_as_csv_hold_their_coordinates(groundsieve_provider, scene_laz, tmp_path):
+    """A CSV (a table without geometry) had the return number and intensity alone, and the run said it was done
+    (a dense-UAV reviewer): it has x, y and z columns first, the ground points' coordinates."""
+    import csv
+    import laspy
+    src, _scene = scene_laz
+    result = _run({"INPUT": str(src), "OUTPUT": str(tmp_path / "c.laz"), "GROUND_POINTS": str(tmp_path / "g.csv")})
+    with open(tmp_path / "g.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert list(rows[0])[:5] == ["x", "y", "z", "return_number", "intensity"] and len(rows) == result["GROUND_COUNT"]
+    las = laspy.read(tmp_path / "c.laz")
+    ground = np.asarray(las.classification) == 2
+    got = np.array([[float(r["x"]), float(r["y"]), float(r["z"])] for r in rows])
+    assert np.allclose(got, np.c_[las.x[ground], las.y[ground], las.z[ground]], atol=1e-6)
