@@ -774,7 +774,10 @@ class GroundFilterAlgorithm(SurveyTiles, Discoverable, QgsProcessingAlgorithm):
         input_path = pointclouds.input_path(self, parameters, context, self.INPUT, self.INPUT_LAYER)
         output_path = pointclouds.classified_output_path(self, parameters, context, self.OUTPUT, input_path) or None
         dtm_path = self.parameterAsOutputLayer(parameters, self.DTM, context) or None
-        if not output_path and not dtm_path:
+        # the ground points layer alone (a dense-UAV reviewer's run was refused as writing nothing): from a cloud
+        # run whole, the only run that writes it
+        ground_only = not output_path and not dtm_path and bool(parameters.get(self.GROUND_POINTS))
+        if not output_path and not dtm_path and not ground_only:
             raise QgsProcessingException(pointclouds.nothing_to_write(self))
         try:
             algorithm = self.buildFilter(parameters, context, feedback.pushInfo)
@@ -794,6 +797,13 @@ class GroundFilterAlgorithm(SurveyTiles, Discoverable, QgsProcessingAlgorithm):
                 classes=self.parameterAsString(parameters, self.DTM_CLASSES, context) or "",
                 max_distance_m=self.parameterAsDouble(parameters, self.DTM_MAX_DISTANCE, context),
                 extent=dtm_extent_value(self, parameters, self.DTM_EXTENT, context, input_path, feedback))
+            if ground_only:
+                from ..core.engine.tiles import needs_tiling
+                if needs_tiling(input_path, options.tiling, algorithm):
+                    raise QgsProcessingException(
+                        f"{self.parameterDefinition(self.GROUND_POINTS).description().split(' (')[0]} alone: "
+                        f"{input_path} runs in tiles (a survey, a tile size set, or a cloud beyond the memory "
+                        "budget), which write no such layer; give the classified point cloud or the DTM")
             run = workflow.run_ground_filter(
                 input_path, output_path, algorithm, options=options, dtm_path=dtm_path, dtm=dtm,
                 rasters={path: make for path, make in rasters.values()}, **feedback_callables(feedback))

@@ -320,3 +320,23 @@ def test_ground_points_as_csv_hold_their_coordinates(groundsieve_provider, scene
     ground = np.asarray(las.classification) == 2
     got = np.array([[float(r["x"]), float(r["y"]), float(r["z"])] for r in rows])
     assert np.allclose(got, np.c_[las.x[ground], las.y[ground], las.z[ground]], atol=1e-6)
+
+
+def test_the_ground_points_layer_alone(groundsieve_provider, scene_laz, tmp_path):
+    """The classified cloud and the DTM skipped, the ground points layer given: it was refused as a run that
+    writes nothing (a dense-UAV reviewer). A cloud run whole writes it alone; a survey, run in tiles, which
+    write no such layer, is refused in words before any work."""
+    from qgis.core import QgsProcessingException, QgsVectorLayer
+    src, _scene = scene_laz
+    out = tmp_path / "out"
+    out.mkdir()
+    result = _run({"INPUT": str(src), "OUTPUT": None, "DTM": None, "GROUND_POINTS": str(out / "g.gpkg")})
+    assert QgsVectorLayer(result["GROUND_POINTS"], "g", "ogr").featureCount() == result["GROUND_COUNT"] > 0
+    assert os.listdir(out) == ["g.gpkg"]
+    survey = tmp_path / "survey"
+    survey.mkdir()
+    import shutil
+    shutil.copy(src, survey / "a.laz")
+    with pytest.raises(QgsProcessingException, match="Ground points as a vector layer alone: .*survey runs in tiles"):
+        _run({"INPUT": str(survey), "OUTPUT": None, "DTM": None, "GROUND_POINTS": str(tmp_path / "s.gpkg")})
+    assert not (tmp_path / "s.gpkg").exists()
