@@ -780,7 +780,7 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
             log(f"Tiles of {fitted:g} instead of {size:g}: fitted to the survey's files, as every job of the array "
                 "fits them.")
             size = fitted
-    if dtm_path:
+    if dtm_path and not one_tile:  # (one tile's block was fitted for the one tile at a time it is)
         size = fit_dtm_blocks(size, buffer_m, dtm.cell_size_m, tiling, log)
     if per_task and chosen:
         _say_tiles_beyond_workers(size, buffer_m, density, per_task, tiling, log)

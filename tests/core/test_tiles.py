@@ -405,7 +405,7 @@ def test_points_on_the_survey_s_far_edges_make_no_tiles_of_their_own(tmp_path):
     assert np.array_equal(np.asarray(laspy.read(tmp_path / "one.laz").classification), expected[mine])
 
 
-def test_a_survey_that_fits_whole_and_whose_tiles_would_read_it_all_runs_as_one_tile(tmp_path):
+def test_a_survey_that_fits_whole_and_whose_tiles_would_read_it_all_runs_as_one_tile(tmp_path, monkeypatch):
     """A dense survey of 4 files that fits the memory budget whole, whose planned tiles of 50 m would each read
     their buffer of SMRF's reach across most of it (a photogrammetry reviewer's 8.6 M points took 2.4 times
     their whole file's time in 9 tiles): it runs as one tile, with the whole file's classes and DTM; also with a
@@ -445,6 +445,17 @@ def test_a_survey_that_fits_whole_and_whose_tiles_would_read_it_all_runs_as_one_
         assert gt == gt_whole
         np.testing.assert_allclose(mosaic, reference, atol=1e-3)
     assert runs["one"].tiles == runs["under"].tiles == 1 and runs["set"].tiles >= 4
+    # its DTM block fits the grids' memory for the one tile at a time it is, not for 2 workers' blocks at once:
+    # still one tile (the later fit for the workers had cut it again)
+    from groundsieve.core.grids import spec
+    monkeypatch.setattr(spec, "memory_budget_bytes", lambda: 2_000_000)
+    lines = []
+    run = run_ground_filter(str(folder), str(tmp_path / "block.vpc"), SMRF(), dtm_path=str(tmp_path / "block.tif"),
+                            dtm=cell, options=FilterOptions(tiling=TileOptions(memory_budget_mb=150, workers=2,
+                                                                               parallel="threads")),
+                            log=lines.append)
+    assert run.tiles == 1, lines
+    monkeypatch.undo()
     big = tmp_path / "big"
     big.mkdir()
     wide = make_scene(SceneSpec(size_m=300.0, density_per_m2=5.0, seed=7))
