@@ -97,6 +97,10 @@ def describe(name: str, built, preset: Optional["Preset"] = None, typed_wins: bo
                      + (", ".join(show(f) for f in given if f not in changed) or "nothing")
                      + ("; changed from the preset: " + ", ".join(show(f) for f in changed) if changed else "")
                      + ("" if typed_wins else " (a value equal to the filter's default never replaces the preset's)"))
+        if preset.description and os.path.dirname(os.path.abspath(preset.path)) == os.path.abspath(SHIPPED_DIR):
+            # (what a shipped preset is for and what it measured, where the user sees the run: a forester took
+            # forest-smrf for a forest's preset, and its DTM lifted crowns on a real plot)
+            lines.append(f"The shipped preset {os.path.basename(preset.path)}: {preset.description}.")
     return lines
 
 

@@ -420,12 +420,13 @@ def demoted_ground(classification: np.ndarray, ground: np.ndarray, touched: np.n
 def agreement_counts(cloud, ground: np.ndarray, touched: np.ndarray) -> list:
     """[tp, fn, fp, tn, by labels (1) or classes (0)]: the run's ground against the input's own, over the points
     given a class: an ISPRS text's reference labels (0 ground), or a LAS's classes (2 ground, every other class
-    not: 0 too, which the ISPRS samples as LAZ give their objects); zeros when the input holds no ground or
-    nothing else."""
+    not: 0 too, which the ISPRS samples as LAZ give their objects; water, 9, left out, a surface every filter
+    calls ground: lidR's Topography had its Type II raised by 4 points, a forester); zeros when the input holds
+    no ground or nothing else."""
     if cloud.reference_label is not None:
         labelled, ref, kind = touched, np.asarray(cloud.reference_label) == 0, 1
     else:
-        labelled, ref, kind = touched, cloud.classification == CLASS_GROUND, 0
+        labelled, ref, kind = touched & (cloud.classification != 9), cloud.classification == CLASS_GROUND, 0
     tp = int(np.count_nonzero(labelled & ref & ground))
     fn = int(np.count_nonzero(labelled & ref & ~ground))
     fp = int(np.count_nonzero(labelled & ~ref & ground))
@@ -445,7 +446,7 @@ def agreement_note(counts, algorithm=None, options=None) -> str:
     from ..metrics import GroundAccuracy
     acc = GroundAccuracy(tp, fn, fp, tn)
     what = ("the file's reference labels (0 ground, 1 object)" if kind else
-            "the input's classes (2 ground, the others not)")
+            "the input's classes (2 ground, the others but water (9) not)")
     # (a vendor's classes are no truth: its unclassified (1) may hold ground it left, which made autzen's
     # Type II 75 %, most of it within 0.3 m of the vendor's own ground: a dense-UAV reviewer)
     return (f"Against {what}, over {acc.n:,} points: Type I {100 * acc.type1:.2f} % (ground called not ground), "
