@@ -1235,6 +1235,7 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
     replaced: Dict[int, int] = {}  # points of the input's other classes given 1 or 2
     demoted = [0, 0]  # points the input had as ground (2), and of them not ground now
     agreement = [0, 0, 0, 0, 0]  # the run's ground against the input's classes (workflow.agreement_counts)
+    below = [0, 0]  # the tiles' points well below their DTM blocks, and over them (workflow.floating_note)
     not_last = [0, 0]  # ground points, and of them not their pulse's last return
     ground_by_class: Dict[int, int] = {}  # the DTM from classes: the tiles' own ground, by class
     structures: Dict[int, int] = {}  # those of its structure classes made ground
@@ -1289,6 +1290,8 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
             demoted[k] += int(count)
         for k, count in enumerate(result.get("agreement", (0, 0, 0, 0))[:4]):
             agreement[k] += int(count)
+        for k, count in enumerate(result.get("below", (0, 0))):
+            below[k] += int(count)
         for k, count in enumerate(result.get("not_last", (0, 0))):
             not_last[k] += int(count)
         for code, count in result.get("replaced", ()):
@@ -1446,12 +1449,15 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                 log(note)
             _say_enclosed_nodata(dtm_writer, dtm, grid.buffer, log, hull_points, unit)
             from ..grids.rasterize import PIT_DEPTH
-            from .workflow import dtm_spacing_note, gaps_note, pits_note
+            from .workflow import dtm_spacing_note, floating_note, gaps_note, pits_note
             # (the smallest gap named: the largest of the tiles', whose point spacings differ a little)
             note = gaps_note(data_gaps, max(gap_sizes), unit) if data_gaps else ""
             if note:
                 log(note)
             mpu = dtm.metres_per_unit
+            note = floating_note(*below, mpu, unit)
+            if note:
+                log(note)
             pits, spikes = dtm_writer.isolated_pits_and_spikes(check=steps.check, depth=PIT_DEPTH / mpu)
             for note in ("" if dtm.fill_outside_hull else
                          dtm_spacing_note(dtm_points, dtm_writer.valued_cells, dtm_writer.grid.cell, unit),
@@ -2049,6 +2055,7 @@ def _tile_job(job) -> Optional[dict]:
             del classes
             assigned[int(k)] = int(sel.sum())
         block, kept_out, dtm_own, area_bounds, gaps, hull = None, {}, 0, None, [], []
+        below = [0, 0]
         if job["dtm"] is not None:
             area = workflow.processable(cloud, options)
             mine = area & in_tile  # (the DTM's extent: the points that may enter it, as a whole run's grid)
@@ -2061,6 +2068,9 @@ def _tile_job(job) -> Optional[dict]:
             dtm_own = int(np.count_nonzero(in_dtm & in_tile))
             gaps = []  # [the smallest gap named, then each gap (area, x, y)]
             block = _dtm_block(cloud, in_dtm, job["dtm"], job["dtm_grid"], job["bounds"], job["buffer"], area, gaps)
+            if block is not None and mine.any():  # (the points of the tile against its block: workflow.floating_note)
+                below = workflow.points_below(cloud.x[mine], cloud.y[mine], cloud.z[mine], block[2], job["dtm_grid"],
+                                              job["dtm"].metres_per_unit, block[0], block[1])
             hull = _block_hull(block, job["dtm_grid"])  # (the whole run fills the ground's hull)
             if options.keep_existing_classes:
                 kept_out = workflow.kept_out_of_dtm(cloud, cls, area & own & ~in_dtm, job["dtm"], algorithm)
@@ -2068,7 +2078,7 @@ def _tile_job(job) -> Optional[dict]:
                       dtm_points=dtm_own, assigned=assigned, block=block, class_parts=class_parts, copc_read=copc_read,
                       kept_out=sorted(kept_out.items()), replaced=sorted(replaced.items()),
                       structures=sorted(structures.items()), area_bounds=area_bounds, gaps=gaps, hull=hull,
-                      demoted=list(demoted), agreement=list(agreement), ground_classes=ground_classes,
+                      demoted=list(demoted), agreement=list(agreement), below=list(below), ground_classes=ground_classes,
                       not_last=list(not_last),
                       classes=made)
         _save_done(job["done_dir"], result)

@@ -610,3 +610,32 @@ def test_an_extent_in_the_other_order_is_refused_in_a_national_grid_and_a_model_
                       dtm_path=str(tmp_path / "domain.tif"), dtm=DTMOptions(cell_size_m=5.0, extent=domain))
     values, x0, top, cell = _read(tmp_path / "domain.tif")
     assert (x0, top, cell) == (383000.0, 399000.0, 5.0) and values.shape == (400, 500)
+
+
+def test_a_dtm_floating_above_its_points_is_warned_about_whole_and_tiled(tmp_path):
+    """CSF's defaults on a steep forest made a DTM about 4 m too high with a clean log (a forester): 36 % of the
+    last returns lay more than 1 m below it. A DTM with more than 2 % of its points that far below is warned
+    about, whole and tiled; a DTM on its ground is not."""
+    rng = np.random.default_rng(5)
+    n = 40_000
+    x, y = rng.uniform(0, 120, n), rng.uniform(0, 120, n)
+    z = 100.0 + 0.1 * x + rng.normal(0, 0.03, n)
+    cls = np.ones(n, np.uint8)
+    cls[rng.random(n) < 0.3] = 2
+    lifted = z.copy()
+    lifted[cls == 2] += 3.0  # (the "ground" on the canopy, 3 m above the points)
+    for name, heights in (("floating", lifted), ("sound", z)):
+        path = tmp_path / f"{name}.laz"
+        write_las(new_las(x + 500_000.0, y + 5_400_000.0, heights, classification=cls), str(path))
+        for mode, options in (("whole", FilterOptions()),
+                              ("tiled", FilterOptions(tiling=TileOptions(tile_size_m=50.0, workers=2,
+                                                                         parallel="threads")))):
+            lines = []
+            run_ground_filter(str(path), None, ClassGround(), options=options,
+                              dtm_path=str(tmp_path / f"{name}_{mode}.tif"), dtm=DTMOptions(cell_size_m=1.0),
+                              log=lines.append)
+            said = [line for line in lines if "below it: the DTM floats above the ground" in line]
+            assert bool(said) == (name == "floating"), (name, mode, lines)
+            if said:
+                share = float(said[0].split("(")[1].split(" %")[0])
+                assert 60.0 <= share <= 75.0, said  # (the 70 % of points not lifted)
