@@ -42,7 +42,7 @@ import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures import wait as futures_wait
 from dataclasses import dataclass, field
-from typing import Callable, Dict, List, Optional, Sequence
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -693,6 +693,20 @@ def _say_tiles_beyond_workers(size: float, buffer_m: float, density: float, per_
         + "a tile size of 0 and no memory budget, to have the tiles planned for the cluster.")
 
 
+def _tiles_across(size: float, buffer_m: float, box) -> Tuple[int, int]:
+    """(columns, rows) of the tiles of ``size`` that the survey's box ``box`` (xmin, ymin, xmax, ymax) spans, its
+    far edge closing its last tiles (``TileGrid.for_survey``)."""
+    kx, ky = TileGrid.for_survey(size, buffer_m, box).key_of(np.array([box[0], box[2]]), np.array([box[1], box[3]]))
+    return int(kx[1] - kx[0] + 1), int(ky[1] - ky[0] + 1)
+
+
+def _tile_and_buffer_points(reach: float, w: float, h: float, density: float, total: int) -> float:
+    """The points a tile with its buffer (a square of side ``reach``) holds at most in a survey of ``w`` x ``h``
+    and ``total`` points at ``density``: its square cut to the survey's box, and never more than the survey
+    (a dense survey of 8.6 M points was said to need 6,338 MB a tile: a photogrammetry reviewer)."""
+    return min(min(reach, w) * min(reach, h) * density, float(total))
+
+
 def survey_as_one_tile(infos: Sequence[LasInfo], size: float, buffer_m: float, tiling: TileOptions, algorithm=None,
                        dtm=None, log: Callable[[str], None] = lambda _m: None) -> Optional[float]:
     """A tile size that makes the survey one tile, or None: where the survey fits the memory budget whole
@@ -703,19 +717,18 @@ def survey_as_one_tile(infos: Sequence[LasInfo], size: float, buffer_m: float, t
     buffer, that is the whole survey (a photogrammetry reviewer: 8.6 M points in 9 files, 2.4 times). The
     size is the smallest multiple of 10 m (and of the DTM cell) from the survey's side up to 4 times it
     whose tile on the grid holds the whole survey (the survey's far edge closes it) and whose DTM block fits."""
-    x0, y0, x1, y1 = survey_box(infos)
+    box = survey_box(infos)
+    x0, y0, x1, y1 = box
     w, h = x1 - x0, y1 - y0
     reach = size + 2 * buffer_m
-    planned = TileGrid.for_survey(size, buffer_m, (x0, y0, x1, y1))
-    kx, ky = planned.key_of(np.array([x0, x1]), np.array([y0, y1]))
-    tiles = int(kx[1] - kx[0] + 1) * int(ky[1] - ky[0] + 1)
+    tiles = math.prod(_tiles_across(size, buffer_m, box))
     # the points the tiles read with their buffers against the survey's (an upper bound: each tile's buffered
     # square cut to the survey's box), against the tiles the budget lets run at once (not the workers asked
     # for: 4 workers on a 2 GB budget run 1 such tile at a time, and 4 tiles each reading the whole survey
     # took 2.2 times one tile's time, a dense-UAV reviewer)
     total = sum(i.count for i in infos)
     repeated = tiles * min(reach, w) * min(reach, h) / max(w * h, 1.0)
-    per_tile = min(min(reach, w) * min(reach, h) * total / max(w * h, 1.0), float(total)) * BYTES_PER_POINT
+    per_tile = _tile_and_buffer_points(reach, w, h, total / max(w * h, 1.0), total) * BYTES_PER_POINT
     at_once = max(1, min(tiling.worker_count, int(tiling.budget_bytes // max(per_tile, 1.0))))
     if tiles < 2 or repeated <= at_once:
         return None
@@ -731,9 +744,7 @@ def survey_as_one_tile(infos: Sequence[LasInfo], size: float, buffer_m: float, t
     one = math.ceil(side / 10.0) * 10.0
     while one <= 4 * side:
         s = math.ceil(one / cell - 1e-9) * cell
-        grid = TileGrid.for_survey(s, buffer_m, (x0, y0, x1, y1))
-        kx, ky = grid.key_of(np.array([x0, x1]), np.array([y0, y1]))
-        if kx[0] == kx[1] and ky[0] == ky[1]:
+        if _tiles_across(s, buffer_m, box) == (1, 1):
             if dtm is not None:
                 try:
                     if fit_dtm_blocks(s, buffer_m, cell, dataclasses.replace(tiling, workers=1)) != s:
@@ -785,12 +796,10 @@ def _plan_and_run(inputs, infos, outs, output_path, algorithm, options, dtm_path
     if per_task and chosen:
         _say_tiles_beyond_workers(size, buffer_m, density, per_task, tiling, log)
     if not tiling.tile_size_m and not one_tile:  # the planned tiles cannot be smaller than 50 m: say when the
-        # budget asked for less; a tile and its buffer hold at most the survey's points (its box, and its count:
-        # a dense survey of 8.6 M points was said to need 6,338 MB a tile, a photogrammetry reviewer)
+        # budget asked for less
         bx0, by0, bx1, by1 = survey_box(infos)
-        reach = size + 2 * buffer_m
-        per_tile = min(min(reach, max(bx1 - bx0, 1.0)) * min(reach, max(by1 - by0, 1.0)) * density,
-                       float(sum(i.count for i in infos))) * BYTES_PER_POINT
+        per_tile = _tile_and_buffer_points(size + 2 * buffer_m, max(bx1 - bx0, 1.0), max(by1 - by0, 1.0), density,
+                                           sum(i.count for i in infos)) * BYTES_PER_POINT
         fit = max(1, int(tiling.budget_bytes // max(per_tile, 1.0)))
         if cluster is None and fit < tiling.worker_count:
             # the budget wins over the workers: fewer tiles at a time rather than more memory than allowed
@@ -1188,13 +1197,13 @@ def _run(work, inputs, infos, outs, output_path, grid, algorithm, options, dtm_p
                   if sum(p.own_count for p in parts)
                   or (dtm_grid is not None and _block_cells(dtm_grid, grid.bounds(k)) is not None))
     from ..io.copc import plan_tiles
-    copc_tiles = plan_tiles(infos, grid.size, grid.buffer, grid.edge)  # the tiles COPC inputs may have points in
+    copc_tiles = plan_tiles(infos, grid)  # the tiles COPC inputs may have points in
     keys = sorted(set(keys) | set(copc_tiles))
     if one is not None:
         keys = _one_files_tiles(keys, tiles, copc_tiles, one, grid, dtm_grid, infos, log)
     if copc_tiles:  # ... and those whose buffer reaches into them
         from ..io.copc import add_buffer_sources
-        add_buffer_sources(copc_tiles, infos, keys, grid.size, grid.buffer, grid.edge)
+        add_buffer_sources(copc_tiles, infos, keys, grid)
     n_copc = sum(1 for i in infos if i.copc)
     log(f"Binned into {len(keys)} tile(s) in {time.perf_counter() - t_start:.1f} s." if not n_copc else
         f"Planned {len(keys)} tile(s) in {time.perf_counter() - t_start:.1f} s ({n_copc} COPC file(s) read by "

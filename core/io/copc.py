@@ -349,12 +349,18 @@ class CopcSource:
     buffer: float     #: its buffer (m)
     edge: Tuple[float, float] = (math.inf, math.inf)  #: the survey's far edges (``TileGrid.edge``)
 
+    @property
+    def grid(self):
+        """The survey's tile grid (``lasfiles.TileGrid``)."""
+        from .lasfiles import TileGrid
+        return TileGrid(self.size, self.buffer, tuple(self.edge))
 
-def _tile_selection(x, y, key, size: float, buffer: float, edge=(math.inf, math.inf)):
+
+def _tile_selection(x, y, key, grid):
     """(in the tile or its buffer, the tile's own) for points at x, y: ``lasfiles.bin_file``'s
-    test (``TileGrid.key_of`` and ``_in_buffer``), so that a tile holds the points its parts would."""
-    from .lasfiles import TileGrid, _in_buffer
-    grid = TileGrid(size, buffer, tuple(edge))
+    test (``TileGrid.key_of`` and ``_in_buffer``) on ``grid``, so that a tile holds the points its parts would."""
+    from .lasfiles import _in_buffer
+    size, buffer = grid.size, grid.buffer
     kx, ky = grid.key_of(x, y)
     m = int(math.ceil(buffer / size)) if buffer > 0 else 0
     dx, dy = key[0] - kx, key[1] - ky
@@ -378,20 +384,18 @@ def read_tile(source: CopcSource, records: bool = False) -> Tuple[PointCloud, np
     points, file_index, decompressed = _read_nodes_cached(index, sel, None if records else TILE_LAYERS, _CACHE)
     x = np.asarray(points.x, dtype=np.float64)
     y = np.asarray(points.y, dtype=np.float64)
-    keep, own = _tile_selection(x, y, source.key, s, b, source.edge)
+    keep, own = _tile_selection(x, y, source.key, source.grid)
     idx = np.where(own, file_index, -1 - file_index)[keep]
     return _cloud(index, points[keep], records), idx, decompressed
 
 
-def plan_tiles(infos: Sequence, size: float, buffer: float,
-               edge=(math.inf, math.inf)) -> Dict[Tuple[int, int], List[CopcSource]]:
-    """The tiles the COPC inputs among ``infos`` (``LasInfo`` with ``copc`` set) may have points
-    in, each with the sources it reads. From the hierarchy alone: a node no wider than
+def plan_tiles(infos: Sequence, grid) -> Dict[Tuple[int, int], List[CopcSource]]:
+    """The tiles of ``grid`` (``lasfiles.TileGrid``) the COPC inputs among ``infos`` (``LasInfo`` with ``copc``
+    set) may have points in, each with the sources it reads. From the hierarchy alone: a node no wider than
     :data:`COARSE_TILES` tiles names the tiles its cube covers; the points of the wider (coarse,
     upper) nodes, few, are read to name theirs. A tile named but holding no point of its own is
     skipped by the tile job."""
-    from .lasfiles import TileGrid
-    grid = TileGrid(size, buffer, tuple(edge))
+    size = grid.size
     tiles: Dict[Tuple[int, int], List[CopcSource]] = {}
     for k, info in enumerate(infos):
         if not getattr(info, "copc", False) or not info.count:
@@ -416,18 +420,18 @@ def plan_tiles(infos: Sequence, size: float, buffer: float,
             kx, ky = grid.key_of(np.asarray(points.x, dtype=np.float64), np.asarray(points.y, dtype=np.float64))
             keys.update(zip(kx.tolist(), ky.tolist()))
         for key in keys:
-            tiles.setdefault(key, []).append(CopcSource(k, info.path, key, float(size), float(buffer), grid.edge))
+            tiles.setdefault(key, []).append(_source(k, info.path, key, grid))
     return tiles
 
 
-def add_buffer_sources(tiles: Dict[Tuple[int, int], List[CopcSource]], infos: Sequence, keys, size: float,
-                       buffer: float, edge=(math.inf, math.inf)) -> None:
-    """Give each of the survey's tiles ``keys`` a source in every COPC input its buffer reaches, beside
+def add_buffer_sources(tiles: Dict[Tuple[int, int], List[CopcSource]], infos: Sequence, keys, grid) -> None:
+    """Give each of the survey's tiles ``keys`` (of ``grid``) a source in every COPC input its buffer reaches, beside
     those in which it has points of its own (:func:`plan_tiles`): where the tiles lie on the files' edges
     (a delivery of 500 m files in 500 m tiles), a tile had none of its neighbours' points for its buffer,
     and its seams were wrong by up to 0.34 m (1.23 m with SMRF) where binned LAZ gave the whole run's DTM
     (an HPC reviewer). From the files' header boxes; a source that holds no point is read for nothing."""
     keys = set(keys)
+    size, buffer = grid.size, grid.buffer
     for k, info in enumerate(infos):
         if not getattr(info, "copc", False) or not info.count:
             continue
@@ -438,7 +442,11 @@ def add_buffer_sources(tiles: Dict[Tuple[int, int], List[CopcSource]], infos: Se
                     continue
                 sources = tiles.setdefault((i, j), [])
                 if not any(src.file_index == k for src in sources):
-                    sources.append(CopcSource(k, info.path, (i, j), float(size), float(buffer), tuple(edge)))
+                    sources.append(_source(k, info.path, (i, j), grid))
+
+
+def _source(file_index: int, path: str, key, grid) -> CopcSource:
+    return CopcSource(file_index, path, key, float(grid.size), float(grid.buffer), tuple(grid.edge))
 
 
 def tile_sources(parts: Sequence, copc: Sequence[CopcSource], read_part, records: bool = False) -> Tuple[list, int]:

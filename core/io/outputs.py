@@ -90,17 +90,11 @@ def remove_stale_sink_folders(path: str, *, max_age_s: float = 86400.0) -> list:
     """Delete the folders of :func:`temporary_folder_beside` a killed run left for the output ``path``: those of
     a process of this machine no longer running, and those of another machine older than ``max_age_s``."""
     import shutil
-    folder = os.path.dirname(os.path.abspath(os.fspath(path)))
-    base = _short(os.path.basename(os.fspath(path)))
-    named = re.compile(re.escape(f".{base}.gs") + r"(?:([A-Za-z0-9-]*)\.)?(\d+)-[^/]*\.sink$")
+    pattern, named = _temporaries_named(os.fspath(path), ".sink", start="gs")
     removed = []
-    for holder in glob.glob(os.path.join(glob.escape(folder), glob.escape(f".{base}.gs") + "*.sink")):
-        m = named.match(os.path.basename(holder))
+    for holder in glob.glob(pattern):
         try:
-            if m and m.group(1) in (None, _host()):
-                stale = int(m.group(2)) != os.getpid() and not _process_alive(int(m.group(2)))
-            else:
-                stale = time.time() - os.path.getmtime(holder) > max_age_s
+            stale = _left_by_the_dead(named.match(os.path.basename(holder)), os.path.getmtime(holder), max_age_s)
             if stale and os.path.isdir(holder):
                 shutil.rmtree(holder)
                 removed.append(holder)
@@ -248,24 +242,33 @@ def _windows_process_alive(pid: int) -> bool:
         kernel32.CloseHandle(handle)
 
 
+def _temporaries_named(path: str, ending: str, start: str = ""):
+    """The glob (of ``.NAME.<start>*<ending>``) and the pattern of the temporaries of the output ``path`` ending
+    in ``ending`` (the module's naming, ``.NAME.gs…<ending>``): ".NAME.gs<host>.<pid>-...", this machine's
+    writers by their process, another machine's by age only; ".NAME.gs<pid>-..." (before the host was named)
+    as this machine's."""
+    folder = os.path.dirname(os.path.abspath(path))
+    base = _short(os.path.basename(path))
+    return (os.path.join(glob.escape(folder), glob.escape(f".{base}.{start}") + "*" + glob.escape(ending)),
+            re.compile(re.escape(f".{base}.gs") + r"(?:([A-Za-z0-9-]*)\.)?(\d+)-[^/]*" + re.escape(ending) + "$"))
+
+
+def _left_by_the_dead(match, since: float, max_age_s: float) -> bool:
+    """Whether a temporary whose name gave ``match`` (:func:`_temporaries_named`; None: not named so) was left
+    by a writer gone: a process of this machine no longer running, else one unknown whose temporary dates
+    from ``since`` (a time stamp) more than ``max_age_s`` ago."""
+    if match and match.group(1) in (None, _host()):
+        return int(match.group(2)) != os.getpid() and not _process_alive(int(match.group(2)))
+    return time.time() - since > max_age_s
+
+
 def remove_stale_temporaries(path: str, *, max_age_s: float = 86400.0) -> list:
     """Delete the temporaries a killed run left for the output ``path`` (see the module's naming):
     those of a process no longer running, and those of an unknown writer older than ``max_age_s``.
     Returns the paths removed."""
     path = os.fspath(path)
-    folder = os.path.dirname(os.path.abspath(path))
-    base = _short(os.path.basename(path))
     ext = _ext(path)
-
-    def named(kind: str):
-        """The glob and the pattern of ``.NAME.gs…<kind>EXT``: ".NAME.gs<host>.<pid>-...", this machine's
-        writers by their process, another machine's by age only; ".NAME.gs<pid>-..." (before the host
-        was named) as this machine's."""
-        return (os.path.join(glob.escape(folder), glob.escape(f".{base}.") + "*" + glob.escape(f".{kind}{ext}")),
-                re.compile(re.escape(f".{base}.gs") + r"(?:([A-Za-z0-9-]*)\.)?(\d+)-[^/]*"
-                           + re.escape(f".{kind}{ext}") + "$"))
-    (pattern, own), (keep, kept) = named("part"), named("keep")
-    here = _host()
+    (pattern, own), (keep, kept) = _temporaries_named(path, f".part{ext}"), _temporaries_named(path, f".keep{ext}")
     removed = []
     # (GDAL's COG writer keeps the overviews in "<its output>.ovr.tmp" until it ends: a DTM killed
     # while being written left one beside its temporary)
@@ -274,10 +277,8 @@ def remove_stale_temporaries(path: str, *, max_age_s: float = 86400.0) -> list:
         name = os.path.basename(tmp[:-len(".ovr.tmp")] if tmp.endswith(".ovr.tmp") else tmp)
         m = (kept if previous else own).match(name)
         try:
-            if m and m.group(1) in (None, here):
-                stale = int(m.group(2)) != os.getpid() and not _process_alive(int(m.group(2)))
-            else:  # (a kept file has its output's old mtime; its ctime is when it was kept)
-                stale = time.time() - (os.stat(tmp).st_ctime if previous else os.path.getmtime(tmp)) > max_age_s
+            # (a kept file has its output's old mtime; its ctime is when it was kept)
+            stale = _left_by_the_dead(m, os.stat(tmp).st_ctime if previous else os.path.getmtime(tmp), max_age_s)
             if stale and os.path.isfile(tmp):
                 if previous and not os.path.lexists(path):
                     os.replace(tmp, path)  # a commit killed while the output was moved aside: put it back
